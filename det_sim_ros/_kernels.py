@@ -1,0 +1,488 @@
+"""
+Compiled kernels: the right-hand side, outputs and the one stepping core.
+
+Everything that runs per step lives here and is compiled once with numba (``cache=True``), so a
+step costs well under a microsecond instead of the tens of microseconds of interpreted Python.
+The physics is written once, in :func:`rhs`; ``model.py`` builds the arrays it reads and
+documents the equations. With ``NUMBA_DISABLE_JIT=1`` the same code runs as plain Python.
+
+The model arrays ``A`` (built by :func:`det_sim_ros.model.build_arrays`) are a tuple:
+
+    flags  int64[6]   n_q, n_c (= n_p), creep, rc source, power monitor, n_state
+    cell_q int64[n_c+1]  offsets of each cell's Ritz coordinates in q
+    cell_g int64[n_c+1]  offsets of each cell's quadrature nodes
+    B1, B2 (n_nodes, r_max)  S_j'(x_g), S_j''(x_g) of the cell owning node g
+    W      (n_nodes,)  quadrature weights (m)
+    Mb, K, D (n_q, n_q)  beam mass, linear bending stiffness, beam damping (both beams)
+    MI     (n_c, n_c)  interface mass matrix acting on the end shortenings y_c
+    cellp  (n_c, 3)    l, EI, kappa (1 for the consistent w'^4/8 end-shortening term)
+    detp   (n_c, 9)    l0, V*Y, C0, V, E_M, eta_M, eta_v, Rs, Rp of the DET spanning cell c
+    ref    (n_q,)      S_j at the reference point of its cell (published deflection)
+
+Status codes returned by kernels: 0 ok, 1 stretch lambda <= 0 (l - y <= 0), 2 non-finite state.
+"""
+
+import math
+
+import numpy as np
+from numba import njit
+
+OK, BAD_STRETCH, NON_FINITE = 0, 1, 2
+N_CELL_OUTPUTS = 9   # q_ref, qdot_ref, y, lambda, q_p, v_p, i_DE, C, eps_E
+N_GLOBAL_OUTPUTS = 3  # H, P_in, P_diss
+_JIT = dict(cache=True, nogil=True, error_model='numpy')  # numpy: no zero-division branches
+
+
+@njit(**_JIT)
+def _kinematics(q, qd, A, y, J, h, Us4):
+    """End shortening y_c, its gradient J, qd' H_y qd per cell, and the quartic bending energy."""
+    flags, cell_q, cell_g, B1, B2, W = A[0], A[1], A[2], A[3], A[4], A[5]
+    cellp = A[10]
+    nc = flags[1]
+    for c in range(nc):
+        o = cell_q[c]
+        r = cell_q[c + 1] - o
+        EI = cellp[c, 1]
+        kap = cellp[c, 2]
+        yc = 0.0
+        hc = 0.0
+        u4 = 0.0
+        for j in range(r):
+            J[o + j] = 0.0
+        for g in range(cell_g[c], cell_g[c + 1]):
+            wp = 0.0
+            wd = 0.0
+            for j in range(r):
+                wp += B1[g, j] * q[o + j]
+                wd += B1[g, j] * qd[o + j]
+            wg = W[g]
+            wp2 = wp * wp
+            yc += wg * (0.5 * wp2 + 0.125 * kap * wp2 * wp2)
+            hc += wg * (1.0 + 1.5 * kap * wp2) * wd * wd
+            gy = wg * (wp + 0.5 * kap * wp2 * wp)
+            for j in range(r):
+                J[o + j] += gy * B1[g, j]
+            if Us4 is not None:
+                wpp = 0.0
+                for j in range(r):
+                    wpp += B2[g, j] * q[o + j]
+                u4 += EI * wg * wpp * wpp * wp2
+        y[c] = yc
+        h[c] = hc
+        if Us4 is not None:
+            Us4[c] = u4
+
+
+@njit(**_JIT)
+def _quartic_force(q, A, F):
+    """Subtract the gradient of the quartic bending energy EI int w''^2 w'^2 dx from F."""
+    flags, cell_q, cell_g, B1, B2, W = A[0], A[1], A[2], A[3], A[4], A[5]
+    cellp = A[10]
+    for c in range(flags[1]):
+        o = cell_q[c]
+        r = cell_q[c + 1] - o
+        EI2 = 2.0 * cellp[c, 1]
+        for g in range(cell_g[c], cell_g[c + 1]):
+            wp = 0.0
+            wpp = 0.0
+            for j in range(r):
+                wp += B1[g, j] * q[o + j]
+                wpp += B2[g, j] * q[o + j]
+            s1 = EI2 * W[g] * wpp * wpp * wp
+            s2 = EI2 * W[g] * wpp * wp * wp
+            for j in range(r):
+                F[o + j] -= s1 * B1[g, j] + s2 * B2[g, j]
+
+
+@njit(**_JIT)
+def _solve_spd(Mt, F, out):
+    """Solve Mt out = F for a small symmetric positive definite Mt (Cholesky, in place)."""
+    n = F.shape[0]
+    if n == 1:
+        out[0] = F[0] / Mt[0, 0]
+        return
+    for j in range(n):
+        s = Mt[j, j]
+        for k in range(j):
+            s -= Mt[j, k] * Mt[j, k]
+        d = math.sqrt(s)
+        Mt[j, j] = d
+        for i in range(j + 1, n):
+            s = Mt[i, j]
+            for k in range(j):
+                s -= Mt[i, k] * Mt[j, k]
+            Mt[i, j] = s / d
+    for i in range(n):
+        s = F[i]
+        for k in range(i):
+            s -= Mt[i, k] * out[k]
+        out[i] = s / Mt[i, i]
+    for i in range(n - 1, -1, -1):
+        s = out[i]
+        for k in range(i + 1, n):
+            s -= Mt[k, i] * out[k]
+        out[i] = s / Mt[i, i]
+
+
+@njit(**_JIT)
+def workspace_size(A):
+    """Scratch floats :func:`rhs` needs: y, h (n_c each), J, F (n_q each), the mass matrix."""
+    nq, nc = A[0][0], A[0][1]
+    return 2 * nc + 2 * nq + nq * nq
+
+
+@njit(**_JIT)
+def rhs(x, u, A, dx, pw, ws, quasi_static=False):
+    """
+    dx = f(x, u) for the DET-beam system; returns a status code (see module docstring).
+
+    State layout: q (n_q), qdot (n_q), eps_E (n_p, if creep), q_p (n_p, if rc source), then the
+    supplied and dissipated energy (2, if the power monitor is on). ``pw`` receives the
+    supplied and dissipated power (W) whether or not the monitor integrates them. ``ws`` is an
+    scratch buffer of :func:`workspace_size` floats (saves allocations in hot loops).
+
+    With ``quasi_static`` the charge slots hold z = q_p - C(q) v_inf (v_inf = v Rp/(Rs+Rp), the
+    charge the circuit relaxes to for frozen q) and receive dz/dt; see :func:`advance`.
+    """
+    flags, cell_q = A[0], A[1]
+    Mb, K, D, MI, cellp, detp = A[6], A[7], A[8], A[9], A[10], A[11]
+    nq, nc, creep, rcsrc, power = flags[0], flags[1], flags[2], flags[3], flags[4]
+    ie = 2 * nq
+    ip = ie + nc * creep
+    iw = ip + nc * rcsrc
+    for k in range(x.shape[0]):
+        if not math.isfinite(x[k]):
+            return NON_FINITE
+    q = x[:nq]
+    qd = x[nq:2 * nq]
+    y = ws[:nc]
+    h = ws[nc:2 * nc]
+    J = ws[2 * nc:2 * nc + nq]
+    F = ws[2 * nc + nq:2 * nc + 2 * nq]
+    Mt = ws[2 * nc + 2 * nq:2 * nc + 2 * nq + nq * nq].reshape((nq, nq))
+    _kinematics(q, qd, A, y, J, h, None)
+    p_diss = 0.0
+    for i in range(nq):
+        s = 0.0
+        dq = 0.0
+        for k in range(nq):
+            s += K[i, k] * q[k]
+            dq += D[i, k] * qd[k]
+        F[i] = -s - dq
+        p_diss += qd[i] * dq
+    _quartic_force(q, A, F)
+    # Interface mass on the end shortenings: T_I = 1/2 ydot' MI ydot with ydot_c = J_c . qdot.
+    for j in range(nq):
+        for k in range(nq):
+            Mt[j, k] = Mb[j, k]
+    for c in range(nc):
+        for c2 in range(nc):
+            mi = MI[c, c2]
+            if mi == 0.0:
+                continue
+            for j in range(cell_q[c], cell_q[c + 1]):
+                F[j] -= mi * J[j] * h[c2]
+                for k in range(cell_q[c2], cell_q[c2 + 1]):
+                    Mt[j, k] += mi * J[j] * J[k]
+    p_in = 0.0
+    for i in range(nc):
+        l0, VY, C0, V = detp[i, 0], detp[i, 1], detp[i, 2], detp[i, 3]
+        EM, etaM, etav, Rs, Rp = detp[i, 4], detp[i, 5], detp[i, 6], detp[i, 7], detp[i, 8]
+        lam = (cellp[i, 0] - y[i]) / l0
+        if not lam > 0.0:
+            return BAD_STRETCH
+        lam2 = lam * lam
+        # dU_DE/dlambda without the sign of dlambda/dq = -J/l0 (eq 53, corrected eq 71)
+        if rcsrc:
+            qp = x[ip + i]
+            if quasi_static:
+                qp += C0 * lam2 * u[i] * Rp / (Rs + Rp)
+            vp = qp / (C0 * lam2)
+            bracket = VY / 3.0 * (lam - 1.0 / (lam2 * lam)) - qp * qp / (C0 * lam2 * lam)
+        else:
+            vp = u[i]
+            bracket = VY / 3.0 * (lam - 1.0 / (lam2 * lam)) - C0 * lam * vp * vp
+        jqd = 0.0
+        for j in range(cell_q[i], cell_q[i + 1]):
+            jqd += J[j] * qd[j]
+        lzd = jqd / (l0 * lam2)          # d(lambda_z)/dt, lambda_z = 1/lambda
+        eps = x[ie + i] if creep else 0.0
+        visc = V * (EM * eps + etav * lzd)  # Maxwell spring + Kelvin-Voigt stress (eq 67)
+        coef = bracket / l0 - visc / (l0 * lam2)
+        for j in range(cell_q[i], cell_q[i + 1]):
+            F[j] += coef * J[j]
+        if creep:
+            dx[ie + i] = lzd - EM / etaM * eps
+        if rcsrc:
+            i_de = (u[i] - vp) / Rs
+            dx[ip + i] = u[i] / Rs - (1.0 / Rs + 1.0 / Rp) * vp
+            if quasi_static:  # minus d(C v_inf)/dt, dC/dt = 2 C0 lam dlam/dt
+                dx[ip + i] += 2.0 * C0 * lam * jqd / l0 * u[i] * Rp / (Rs + Rp)
+            p_diss += Rs * i_de * i_de
+        else:
+            # q_p = C0 lam^2 v: i = dq_p/dt + v/Rp with dlambda/dt = -J.qdot / l0
+            i_de = -2.0 * C0 * lam * jqd / l0 * vp + vp / Rp
+        p_in += u[i] * i_de
+        p_diss += vp * vp / Rp + V * etav * lzd * lzd
+        if creep:
+            p_diss += V * EM * EM * eps * eps / etaM
+    qdd = dx[nq:2 * nq]
+    _solve_spd(Mt, F, qdd)
+    for i in range(nq):
+        dx[i] = qd[i]
+    pw[0] = p_in
+    pw[1] = p_diss
+    if power:
+        dx[iw] = p_in
+        dx[iw + 1] = p_diss
+    return OK
+
+
+@njit(**_JIT)
+def stiff_rates(x, A, L):
+    """Diagonal linear part for exponential steppers: dq_p/dt = -q_p/(C Rs || Rp) + ... ."""
+    flags, detp, cellp = A[0], A[11], A[10]
+    nq, nc, creep, rcsrc = flags[0], flags[1], flags[2], flags[3]
+    for k in range(L.shape[0]):
+        L[k] = 0.0
+    if not rcsrc:
+        return OK
+    y = np.empty(nc)
+    h = np.empty(nc)
+    J = np.empty(nq)
+    _kinematics(x[:nq], x[nq:2 * nq], A, y, J, h, None)
+    ip = 2 * nq + nc * creep
+    for i in range(nc):
+        lam = (cellp[i, 0] - y[i]) / detp[i, 0]
+        if not lam > 0.0:
+            return BAD_STRETCH
+        L[ip + i] = -(1.0 / detp[i, 7] + 1.0 / detp[i, 8]) / (detp[i, 2] * lam * lam)
+    return OK
+
+
+@njit(**_JIT)
+def outputs(x, u, A, out):
+    """
+    Fill ``out`` with the named outputs (see model.OUTPUT_NAMES); returns a status code.
+
+    Per cell: q_ref, qdot_ref, y, lambda, q_p, v_p, i_DE, C, eps_E; then H, P_in, P_diss.
+    """
+    flags, cell_q = A[0], A[1]
+    Mb, K, MI, cellp, detp, ref = A[6], A[7], A[9], A[10], A[11], A[12]
+    nq, nc, creep, rcsrc = flags[0], flags[1], flags[2], flags[3]
+    nx = flags[5]
+    dx = np.empty(nx)
+    pw = np.empty(2)
+    status = rhs(x, u, A, dx, pw, np.empty(workspace_size(A)))
+    if status != OK:
+        return status
+    q = x[:nq]
+    qd = x[nq:2 * nq]
+    y = np.empty(nc)
+    h = np.empty(nc)
+    J = np.empty(nq)
+    Us4 = np.empty(nc)
+    _kinematics(q, qd, A, y, J, h, Us4)
+    energy = 0.0
+    for i in range(nq):
+        for k in range(nq):
+            energy += 0.5 * qd[i] * Mb[i, k] * qd[k] + 0.5 * q[i] * K[i, k] * q[k]
+    ydot = np.zeros(nc)
+    for c in range(nc):
+        energy += Us4[c]
+        for j in range(cell_q[c], cell_q[c + 1]):
+            ydot[c] += J[j] * qd[j]
+    for c in range(nc):
+        for c2 in range(nc):
+            energy += 0.5 * MI[c, c2] * ydot[c] * ydot[c2]
+    ie = 2 * nq
+    ip = ie + nc * creep
+    for c in range(nc):
+        l0, VY, C0, V, EM, Rs, Rp = (detp[c, 0], detp[c, 1], detp[c, 2], detp[c, 3],
+                                     detp[c, 4], detp[c, 7], detp[c, 8])
+        lam = (cellp[c, 0] - y[c]) / l0
+        lam2 = lam * lam
+        cap = C0 * lam2
+        if rcsrc:
+            qp = x[ip + c]
+            vp = qp / cap
+            i_de = (u[c] - vp) / Rs
+        else:
+            vp = u[c]
+            qp = cap * vp
+            i_de = 2.0 * C0 * lam * (-ydot[c] / l0) * vp + vp / Rp
+        eps = x[ie + c] if creep else 0.0
+        energy += VY / 6.0 * (lam2 + 1.0 / lam2 - 2.0) + 0.5 * qp * qp / cap
+        energy += 0.5 * V * EM * eps * eps
+        qr = 0.0
+        qdr = 0.0
+        for j in range(cell_q[c], cell_q[c + 1]):
+            qr += ref[j] * q[j]
+            qdr += ref[j] * qd[j]
+        k = c * N_CELL_OUTPUTS
+        out[k] = qr
+        out[k + 1] = qdr
+        out[k + 2] = y[c]
+        out[k + 3] = lam
+        out[k + 4] = qp
+        out[k + 5] = vp
+        out[k + 6] = i_de
+        out[k + 7] = cap
+        out[k + 8] = eps
+    k = nc * N_CELL_OUTPUTS
+    out[k] = energy
+    out[k + 1] = pw[0]
+    out[k + 2] = pw[1]
+    for k in range(out.shape[0]):
+        if not math.isfinite(out[k]):
+            return NON_FINITE
+    return OK
+
+
+@njit(**_JIT)
+def _shift_charge(x, u, A, sign):
+    """q_p += sign * C(q) v_inf: to and from the quasi-static charge coordinates z."""
+    flags, detp, cellp = A[0], A[11], A[10]
+    nq, nc, creep = flags[0], flags[1], flags[2]
+    y = np.empty(nc)
+    h = np.empty(nc)
+    J = np.empty(nq)
+    _kinematics(x[:nq], x[nq:2 * nq], A, y, J, h, None)
+    ip = 2 * nq + nc * creep
+    for i in range(nc):
+        lam = (cellp[i, 0] - y[i]) / detp[i, 0]
+        Rs, Rp = detp[i, 7], detp[i, 8]
+        x[ip + i] += sign * detp[i, 2] * lam * lam * u[i] * Rp / (Rs + Rp)
+
+
+@njit(**_JIT)
+def phi(k, z):
+    """phi_k(z) = sum_m z^m / (m + k)!, the exponential integrators' functions (phi_0 = e^z)."""
+    if k == 0:
+        return math.exp(z)
+    if abs(z) < 0.5:
+        # Taylor series: 18 terms reach round-off for |z| < 0.5 and k >= 1
+        term = 1.0
+        for m in range(1, k + 1):
+            term /= m
+        s = term
+        for m in range(1, 18):
+            term *= z / (m + k)
+            s += term
+        return s
+    value = math.exp(z)
+    fact = 1.0
+    for m in range(k):
+        if m > 0:
+            fact *= m
+        value = (value - 1.0 / fact) / z
+    return value
+
+
+@njit(**_JIT)
+def advance(x, u, A, c, terms, h, n_steps):
+    """
+    Advance x in place by n_steps fixed steps of size h with the input u held (zero-order hold).
+
+    One core for every method: an exponential Runge-Kutta scheme for x' = L x + N(x) with the
+    diagonal L of :func:`stiff_rates` frozen per step,
+
+        X_i = phi_0(c_i h L) x + h sum_j a_ij(hL) N(X_j),  x+ = phi_0(hL) x + h sum_i b_i(hL) N(X_i)
+
+    where each a_ij, b_i is a sum of ``weight * phi_k(c_arg h L)`` (rows of ``terms``:
+    stage i (n_stages for b), j, k, c_arg, weight; k = -1 is a constant weight). With L = 0
+    (explicit methods, or no stiff state) it is the classical Runge-Kutta method of the table.
+    Exponential methods integrate the charge in quasi-static coordinates z = q_p - C(q) v_inf:
+    z is the small lag behind the charge the circuit relaxes to, so the part of the charge
+    equation left to the explicit stages (the change of 1/(C Rs) along the step) acts on z
+    instead of on the full charge, which makes the frozen-L splitting error tiny.
+    Returns a status code; on failure x holds the last good state.
+    """
+    nx = x.shape[0]
+    s = c.shape[0]
+    nt = terms.shape[0]
+    exponential = False   # a table with any phi_k term is an exponential method
+    for t in range(nt):
+        if terms[t, 2] >= 0.0:
+            exponential = True
+    ws = np.empty(workspace_size(A))
+    N = np.empty((s, nx))
+    X = np.empty(nx)
+    L = np.zeros(nx)
+    pw = np.empty(2)
+    coef = np.empty((nt, nx))
+    e_c = np.ones((s, nx))
+    e_1 = np.ones(nx)
+    x_new = np.empty(nx)
+    for t in range(nt):  # L = 0 values: phi_k(0) = 1/k!
+        k = int(terms[t, 2])
+        for m in range(nx):
+            coef[t, m] = terms[t, 4] * (1.0 if k < 0 else phi(k, 0.0))
+    rcsrc = A[0][3] == 1
+    qs = exponential and rcsrc
+    x_start = x.copy()
+    if qs:
+        _shift_charge(x, u, A, -1.0)
+    for _ in range(n_steps):
+        if exponential:
+            status = stiff_rates(x, A, L)
+            if status != OK:
+                return status
+            for m in range(nx):
+                if L[m] == 0.0:
+                    continue
+                z = h * L[m]
+                for t in range(nt):
+                    k = int(terms[t, 2])
+                    if k >= 0:
+                        coef[t, m] = terms[t, 4] * phi(k, terms[t, 3] * z)
+                for i in range(s):
+                    e_c[i, m] = math.exp(c[i] * z)
+                e_1[m] = math.exp(z)
+        for i in range(s):
+            for m in range(nx):
+                X[m] = e_c[i, m] * x[m]
+            for t in range(terms.shape[0]):
+                if int(terms[t, 0]) == i:
+                    j = int(terms[t, 1])
+                    for m in range(nx):
+                        X[m] += h * coef[t, m] * N[j, m]
+            status = rhs(X, u, A, N[i], pw, ws, qs)
+            if status != OK:
+                x[:] = x_start
+                return status
+            for m in range(nx):
+                N[i, m] -= L[m] * X[m]
+        for m in range(nx):
+            x_new[m] = e_1[m] * x[m]
+        for t in range(terms.shape[0]):
+            if int(terms[t, 0]) == s:
+                j = int(terms[t, 1])
+                for m in range(nx):
+                    x_new[m] += h * coef[t, m] * N[j, m]
+        for m in range(nx):
+            if not math.isfinite(x_new[m]):
+                x[:] = x_start
+                return NON_FINITE
+        for m in range(nx):
+            x[m] = x_new[m]
+    if qs:
+        _shift_charge(x, u, A, 1.0)
+    return OK
+
+
+@njit(**_JIT)
+def advance_batch(X, U, A, c, terms, h, n_steps, status):
+    """Advance N independent copies (rows of X, inputs U) with the same model arrays."""
+    for b in range(X.shape[0]):
+        if status[b] == OK:
+            status[b] = advance(X[b], U[b], A, c, terms, h, n_steps)
+
+
+@njit(**_JIT)
+def advance_and_output(x, u, A, c, terms, h, n_steps, out):
+    """One control period in one call: advance, then fill the outputs (status of the first error)."""
+    status = advance(x, u, A, c, terms, h, n_steps)
+    if status != OK:
+        return status
+    return outputs(x, u, A, out)

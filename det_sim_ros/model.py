@@ -1,0 +1,191 @@
+"""
+The DET-buckled-beam model, derived from energies and virtual works (paper Sections 2-3).
+
+Generalized coordinates: the Ritz coefficients q of each beam pair ("cell", w = sum q_j S_j),
+the Maxwell strain eps_E of each DET (if creep) and the DET charge q_p (if the source is an RC
+circuit). With y_c(q) the end shortening of cell c and lambda = (l - y_c)/l0 (eq 66):
+
+    T    = 1/2 qdot' Mb qdot + 1/2 ydot' MI ydot,          ydot = J qdot, J = dy/dq
+    U_s  = sum_cells EI int w''^2 (1 + w'^2) dx             (eq 51, both beams)
+    U_DE = V Y/6 (lambda^2 + lambda^-2 - 2) + q_p^2 / (2 C0 lambda^2)     (eq 53)
+    dW   = -(qdot' D + V (E_M eps_E + eta_v dlz/dt) dlz/dq) dq           (eqs 54-55, 67)
+           + V (eta_M (dlz/dt - deps_E/dt) - E_M eps_E) d eps_E + circuit (eqs 56-57)
+
+Lagrange's equations (35) then give, with lz = 1/lambda and dlz/dq = J / (l0 lambda^2):
+
+    (Mb + J' MI J) qddot + J' MI (qdot' H_y qdot) + D qdot + dU_s/dq
+        - (J / l0) [V Y/3 (lambda - lambda^-3) - q_p^2 / (C0 lambda^3)]
+        + V (E_M eps_E + eta_v dlz/dt) dlz/dq = 0
+    deps_E/dt = dlz/dt - (E_M / eta_M) eps_E
+    dq_p/dt   = v / Rs - (1/Rs + 1/Rp) v_p,    v_p = q_p / (C0 lambda^2),  i_DE = (v - v_p) / Rs
+
+For one cell and the paper's one-term shape this is the paper's eq 71 with its errata corrected
+(see ../shared/design/model-notes.md, verified here by the tests):
+
+1. the inertia term is a m (q^2 qddot + q qdot^2), not a m (q^2 qddot + 2 q qdot^2): the printed
+   form forgets dT/dq and injects the spurious power -a m q qdot^3 (eq 75 likewise);
+2. eq 70's kinetic energy carries qdot^2, not qdot;
+3. eq 57's V_e has R_p qdot_p, not R_p q_p;
+4. eq 62's condition is w(l/2) = q, not w'(l/2) = q;
+5. eq 78's pre-strain energy is a constant already contained in U_DE.
+
+The 'consistent' fidelity uses the fourth-order end shortening y = int (w'^2/2 + w'^4/8) dx that
+matches eq 51's energy (eq 65 drops it). Reductions: no creep drops eps_E; the ideal source
+(Rs -> 0) makes q_p = C0 lambda^2 v algebraic and drops the stiff charge state; a dropped state
+is neither stored nor computed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from . import _kernels
+from .scene import Scene
+from .shapes import make_basis
+
+__all__ = ['Model', 'ModelDomainError', 'build_model', 'CELL_OUTPUTS', 'GLOBAL_OUTPUTS']
+
+CELL_OUTPUTS = ('q', 'q_dot', 'y', 'lambda', 'q_p', 'v_p', 'i_DE', 'C', 'eps_E')
+GLOBAL_OUTPUTS = ('H', 'P_in', 'P_diss')
+_STATUS_TEXT = {
+    _kernels.BAD_STRETCH: 'DET stretch lambda = (l - y)/l0 <= 0: the beam ends met (l - y <= 0)',
+    _kernels.NON_FINITE: 'non-finite state or output (NaN or inf)',
+}
+
+
+class ModelDomainError(ArithmeticError):
+    """The state left the model's domain; the message names the quantity."""
+
+    def __init__(self, status: int, where: str = ''):
+        self.status = status
+        super().__init__(_STATUS_TEXT.get(status, f'status {status}') + (f' {where}' if where
+                                                                          else ''))
+
+
+def check(status: int, where: str = '') -> None:
+    """Raise :class:`ModelDomainError` for a non-zero kernel status."""
+    if status != _kernels.OK:
+        raise ModelDomainError(status, where)
+
+
+@dataclasses.dataclass
+class Model:
+    """
+    A built model: f(t, x, u), named states and outputs, and the compiled arrays.
+
+    Create it with :func:`build_model`; ``arrays`` is what the kernels read.
+    """
+
+    scene: Scene
+    arrays: tuple
+    state_names: tuple
+    output_names: tuple
+    n_inputs: int
+    bases: tuple
+
+    @property
+    def n_states(self) -> int:
+        """Length of x, including the two energy-monitor states when enabled."""
+        return len(self.state_names)
+
+    def initial_state(self) -> np.ndarray:
+        """q = q0 at the first Ritz coordinate of each cell, everything else 0 (scenarios.md)."""
+        x = np.zeros(self.n_states)
+        cell_q = self.arrays[1]
+        for c in range(len(cell_q) - 1):
+            x[cell_q[c]] = self.scene.physics.q0 / self.bases[c].reference_row()[0]
+        return x
+
+    def f(self, t, x, u, params=None) -> np.ndarray:  # noqa: ARG002 - nlsys signature
+        """dx/dt at (x, u); python-control's ``updfcn(t, x, u, params)`` signature."""
+        del t, params
+        dx = np.empty(self.n_states)
+        check(_kernels.rhs(np.asarray(x, dtype=float), self._u(u), self.arrays, dx,
+                           np.empty(2), np.empty(_kernels.workspace_size(self.arrays))))
+        return dx
+
+    def output_vector(self, x, u) -> np.ndarray:
+        """Outputs as one vector in ``output_names`` order."""
+        out = np.empty(len(self.output_names))
+        check(_kernels.outputs(np.asarray(x, dtype=float), self._u(u), self.arrays, out))
+        return out
+
+    def outputs(self, x, u) -> dict:
+        """Named outputs at one state (see ``output_names``)."""
+        return dict(zip(self.output_names, self.output_vector(x, u)))
+
+    def stiff_rates(self, x) -> np.ndarray:
+        """Diagonal of the stiff linear part (1/s): -1/(C Rs||Rp) at the charge states."""
+        L = np.empty(self.n_states)
+        check(_kernels.stiff_rates(np.asarray(x, dtype=float), self.arrays, L))
+        return L
+
+    def _u(self, u):
+        u = np.atleast_1d(np.asarray(u, dtype=float))
+        if u.shape != (self.n_inputs,):
+            raise ValueError(f'expected {self.n_inputs} input voltage(s), got shape {u.shape}')
+        return u
+
+
+def build_model(scene: Scene) -> Model:
+    """Assemble the model arrays from a scene (Ritz integrals computed once, here)."""
+    p = scene.physics
+    length = scene.beam_length
+    basis = make_basis(scene.beam, length, scene.fidelity, scene.n_ritz)
+    cells = [basis]            # one cell (beam pair + DET) per scene for now
+    MI = np.array([[p.m]])
+    return _assemble(scene, cells, MI, [p])
+
+
+def _assemble(scene, cells, MI, det_physics):
+    nc = len(cells)
+    r = [b.n_ritz for b in cells]
+    nq = int(sum(r))
+    cell_q = np.concatenate([[0], np.cumsum(r)]).astype(np.int64)
+    nodes = [b.quadrature() for b in cells]
+    cell_g = np.concatenate([[0], np.cumsum([len(x) for x, _ in nodes])]).astype(np.int64)
+    B1 = np.zeros((cell_g[-1], max(r)))
+    B2 = np.zeros_like(B1)
+    W = np.zeros(cell_g[-1])
+    Mb = np.zeros((nq, nq))
+    K = np.zeros((nq, nq))
+    D = np.zeros((nq, nq))
+    ref = np.zeros(nq)
+    cellp = np.zeros((nc, 3))
+    detp = np.zeros((nc, 9))
+    kappa = 1.0 if scene.fidelity == 'consistent' else 0.0
+    for c, (basis, (x, w), ph) in enumerate(zip(cells, nodes, det_physics)):
+        g = slice(cell_g[c], cell_g[c + 1])
+        s = slice(cell_q[c], cell_q[c + 1])
+        S0, S1, S2 = (basis.values(x, k) for k in range(3))
+        B1[g, :basis.n_ritz] = S1
+        B2[g, :basis.n_ritz] = S2
+        W[g] = w
+        EI = ph.E_b * ph.I
+        # both beams: factor 2 on every beam integral (eqs 49, 51, 55 with B1 = B2)
+        Mb[s, s] = 2.0 * ph.rho_b * (ph.I * S1.T @ (w[:, None] * S1)
+                                     + ph.area * S0.T @ (w[:, None] * S0))
+        K[s, s] = 2.0 * EI * S2.T @ (w[:, None] * S2)
+        D[s, s] = 2.0 * ph.eta_b * ph.I * S2.T @ (w[:, None] * S2)
+        ref[s] = basis.reference_row()
+        cellp[c] = (basis.length, EI, kappa)
+        detp[c] = (ph.l0, ph.volume * ph.Y, ph.C0, ph.volume, ph.E_M, ph.eta_M, ph.eta_v,
+                   ph.Rs, ph.Rp)
+    creep, rc, power = int(scene.creep), int(scene.source == 'rc'), int(scene.monitor_power)
+    names = [f'q[{j}]' for j in range(nq)] + [f'q_dot[{j}]' for j in range(nq)]
+    if creep:
+        names += [f'eps_E[{i}]' for i in range(nc)]
+    if rc:
+        names += [f'q_p[{i}]' for i in range(nc)]
+    if power:
+        names += ['W_in', 'W_diss']
+    flags = np.array([nq, nc, creep, rc, power, len(names)], dtype=np.int64)
+    arrays = (flags, cell_q, cell_g, B1, B2, W, Mb, K, D, np.asarray(MI, dtype=float), cellp,
+              detp, ref)
+    if nc == 1:
+        out_names = CELL_OUTPUTS
+    else:
+        out_names = tuple(f'{n}[{c}]' for c in range(nc) for n in CELL_OUTPUTS)
+    return Model(scene, arrays, tuple(names), out_names + GLOBAL_OUTPUTS, nc, tuple(cells))

@@ -1,0 +1,205 @@
+"""
+The simulator: state, the sim-time grid t = k dt, and inputs held between commands.
+
+:class:`Simulator` advances exactly one control period dt per :meth:`Simulator.step` with the
+input held constant (zero-order hold), in ``substeps`` fixed internal steps of the chosen method.
+Time is always ``k * dt`` (never accumulated), and the same inputs give bit-identical outputs.
+A state that leaves the model's domain puts the simulator in a fault: the last good state is kept,
+``fault`` names the cause, and :meth:`Simulator.reset` recovers. No NaN ever leaves it.
+
+:func:`simulate` is the offline entry point: a voltage profile in, named output arrays out.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Callable
+
+import numpy as np
+
+from . import _kernels
+from .integrators import choose_substeps, get_method, Method
+from .model import build_model, Model, ModelDomainError
+from .scene import load_scene, Scene
+
+__all__ = ['Simulator', 'InputCheck', 'simulate', 'SimulationResult']
+
+
+@dataclasses.dataclass(frozen=True)
+class InputCheck:
+    """What :meth:`Simulator.set_input` did with a command."""
+
+    accepted: bool
+    clamped: bool
+    reason: str = ''
+
+
+class Simulator:
+    """
+    Fixed-step simulation of one scene.
+
+    :param scene: a :class:`Scene`, a scene file/name, or a built :class:`Model`.
+    :param method: stepper name (default: the scene's ``integrator.method``; 'auto' picks
+        'etdrk4' when the scene has a stiff charge state and 'rk4' otherwise).
+    :param substeps: internal steps per control period (default: the scene's, 0 = from the
+        scene's tolerance).
+    """
+
+    def __init__(self, scene=None, method: str | None = None, substeps: int | None = None):
+        if isinstance(scene, Model):
+            self.model = scene
+        else:
+            if not isinstance(scene, Scene):
+                scene = load_scene('default' if scene is None else scene)
+            self.model = build_model(scene)
+        self.scene = self.model.scene
+        self.method = self._pick_method(method or self.scene.method)
+        substeps = self.scene.substeps if substeps is None else substeps
+        if substeps < 0:
+            raise ValueError(f'substeps must be >= 0 (got {substeps})')
+        self.dt = self.scene.dt
+        self.substeps = substeps or choose_substeps(self.method, self.dt, self.scene.tolerance)
+        self.h = self.dt / self.substeps
+        self._c, self._terms = self.method.arrays()
+        self.output_names = self.model.output_names
+        self._out = np.empty(len(self.output_names))
+        self.reset()
+
+    def _pick_method(self, name: str) -> Method:
+        if name == 'auto':
+            stiff = self.scene.source == 'rc'
+            return get_method('etdrk4' if stiff else 'rk4')
+        return get_method(name)
+
+    # -- state ----------------------------------------------------------------------------
+    def reset(self, x0=None) -> None:
+        """Back to t = 0, the initial state (or ``x0``), 0 V input, no fault."""
+        self.k = 0
+        self.x = self.model.initial_state() if x0 is None else np.array(x0, dtype=float)
+        if self.x.shape != (self.model.n_states,):
+            raise ValueError(f'x0 must have {self.model.n_states} entries')
+        self.u = np.zeros(self.model.n_inputs)
+        self.fault = ''
+        status = _kernels.outputs(self.x, self.u, self.model.arrays, self._out)
+        if status != _kernels.OK:
+            raise ModelDomainError(status, 'in the initial state')
+        self.initial_energy = float(self._out[self.output_names.index('H')])
+
+    @property
+    def t(self) -> float:
+        """Simulated time k * dt, s."""
+        return self.k * self.dt
+
+    # -- input ----------------------------------------------------------------------------
+    def set_input(self, volts) -> InputCheck:
+        """
+        Hold new DET voltages from now on (zero-order hold).
+
+        Non-finite values and a wrong length are refused (the previous input stays); values
+        outside [0, v_max] are clamped.
+        """
+        try:
+            v = np.array(volts, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            return InputCheck(False, False, f'not a vector of numbers: {volts!r}')
+        if v.shape != (self.model.n_inputs,):
+            return InputCheck(False, False, f'expected {self.model.n_inputs} voltage(s), '
+                                            f'got {v.size}')
+        if not np.all(np.isfinite(v)):
+            return InputCheck(False, False, f'non-finite voltage {v.tolist()}')
+        v_max = self.scene.physics.v_max
+        clamped = np.clip(v, 0.0, v_max)
+        self.u = clamped
+        if np.any(clamped != v):
+            return InputCheck(True, True, f'voltage {v.tolist()} clamped to [0, {v_max:g}] V')
+        return InputCheck(True, False)
+
+    # -- stepping ---------------------------------------------------------------------------
+    def step(self) -> np.ndarray:
+        """
+        Advance one control period and return the outputs (a view, in ``output_names`` order).
+
+        :raises ModelDomainError: the state left the domain; the simulator is then faulted at
+            the last good state until :meth:`reset`.
+        """
+        if self.fault:
+            raise ModelDomainError(_kernels.NON_FINITE, f'(faulted: {self.fault})')
+        x_new = self.x.copy()
+        status = _kernels.advance_and_output(x_new, self.u, self.model.arrays, self._c,
+                                             self._terms, self.h, self.substeps, self._out)
+        if status != _kernels.OK:
+            error = ModelDomainError(status, f'at t = {self.t + self.dt:.6g} s')
+            self.fault = str(error)
+            status = _kernels.outputs(self.x, self.u, self.model.arrays, self._out)
+            raise error
+        self.x = x_new
+        self.k += 1
+        return self._out
+
+    def outputs(self) -> dict:
+        """Named outputs at the current state and input."""
+        status = _kernels.outputs(self.x, self.u, self.model.arrays, self._out)
+        if status != _kernels.OK:
+            raise ModelDomainError(status)
+        return dict(zip(self.output_names, self._out.tolist()))
+
+    def power_residual(self) -> float:
+        """
+        Energy-balance residual H(t) - H(0) - (W_in - W_diss), relative to the energy scale.
+
+        NaN when the scene does not monitor power. The scale is max(H(0), W_in, 1 uJ).
+        """
+        if not self.scene.monitor_power:
+            return math.nan
+        out = self.outputs()
+        w_in, w_diss = self.x[-2], self.x[-1]
+        scale = max(abs(self.initial_energy), abs(w_in), 1e-6)
+        return (out['H'] - self.initial_energy - (w_in - w_diss)) / scale
+
+
+@dataclasses.dataclass
+class SimulationResult:
+    """Sampled outputs of an offline run: ``t`` (s), ``u`` (V), ``x`` and each named output."""
+
+    t: np.ndarray
+    u: np.ndarray
+    x: np.ndarray
+    outputs: dict
+
+    def __getitem__(self, name):
+        return self.outputs[name]
+
+
+def simulate(scene, voltage: Callable[[float], float] | np.ndarray, t_end: float,
+             method: str | None = None, substeps: int | None = None) -> SimulationResult:
+    """
+    Run a scene offline and return the outputs at every control sample t = k dt.
+
+    :param voltage: a function v(t) (sampled at the start of each period and held), or an array
+        of per-period voltages (shape (n_periods,) or (n_periods, n_inputs)).
+    :param t_end: end time, s (rounded to whole control periods).
+    """
+    sim = scene if isinstance(scene, Simulator) else Simulator(scene, method, substeps)
+    n = int(round(t_end / sim.dt))
+    n_in = sim.model.n_inputs
+    if callable(voltage):
+        volts = np.array([np.broadcast_to(voltage(k * sim.dt), (n_in,)) for k in range(n)],
+                         dtype=float)
+    else:
+        volts = np.asarray(voltage, dtype=float).reshape(n, -1) if n else np.zeros((0, n_in))
+    t = np.arange(n + 1) * sim.dt
+    Y = np.empty((n + 1, len(sim.output_names)))
+    X = np.empty((n + 1, sim.model.n_states))
+    U = np.zeros((n + 1, n_in))
+    Y[0] = list(sim.outputs().values())
+    X[0] = sim.x
+    for k in range(n):
+        check = sim.set_input(volts[k])
+        if not check.accepted:
+            raise ValueError(f'voltage sample {k}: {check.reason}')
+        U[k] = sim.u
+        Y[k + 1] = sim.step()
+        X[k + 1] = sim.x
+    U[n] = sim.u
+    return SimulationResult(t, U, X, {name: Y[:, i] for i, name in enumerate(sim.output_names)})
