@@ -1,0 +1,690 @@
+"""
+MCAP run logs in the rosbag2 conventions, and a reader that also recovers unfinished files.
+
+Writing (:class:`Recorder`) follows what ``ros2 bag record`` (Jazzy, mcap storage plugin) writes,
+so a log opens in Foxglove, ``ros2 bag info|play`` and any rosbag2/MCAP reader:
+
+- header profile ``ros2``; one channel per topic, message encoding ``cdr`` (rclpy's serializer,
+  4-byte encapsulation header included), channel metadata ``offered_qos_profiles`` in the Jazzy
+  (metadata version 9) YAML form;
+- one schema per type, named ``pkg/msg/Type``, encoding ``ros2msg``: the type's ``.msg`` text
+  followed by each dependency (recursively, once) after a line of 80 ``=`` and ``MSG: pkg/Type``;
+- ``log_time = publish_time = sim time`` in ns, never decreasing (a smaller time is clamped and
+  counted);
+- the run is self-describing: an attachment ``scene.yaml`` and a metadata record ``det_sim_ros``
+  (package version, scene YAML, stepper, wall start time) at the start of every file, and a
+  metadata record ``det_sim_ros.end`` with the counters when the file is closed.
+
+Crash safety: chunks are bounded (64 KiB) and the writer is flushed every ``flush_period_s`` of
+wall time (0.1 s), so a SIGKILL loses at most that much; :meth:`Recorder.close` (called from the
+node's shutdown path on SIGINT/SIGTERM and from ``atexit``) finishes and indexes the file. A
+logging fault (disk full, unwritable path, ...) never raises into the caller: it stops recording,
+and :attr:`Recorder.fault` says why.
+
+Reading (:class:`LogReader`) streams records in file order and stops quietly at the end of the
+readable data, so a file cut by a crash gives every message of every complete chunk.
+"""
+
+from __future__ import annotations
+
+import atexit
+import dataclasses
+import logging
+import os
+import re
+import sys
+import time
+import weakref
+from typing import Callable, Iterable, Iterator, Mapping
+
+__all__ = ['Recorder', 'LogReader', 'LogMessage', 'message_definition', 'qos_profiles_yaml',
+           'type_name_of', 'deserialize', 'recover', 'log_files', 'LIBRARY', 'METADATA_NAME']
+
+LIBRARY = 'det_sim_ros'
+METADATA_NAME = 'det_sim_ros'
+END_METADATA_NAME = 'det_sim_ros.end'
+SCENE_ATTACHMENT = 'scene.yaml'
+DELIMITER = '=' * 80 + '\n'
+
+_logger = logging.getLogger(__name__)
+
+# -- message definitions (schemas) ----------------------------------------------------------------
+
+_PRIMITIVES = frozenset({'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16',
+                         'uint16', 'int32', 'uint32', 'int64', 'uint64', 'string', 'wstring'})
+_FIELD_TYPE = re.compile(r'^\s*([A-Za-z][A-Za-z0-9_/]*)')
+
+# Used only when no ROS share directory has the .msg files (ROS-free installs); comments dropped.
+_BUILTIN_MSG = {
+    'builtin_interfaces/msg/Time': 'int32 sec\nuint32 nanosec\n',
+    'std_msgs/msg/Header': 'builtin_interfaces/Time stamp\nstring frame_id\n',
+    'std_msgs/msg/MultiArrayDimension': 'string label\nuint32 size\nuint32 stride\n',
+    'std_msgs/msg/MultiArrayLayout': 'MultiArrayDimension[] dim\nuint32 data_offset\n',
+    'std_msgs/msg/Float64MultiArray': 'MultiArrayLayout layout\nfloat64[] data\n',
+    'sensor_msgs/msg/JointState': ('std_msgs/Header header\n\nstring[] name\nfloat64[] position\n'
+                                   'float64[] velocity\nfloat64[] effort\n'),
+    'rosgraph_msgs/msg/Clock': 'builtin_interfaces/Time clock\n',
+}
+
+
+def _split_type(name: str) -> tuple[str, str, str]:
+    parts = name.split('/')
+    if len(parts) == 2:
+        return parts[0], 'msg', parts[1]
+    if len(parts) == 3:
+        return parts[0], parts[1], parts[2]
+    raise ValueError(f'not a ROS type name (pkg/msg/Type): {name!r}')
+
+
+def _share_dirs() -> list[str]:
+    dirs = []
+    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
+        if prefix:
+            dirs.append(os.path.join(prefix, 'share'))
+    dirs.append(os.path.join(sys.prefix, 'share'))
+    dirs.append(os.path.join(sys.base_prefix, 'share'))
+    return list(dict.fromkeys(dirs))
+
+
+def _msg_text(name: str) -> str:
+    package, kind, type_ = _split_type(name)
+    for share in _share_dirs():
+        path = os.path.join(share, package, kind, type_ + '.msg')
+        if os.path.isfile(path):
+            with open(path, encoding='utf-8') as stream:
+                return stream.read()
+    full = f'{package}/{kind}/{type_}'
+    if full in _BUILTIN_MSG:
+        return _BUILTIN_MSG[full]
+    raise LookupError(f'no .msg definition found for {name!r} in ' + ', '.join(_share_dirs()))
+
+
+def _dependencies(text: str, package: str) -> list[str]:
+    deps = set()
+    for line in text.splitlines():
+        line = line.split('#', 1)[0]
+        match = _FIELD_TYPE.match(line)
+        if not match or not line[match.end():].strip():
+            continue
+        base = re.split(r'[\[<]', match.group(1))[0]
+        if base in _PRIMITIVES:
+            continue
+        deps.add(base if '/' in base else f'{package}/{base}')
+    return sorted(deps)
+
+
+_DEFINITIONS: dict[str, str] = {}
+
+
+def message_definition(type_name: str) -> str:
+    """
+    The complete ``ros2msg`` definition of a type, as rosbag2 stores it.
+
+    The type's own ``.msg`` text first, then every dependency once (depth first, sorted), each
+    after an 80 ``=`` line and ``MSG: pkg/Type``. The ``.msg`` files are looked up in the
+    ``share`` directories of ``AMENT_PREFIX_PATH`` and of this Python's prefix (pip-installed
+    ROS wheels); a few core types are built in for ROS-free use.
+    """
+    if type_name in _DEFINITIONS:
+        return _DEFINITIONS[type_name]
+    seen = set()
+
+    def expand(name: str, depth: int) -> str:
+        if depth > 50:
+            raise RecursionError(f'message definition of {type_name!r} is too deep')
+        text = _msg_text(name)
+        for dep in _dependencies(text, _split_type(name)[0]):
+            if dep not in seen:
+                seen.add(dep)
+                text += '\n' + DELIMITER + f'MSG: {dep}\n' + expand(dep, depth + 1)
+        return text
+
+    _DEFINITIONS[type_name] = result = expand(type_name, 0)
+    return result
+
+
+def type_name_of(msg_or_class) -> str:
+    """``'sensor_msgs/msg/JointState'`` for an rclpy message (or its class)."""
+    cls = msg_or_class if isinstance(msg_or_class, type) else type(msg_or_class)
+    parts = cls.__module__.split('.')
+    if len(parts) < 2:
+        raise TypeError(f'{cls!r} is not a generated ROS message class')
+    return f'{parts[0]}/{parts[1]}/{cls.__name__}'
+
+
+def _message_class(type_name: str):
+    import importlib
+    package, kind, type_ = _split_type(type_name)
+    return getattr(importlib.import_module(f'{package}.{kind}'), type_)
+
+
+def deserialize(type_name: str, data: bytes):
+    """Deserialize CDR bytes into the rclpy message class of ``type_name``."""
+    from rclpy.serialization import deserialize_message
+    return deserialize_message(data, _message_class(type_name))
+
+
+# -- QoS metadata --------------------------------------------------------------------------------
+
+_INFINITE = (9223372036, 854775807)  # RMW_DURATION_INFINITE as rosbag2 Jazzy writes it
+_RMW_DEFAULTS = {'history': 'keep_last', 'reliability': 'reliable', 'durability': 'volatile',
+                 'liveliness': 'automatic'}
+
+
+def _policy(value, key):
+    name = getattr(value, 'name', value)
+    name = str(name).lower()
+    if name in ('system_default', 'unknown', 'best_available'):
+        name = _RMW_DEFAULTS[key]
+    return name
+
+
+def _duration(value):
+    ns = getattr(value, 'nanoseconds', value)
+    if ns is None or int(ns) <= 0:
+        return _INFINITE
+    ns = int(ns)
+    return ns // 1_000_000_000, ns % 1_000_000_000
+
+
+def qos_profiles_yaml(qos=None) -> str:
+    """
+    The ``offered_qos_profiles`` channel metadata, in rosbag2 Jazzy's (version 9) YAML form.
+
+    :param qos: an ``rclpy.qos.QoSProfile``, a mapping with the same keys (history, depth,
+        reliability, durability, liveliness, deadline/lifespan/liveliness_lease_duration in ns),
+        an int (depth, reliable) or None (reliable, keep last 10). System defaults are written
+        as the rmw defaults; zero durations as infinite.
+    """
+    if qos is None or isinstance(qos, int):
+        qos = {'depth': 10 if qos is None else qos}
+    get = (qos.get if isinstance(qos, Mapping) else lambda key, default=None:
+           getattr(qos, key, default))
+    lines = [
+        f"- history: {_policy(get('history', 'keep_last'), 'history')}",
+        f"  depth: {int(get('depth', 10) or 0)}",
+        f"  reliability: {_policy(get('reliability', 'reliable'), 'reliability')}",
+        f"  durability: {_policy(get('durability', 'volatile'), 'durability')}",
+    ]
+    for key in ('deadline', 'lifespan'):
+        sec, nsec = _duration(get(key, 0))
+        lines += [f'  {key}:', f'    sec: {sec}', f'    nsec: {nsec}']
+    lines.append(f"  liveliness: {_policy(get('liveliness', 'automatic'), 'liveliness')}")
+    sec, nsec = _duration(get('liveliness_lease_duration', 0))
+    lines += ['  liveliness_lease_duration:', f'    sec: {sec}', f'    nsec: {nsec}']
+    avoid = bool(get('avoid_ros_namespace_conventions', False))
+    lines.append(f'  avoid_ros_namespace_conventions: {str(avoid).lower()}')
+    return '\n'.join(lines)
+
+
+# -- writing -------------------------------------------------------------------------------------
+
+def _scene_yaml(scene) -> str:
+    if scene is None:
+        return ''
+    if isinstance(scene, str):
+        return scene
+    import yaml
+    from .scene import scene_to_dict
+    data = scene if isinstance(scene, Mapping) else scene_to_dict(scene, wrap=True)
+    return yaml.safe_dump(data, sort_keys=False)
+
+
+def _fully_qualified(topic: str) -> str:
+    return topic if topic.startswith('/') else '/' + topic
+
+
+class Recorder:
+    """
+    Record ROS messages of one run to MCAP (see the module docstring for the format).
+
+    Usable without a ROS graph: only ``rclpy.serialization`` is needed (and not even that when
+    :meth:`record` is given CDR bytes).
+
+    :param path: a ``.mcap`` file (or an existing non-directory such as a device), or a
+        directory in which ``det_sim_<date>-<time>_<pid>.mcap`` is created.
+    :param scene: the :class:`~det_sim_ros.scene.Scene` (or its YAML text / mapping) stored
+        in every file.
+    :param qos_by_topic: topic -> QoS (``rclpy.qos.QoSProfile``, mapping or depth) for the
+        ``offered_qos_profiles`` metadata; topics not listed get reliable, keep last 10.
+    :param flush_period_s: wall time between flushes (ends the chunk and writes it out); bounds
+        what a SIGKILL loses. 0 flushes after every message.
+    :param chunk_size: chunk size limit in bytes (a chunk is also ended by every flush).
+    :param compression: 'zstd', 'lz4' or 'none'.
+    :param split_mb: start a new file when the current one exceeds this many MiB (0: never).
+    :param split_s: start a new file every this many seconds of log time (0: never).
+    :param metadata: extra string key/values for the ``det_sim_ros`` metadata record (e.g. the
+        stepper ``method`` and ``substeps``, the ``output_map``).
+    :param on_fault: called once with the fault text when recording stops on an error.
+    :param clock: wall clock for the flush period (``time.monotonic``).
+    """
+
+    def __init__(self, path, scene=None, *, qos_by_topic: Mapping | None = None,
+                 flush_period_s: float = 0.1, chunk_size: int = 64 * 1024,
+                 compression: str = 'zstd', split_mb: float = 0.0, split_s: float = 0.0,
+                 metadata: Mapping[str, object] | None = None,
+                 on_fault: Callable[[str], None] | None = None,
+                 clock: Callable[[], float] = time.monotonic, prefix: str = 'det_sim'):
+        self.fault = ''
+        self.paths: list[str] = []
+        self.messages = 0       # messages written
+        self.bytes = 0          # serialized payload bytes written
+        self.clamped = 0        # log times raised to keep them non-decreasing
+        self.dropped = 0        # messages not written because of a fault
+        self.flushes = 0
+        self.record_time_s = 0.0  # wall time spent in record()
+        self.qos_by_topic = {_fully_qualified(k): v for k, v in (qos_by_topic or {}).items()}
+        self.flush_period_s = float(flush_period_s)
+        self.chunk_size = int(chunk_size)
+        self.split_bytes = int(float(split_mb) * 1024 * 1024)
+        self.split_ns = int(float(split_s) * 1e9)
+        self.on_fault = on_fault
+        self._clock = clock
+        self._compression = compression
+        self._metadata = {str(k): str(v) for k, v in (metadata or {}).items()}
+        self._writer = None
+        self._stream = None
+        self._last_t = 0
+        self._file_start_t = None
+        self._channels: dict[str, int] = {}
+        self._schemas: dict[str, int] = {}
+        self._types: dict[str, str] = {}
+        self._sequence: dict[str, int] = {}
+        self._type_cache: dict[type, str] = {}
+        self._serialize = None
+        try:
+            from . import __version__
+            self.version = __version__
+        except Exception:  # pragma: no cover - partial installs
+            self.version = 'unknown'
+        try:
+            self.scene_yaml = _scene_yaml(scene)
+            self._base = self._first_path(os.fspath(path), prefix)
+            self._open(self._base)
+        except Exception as exc:  # noqa: BLE001 - a logging fault must not stop the simulation
+            self._set_fault(exc)
+        _open_recorders.add(self)
+
+    # -- files -------------------------------------------------------------------------------
+    @staticmethod
+    def _first_path(path: str, prefix: str) -> str:
+        if path.endswith('.mcap') or (os.path.exists(path) and not os.path.isdir(path)):
+            folder = os.path.dirname(path)
+            if folder:
+                os.makedirs(folder, exist_ok=True)
+            return path
+        os.makedirs(path, exist_ok=True)
+        stamp = time.strftime('%Y%m%d-%H%M%S')
+        base = os.path.join(path, f'{prefix}_{stamp}_{os.getpid()}')
+        candidate, n = base + '.mcap', 1
+        while os.path.exists(candidate):
+            candidate, n = f'{base}-{n}.mcap', n + 1
+        return candidate
+
+    def _split_path(self) -> str:
+        stem = self._base[:-5] if self._base.endswith('.mcap') else self._base
+        return f'{stem}_{len(self.paths):03d}.mcap'
+
+    def _open(self, path: str) -> None:
+        from mcap.writer import CompressionType, Writer
+        compression = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
+                       'none': CompressionType.NONE, '': CompressionType.NONE}[self._compression]
+        self._stream = open(path, 'wb')
+        self.paths.append(path)
+        writer = Writer(self._stream, chunk_size=self.chunk_size, compression=compression)
+        writer.start(profile='ros2', library=f'{LIBRARY} {self.version}')
+        wall_ns = time.time_ns()
+        info = {'version': self.version, 'scene_yaml': self.scene_yaml, 'time_base': 'sim_time',
+                'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
+                'wall_start_ns': str(wall_ns), 'file_index': str(len(self.paths) - 1)}
+        info.update(self._metadata)
+        writer.add_metadata(METADATA_NAME, info)
+        if self.scene_yaml:
+            writer.add_attachment(create_time=wall_ns, log_time=self._last_t,
+                                  name=SCENE_ATTACHMENT, media_type='application/yaml',
+                                  data=self.scene_yaml.encode())
+        writer.flush()
+        self._writer = writer
+        self._channels.clear()
+        self._schemas.clear()
+        self._file_start_t = None
+        self._last_flush = self._clock()
+
+    def _close_file(self) -> None:
+        writer, stream = self._writer, self._stream
+        self._writer = self._stream = None
+        if writer is None:
+            return
+        try:
+            writer.add_metadata(END_METADATA_NAME, self.counters(strings=True))
+            writer.finish()
+        finally:
+            stream.close()
+
+    # -- recording ---------------------------------------------------------------------------
+    def _channel(self, topic: str, msg, type_name: str | None) -> int:
+        type_name = type_name or self._types.get(topic)
+        if type_name is None:
+            cls = type(msg)
+            type_name = self._type_cache.get(cls) or self._type_cache.setdefault(
+                cls, type_name_of(cls))
+        self._types[topic] = type_name
+        writer = self._writer
+        schema_id = self._schemas.get(type_name)
+        if schema_id is None:
+            schema_id = writer.register_schema(name=type_name, encoding='ros2msg',
+                                               data=message_definition(type_name).encode())
+            self._schemas[type_name] = schema_id
+        channel_id = writer.register_channel(
+            topic=topic, message_encoding='cdr', schema_id=schema_id,
+            metadata={'offered_qos_profiles': qos_profiles_yaml(self.qos_by_topic.get(topic)),
+                      'topic_type_hash': ''})
+        self._channels[topic] = channel_id
+        return channel_id
+
+    def record(self, topic: str, msg, log_time_ns: int, type_name: str | None = None) -> bool:
+        """
+        Write one message at sim time ``log_time_ns`` (also its publish time).
+
+        :param msg: an rclpy message, or its CDR bytes (then give ``type_name`` on first use).
+        :returns: True if written; False when recording has stopped on a fault.
+        """
+        if self._writer is None:
+            self.dropped += 1
+            return False
+        start = self._clock()
+        try:
+            topic = topic if topic.startswith('/') else '/' + topic
+            t = int(log_time_ns)
+            if t < self._last_t:
+                t = self._last_t
+                self.clamped += 1
+            self._last_t = t
+            if isinstance(msg, (bytes, bytearray, memoryview)):
+                data = bytes(msg)
+            else:
+                if self._serialize is None:
+                    from rclpy.serialization import serialize_message
+                    self._serialize = serialize_message
+                data = self._serialize(msg)
+            if self._file_start_t is None:
+                self._file_start_t = t
+            elif ((self.split_ns and t - self._file_start_t >= self.split_ns)
+                  or (self.split_bytes and self._stream.tell() >= self.split_bytes)):
+                self._close_file()
+                self._open(self._split_path())
+                self._file_start_t = t
+            channel_id = self._channels.get(topic)
+            if channel_id is None:
+                channel_id = self._channel(topic, msg, type_name)
+            sequence = self._sequence.get(topic, 0)
+            self._sequence[topic] = sequence + 1
+            self._writer.add_message(channel_id=channel_id, log_time=t, data=data,
+                                     publish_time=t, sequence=sequence)
+            self.messages += 1
+            self.bytes += len(data)
+            if start - self._last_flush >= self.flush_period_s:
+                self._flush(start)
+            return True
+        except Exception as exc:  # noqa: BLE001 - never raise into the node
+            self.dropped += 1
+            self._set_fault(exc)
+            return False
+        finally:
+            self.record_time_s += self._clock() - start
+
+    def _flush(self, now: float) -> None:
+        self._writer.flush()
+        self.flushes += 1
+        self._last_flush = now
+
+    def maybe_flush(self) -> None:
+        """Flush if the flush period has passed (call from a timer when messages are sparse)."""
+        if self._writer is None:
+            return
+        now = self._clock()
+        if now - self._last_flush >= self.flush_period_s:
+            try:
+                self._flush(now)
+            except Exception as exc:  # noqa: BLE001
+                self._set_fault(exc)
+
+    def _set_fault(self, exc: BaseException) -> None:
+        if self.fault:
+            return
+        where = f' ({self.paths[-1]})' if self.paths else ''
+        self.fault = f'logging stopped{where}: {type(exc).__name__}: {exc}'
+        _logger.error(self.fault)
+        writer, stream = self._writer, self._stream
+        self._writer = self._stream = None
+        if stream is not None:
+            try:  # keep what can be kept: finish the file if the error allows it
+                writer.finish()
+            except Exception:  # noqa: BLE001
+                pass
+            try:
+                stream.close()
+            except Exception:  # noqa: BLE001
+                pass
+        if self.on_fault is not None:
+            try:
+                self.on_fault(self.fault)
+            except Exception:  # noqa: BLE001
+                _logger.exception('on_fault callback failed')
+
+    @property
+    def active(self) -> bool:
+        """True while messages are being written."""
+        return self._writer is not None
+
+    @property
+    def path(self) -> str:
+        """The file being written (the last one after a split)."""
+        return self.paths[-1] if self.paths else ''
+
+    def counters(self, strings: bool = False) -> dict:
+        """Messages, bytes, clamped and dropped counts, flushes, files, fault."""
+        values = {'messages': self.messages, 'bytes': self.bytes, 'clamped': self.clamped,
+                  'dropped': self.dropped, 'flushes': self.flushes, 'files': len(self.paths),
+                  'fault': self.fault}
+        return {k: str(v) for k, v in values.items()} if strings else values
+
+    def close(self) -> None:
+        """Finish and index the file (idempotent; never raises)."""
+        _open_recorders.discard(self)
+        if self._writer is None:
+            return
+        try:
+            self._close_file()
+        except Exception as exc:  # noqa: BLE001
+            self._set_fault(exc)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+_open_recorders: 'weakref.WeakSet[Recorder]' = weakref.WeakSet()
+
+
+@atexit.register
+def _close_open_recorders() -> None:  # pragma: no cover - runs at interpreter exit
+    for recorder in list(_open_recorders):
+        recorder.close()
+
+
+# -- reading -------------------------------------------------------------------------------------
+
+@dataclasses.dataclass(frozen=True)
+class LogMessage:
+    """One logged message: CDR ``data`` of ``type_name`` on ``topic``."""
+
+    topic: str
+    type_name: str
+    log_time: int
+    publish_time: int
+    sequence: int
+    data: bytes
+
+    def decode(self):
+        """The rclpy message."""
+        return deserialize(self.type_name, self.data)
+
+
+def log_files(paths) -> list[str]:
+    """Expand files and directories (their ``*.mcap``, sorted) into a list of MCAP files."""
+    if isinstance(paths, (str, os.PathLike)):
+        paths = [paths]
+    files = []
+    for path in map(os.fspath, paths):
+        if os.path.isdir(path):
+            files += sorted(os.path.join(path, f) for f in os.listdir(path) if f.endswith('.mcap'))
+        else:
+            files.append(path)
+    if not files:
+        raise FileNotFoundError(f'no MCAP files in {list(map(os.fspath, paths))}')
+    return files
+
+
+class LogReader:
+    """
+    Stream an MCAP log (one file, several split files or a directory of them) in file order.
+
+    Works on finished and unfinished files alike: reading stops at the first record that is
+    missing or torn (a file cut by SIGKILL or power loss), and :attr:`complete` then says
+    False. Metadata, attachments and channels seen so far are available as attributes.
+    """
+
+    def __init__(self, paths):
+        self.files = log_files(paths)
+        self.metadata: dict[str, dict[str, str]] = {}
+        self.attachments: dict[str, bytes] = {}
+        self.channels: dict[int, tuple[str, str, dict]] = {}  # per current file
+        self.topics: dict[str, str] = {}                       # topic -> type name
+        self.qos: dict[str, str] = {}                          # topic -> offered_qos_profiles
+        self.definitions: dict[str, bytes] = {}                # type name -> schema data
+        self.profile = ''
+        self.complete = True
+        self.errors: list[str] = []
+        self._scanned = False
+
+    def _records(self, path: str, stop_at_message: bool = False) -> Iterator:
+        from mcap.records import (Attachment, Channel, Footer, Header, Message, Metadata,
+                                  Schema)
+        from mcap.stream_reader import StreamReader
+        schemas: dict[int, str] = {}
+        self.channels = {}
+        finished = False
+        with open(path, 'rb') as stream:
+            records = StreamReader(stream, validate_crcs=True).records
+            while True:
+                try:
+                    record = next(records)
+                except StopIteration:
+                    finished = True
+                    break
+                except Exception as exc:  # noqa: BLE001 - the end of the readable data
+                    self.errors.append(f'{path}: {type(exc).__name__}: {exc}')
+                    break
+                if isinstance(record, Message):
+                    if stop_at_message:
+                        return
+                    channel = self.channels.get(record.channel_id)
+                    if channel is None:
+                        continue
+                    yield LogMessage(channel[0], channel[1], record.log_time,
+                                     record.publish_time, record.sequence, record.data)
+                elif isinstance(record, Schema):
+                    schemas[record.id] = record.name
+                    self.definitions.setdefault(record.name, record.data)
+                elif isinstance(record, Channel):
+                    type_name = schemas.get(record.schema_id, '')
+                    self.channels[record.id] = (record.topic, type_name, dict(record.metadata))
+                    self.topics.setdefault(record.topic, type_name)
+                    if 'offered_qos_profiles' in record.metadata:
+                        self.qos.setdefault(record.topic, record.metadata['offered_qos_profiles'])
+                elif isinstance(record, Metadata):
+                    self.metadata.setdefault(record.name, dict(record.metadata))
+                elif isinstance(record, Attachment):
+                    self.attachments.setdefault(record.name, record.data)
+                elif isinstance(record, Header):
+                    self.profile = record.profile
+                elif isinstance(record, Footer):
+                    finished = True
+                    break
+        if not finished and not stop_at_message:
+            self.complete = False
+
+    def scan_info(self) -> 'LogReader':
+        """Read the header records of the first file (metadata, scene) without the messages."""
+        if not self._scanned:
+            for _ in self._records(self.files[0], stop_at_message=True):
+                pass
+            self._scanned = True
+        return self
+
+    def messages(self, topics: Iterable[str] | None = None) -> Iterator[LogMessage]:
+        """All readable messages of all files, in file order (= non-decreasing log time)."""
+        wanted = None if topics is None else {_fully_qualified(t) for t in topics}
+        self.complete = True
+        for path in self.files:
+            for message in self._records(path):
+                if wanted is None or message.topic in wanted:
+                    yield message
+        self._scanned = True
+
+    @property
+    def info(self) -> dict[str, str]:
+        """The ``det_sim_ros`` metadata record (version, scene_yaml, stepper, ...)."""
+        self.scan_info()
+        return self.metadata.get(METADATA_NAME, {})
+
+    @property
+    def scene_yaml(self) -> str:
+        """The scene YAML the run used ('' if the log has none)."""
+        self.scan_info()
+        data = self.attachments.get(SCENE_ATTACHMENT)
+        return data.decode() if data is not None else self.info.get('scene_yaml', '')
+
+
+def recover(source, target: str, compression: str = 'zstd') -> dict:
+    """
+    Rewrite the readable part of a (possibly unfinished) log into a finished, indexed MCAP.
+
+    :returns: ``{'messages': n, 'complete': bool}`` (complete: the source was finished).
+    """
+    from mcap.writer import CompressionType, Writer
+    reader = LogReader(source)
+    kind = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
+            'none': CompressionType.NONE}[compression]
+    count = 0
+    with open(target, 'wb') as stream:
+        writer = None
+        schemas: dict[str, int] = {}
+        channels: dict[str, int] = {}
+        for message in reader.messages():
+            if writer is None:
+                writer = Writer(stream, compression=kind)
+                writer.start(profile=reader.profile or 'ros2', library=f'{LIBRARY} recover')
+                for name, data in reader.metadata.items():
+                    writer.add_metadata(name, data)
+                for name, data in reader.attachments.items():
+                    writer.add_attachment(0, 0, name, 'application/yaml', data)
+            if message.topic not in channels:
+                if message.type_name not in schemas:
+                    schemas[message.type_name] = writer.register_schema(
+                        message.type_name, 'ros2msg', reader.definitions[message.type_name])
+                meta = {'offered_qos_profiles': reader.qos.get(message.topic,
+                                                               qos_profiles_yaml())}
+                channels[message.topic] = writer.register_channel(
+                    message.topic, 'cdr', schemas[message.type_name], meta)
+            writer.add_message(channels[message.topic], message.log_time, message.data,
+                               message.publish_time, message.sequence)
+            count += 1
+        if writer is None:
+            writer = Writer(stream, compression=kind)
+            writer.start(profile=reader.profile or 'ros2', library=f'{LIBRARY} recover')
+        writer.finish()
+    return {'messages': count, 'complete': reader.complete}
