@@ -102,8 +102,11 @@ class Model:
         """dx/dt at (x, u); python-control's ``updfcn(t, x, u, params)`` signature."""
         del t, params
         dx = np.empty(self.n_states)
+        if not np.all(np.isfinite(x)):
+            check(_kernels.NON_FINITE)
         check(_kernels.rhs(np.asarray(x, dtype=float), self._u(u), self.arrays, dx,
-                           np.empty(2), np.empty(_kernels.workspace_size(self.arrays))))
+                           np.empty(2), np.empty(_kernels.workspace_size(self.arrays)),
+                           np.empty((self.arrays[0][0],) * 2)))
         return dx
 
     def output_vector(self, x, u) -> np.ndarray:
@@ -115,6 +118,25 @@ class Model:
     def outputs(self, x, u) -> dict:
         """Named outputs at one state (see ``output_names``)."""
         return dict(zip(self.output_names, self.output_vector(x, u)))
+
+    def apply_input_jump(self, x, u_old, u_new) -> None:
+        """
+        Book the energy of an instantaneous recharge into the monitor states (in place).
+
+        With an ideal source a voltage step moves the charge C dv at once: the source supplies
+        v_new C dv and the vanishing series resistance dissipates C dv^2 / 2 (the R -> 0 limit of
+        the RC charging loss). Nothing to do for RC scenes or without the power monitor.
+        """
+        if self.scene.source != 'ideal' or not self.scene.monitor_power:
+            return
+        u_old, u_new = self._u(u_old), self._u(u_new)
+        out = self.output_vector(x, u_new)
+        n_cell = len(CELL_OUTPUTS)
+        for c in range(self.n_inputs):
+            cap = out[c * n_cell + CELL_OUTPUTS.index('C')]
+            dv = u_new[c] - u_old[c]
+            x[-2] += u_new[c] * cap * dv
+            x[-1] += 0.5 * cap * dv * dv
 
     def stiff_rates(self, x) -> np.ndarray:
         """Diagonal of the stiff linear part (1/s): -1/(C Rs||Rp) at the charge states."""
@@ -153,7 +175,7 @@ def _assemble(scene, cells, MI, det_physics):
     K = np.zeros((nq, nq))
     D = np.zeros((nq, nq))
     ref = np.zeros(nq)
-    cellp = np.zeros((nc, 3))
+    cellp = np.zeros((nc, 6))
     detp = np.zeros((nc, 9))
     kappa = 1.0 if scene.fidelity == 'consistent' else 0.0
     for c, (basis, (x, w), ph) in enumerate(zip(cells, nodes, det_physics)):
@@ -170,7 +192,10 @@ def _assemble(scene, cells, MI, det_physics):
         K[s, s] = 2.0 * EI * S2.T @ (w[:, None] * S2)
         D[s, s] = 2.0 * ph.eta_b * ph.I * S2.T @ (w[:, None] * S2)
         ref[s] = basis.reference_row()
-        cellp[c] = (basis.length, EI, kappa)
+        c2 = 0.5 * w @ S1[:, 0] ** 2
+        c4 = 0.125 * w @ S1[:, 0] ** 4
+        e4 = EI * w @ (S2[:, 0] * S1[:, 0]) ** 2
+        cellp[c] = (basis.length, EI, kappa, c2, c4, e4)  # last three used when n_ritz == 1
         detp[c] = (ph.l0, ph.volume * ph.Y, ph.C0, ph.volume, ph.E_M, ph.eta_M, ph.eta_v,
                    ph.Rs, ph.Rp)
     creep, rc, power = int(scene.creep), int(scene.source == 'rc'), int(scene.monitor_power)

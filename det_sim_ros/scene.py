@@ -277,7 +277,8 @@ def load_scene(source: Any = 'default', overrides: Mapping[str, Any] | None = No
     :param source: a path to a scene YAML, an installed scene name ('default'), or a mapping of
         the same shape (with or without the ``sim_node: ros__parameters:`` wrapper).
     :param overrides: ``{'physics.Rs': 1.0e3, 'eps_b': 0.25, ...}``; a key without a section is
-        looked up in the section that has it. Values given as strings are parsed as YAML.
+        looked up in the section that has it. Values given as strings are parsed as YAML, and
+        text such as '1.0e3' that YAML 1.1 keeps as a string is read as a number.
     :raises SceneError: one line naming the offending key, value and allowed range.
     """
     if isinstance(source, Scene):
@@ -289,11 +290,16 @@ def load_scene(source: Any = 'default', overrides: Mapping[str, Any] | None = No
         data = _read_yaml(find_config(origin))
     data = _unwrap_ros_params(data, origin)
     for key, value in (overrides or {}).items():
-        if isinstance(value, str):
+        if isinstance(value, str):   # command-line text: YAML, and numbers like 1.0e3 too
             try:
                 value = yaml.safe_load(value)
             except yaml.YAMLError:
                 pass
+            if isinstance(value, str):
+                try:
+                    value = float(value)
+                except ValueError:
+                    pass
         _apply_override(data, key, value)
 
     unknown = set(data) - set(SECTIONS) - set(TOP_SPEC) - {'node'}

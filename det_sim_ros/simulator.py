@@ -41,7 +41,8 @@ class Simulator:
 
     :param scene: a :class:`Scene`, a scene file/name, or a built :class:`Model`.
     :param method: stepper name (default: the scene's ``integrator.method``; 'auto' picks
-        'etdrk4' when the scene has a stiff charge state and 'rk4' otherwise).
+        'lawson5' when the scene has a stiff charge state and 'dp5' otherwise: the cheapest
+        per accuracy in bench/work_precision.py).
     :param substeps: internal steps per control period (default: the scene's, 0 = from the
         scene's tolerance).
     """
@@ -69,7 +70,7 @@ class Simulator:
     def _pick_method(self, name: str) -> Method:
         if name == 'auto':
             stiff = self.scene.source == 'rc'
-            return get_method('etdrk4' if stiff else 'rk4')
+            return get_method('lawson5' if stiff else 'dp5')
         return get_method(name)
 
     # -- state ----------------------------------------------------------------------------
@@ -110,6 +111,7 @@ class Simulator:
             return InputCheck(False, False, f'non-finite voltage {v.tolist()}')
         v_max = self.scene.physics.v_max
         clamped = np.clip(v, 0.0, v_max)
+        self.model.apply_input_jump(self.x, self.u, clamped)
         self.u = clamped
         if np.any(clamped != v):
             return InputCheck(True, True, f'voltage {v.tolist()} clamped to [0, {v_max:g}] V')
