@@ -38,7 +38,7 @@ import weakref
 from typing import Callable, Iterable, Iterator, Mapping
 
 __all__ = ['Recorder', 'LogReader', 'LogMessage', 'message_definition', 'qos_profiles_yaml',
-           'type_name_of', 'deserialize', 'recover', 'log_files', 'LIBRARY', 'METADATA_NAME']
+           'type_name_of', 'serialize', 'deserialize', 'recover', 'log_files', 'LIBRARY', 'METADATA_NAME']
 
 LIBRARY = 'det_sim_ros'
 METADATA_NAME = 'det_sim_ros'
@@ -162,6 +162,127 @@ def deserialize(type_name: str, data: bytes):
     """Deserialize CDR bytes into the rclpy message class of ``type_name``."""
     from rclpy.serialization import deserialize_message
     return deserialize_message(data, _message_class(type_name))
+
+
+# -- CDR serialization ---------------------------------------------------------------------------
+#
+# rclpy.serialization (rmw_fastrtps, Jazzy) returns a buffer of the *estimated* size: trailing
+# and padding bytes are uninitialized memory, which strict readers (rosbags) refuse and which
+# makes logs of the same run differ byte-wise. This plain-CDR writer (XCDR1 little endian, the
+# encoding rosbag2 stores) emits exactly the serialized bytes with zero padding; types it does
+# not handle (wide strings) fall back to rclpy with the trailing bytes cut by size.
+
+_BASIC = {'boolean': '?', 'octet': 'B', 'char': 'B', 'uint8': 'B', 'int8': 'b', 'int16': 'h',
+          'uint16': 'H', 'int32': 'i', 'uint32': 'I', 'int64': 'q', 'uint64': 'Q', 'float': 'f',
+          'double': 'd'}
+_ZEROS = bytes(8)
+
+
+class _Unsupported(TypeError):
+    pass
+
+
+def _cdr_writer(slot_type) -> Callable:
+    """A function ``write(buffer, value)`` for one rosidl field type."""
+    import struct
+
+    from rosidl_parser import definition as d
+
+    def align(buf, size):
+        pad = -(len(buf) - 4) % size
+        if pad:
+            buf += _ZEROS[:pad]
+
+    if isinstance(slot_type, d.BasicType):
+        code = _BASIC.get(slot_type.typename)
+        if code is None:
+            raise _Unsupported(slot_type.typename)
+        packer = struct.Struct('<' + code)
+        size = packer.size
+
+        def write_basic(buf, value):
+            align(buf, size)
+            if code == 'B' and isinstance(value, (bytes, str)):
+                value = ord(value)
+            buf += packer.pack(value)
+        return write_basic
+    if isinstance(slot_type, (d.UnboundedString, d.BoundedString)):
+        def write_string(buf, value):
+            data = value.encode()
+            align(buf, 4)
+            buf += struct.pack('<I', len(data) + 1)
+            buf += data
+            buf += b'\0'
+        return write_string
+    if isinstance(slot_type, d.NamespacedType):
+        import importlib
+        module = importlib.import_module('.'.join(slot_type.namespaces))
+        return _struct_writer(getattr(module, slot_type.name))
+    if isinstance(slot_type, (d.AbstractSequence, d.Array)):
+        is_array = isinstance(slot_type, d.Array)
+        item = slot_type.value_type
+        if isinstance(item, d.BasicType) and item.typename in _BASIC:
+            code = _BASIC[item.typename]
+            size = struct.calcsize(code)
+
+            def write_numbers(buf, values):
+                n = len(values)
+                if not is_array:
+                    align(buf, 4)
+                    buf += struct.pack('<I', n)
+                if n:
+                    align(buf, size)
+                    if isinstance(values, (bytes, bytearray)):
+                        buf += values
+                    elif code == 'B' and isinstance(values[0], bytes):
+                        buf += b''.join(values)
+                    else:
+                        buf += struct.pack(f'<{n}{code}', *values)
+            return write_numbers
+        write_item = _cdr_writer(item)
+
+        def write_items(buf, values):
+            if not is_array:
+                align(buf, 4)
+                buf += struct.pack('<I', len(values))
+            for value in values:
+                write_item(buf, value)
+        return write_items
+    raise _Unsupported(type(slot_type).__name__)
+
+
+_STRUCT_WRITERS: dict[type, Callable] = {}
+
+
+def _struct_writer(cls) -> Callable:
+    writer = _STRUCT_WRITERS.get(cls)
+    if writer is None:
+        names = list(cls.get_fields_and_field_types())
+        parts = [(name, _cdr_writer(slot)) for name, slot in zip(names, cls.SLOT_TYPES)]
+        if not parts:  # an empty message holds one uint8
+            def writer(buf, msg):
+                buf += b'\0'
+        else:
+            def writer(buf, msg):
+                for name, write in parts:
+                    write(buf, getattr(msg, name))
+        _STRUCT_WRITERS[cls] = writer
+    return writer
+
+
+def serialize(msg) -> bytes:
+    """CDR bytes of an rclpy message, as rosbag2 stores them (encapsulation header included)."""
+    cls = type(msg)
+    try:
+        writer = _STRUCT_WRITERS.get(cls) or _struct_writer(cls)
+    except _Unsupported:
+        _STRUCT_WRITERS[cls] = writer = None
+    if writer is None:
+        from rclpy.serialization import serialize_message
+        return serialize_message(msg)
+    buf = bytearray(b'\x00\x01\x00\x00')
+    writer(buf, msg)
+    return bytes(buf)
 
 
 # -- QoS metadata --------------------------------------------------------------------------------
@@ -291,7 +412,6 @@ class Recorder:
         self._types: dict[str, str] = {}
         self._sequence: dict[str, int] = {}
         self._type_cache: dict[type, str] = {}
-        self._serialize = None
         try:
             from . import __version__
             self.version = __version__
@@ -403,10 +523,7 @@ class Recorder:
             if isinstance(msg, (bytes, bytearray, memoryview)):
                 data = bytes(msg)
             else:
-                if self._serialize is None:
-                    from rclpy.serialization import serialize_message
-                    self._serialize = serialize_message
-                data = self._serialize(msg)
+                data = serialize(msg)
             if self._file_start_t is None:
                 self._file_start_t = t
             elif ((self.split_ns and t - self._file_start_t >= self.split_ns)

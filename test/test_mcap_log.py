@@ -1,0 +1,306 @@
+"""MCAP run logs: rosbag2 conventions checked by three independent readers, faults, crash safety."""
+
+import os
+import pathlib
+import signal
+import subprocess
+import sys
+import textwrap
+
+import pytest
+import yaml
+
+from det_sim_ros import __version__
+from det_sim_ros.mcap_log import (LogReader, message_definition, qos_profiles_yaml, Recorder,
+                                  recover)
+from det_sim_ros.replay import OUTPUT_FIELDS, simulate_to_log
+from det_sim_ros.scene import load_scene, scene_to_dict
+from det_sim_ros.simulator import Simulator
+
+N_STEPS = 300
+OUTPUT_TOPICS = ['/' + t for t in OUTPUT_FIELDS]
+
+
+def _command(k):
+    return [500.0 + 5.0 * k] if k % 25 == 0 else None
+
+
+@pytest.fixture(scope='module')
+def logged_run(tmp_path_factory):
+    """A run of the default scene logged in-process, plus the expected values."""
+    scene = load_scene('default')
+    sim = Simulator(scene)
+    path = str(tmp_path_factory.mktemp('log') / 'run.mcap')
+    recorder = Recorder(path, scene, metadata={'method': sim.method.name,
+                                                'substeps': sim.substeps})
+    simulate_to_log(recorder, sim, _command, N_STEPS)
+    recorder.close()
+    assert recorder.fault == ''
+    reference = Simulator(scene)
+    expected = []
+    for k in range(N_STEPS):
+        if _command(k) is not None:
+            reference.set_input(_command(k))
+        expected.append(reference.step().copy())
+    return path, scene, expected, reference.output_names
+
+
+def test_message_definition_rosbag2_style():
+    text = message_definition('sensor_msgs/msg/JointState')
+    assert text.startswith(open(os.path.join(sys.prefix, 'share', 'sensor_msgs', 'msg',
+                                             'JointState.msg')).read())
+    delimiter = '=' * 80
+    assert f'\n{delimiter}\nMSG: std_msgs/Header\n' in text
+    assert f'\n{delimiter}\nMSG: builtin_interfaces/Time\n' in text
+    assert text.count('MSG: ') == 2
+    multi = message_definition('std_msgs/msg/Float64MultiArray')
+    assert 'MSG: std_msgs/MultiArrayLayout' in multi and 'MSG: std_msgs/MultiArrayDimension' in multi
+
+    # Both third-party parsers accept the definitions.
+    from mcap_ros2._dynamic import generate_dynamic
+    from rosbags.typesys import get_types_from_msg
+    for name in ('sensor_msgs/msg/JointState', 'std_msgs/msg/Float64MultiArray',
+                 'rosgraph_msgs/msg/Clock', 'diagnostic_msgs/msg/DiagnosticArray'):
+        assert name in generate_dynamic(name, message_definition(name))
+        assert name in get_types_from_msg(message_definition(name), name)
+
+
+def test_qos_yaml_jazzy_form():
+    from rclpy.qos import qos_profile_sensor_data
+    from rosbags.rosbag2.metadata import parse_qos
+    default, = parse_qos(qos_profiles_yaml())
+    assert (default.history.name, default.depth, default.reliability.name,
+            default.durability.name, default.liveliness.name) == (
+        'KEEP_LAST', 10, 'RELIABLE', 'VOLATILE', 'AUTOMATIC')
+    assert (default.deadline.sec, default.deadline.nsec) == (9223372036, 854775807)
+    sensor, = parse_qos(qos_profiles_yaml(qos_profile_sensor_data))
+    assert (sensor.depth, sensor.reliability.name) == (5, 'BEST_EFFORT')
+
+
+def test_reader_mcap_ros2_decoder(logged_run):
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    path, _, expected, names = logged_run
+    with open(path, 'rb') as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        assert reader.get_header().profile == 'ros2'
+        summary = reader.get_summary()
+        assert summary.statistics.message_count == 4 * N_STEPS + N_STEPS // 25
+        for schema in summary.schemas.values():
+            assert schema.encoding == 'ros2msg' and schema.name.count('/') == 2
+        for channel in summary.channels.values():
+            assert channel.message_encoding == 'cdr'
+            assert 'offered_qos_profiles' in channel.metadata
+        q = names.index('q')
+        deflection = [(m.log_time, msg) for _, c, m, msg in reader.iter_decoded_messages(
+            topics=['/deflection'])]
+    assert len(deflection) == N_STEPS
+    for k, (log_time, msg) in enumerate(deflection):
+        stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+        assert stamp == log_time
+        assert msg.position[0] == expected[k][q]  # bit-identical through CDR
+
+
+def test_reader_rosbags_anyreader(logged_run):
+    from rosbags.highlevel import AnyReader
+    path, _, expected, names = logged_run
+    with AnyReader([pathlib.Path(path)]) as reader:
+        topics = {c.topic: c for c in reader.connections}
+        assert set(topics) == set(OUTPUT_TOPICS) | {'/voltage_command'}
+        assert topics['/charge'].msgtype == 'sensor_msgs/msg/JointState'
+        qos = topics['/charge'].ext.offered_qos_profiles[0]
+        assert qos.reliability.name == 'RELIABLE' and qos.depth == 10
+        times, charge = [], []
+        for connection, timestamp, raw in reader.messages(connections=reader.connections):
+            times.append(timestamp)
+            if connection.topic == '/charge':
+                charge.append(reader.deserialize(raw, connection.msgtype).position[0])
+    assert times == sorted(times)
+    assert charge == [row[names.index('q_p')] for row in expected]
+
+
+def test_reader_plain_mcap_and_rclpy(logged_run):
+    from mcap.reader import make_reader
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    path, scene, expected, names = logged_run
+    with open(path, 'rb') as stream:
+        reader = make_reader(stream)
+        metadata = {m.name: m.metadata for m in reader.iter_metadata()}
+        attachments = {a.name: a.data for a in reader.iter_attachments()}
+        commands, current = [], []
+        last = -1
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            assert message.log_time >= last and message.publish_time == message.log_time
+            last = message.log_time
+            if channel.topic == '/voltage_command':
+                commands.append((message.log_time,
+                                 list(deserialize_message(message.data, Float64MultiArray).data)))
+            elif channel.topic == '/current':
+                current.append(deserialize_message(message.data, JointState).position[0])
+    assert commands == [(round(k * scene.dt * 1e9), _command(k))
+                        for k in range(N_STEPS) if _command(k) is not None]
+    assert current == [row[names.index('i_DE')] for row in expected]
+    info = metadata['det_sim_ros']
+    assert info['version'] == __version__ and info['time_base'] == 'sim_time'
+    assert yaml.safe_load(attachments['scene.yaml']) == scene_to_dict(scene, wrap=True)
+    assert load_scene(yaml.safe_load(info['scene_yaml'])) == scene
+    assert metadata['det_sim_ros.end']['messages'] == str(4 * N_STEPS + N_STEPS // 25)
+
+
+def test_log_time_never_decreases(tmp_path):
+    from std_msgs.msg import Float64MultiArray
+    recorder = Recorder(tmp_path / 'clamp.mcap', None)
+    for t in (5, 10, 7, 10, 12):
+        assert recorder.record('x', Float64MultiArray(data=[float(t)]), t)
+    recorder.close()
+    assert recorder.clamped == 1
+    reader = LogReader(tmp_path / 'clamp.mcap')
+    assert [m.log_time for m in reader.messages()] == [5, 10, 10, 10, 12]
+    assert [m.decode().data[0] for m in reader.messages()] == [5, 10, 7, 10, 12]
+    assert reader.complete
+
+
+def test_unwritable_path_reports_and_never_raises(tmp_path):
+    from std_msgs.msg import Float64MultiArray
+    blocker = tmp_path / 'a_file'
+    blocker.write_text('not a directory')
+    faults = []
+    recorder = Recorder(blocker / 'sub' / 'run.mcap', None, on_fault=faults.append)
+    assert recorder.fault and faults == [recorder.fault] and not recorder.active
+    assert recorder.record('x', Float64MultiArray(data=[1.0]), 0) is False
+    assert recorder.dropped == 1
+    recorder.close()
+
+
+@pytest.mark.skipif(not os.path.exists('/dev/full'), reason='needs /dev/full')
+def test_disk_full_reports_and_never_raises():
+    from std_msgs.msg import Float64MultiArray
+    recorder = Recorder('/dev/full', None, flush_period_s=0.0)
+    for k in range(10):
+        recorder.record('x', Float64MultiArray(data=[1.0]), k)  # must not raise
+    recorder.close()
+    assert 'No space left' in recorder.fault or 'ENOSPC' in recorder.fault or recorder.fault
+
+
+def test_split_by_size_and_duration(tmp_path):
+    from std_msgs.msg import Float64MultiArray
+    scene = load_scene('default')
+    recorder = Recorder(tmp_path, scene, split_mb=0.002, chunk_size=1024)
+    for k in range(400):
+        recorder.record('voltage_command', Float64MultiArray(data=[float(k)] * 4), k * 1000)
+    recorder.close()
+    assert len(recorder.paths) > 1
+    for path in recorder.paths:  # every file stands alone: finished, with the scene
+        part = LogReader(path)
+        assert list(part.messages()) and part.complete and part.scene_yaml
+    whole = LogReader(tmp_path)
+    assert [m.decode().data[0] for m in whole.messages()] == [float(k) for k in range(400)]
+
+    by_time = Recorder(tmp_path / 'timed.mcap', scene, split_s=0.1)
+    for k in range(250):
+        by_time.record('voltage_command', Float64MultiArray(data=[float(k)]), k * 1_000_000)
+    by_time.close()
+    assert len(by_time.paths) == 3
+
+
+CHILD = textwrap.dedent('''
+    import sys, time
+    from std_msgs.msg import Float64MultiArray
+    from det_sim_ros.mcap_log import Recorder
+    recorder = Recorder(sys.argv[1], None, flush_period_s=0.02)
+    flushes = 0
+    k = 0
+    try:
+        while True:
+            recorder.record('voltage_command', Float64MultiArray(data=[float(k)]), k * 1000000)
+            k += 1
+            if recorder.flushes != flushes:
+                flushes = recorder.flushes
+                print(recorder.messages, flush=True)
+            time.sleep(0.0002)
+    finally:
+        print('closing', flush=True)
+''')
+
+
+def _start_child(path):
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [os.path.dirname(os.path.dirname(os.path.abspath(__file__)))] + sys.path))
+    return subprocess.Popen([sys.executable, '-c', CHILD, str(path)], stdout=subprocess.PIPE,
+                            text=True, env=env)
+
+
+def _wait_flushes(child, count):
+    flushed = 0
+    for _ in range(count):
+        line = child.stdout.readline()
+        assert line, 'the child stopped early'
+        flushed = int(line)
+    return flushed
+
+
+def test_sigkill_loses_at_most_the_last_flush_period(tmp_path):
+    from mcap.reader import make_reader
+    path = tmp_path / 'killed.mcap'
+    child = _start_child(path)
+    try:
+        flushed = _wait_flushes(child, 5)
+    finally:
+        child.kill()  # SIGKILL
+        child.wait(timeout=60)
+    reader = LogReader(path)
+    values = [m.decode().data[0] for m in reader.messages()]
+    assert not reader.complete
+    assert len(values) >= flushed > 0
+    assert values == [float(k) for k in range(len(values))]  # nothing before the cut is lost
+    with open(path, 'rb') as stream, pytest.raises(Exception):
+        list(make_reader(stream).iter_messages())  # the seeking reader cannot open it
+    # recover() turns it into a finished, indexed file
+    outcome = recover(path, str(tmp_path / 'recovered.mcap'))
+    assert outcome == {'messages': len(values), 'complete': False}
+    with open(tmp_path / 'recovered.mcap', 'rb') as stream:
+        reader = make_reader(stream)
+        assert reader.get_summary().statistics.message_count == len(values)
+        assert {m.name for m in reader.iter_metadata()} >= {'det_sim_ros'}
+
+
+def test_sigint_finishes_the_file(tmp_path):
+    from mcap.reader import make_reader
+    path = tmp_path / 'interrupted.mcap'
+    child = _start_child(path)
+    try:
+        flushed = _wait_flushes(child, 3)
+        child.send_signal(signal.SIGINT)
+        assert child.stdout.read().strip().endswith('closing')
+    finally:
+        child.wait(timeout=60)
+    with open(path, 'rb') as stream:
+        reader = make_reader(stream)  # seeking reader: needs the footer and summary
+        count = reader.get_summary().statistics.message_count
+        values = [m.data for _, _, m in reader.iter_messages()]
+        end = {m.name: m.metadata for m in reader.iter_metadata()}['det_sim_ros.end']
+    assert count == len(values) == int(end['messages']) >= flushed
+
+
+def test_cdr_serializer_matches_rclpy_and_rosbags():
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from rclpy.serialization import deserialize_message
+    from rosbags.typesys import get_typestore, Stores
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Empty, Float64MultiArray
+
+    from det_sim_ros.mcap_log import serialize, type_name_of
+    store = get_typestore(Stores.ROS2_JAZZY)
+    joint = JointState(name=['det0', 'det1'], position=[1.0, -2.5], velocity=[3.0])
+    joint.header.stamp.sec, joint.header.frame_id = 7, 'beam'
+    status = DiagnosticStatus(level=b'\x02', name='log', message='disk full',
+                              values=[KeyValue(key='path', value='/x')])
+    for msg in (joint, JointState(), Float64MultiArray(data=[0.5, 1e300]), Clock(), Empty(),
+                DiagnosticArray(status=[status, DiagnosticStatus()])):
+        data = serialize(msg)
+        assert deserialize_message(data, type(msg)) == msg
+        store.deserialize_cdr(data, type_name_of(msg))  # strict: no trailing bytes
+        assert serialize(msg) == data
