@@ -1,0 +1,164 @@
+"""
+Fixtures for launch-free, in-process ROS 2 tests.
+
+rclpy runs in an isolated domain (picked from the pid) with localhost-only discovery, set before
+rclpy.init. Each test gets its own context; a :class:`Harness` holds the node under test and a
+test node spun together in one SingleThreadedExecutor.
+"""
+
+import math
+import os
+import time
+
+import pytest
+
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+DOMAIN_ID = 1 + os.getpid() % 101  # 1..101: avoids the default domain 0
+os.environ['ROS_DOMAIN_ID'] = str(DOMAIN_ID)
+
+WALL_TIMEOUT = 120.0  # s; a safety net only: a wait that hits it fails the test
+
+
+@pytest.fixture
+def ros_context():
+    """Initialise rclpy in a fresh context on the test domain."""
+    import rclpy
+    from rclpy.context import Context
+    context = Context()
+    rclpy.init(context=context, domain_id=DOMAIN_ID)
+    yield context
+    rclpy.try_shutdown(context=context)
+
+
+def stamp_ns(stamp):
+    """Nanoseconds of a builtin_interfaces/Time."""
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+class Harness:
+    """
+    The node under test plus a test node that commands it and records what it publishes.
+
+    ``samples[topic]`` maps the sample's sim time (ns) to its ``position`` values
+    (``deflection`` also stores ``velocity`` in ``velocities``).
+    """
+
+    TOPICS = ('deflection', 'displacement', 'charge', 'current')
+
+    def __init__(self, context, namespace='', **params):
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.parameter import Parameter
+        from rosgraph_msgs.msg import Clock
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import Float64MultiArray
+        from std_srvs.srv import SetBool, Trigger
+        from diagnostic_msgs.msg import DiagnosticArray
+        import rclpy
+
+        from det_sim_ros.sim_node import SimNode
+
+        params.setdefault('real_time', False)
+        params.setdefault('info_period', 0.0)
+        overrides = [Parameter(name, value=value) for name, value in params.items()]
+        self.context = context
+        self.node = SimNode(context=context, namespace=namespace, parameter_overrides=overrides)
+        self.test = rclpy.create_node('tester', context=context, namespace=namespace)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+        self.executor.add_node(self.test)
+        self.samples = {topic: {} for topic in self.TOPICS}
+        self.velocities = {}
+        self.clock = []
+        self.diagnostics = []
+        self.non_finite = []
+        self.subs = [self.test.create_subscription(
+            JointState, topic, lambda msg, topic=topic: self._on_sample(topic, msg), 100)
+            for topic in self.TOPICS]
+        self.subs.append(self.test.create_subscription(
+            Clock, '/clock', lambda msg: self.clock.append(stamp_ns(msg.clock)), 100))
+        self.subs.append(self.test.create_subscription(
+            DiagnosticArray, '/diagnostics', self.diagnostics.append, 10))
+        self.cmd = self.test.create_publisher(Float64MultiArray, 'voltage_command', 10)
+        self.joint_cmd = self.test.create_publisher(JointState, 'voltage_command_joint', 10)
+        self.clients = {
+            'pause': self.test.create_client(SetBool, 'sim_node/pause'),
+            'step': self.test.create_client(Trigger, 'sim_node/step'),
+            'reset': self.test.create_client(Trigger, 'sim_node/reset'),
+        }
+        self.executor.spin_once(timeout_sec=0)
+        self.spin_until(lambda: all(s.get_publisher_count() > 0 for s in self.subs[:4])
+                        and self.cmd.get_subscription_count() > 0
+                        and self.joint_cmd.get_subscription_count() > 0
+                        and all(c.service_is_ready() for c in self.clients.values()),
+                        'discovery')
+
+    def _on_sample(self, topic, msg):
+        values = list(msg.position) + list(msg.velocity)
+        if not all(math.isfinite(v) for v in values):
+            self.non_finite.append((topic, values))
+        t = stamp_ns(msg.header.stamp)
+        self.samples[topic][t] = list(msg.position)
+        if topic == 'deflection':
+            self.velocities[t] = list(msg.velocity)
+
+    def spin_until(self, condition, what='condition'):
+        """Spin both nodes until condition() holds; fail after the wall-clock safety timeout."""
+        deadline = time.monotonic() + WALL_TIMEOUT
+        while not condition():
+            if time.monotonic() > deadline:
+                pytest.fail(f'timed out waiting for {what}')
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def latest(self, topic):
+        """Sim time (ns) of the newest sample received on topic, -1 if none."""
+        return max(self.samples[topic], default=-1)
+
+    def spin_until_sim_time(self, t, topic='displacement'):
+        """Spin until a sample stamped at or after sim time t (s) has arrived on topic."""
+        target = int(round(t * 1e9))
+        self.spin_until(lambda: self.latest(topic) >= target, f'{topic} at t = {t} s')
+
+    def call(self, name, **fields):
+        """Call ~/pause, ~/step or ~/reset and return the response."""
+        client = self.clients[name]
+        request = client.srv_type.Request(**fields)
+        future = client.call_async(request)
+        self.spin_until(future.done, f'~/{name} response')
+        return future.result()
+
+    def command(self, volts):
+        """Publish a Float64MultiArray command and spin until the node has received it."""
+        from std_msgs.msg import Float64MultiArray
+        self._send(self.cmd, Float64MultiArray(data=[float(v) for v in volts]))
+
+    def joint_command(self, names, volts):
+        """Publish a JointState command (position = volts) and wait for its arrival."""
+        from sensor_msgs.msg import JointState
+        self._send(self.joint_cmd, JointState(name=list(names),
+                                              position=[float(v) for v in volts]))
+
+    def _send(self, publisher, msg):
+        before = self.node.commands_received
+        publisher.publish(msg)
+        self.spin_until(lambda: self.node.commands_received > before, 'command delivery')
+
+    def close(self):
+        """Destroy the nodes and the executor."""
+        self.executor.shutdown()
+        self.test.destroy_node()
+        self.node.destroy_node()
+
+
+@pytest.fixture
+def harness(ros_context):
+    """Make Harness objects (call with node parameters); cleaned up after the test."""
+    made = []
+
+    def make(**params):
+        h = Harness(ros_context, **params)
+        made.append(h)
+        return h
+
+    yield make
+    for h in made:
+        h.close()

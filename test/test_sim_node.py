@@ -1,0 +1,284 @@
+"""
+In-process tests of the ROS 2 node: physics through the topics, bad inputs, services, faults.
+
+All waits are on sim time (sample stamps) or on message delivery; wall time is only a safety net.
+"""
+
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+
+from det_sim_ros.scene import load_scene, SceneError
+from det_sim_ros.sim_node import _rest_shortening, SimNode
+from det_sim_ros.simulator import Simulator
+
+MS = 1_000_000  # ns
+
+
+def offline(scene, volts, t_end):
+    """Run the scene offline at a constant voltage; return {k: outputs dict} for k = 0..n."""
+    sim = Simulator(scene)
+    assert sim.set_input(volts).accepted
+    rows = {0: sim.outputs()}
+    for k in range(1, int(round(t_end / sim.dt)) + 1):
+        sim.step()
+        rows[k] = sim.outputs()
+    return rows
+
+
+def k_of(t_ns, dt):
+    k = int(round(t_ns * 1e-9 / dt))
+    assert abs(k * dt * 1e9 - t_ns) <= 1, 'stamp off the sim-time grid'
+    return k
+
+
+@pytest.mark.parametrize('how', ['array', 'joint'])
+def test_step_response_matches_offline_model(harness, how):
+    """A 3 kV command: outputs equal the offline model, settle at its statics, q_p -> C v."""
+    h = harness(start_paused=True)
+    volts = 3000.0
+    if how == 'array':
+        h.command([volts])
+    else:
+        h.joint_command(['det0'], [volts])
+    assert h.call('pause', data=False).success
+    t_end = 1.5
+    h.spin_until_sim_time(t_end)
+    h.spin_until_sim_time(t_end, 'current')
+
+    scene = h.node.scene
+    dt = scene.dt
+    ref = offline(scene, [volts], t_end + 0.1)
+    y0 = _rest_shortening(scene)
+    assert y0 == pytest.approx(h.node.y0)
+    assert not h.non_finite
+    channels = {'deflection': 'q', 'charge': 'q_p', 'current': 'i_DE'}
+    n_checked = 0
+    for topic, name in channels.items():
+        for t_ns, values in h.samples[topic].items():
+            k = k_of(t_ns, dt)
+            if k in ref:
+                assert values[0] == pytest.approx(ref[k][name], rel=1e-9, abs=1e-15), (topic, k)
+                n_checked += 1
+    for t_ns, values in h.samples['displacement'].items():
+        k = k_of(t_ns, dt)
+        if k in ref:
+            assert values[0] == pytest.approx(y0 - ref[k]['y'], rel=1e-9, abs=1e-12)
+    for t_ns, velocity in h.velocities.items():
+        k = k_of(t_ns, dt)
+        if k in ref:
+            assert velocity[0] == pytest.approx(ref[k]['q_dot'], rel=1e-9, abs=1e-12)
+    assert n_checked > 10
+
+    # physics: the final samples sit at the model's static equilibrium at 3 kV
+    settled = offline(scene, [volts], 10.0)
+    last = settled[max(settled)]
+    dy_static = y0 - last['y']
+    t_last = h.latest('displacement')
+    dy = h.samples['displacement'][t_last][0]
+    assert dy > 0.0
+    assert dy == pytest.approx(dy_static, rel=0.01)
+    t_q = h.latest('charge')
+    C = ref[k_of(t_q, dt)]['C']
+    assert h.samples['charge'][t_q][0] == pytest.approx(C * volts, rel=1e-3)
+    # the charging current has decayed to (about) the leakage current v / Rp
+    i_end = abs(h.samples['current'][h.latest('current')][0])
+    assert i_end < 1e-3 * volts / scene.physics.Rs
+    assert i_end == pytest.approx(volts / scene.physics.Rp, rel=0.1)
+
+
+def test_bad_inputs_refused_or_clamped(harness):
+    """NaN/inf/wrong length are refused (last valid voltage held); out-of-range is clamped."""
+    h = harness(start_paused=True)
+    u = lambda: h.node._sim.u.tolist()  # noqa: E731
+    h.command([1000.0])
+    assert u() == [1000.0] and h.node.refused_commands == 0
+    for bad in ([math.nan], [math.inf], [-math.inf], [1.0, 2.0], []):
+        h.command(bad)
+        assert u() == [1000.0]
+    assert h.node.refused_commands == 5
+    h.joint_command(['det7'], [500.0])
+    h.joint_command(['det0'], [math.nan])
+    assert u() == [1000.0] and h.node.refused_commands == 7
+    h.command([-5.0])
+    assert u() == [0.0]
+    h.command([5000.0])
+    assert u() == [h.node.scene.physics.v_max]
+    assert h.node.clamped_commands == 2
+    h.joint_command(['det0'], [2500.0])
+    assert u() == [2500.0]
+    assert h.node.refused_commands == 7
+    # the held voltage drives the model (charge follows C v) and nothing published is NaN
+    assert h.call('pause', data=False).success
+    h.spin_until_sim_time(0.2, 'charge')
+    assert not h.non_finite
+    # the counters are on /diagnostics
+    h.spin_until(lambda: any(kv.key == 'refused_commands' and kv.value == '7'
+                             for d in h.diagnostics for s in d.status for kv in s.values),
+                 'diagnostics with the refused count')
+
+
+def test_invalid_parameters_refused(harness):
+    """Runtime parameter changes are validated; invalid ones are refused with a reason."""
+    h = harness()
+    node = h.node
+    bad = [
+        Parameter('real_time_factor', value=-1.0),
+        Parameter('real_time_factor', value=0.0),
+        Parameter('real_time_factor', value=math.nan),
+        Parameter('real_time_factor', value='fast'),
+        Parameter('steps_per_tick', value=0),
+        Parameter('max_catchup_steps', value=-3),
+        Parameter('scene_file', value='other'),
+        Parameter('real_time', value=True),
+        Parameter('physics.Rs', value=1.0e3),
+        Parameter('rate_hz', value=10.0),
+    ]
+    for param in bad:
+        result = node.set_parameters([param])[0]
+        assert not result.successful, param.name
+        assert result.reason, param.name
+    assert node.get_parameter('real_time_factor').value == 1.0
+    assert node.get_parameter('steps_per_tick').value == 10
+    for param in (Parameter('real_time_factor', value=2.5), Parameter('steps_per_tick', value=3)):
+        assert node.set_parameters([param])[0].successful
+    assert node._rtf == 2.5 and node._steps_per_tick == 3
+
+
+def test_pause_step_reset(harness):
+    """~/step advances one control period while paused; ~/reset returns to t = 0 and 0 V."""
+    h = harness(start_paused=True)
+    h.command([2000.0])
+    for k in (1, 2, 3):
+        response = h.call('step')
+        assert response.success, response.message
+        h.spin_until(lambda k=k: h.latest('deflection') == k * MS, f'sample {k}')
+    assert h.node._sim.k == 3
+    assert h.call('pause', data=False).success
+    refused = h.call('step')
+    assert not refused.success and 'paused' in refused.message
+    h.spin_until_sim_time(0.1)
+    assert h.call('pause', data=True).success
+    k_paused = h.node._sim.k
+    for _ in range(5):
+        h.executor.spin_once(timeout_sec=0.01)
+    assert h.node._sim.k == k_paused
+    for topic in h.samples:
+        h.samples[topic].clear()
+    assert h.call('reset').success
+    assert h.node._sim.k == 0 and h.node._sim.u.tolist() == [0.0]
+    h.spin_until(lambda: 0 in h.samples['displacement'], 'the t = 0 sample after reset')
+    initial = Simulator(h.node.scene).outputs()
+    assert h.samples['displacement'][0][0] == pytest.approx(h.node.y0 - initial['y'], rel=1e-12)
+    assert h.samples['deflection'][0][0] == pytest.approx(initial['q'], rel=1e-12)
+    assert not h.non_finite
+
+
+def test_clock_advances_in_free_run(harness, ros_context):
+    """/clock follows sim time, and a use_sim_time node sees it."""
+    import rclpy
+    h = harness()
+    follower = rclpy.create_node('follower', context=ros_context, parameter_overrides=[
+        Parameter('use_sim_time', value=True)])
+    h.executor.add_node(follower)
+    h.spin_until(lambda: max(h.clock, default=0) >= 500 * MS, '/clock at 0.5 s')
+    assert h.clock == sorted(h.clock)
+    assert all(t % MS == 0 for t in h.clock)
+    h.spin_until(lambda: follower.get_clock().now().nanoseconds >= 500 * MS,
+                 'the follower clock at 0.5 s')
+    h.executor.remove_node(follower)
+    follower.destroy_node()
+
+
+def test_real_time_mode_publishes_on_the_grid(harness):
+    """Real-time mode: samples arrive on the t = k dt grid, and no /clock is published."""
+    h = harness(real_time=True, real_time_factor=4.0)
+    h.spin_until_sim_time(0.2)
+    stamps = sorted(h.samples['displacement'])
+    assert all(t % MS == 0 for t in stamps)
+    assert h.node.count_publishers('/clock') == 0
+    assert not h.non_finite
+
+
+def test_fault_stops_integration_and_reset_recovers(harness):
+    """A diverging state: integration stops, /diagnostics reports ERROR, no NaN, reset recovers."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+    h = harness(start_paused=True, **{'integrator.method': 'rk4', 'integrator.substeps': 1})
+    h.command([3000.0])
+    assert h.call('pause', data=False).success
+    h.spin_until(lambda: any(s.level == DiagnosticStatus.ERROR
+                             for d in h.diagnostics for s in d.status), 'ERROR diagnostics')
+    fault = h.node._sim.fault
+    assert fault
+    error = [s for d in h.diagnostics for s in d.status if s.level == DiagnosticStatus.ERROR][0]
+    assert fault in error.message
+    k_fault = h.node._sim.k
+    for _ in range(20):
+        h.executor.spin_once(timeout_sec=0.01)
+    assert h.node._sim.k == k_fault
+    assert max(h.samples['deflection'], default=0) <= k_fault * MS
+    assert not h.non_finite
+    step = h.call('step')
+    assert not step.success
+    assert h.call('reset').success
+    assert not h.node._sim.fault
+    h.spin_until_sim_time(0.05)
+    assert not h.non_finite
+    h.diagnostics.clear()
+    h.spin_until(lambda: h.diagnostics, 'diagnostics after reset')
+    assert h.diagnostics[-1].status[0].level == DiagnosticStatus.OK
+
+
+def test_namespaced_node(ros_context):
+    """Relative names: in a namespace, topics and services move with the node."""
+    node = SimNode(context=ros_context, namespace='arm1', parameter_overrides=[
+        Parameter('real_time', value=False), Parameter('start_paused', value=True)])
+    try:
+        topics = {name for name, _ in node.get_publisher_names_and_types_by_node(
+            'sim_node', '/arm1')}
+        assert {'/arm1/deflection', '/arm1/displacement', '/arm1/charge',
+                '/arm1/current', '/clock', '/diagnostics'} <= topics
+        services = {name for name, _ in node.get_service_names_and_types_by_node(
+            'sim_node', '/arm1')}
+        assert {'/arm1/sim_node/pause', '/arm1/sim_node/step', '/arm1/sim_node/reset'} <= services
+    finally:
+        node.destroy_node()
+
+
+def test_malformed_scene_refused_in_process(ros_context, tmp_path):
+    """A bad scene key or node key raises SceneError naming the key."""
+    bad = tmp_path / 'bad.yaml'
+    text = open(os.path.join(os.path.dirname(__file__), '..', 'config', 'default.yaml')).read()
+    bad.write_text(text.replace('eps_b: 0.20', 'eps_b: 7.0'))
+    with pytest.raises(SceneError, match='eps_b'):
+        SimNode(context=ros_context, parameter_overrides=[Parameter('scene_file', value=str(bad))])
+    with pytest.raises(SceneError, match='node.warp_speed'):
+        SimNode(context=ros_context, parameter_overrides=[Parameter('node.warp_speed', value=9)])
+
+
+def test_malformed_scene_exits_with_one_line(tmp_path):
+    """`sim_node` with a malformed scene exits non-zero with one line naming the key."""
+    bad = tmp_path / 'bad.yaml'
+    text = open(os.path.join(os.path.dirname(__file__), '..', 'config', 'default.yaml')).read()
+    bad.write_text(text.replace('Rs: 2.0e+3', 'Rs: -2.0e+3'))
+    proc = subprocess.run(
+        [sys.executable, '-m', 'det_sim_ros.sim_node', '--ros-args', '-p',
+         f'scene_file:={bad}'], capture_output=True, text=True, timeout=120)
+    output = (proc.stdout + proc.stderr).strip()
+    assert proc.returncode != 0
+    assert 'Traceback' not in output
+    lines = [line for line in output.splitlines() if line.strip()]
+    assert len(lines) == 1, output
+    assert 'Rs' in lines[0]
+
+
+def test_scene_loads_by_default():
+    """The default scene: fixed beam, eps_b = 0.20, full model, 1 kHz."""
+    scene = load_scene('default')
+    assert scene.beam == 'fixed' and scene.eps_b == 0.20 and scene.rate_hz == 1000.0
+    assert scene.creep and scene.source == 'rc'
