@@ -189,6 +189,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     """Entry point of the ``det_sim`` console script; returns the exit code."""
     parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ['bench']:          # everything after 'bench' belongs to the benchmark
+        return _run_bench(argv[1:])
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:        # argparse: --help (0) or a bad argument (2)
@@ -502,6 +505,10 @@ def _plot_step(plt, runs, args, out):
 
 # -- bench ----------------------------------------------------------------------------------------
 def cmd_bench(args) -> int:
+    return _run_bench(list(args.bench_args))
+
+
+def _run_bench(argv) -> int:
     try:
         from . import benchmark
     except ModuleNotFoundError as exc:
@@ -510,7 +517,7 @@ def cmd_bench(args) -> int:
         print(f'{PROG}: bench is not available (det_sim_ros.benchmark is not installed)',
               file=sys.stderr)
         return 1
-    return int(benchmark.main(list(args.bench_args)) or 0)
+    return int(benchmark.main(list(argv)) or 0)
 
 
 if __name__ == '__main__':

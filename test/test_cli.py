@@ -1,0 +1,222 @@
+"""The det_sim console script: each subcommand on a small case (no ROS)."""
+
+import csv
+import io
+import os
+import sys
+import types
+
+import numpy as np
+import pytest
+import yaml
+
+from det_sim_ros import cli, statics
+from det_sim_ros.scene import load_scene, scene_to_dict
+
+
+def read_csv(path):
+    with open(path, newline='', encoding='utf-8') as stream:
+        rows = list(csv.DictReader(stream))
+    return rows
+
+
+def has_matplotlib():
+    try:
+        import matplotlib  # noqa: F401
+        return True
+    except ImportError:
+        return False
+
+
+@pytest.fixture(scope='module')
+def statics_out(tmp_path_factory):
+    out = tmp_path_factory.mktemp('statics')
+    code = cli.main(['statics', '--beams', 'fixed,simply_supported', '--eps-range', '0:0.3:13',
+                     '--eps-b', '0.15,0.25', '--n-q', '41', '--out', str(out)])
+    assert code == 0
+    return out
+
+
+def test_statics_files_and_columns(statics_out):
+    names = ['statics_branches.csv', 'statics_potential.csv', 'statics_critical.csv']
+    for name in names:
+        assert (statics_out / name).is_file()
+    branches = read_csv(statics_out / 'statics_branches.csv')
+    assert list(branches[0]) == ['beam', 'voltage_V', 'eps_b', 'branch', 'q_m', 'y_m',
+                                 'delta_y_m', 'stable', 'stiffness']
+    pot = read_csv(statics_out / 'statics_potential.csv')
+    assert list(pot[0]) == ['beam', 'voltage_V', 'eps_b', 'q_m', 'U_pot_J', 'U_pot_norm']
+    un = np.array([float(r['U_pot_norm']) for r in pot])
+    assert un.min() == 0.0 and un.max() == 1.0
+    assert len(pot) == 2 * 2 * 2 * 41           # beams x pre-strains x voltages x points
+    if has_matplotlib():
+        for beam in ('fixed', 'simply_supported'):
+            png = statics_out / f'statics_{beam}.png'
+            assert png.is_file() and 0 < png.stat().st_size < 200_000
+
+
+def test_statics_branches_are_symmetric_and_switch_where_statics_says(statics_out):
+    branches = read_csv(statics_out / 'statics_branches.csv')
+    crit = {(r['beam'], float(r['voltage_V'])): float(r['eps_b_min'])
+            for r in read_csv(statics_out / 'statics_critical.csv')}
+    assert set(crit) == {(b, v) for b in ('fixed', 'simply_supported') for v in (0.0, 3000.0)}
+    for (beam, v), e_min in crit.items():
+        scene = load_scene('default', {'scene.beam': beam})
+        assert e_min == pytest.approx(statics.critical_prestrain(scene, v), rel=1e-8)
+        rows = [r for r in branches if r['beam'] == beam and float(r['voltage_V']) == v]
+        for r in rows:
+            if r['branch'] == 'straight':
+                assert float(r['q_m']) == 0.0
+                assert (r['stable'] == '1') == (float(r['eps_b']) < e_min)
+        plus = {r['eps_b']: r for r in rows if r['branch'] == 'buckled+'}
+        minus = {r['eps_b']: r for r in rows if r['branch'] == 'buckled-'}
+        assert set(plus) == set(minus) == {r['eps_b'] for r in rows
+                                           if r['branch'] == 'straight'
+                                           and float(r['eps_b']) > e_min}
+        for e, r in plus.items():
+            assert float(minus[e]['q_m']) == pytest.approx(-float(r['q_m']), rel=1e-9)
+            assert float(r['q_m']) > 0 and r['stable'] == '1'
+            assert float(minus[e]['y_m']) == pytest.approx(float(r['y_m']), rel=1e-9)
+            dy = float(r['delta_y_m'])
+            assert dy == pytest.approx(0.0, abs=1e-12) if v == 0.0 else dy > 0
+    assert crit['fixed', 0.0] > crit['simply_supported', 0.0]
+
+
+@pytest.fixture(scope='module')
+def step_out(tmp_path_factory):
+    out = tmp_path_factory.mktemp('step')
+    code = cli.main(['step', '--beams', 'fixed,simply_supported', '--eps-b', '0.20,0.25',
+                     '--t-end', '3.0', '--out', str(out)])
+    assert code == 0
+    return out
+
+
+def test_step_files_and_columns(step_out):
+    rows = read_csv(step_out / 'step.csv')
+    assert list(rows[0]) == ['beam', 'eps_b', 't_s', 'v_V', 'q_m', 'y_m', 'delta_y_m', 'eps_y']
+    assert len(rows) == 4 * 3001
+    run = [r for r in rows if r['beam'] == 'fixed' and float(r['eps_b']) == 0.2]
+    t = np.array([float(r['t_s']) for r in run])
+    v = np.array([float(r['v_V']) for r in run])
+    dy = np.array([float(r['delta_y_m']) for r in run])
+    assert np.all(v[t < 1.5 - 1e-9] == 0.0) and np.all(v[(t > 1.5 + 1e-9) & (t < 3.0)] == 3000.0)
+    i0 = int(np.searchsorted(t, 1.5 - 1e-9))
+    assert dy[i0] == 0.0                                     # y0 = y at the end of the 0 V phase
+    # the rest state before the step is the statics' stable buckled state
+    y0 = float(run[i0]['y_m'])
+    scene = load_scene('default', {'scene.beam': 'fixed', 'scene.eps_b': 0.2})
+    assert y0 == pytest.approx(statics.rest_shortening(scene), rel=2e-3)
+    if has_matplotlib():
+        png = step_out / 'step.png'
+        assert png.is_file() and 0 < png.stat().st_size < 200_000
+
+
+def test_step_paper_comparison(step_out):
+    comp = {(r['beam'], float(r['eps_b'])): r
+            for r in read_csv(step_out / 'paper_comparison.csv')}
+    assert list(next(iter(comp.values()))) == [
+        'beam', 'eps_b', 'switched', 'switched_paper', 'eps_y_percent', 'eps_y_paper_percent',
+        'q_before_m', 'q_end_of_vmax_m', 'q_final_m']
+    for beam in ('fixed', 'simply_supported'):
+        assert comp[beam, 0.2]['switched'] == comp[beam, 0.2]['switched_paper'] == 'yes'
+        assert comp[beam, 0.25]['switched'] == comp[beam, 0.25]['switched_paper'] == 'no'
+        for eps in (0.2, 0.25):
+            assert 5.0 < float(comp[beam, eps]['eps_y_percent']) < 10.0
+    # the fixed beam gives the larger actuation strain (paper: ~8 % vs ~6.5 %)
+    assert (float(comp['fixed', 0.2]['eps_y_percent'])
+            > float(comp['simply_supported', 0.2]['eps_y_percent']))
+    md = (step_out / 'paper_comparison.md').read_text()
+    assert md.startswith('| beam | eps_b |') and md.count('\n') == 2 + 4
+
+
+def test_without_matplotlib_csv_is_still_written(tmp_path, monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, 'matplotlib', None)      # import matplotlib -> ImportError
+    code = cli.main(['statics', '--eps-range', '0.1:0.2:3', '--eps-b', '0.2', '--n-q', '11',
+                     '--out', str(tmp_path)])
+    assert code == 0
+    assert (tmp_path / 'statics_branches.csv').is_file()
+    assert not list(tmp_path.glob('*.png'))
+    err = capsys.readouterr().err
+    assert 'matplotlib is not installed' in err and 'det_sim_ros[plots]' in err
+
+
+def test_scene_file_and_set_overrides(tmp_path, capsys):
+    scene = load_scene('default', {'scene.beam': 'simply_supported'})
+    path = tmp_path / 'my_scene.yaml'
+    path.write_text(yaml.safe_dump(scene_to_dict(scene, wrap=True)))
+    out = tmp_path / 'out'
+    code = cli.main(['statics', '--scene', str(path), '--set', 'physics.t_b=3e-4',
+                     '--set', 'physics.Rs=1e3', '--eps-range', '0.1:0.2:3', '--eps-b', '0.2',
+                     '--n-q', '11', '--no-plots', '--out', str(out)])
+    assert code == 0
+    crit = read_csv(out / 'statics_critical.csv')
+    assert {r['beam'] for r in crit} == {'simply_supported'}      # the scene's beam
+    expected = statics.critical_prestrain(scene.replace(**{'physics.t_b': 3e-4,
+                                                           'physics.Rs': 1e3}), 0.0)
+    assert float(crit[0]['eps_b_min']) == pytest.approx(expected, rel=1e-8)
+    assert float(crit[0]['eps_b_min']) > 0.04       # thicker beams buckle later than 3.5 %
+    assert 'wrote' in capsys.readouterr().out
+
+
+@pytest.mark.parametrize('argv, fragment', [
+    ([], 'choose a subcommand'),
+    (['statics', '--set', 'physics.Rs'], 'key=value'),
+    (['statics', '--eps-range', '0:0.3'], 'START:STOP:N'),
+    (['statics', '--eps-range', '0.3:0:5'], 'STOP > START'),
+    (['step', '--beams', 'hinged'], 'unknown beam'),
+    (['step', '--t-end', '-1'], 'must be > 0'),
+    (['step', '--eps-b', '0.2,abc'], 'comma-separated'),
+    (['statics', '--set', 'physics.Rs=-5'], "'physics.Rs'"),
+    (['statics', '--set', 'physics.colour=3'], 'unknown scene key'),
+    (['step', '--scene', 'no_such_scene'], 'not found'),
+    (['frobnicate'], 'invalid choice'),
+])
+def test_bad_arguments_exit_2_with_one_line(argv, fragment, tmp_path, capsys):
+    code = cli.main(argv + ['--out', str(tmp_path)] if argv and argv[0] != 'frobnicate'
+                    else argv)
+    assert code == 2
+    err = capsys.readouterr().err
+    assert fragment in err
+    assert 'Traceback' not in err
+    assert err.strip().splitlines()[-1].startswith('det_sim')
+
+
+def test_help_exits_0(capsys):
+    assert cli.main(['--help']) == 0
+    assert 'statics' in capsys.readouterr().out
+
+
+def test_bench_missing_and_present(monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, 'det_sim_ros.benchmark', None)
+    assert cli.main(['bench']) == 1
+    err = capsys.readouterr().err
+    assert 'not available' in err and len(err.strip().splitlines()) == 1
+    seen = {}
+    fake = types.ModuleType('det_sim_ros.benchmark')
+    fake.main = lambda argv: seen.setdefault('argv', argv) and 0
+    monkeypatch.setitem(sys.modules, 'det_sim_ros.benchmark', fake)
+    import det_sim_ros
+    monkeypatch.setattr(det_sim_ros, 'benchmark', fake, raising=False)
+    assert cli.main(['bench', '--quick', '--out', 'x']) == 0
+    assert seen['argv'] == ['--quick', '--out', 'x']
+
+
+def test_progress_bar_only_after_delay():
+    quiet = io.StringIO()
+    bar = cli.Progress(10, 'sweep', stream=quiet, delay=3600.0)
+    for k in range(10):
+        bar.advance()
+    bar.close()
+    assert quiet.getvalue() == ''
+    loud = io.StringIO()
+    bar = cli.Progress(4, 'sweep', stream=loud, delay=0.0)
+    for k in range(4):
+        bar.advance()
+    bar.close()
+    text = loud.getvalue()
+    assert 'sweep [' in text and '4/4' in text and text.endswith('\n')
+
+
+def test_module_entry_point_runs():
+    assert os.path.isfile(cli.__file__)
+    assert callable(cli.main)
