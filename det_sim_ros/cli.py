@@ -3,7 +3,8 @@
 
 Subcommands::
 
-    det_sim statics [--beams fixed,simply_supported] [--eps-range 0:0.3:61] [--eps-b 0.15,0.20,0.25]
+    det_sim statics [--beams fixed,simply_supported] [--eps-range 0:0.3:61]
+                    [--eps-b 0.15,0.20,0.25]
     det_sim step    [--beams fixed,simply_supported] [--eps-b 0.15,0.20,0.25] [--t-end 4.5]
     det_sim bench   [...]            (the integration benchmark, det_sim_ros.benchmark)
 
@@ -82,7 +83,7 @@ class Progress:
             self.stream.flush()
 
 
-# -- argument parsing ------------------------------------------------------------------------------
+# -- argument parsing -----------------------------------------------------------------------------
 def _parse_set(text: str):
     key, sep, value = text.partition('=')
     if not sep or not key.strip():
@@ -150,7 +151,8 @@ def build_parser() -> argparse.ArgumentParser:
     common.add_argument('--set', dest='overrides', action='append', type=_parse_set, default=[],
                         metavar='KEY=VALUE',
                         help='override a scene parameter, e.g. physics.Rs=1e3 (repeatable)')
-    common.add_argument('--out', default='det_sim_out', help='output folder (default: %(default)s)')
+    common.add_argument('--out', default='det_sim_out',
+                        help='output folder (default: %(default)s)')
     common.add_argument('--dpi', type=int, default=80, help='PNG resolution (default: 80)')
     common.add_argument('--no-plots', action='store_true', help='write the CSV files only')
 
