@@ -224,6 +224,8 @@ def _cdr_writer(slot_type) -> Callable:
         if isinstance(item, d.BasicType) and item.typename in _BASIC:
             code = _BASIC[item.typename]
             size = struct.calcsize(code)
+            typecode = {'d': 'd', 'f': 'f'}.get(code)
+            native = sys.byteorder == 'little'
 
             def write_numbers(buf, values):
                 n = len(values)
@@ -234,6 +236,8 @@ def _cdr_writer(slot_type) -> Callable:
                     align(buf, size)
                     if isinstance(values, (bytes, bytearray)):
                         buf += values
+                    elif native and getattr(values, 'typecode', None) == typecode:
+                        buf += values.tobytes()  # array.array, as rclpy stores sequences
                     elif code == 'B' and isinstance(values[0], bytes):
                         buf += b''.join(values)
                     else:
@@ -378,6 +382,7 @@ class Recorder:
         stepper ``method`` and ``substeps``, the ``output_map``).
     :param on_fault: called once with the fault text when recording stops on an error.
     :param clock: wall clock for the flush period (``time.monotonic``).
+    :param namespace: the node namespace that relative topic names are resolved in.
     """
 
     def __init__(self, path, scene=None, *, qos_by_topic: Mapping | None = None,
@@ -385,7 +390,8 @@ class Recorder:
                  compression: str = 'zstd', split_mb: float = 0.0, split_s: float = 0.0,
                  metadata: Mapping[str, object] | None = None,
                  on_fault: Callable[[str], None] | None = None,
-                 clock: Callable[[], float] = time.monotonic, prefix: str = 'det_sim'):
+                 clock: Callable[[], float] = time.monotonic, prefix: str = 'det_sim',
+                 namespace: str = '/'):
         self.fault = ''
         self.paths: list[str] = []
         self.messages = 0       # messages written
@@ -394,7 +400,8 @@ class Recorder:
         self.dropped = 0        # messages not written because of a fault
         self.flushes = 0
         self.record_time_s = 0.0  # wall time spent in record()
-        self.qos_by_topic = {_fully_qualified(k): v for k, v in (qos_by_topic or {}).items()}
+        self._ns = '/' + namespace.strip('/') + '/' if namespace.strip('/') else '/'
+        self.qos_by_topic = {self._resolve(k): v for k, v in (qos_by_topic or {}).items()}
         self.flush_period_s = float(flush_period_s)
         self.chunk_size = int(chunk_size)
         self.split_bytes = int(float(split_mb) * 1024 * 1024)
@@ -424,6 +431,9 @@ class Recorder:
         except Exception as exc:  # noqa: BLE001 - a logging fault must not stop the simulation
             self._set_fault(exc)
         _open_recorders.add(self)
+
+    def _resolve(self, topic: str) -> str:
+        return topic if topic.startswith('/') else self._ns + topic
 
     # -- files -------------------------------------------------------------------------------
     @staticmethod
@@ -514,7 +524,7 @@ class Recorder:
             return False
         start = self._clock()
         try:
-            topic = topic if topic.startswith('/') else '/' + topic
+            topic = topic if topic.startswith('/') else self._ns + topic
             t = int(log_time_ns)
             if t < self._last_t:
                 t = self._last_t

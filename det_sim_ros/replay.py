@@ -30,13 +30,16 @@ from .mcap_log import LogReader, Recorder, deserialize, recover
 __all__ = ['OUTPUT_FIELDS', 'COMMAND_TOPICS', 'ResimResult', 'resimulate', 'play', 'PlayStats',
            'simulate_to_log', 'output_messages', 'main']
 
-# Topic contract of sim_node: output topic -> JointState field -> simulator output name.
+# Topic contract of sim_node: output topic -> JointState field -> simulator output (one value
+# per DET: 'q' for one DET, 'q_0', 'q_1', ... for several). displacement is y0 - y, with y0 the
+# rest shortening at 0 V (logged as metadata 'y0', else from det_sim_ros.statics).
 OUTPUT_FIELDS: dict[str, dict[str, str]] = {
     'deflection': {'position': 'q', 'velocity': 'q_dot'},
     'displacement': {'position': 'y'},
     'charge': {'position': 'q_p'},
     'current': {'position': 'i_DE'},
 }
+RELATIVE_TO_Y0 = {('displacement', 'position')}
 COMMAND_TOPICS = ('voltage_command', 'voltage_command_joint')
 
 
@@ -48,11 +51,35 @@ def _stamp_ns(stamp) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
-def command_volts(type_name: str, msg) -> list[float]:
-    """The voltages of a logged command (Float64MultiArray.data or JointState.position)."""
-    if type_name.endswith('/JointState'):
-        return list(msg.position)
-    return list(msg.data)
+def command_volts(type_name: str, msg, held: Sequence[float]) -> list[float] | None:
+    """
+    The voltages a logged command sets, as the node reads it (None: the node refuses it).
+
+    Float64MultiArray: ``data``. JointState: ``position`` by ``name`` ('det0', 'det1', ...),
+    DETs not named keep their ``held`` voltage.
+    """
+    if not type_name.endswith('/JointState'):
+        return list(msg.data)
+    names, values = list(msg.name), list(msg.position)
+    index = {f'det{i}': i for i in range(len(held))}
+    if len(names) != len(values) or not names or any(n not in index for n in names):
+        return None
+    volts = [float(v) for v in held]
+    for name, value in zip(names, values):
+        volts[index[name]] = value
+    return volts
+
+
+def _indices(names: Sequence[str], base: str, n: int) -> list[int]:
+    if base in names and n == 1:
+        return [names.index(base)]
+    return [names.index(f'{base}_{i}') for i in range(n)]
+
+
+def rest_shortening(scene) -> float:
+    """y0 as the node computes it."""
+    from .statics import rest_shortening as y0
+    return float(y0(scene))
 
 
 # -- re-simulation -------------------------------------------------------------------------------
@@ -120,11 +147,14 @@ def resimulate(log, method: str | None = None, substeps: int | None = None,
         substeps = int(info['substeps'])
     fields = dict(output_fields or OUTPUT_FIELDS)
     sim = Simulator(scene, method=method, substeps=substeps)
-    index = {name: i for i, name in enumerate(sim.output_names)}
+    n = sim.model.n_inputs
+    y0 = float(info['y0']) if info.get('y0') else rest_shortening(scene)
+    index = {(topic, field): np.array(_indices(sim.output_names, output, n))
+             for topic, mapping in fields.items() for field, output in mapping.items()}
     dt_ns = sim.dt * 1e9
     result = ResimResult({}, {}, method=sim.method.name, substeps=sim.substeps)
     initial = sim.outputs()
-    current = np.array([initial[n] for n in sim.output_names])
+    current = np.array([initial[name] for name in sim.output_names])
 
     def advance_to(k: int) -> bool:
         nonlocal current
@@ -146,7 +176,9 @@ def resimulate(log, method: str | None = None, substeps: int | None = None,
                     break
                 result.skipped += 1
                 continue
-            sim.set_input(command_volts(message.type_name, message.decode()))
+            volts = command_volts(message.type_name, message.decode(), sim.u.tolist())
+            if volts is not None:
+                sim.set_input(volts)
             result.commands += 1
         elif name in fields:
             msg = message.decode()
@@ -161,7 +193,13 @@ def resimulate(log, method: str | None = None, substeps: int | None = None,
                 logged = np.asarray(getattr(msg, field), dtype=float)
                 if logged.size == 0:
                     continue
-                deviation = float(np.max(np.abs(logged - current[index[output]])))
+                expected = current[index[(name, field)]]
+                if (name, field) in RELATIVE_TO_Y0:
+                    expected = y0 - expected
+                if logged.shape != expected.shape:
+                    deviation = math.inf
+                else:
+                    deviation = float(np.max(np.abs(logged - expected)))
                 if math.isnan(deviation):
                     deviation = math.inf
                 result.max_deviation[key] = max(result.max_deviation.get(key, 0.0), deviation)
@@ -172,8 +210,9 @@ def resimulate(log, method: str | None = None, substeps: int | None = None,
 
 # -- offline recording (what the node does, without a ROS graph) ---------------------------------
 
-def output_messages(values: Mapping[str, float], stamp_ns: int, joint: str = 'det0') -> dict:
-    """The node's output messages (topic -> JointState) for one set of simulator outputs."""
+def output_messages(values: Mapping[str, float], stamp_ns: int, y0: float,
+                    joint: str = 'det0') -> dict:
+    """The node's output messages (topic -> JointState) for one set of (one-DET) outputs."""
     from builtin_interfaces.msg import Time
     from sensor_msgs.msg import JointState
     stamp = Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)
@@ -183,7 +222,8 @@ def output_messages(values: Mapping[str, float], stamp_ns: int, joint: str = 'de
         msg.header.stamp = stamp
         msg.name = [joint]
         for field, output in mapping.items():
-            setattr(msg, field, [float(values[output])])
+            value = float(values[output])
+            setattr(msg, field, [y0 - value if (topic, field) in RELATIVE_TO_Y0 else value])
         messages[topic] = msg
     return messages
 
@@ -191,7 +231,9 @@ def output_messages(values: Mapping[str, float], stamp_ns: int, joint: str = 'de
 def simulate_to_log(recorder: Recorder, sim, commands: Mapping[int, Sequence[float]] | Callable,
                     n_steps: int, joint_commands: bool = False) -> None:
     """
-    Run ``sim`` for ``n_steps`` and record commands and outputs as the node does.
+    Run ``sim`` (one DET) for ``n_steps`` and record commands and outputs as the node does.
+
+    The initial state is recorded at t_0, then each step's outputs at its end time.
 
     :param commands: step index -> voltages, or a function k -> voltages or None, applied (and
         recorded at t_k) before the step from t_k to t_{k+1}.
@@ -200,6 +242,10 @@ def simulate_to_log(recorder: Recorder, sim, commands: Mapping[int, Sequence[flo
     from std_msgs.msg import Float64MultiArray
     get = commands if callable(commands) else commands.get
     names = sim.output_names
+    y0 = rest_shortening(sim.scene)
+    t_ns = round(sim.k * sim.dt * 1e9)
+    for topic, msg in output_messages(sim.outputs(), t_ns, y0).items():
+        recorder.record(topic, msg, t_ns)
     for _ in range(n_steps):
         k = sim.k
         volts = get(k)
@@ -214,7 +260,7 @@ def simulate_to_log(recorder: Recorder, sim, commands: Mapping[int, Sequence[flo
             sim.set_input(volts)
         out = sim.step()
         t_ns = round(sim.k * sim.dt * 1e9)
-        for topic, msg in output_messages(dict(zip(names, out)), t_ns).items():
+        for topic, msg in output_messages(dict(zip(names, out)), t_ns, y0).items():
             recorder.record(topic, msg, t_ns)
 
 

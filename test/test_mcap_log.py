@@ -85,7 +85,7 @@ def test_reader_mcap_ros2_decoder(logged_run):
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])
         assert reader.get_header().profile == 'ros2'
         summary = reader.get_summary()
-        assert summary.statistics.message_count == 4 * N_STEPS + N_STEPS // 25
+        assert summary.statistics.message_count == 4 * (N_STEPS + 1) + N_STEPS // 25
         for schema in summary.schemas.values():
             assert schema.encoding == 'ros2msg' and schema.name.count('/') == 2
         for channel in summary.channels.values():
@@ -94,8 +94,8 @@ def test_reader_mcap_ros2_decoder(logged_run):
         q = names.index('q')
         deflection = [(m.log_time, msg) for _, c, m, msg in reader.iter_decoded_messages(
             topics=['/deflection'])]
-    assert len(deflection) == N_STEPS
-    for k, (log_time, msg) in enumerate(deflection):
+    assert len(deflection) == N_STEPS + 1  # the initial state at t = 0, then every step
+    for k, (log_time, msg) in enumerate(deflection[1:]):
         stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
         assert stamp == log_time
         assert msg.position[0] == expected[k][q]  # bit-identical through CDR
@@ -116,7 +116,7 @@ def test_reader_rosbags_anyreader(logged_run):
             if connection.topic == '/charge':
                 charge.append(reader.deserialize(raw, connection.msgtype).position[0])
     assert times == sorted(times)
-    assert charge == [row[names.index('q_p')] for row in expected]
+    assert charge[1:] == [row[names.index('q_p')] for row in expected]
 
 
 def test_reader_plain_mcap_and_rclpy(logged_run):
@@ -141,12 +141,12 @@ def test_reader_plain_mcap_and_rclpy(logged_run):
                 current.append(deserialize_message(message.data, JointState).position[0])
     assert commands == [(round(k * scene.dt * 1e9), _command(k))
                         for k in range(N_STEPS) if _command(k) is not None]
-    assert current == [row[names.index('i_DE')] for row in expected]
+    assert current[1:] == [row[names.index('i_DE')] for row in expected]
     info = metadata['det_sim_ros']
     assert info['version'] == __version__ and info['time_base'] == 'sim_time'
     assert yaml.safe_load(attachments['scene.yaml']) == scene_to_dict(scene, wrap=True)
     assert load_scene(yaml.safe_load(info['scene_yaml'])) == scene
-    assert metadata['det_sim_ros.end']['messages'] == str(4 * N_STEPS + N_STEPS // 25)
+    assert metadata['det_sim_ros.end']['messages'] == str(4 * (N_STEPS + 1) + N_STEPS // 25)
 
 
 def test_log_time_never_decreases(tmp_path):

@@ -49,7 +49,7 @@ def test_resim_reproduces_the_log_bit_for_bit(log_path):
     assert set(result.compared) == {f'{topic}.{field} ({name})'
                                     for topic, fields in OUTPUT_FIELDS.items()
                                     for field, name in fields.items()}
-    assert all(count == N_STEPS for count in result.compared.values())
+    assert all(count == N_STEPS + 1 for count in result.compared.values())
     assert all(value == 0.0 for value in result.max_deviation.values())
     assert result.ok(tolerance=0.0)
 
@@ -172,13 +172,13 @@ def test_play_preserves_order_stamps_and_rate(tmp_path, scene, ros_context):
         _wait_matched(player, ['/deflection'], ros_context)
         rate = 2.0
         stats = play(path, node=player, rate=rate, clock=True, topics=['/deflection'])
-        assert stats.published == {'/deflection': 60} and stats.clock == 60
+        assert stats.published == {'/deflection': 61} and stats.clock == 61
         # the player never publishes ahead of the recorded timing divided by the rate
         start = stats.schedule[0][1]
         for wall, log_time in stats.schedule:
             assert wall >= (log_time - start) / 1e9 / rate
         deadline = time.monotonic() + 30.0
-        while (len([r for r in received if r[0] == '/deflection']) < 60
+        while (len([r for r in received if r[0] == '/deflection']) < 61
                or not any(r[0] == '/clock' for r in received)):
             assert time.monotonic() < deadline, 'messages were lost'
             time.sleep(0.02)
