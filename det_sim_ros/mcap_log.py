@@ -565,6 +565,17 @@ class Recorder:
         self.flushes += 1
         self._last_flush = now
 
+    def new_file(self) -> None:
+        """Finish the current file and continue in a new one (e.g. when sim time restarts)."""
+        if self._writer is None:
+            return
+        try:
+            self._close_file()
+            self._last_t = 0
+            self._open(self._split_path())
+        except Exception as exc:  # noqa: BLE001
+            self._set_fault(exc)
+
     def maybe_flush(self) -> None:
         """Flush if the flush period has passed (call from a timer when messages are sparse)."""
         if self._writer is None:

@@ -55,6 +55,12 @@ NODE_PARAMS = {
     'start_paused': (False, 'start paused (resume with ~/pause false, or ~/step)', True, None),
     'diagnostics_period': (1.0, 'seconds between /diagnostics messages (wall clock)', True,
                            (0.01, 3600.0)),
+    'log.enabled': (True, 'record the run to MCAP: commands in, outputs out, scene (issue 5)',
+                    True, None),
+    'log.path': ('./det_sim_logs', 'MCAP log directory (a new file per run) or a .mcap file',
+                 True, None),
+    'log.split_mb': (0.0, 'start a new log file after this many MiB (0 = one file per run)',
+                     True, (0.0, 1.0e6)),
     'info_period': (5.0, 'seconds between INFO status lines (wall clock), 0 = off', True,
                     (0.0, 3600.0)),
 }
@@ -91,6 +97,8 @@ def _check_node_value(name, value):
         ok = isinstance(value, bool)
     elif isinstance(default, int):
         ok = isinstance(value, int) and not isinstance(value, bool)
+    elif isinstance(default, str):
+        ok = isinstance(value, str)
     else:
         ok = isinstance(value, (int, float)) and not isinstance(value, bool)
         value = float(value) if ok else value
@@ -170,6 +178,7 @@ class SimNode(Node):
                           clock=self._steady)
         if self._p('info_period') > 0:
             self.create_timer(self._p('info_period'), self._log_info, clock=self._steady)
+        self._start_recorder(out_qos)
         self._publish_sample(self._current_outputs())
         mode = 'real-time x%g' % self._rtf if self._p('real_time') else 'free-run'
         self.get_logger().info(
@@ -178,6 +187,31 @@ class SimNode(Node):
             f'{mode}{", paused" if self.paused else ""}; DETs {self.det_names}')
 
     # -- set-up ---------------------------------------------------------------------------
+    def _start_recorder(self, out_qos):
+        """MCAP logging (det_sim_ros.mcap_log): on unless log.enabled is false."""
+        if not self._p('log.enabled'):
+            return
+        from .mcap_log import Recorder
+        qos = {topic: out_qos for topic in OUTPUT_TOPICS}
+        qos.update({'voltage_command': QoSProfile(depth=10),
+                    'voltage_command_joint': QoSProfile(depth=10)})
+        self._recorder = Recorder(
+            self._p('log.path'), self.scene, qos_by_topic=qos, split_mb=self._p('log.split_mb'),
+            namespace=self.get_namespace(),
+            metadata={'method': self._sim.method.name, 'substeps': self._sim.substeps,
+                      'y0': repr(self.y0), 'node': self.get_fully_qualified_name()},
+            on_fault=lambda text: self.get_logger().error(text))
+        if self._recorder.active:
+            self.get_logger().info(f'logging to {self._recorder.path}')
+            self.create_timer(self._recorder.flush_period_s, self._recorder.maybe_flush,
+                              clock=self._steady)
+
+    def destroy_node(self):
+        """Finish the MCAP log (indexed and complete), then destroy the node."""
+        if self._recorder is not None:
+            self._recorder.close()
+        return super().destroy_node()
+
     def _declare_scene_parameters(self):
         """Expose the loaded scene as read-only parameters (set them in the scene file)."""
         for name, value in _flatten(scene_to_dict(self.scene)):
@@ -188,7 +222,7 @@ class SimNode(Node):
                 read_only=True))
 
     def _declare_node_parameters(self, overrides):
-        node_section = dict(self.scene.node)
+        node_section = dict(_flatten(self.scene.node))  # node: {log: {enabled: ...}} too
         for name, param in overrides.items():
             if name.startswith('node.'):
                 node_section[name[5:]] = param.value
@@ -372,6 +406,8 @@ class SimNode(Node):
 
     def _srv_reset(self, request, response):
         self._sim.reset()
+        if self._recorder is not None:
+            self._recorder.new_file()  # sim time restarts: one file per continuous run
         self._fault_reported = ''
         self._run_timer(not self.paused)
         self._publish_sample(self._current_outputs())
@@ -437,6 +473,12 @@ class SimNode(Node):
             'voltage_V': str(self._sim.u.tolist()),
             'fault': self._sim.fault,
         }
+        recorder = self._recorder
+        if recorder is not None:
+            values.update({'log_file': recorder.path, 'log_messages': str(recorder.messages),
+                           'log_fault': recorder.fault})
+            if recorder.fault and status.level == DiagnosticStatus.OK:
+                status.level, status.message = DiagnosticStatus.WARN, recorder.fault
         status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
