@@ -44,6 +44,8 @@ setup(
     entry_points={
         'console_scripts': [
             'sim_node = det_sim_ros.sim_node:main',
+            'det_sim = det_sim_ros.cli:main',
+            'det_sim_replay = det_sim_ros.replay:main',
         ],
     },
 )
