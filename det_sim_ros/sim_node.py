@@ -127,6 +127,8 @@ class SimNode(Node):
         self._declare_scene_parameters()
         self._declare_node_parameters(overrides)
 
+        self.get_logger().info(f'preparing scene {scene_file!r} (the first start after an install '
+                               'compiles the model kernels: up to a minute)')
         self._sim = Simulator(self.scene)
         self._dt = self._sim.dt
         names = self._sim.output_names

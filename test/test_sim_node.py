@@ -237,7 +237,8 @@ def test_fault_stops_integration_and_reset_recovers(harness):
 def test_namespaced_node(ros_context):
     """Relative names: in a namespace, topics and services move with the node."""
     node = SimNode(context=ros_context, namespace='arm1', parameter_overrides=[
-        Parameter('real_time', value=False), Parameter('start_paused', value=True)])
+        Parameter('real_time', value=False), Parameter('start_paused', value=True),
+        Parameter('log.enabled', value=False)])
     try:
         topics = {name for name, _ in node.get_publisher_names_and_types_by_node(
             'sim_node', '/arm1')}
