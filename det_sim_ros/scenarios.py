@@ -60,7 +60,6 @@ def reference_solution(scene, t_end: float = STEP_END, voltage=None, method: str
     scale = _state_scale(model)
     X = np.empty((n + 1, model.n_states))
     X[0] = x
-    jac_cache = {}
     for k in range(n):
         u = np.atleast_1d(voltage(k * dt))
         sol = solve_ivp(lambda t, z: model.f(t, z, u), (k * dt, (k + 1) * dt), x, method=method,
@@ -69,7 +68,6 @@ def reference_solution(scene, t_end: float = STEP_END, voltage=None, method: str
             raise RuntimeError(f'reference solve failed at t = {k * dt}: {sol.message}')
         x = sol.y[:, -1]
         X[k + 1] = x
-    del jac_cache
     return np.arange(n + 1) * dt, X
 
 

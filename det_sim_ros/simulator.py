@@ -133,7 +133,8 @@ class Simulator:
         if status != _kernels.OK:
             error = ModelDomainError(status, f'at t = {self.t + self.dt:.6g} s')
             self.fault = str(error)
-            status = _kernels.outputs(self.x, self.u, self.model.arrays, self._out)
+            # leave the outputs buffer at the last good state so nothing faulty can be read
+            _kernels.outputs(self.x, self.u, self.model.arrays, self._out)
             raise error
         self.x = x_new
         self.k += 1
