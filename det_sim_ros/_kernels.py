@@ -6,20 +6,30 @@ step costs well under a microsecond instead of the tens of microseconds of inter
 The physics is written once, in :func:`rhs`; ``model.py`` builds the arrays it reads and
 documents the equations. With ``NUMBA_DISABLE_JIT=1`` the same code runs as plain Python.
 
-The model arrays ``A`` (built by :func:`det_sim_ros.model.build_arrays`) are a tuple:
+The model arrays ``A`` (built by :func:`det_sim_ros.model.build_model`) are a tuple:
 
     flags  int64[6]   n_q, n_c (= n_p), creep, rc source, power monitor, n_state
     cell_q int64[n_c+1]  offsets of each cell's Ritz coordinates in q
     cell_g int64[n_c+1]  offsets of each cell's quadrature nodes
     B1, B2 (n_nodes, r_max)  S_j'(x_g), S_j''(x_g) of the cell owning node g
     W      (n_nodes,)  quadrature weights (m)
-    Mb, K, D (n_q, n_q)  beam mass, linear bending stiffness, beam damping (both beams)
-    MI     (n_c, n_c)  interface mass matrix acting on the end shortenings y_c
+    Mb, K, D (n_q, r_max)  beam mass, linear bending stiffness, beam damping (both beams of a
+                       cell), block diagonal by cell: row j holds its cell's block row, column
+                       k is relative to the cell's first coordinate
+    mi_val (n_nz,)     nonzero entries of the interface mass matrix MI (n_c x n_c) that acts on
+                       the end shortenings y_c (a cell's interface mass, or a plate shared by
+                       several cells) ...
     cellp  (n_c, 6)    l, EI, kappa (1 for the consistent w'^4/8 end-shortening term), and for
                        one-term cells the same integrals in closed form: c2 = 1/2 int S'^2,
                        c4 = 1/8 int S'^4, e4 = EI int S''^2 S'^2 (quadrature skipped)
     detp   (n_c, 9)    l0, V*Y, C0, V, E_M, eta_M, eta_v, Rs, Rp of the DET spanning cell c
     ref    (n_q,)      S_j at the reference point of its cell (published deflection)
+    mi_idx int64[n_nz, 2]  ... at (row cell, column cell)
+    grp_q  int64[n_g+1]    coordinate offsets of the groups of cells MI couples (contiguous);
+                       the mass matrix is block diagonal by group, so N independent actuators
+                       cost O(N), not O(N^3)
+    cell_grp int64[n_c]    group of each cell
+    P      (n_s, n_c)  structure outputs as linear maps of the end shortenings (plate_y, ...)
 
 Status codes returned by kernels: 0 ok, 1 stretch lambda <= 0 (l - y <= 0), 2 non-finite state.
 """
@@ -31,7 +41,7 @@ from numba import njit
 
 OK, BAD_STRETCH, NON_FINITE = 0, 1, 2
 N_CELL_OUTPUTS = 9   # q_ref, qdot_ref, y, lambda, q_p, v_p, i_DE, C, eps_E
-N_GLOBAL_OUTPUTS = 3  # H, P_in, P_diss
+N_GLOBAL_OUTPUTS = 3  # H, P_in, P_diss (after the structure outputs)
 _JIT = dict(cache=True, nogil=True, error_model='numpy')  # numpy: no zero-division branches
 # Helpers called in the step loop are inlined at numba-IR level: a real call would incref and
 # decref every array of the model tuple, which cost more than the physics (measured 4x).
@@ -143,6 +153,16 @@ def _solve_spd(Mt, F, out):
 
 
 @njit(**_JIT)
+def mass_block_size(A):
+    """Columns of the mass-matrix scratch: the largest group's coordinate count."""
+    grp_q = A[14]
+    size = 1
+    for g in range(grp_q.shape[0] - 1):
+        size = max(size, grp_q[g + 1] - grp_q[g])
+    return size
+
+
+@njit(**_JIT)
 def workspace_size(A):
     """Scratch floats :func:`rhs` needs: y, h (n_c each), J, F (n_q each)."""
     nq, nc = A[0][0], A[0][1]
@@ -164,7 +184,8 @@ def rhs(x, u, A, dx, pw, ws, Mt, quasi_static=False):
     charge the circuit relaxes to for frozen q) and receive dz/dt; see :func:`advance`.
     """
     flags, cell_q = A[0], A[1]
-    Mb, K, D, MI, cellp, detp = A[6], A[7], A[8], A[9], A[10], A[11]
+    Mb, K, D, mi_val, cellp, detp = A[6], A[7], A[8], A[9], A[10], A[11]
+    mi_idx, grp_q, cell_grp = A[13], A[14], A[15]
     nq, nc, creep, rcsrc, power = flags[0], flags[1], flags[2], flags[3], flags[4]
     ie = 2 * nq
     ip = ie + nc * creep
@@ -178,28 +199,35 @@ def rhs(x, u, A, dx, pw, ws, Mt, quasi_static=False):
     F = ws[2 * nc + nq:2 * nc + 2 * nq]
     _kinematics(q, qd, A, y, J, h, None)
     p_diss = 0.0
-    for i in range(nq):
-        s = 0.0
-        dq = 0.0
-        for k in range(nq):
-            s += K[i, k] * q[k]
-            dq += D[i, k] * qd[k]
-        F[i] = -s - dq
-        p_diss += qd[i] * dq
+    for c in range(nc):   # cell blocks of K, D and Mb
+        o = cell_q[c]
+        r = cell_q[c + 1] - o
+        col = o - grp_q[cell_grp[c]]     # column of the cell's first coordinate in Mt
+        size = grp_q[cell_grp[c] + 1] - grp_q[cell_grp[c]]
+        for i in range(o, o + r):
+            s = 0.0
+            dq = 0.0
+            for k in range(r):
+                s += K[i, k] * q[o + k]
+                dq += D[i, k] * qd[o + k]
+            F[i] = -s - dq
+            p_diss += qd[i] * dq
+        for i in range(o, o + r):
+            for k in range(size):
+                Mt[i, k] = 0.0
+            for k in range(r):
+                Mt[i, col + k] = Mb[i, k]
     _quartic_force(q, A, F)
     # Interface mass on the end shortenings: T_I = 1/2 ydot' MI ydot with ydot_c = J_c . qdot.
-    for j in range(nq):
-        for k in range(nq):
-            Mt[j, k] = Mb[j, k]
-    for c in range(nc):
-        for c2 in range(nc):
-            mi = MI[c, c2]
-            if mi == 0.0:
-                continue
-            for j in range(cell_q[c], cell_q[c + 1]):
-                F[j] -= mi * J[j] * h[c2]
-                for k in range(cell_q[c2], cell_q[c2 + 1]):
-                    Mt[j, k] += mi * J[j] * J[k]
+    for e in range(mi_val.shape[0]):
+        c = mi_idx[e, 0]
+        c2 = mi_idx[e, 1]
+        mi = mi_val[e]
+        go = grp_q[cell_grp[c]]
+        for j in range(cell_q[c], cell_q[c + 1]):
+            F[j] -= mi * J[j] * h[c2]
+            for k in range(cell_q[c2], cell_q[c2 + 1]):
+                Mt[j, k - go] += mi * J[j] * J[k]
     p_in = 0.0
     for i in range(nc):
         l0, VY, C0, V = detp[i, 0], detp[i, 1], detp[i, 2], detp[i, 3]
@@ -243,7 +271,9 @@ def rhs(x, u, A, dx, pw, ws, Mt, quasi_static=False):
         if creep:
             p_diss += V * EM * EM * eps * eps / etaM
     qdd = dx[nq:2 * nq]
-    _solve_spd(Mt, F, qdd)
+    for g in range(grp_q.shape[0] - 1):
+        a, b = grp_q[g], grp_q[g + 1]
+        _solve_spd(Mt[a:b, :b - a], F[a:b], qdd[a:b])
     for i in range(nq):
         dx[i] = qd[i]
     pw[0] = p_in
@@ -255,17 +285,21 @@ def rhs(x, u, A, dx, pw, ws, Mt, quasi_static=False):
 
 
 @njit(**_INLINE)
-def stiff_rates(x, A, L):
-    """Diagonal linear part for exponential steppers: dq_p/dt = -q_p/(C Rs || Rp) + ... ."""
+def stiff_rates(x, A, L, ws):
+    """
+    Diagonal linear part for exponential steppers: dq_p/dt = -q_p/(C Rs || Rp) + ... .
+
+    ``ws``: scratch of :func:`workspace_size` floats (no allocation: this runs every step).
+    """
     flags, detp, cellp = A[0], A[11], A[10]
     nq, nc, creep, rcsrc = flags[0], flags[1], flags[2], flags[3]
     for k in range(L.shape[0]):
         L[k] = 0.0
     if not rcsrc:
         return OK
-    y = np.empty(nc)
-    h = np.empty(nc)
-    J = np.empty(nq)
+    y = ws[:nc]
+    h = ws[nc:2 * nc]
+    J = ws[2 * nc:2 * nc + nq]
     _kinematics(x[:nq], x[nq:2 * nq], A, y, J, h, None)
     ip = 2 * nq + nc * creep
     for i in range(nc):
@@ -281,10 +315,11 @@ def outputs(x, u, A, out):
     """
     Fill ``out`` with the named outputs (see model.OUTPUT_NAMES); returns a status code.
 
-    Per cell: q_ref, qdot_ref, y, lambda, q_p, v_p, i_DE, C, eps_E; then H, P_in, P_diss.
+    Per cell: q_ref, qdot_ref, y, lambda, q_p, v_p, i_DE, C, eps_E; then the structure outputs
+    (rows of P applied to y), H, P_in, P_diss.
     """
     flags, cell_q = A[0], A[1]
-    Mb, K, MI, cellp, detp, ref = A[6], A[7], A[9], A[10], A[11], A[12]
+    Mb, K, mi_val, cellp, detp, ref, mi_idx = A[6], A[7], A[9], A[10], A[11], A[12], A[13]
     nq, nc, creep, rcsrc = flags[0], flags[1], flags[2], flags[3]
     nx = flags[5]
     for k in range(x.shape[0]):
@@ -292,7 +327,7 @@ def outputs(x, u, A, out):
             return NON_FINITE
     dx = np.empty(nx)
     pw = np.empty(2)
-    status = rhs(x, u, A, dx, pw, np.empty(workspace_size(A)), np.empty((nq, nq)))
+    status = rhs(x, u, A, dx, pw, np.empty(workspace_size(A)), np.empty((nq, mass_block_size(A))))
     if status != OK:
         return status
     q = x[:nq]
@@ -303,17 +338,17 @@ def outputs(x, u, A, out):
     Us4 = np.empty(nc)
     _kinematics(q, qd, A, y, J, h, Us4)
     energy = 0.0
-    for i in range(nq):
-        for k in range(nq):
-            energy += 0.5 * qd[i] * Mb[i, k] * qd[k] + 0.5 * q[i] * K[i, k] * q[k]
     ydot = np.zeros(nc)
     for c in range(nc):
+        o = cell_q[c]
+        for i in range(o, cell_q[c + 1]):
+            for k in range(cell_q[c + 1] - o):
+                energy += 0.5 * qd[i] * Mb[i, k] * qd[o + k] + 0.5 * q[i] * K[i, k] * q[o + k]
         energy += Us4[c]
         for j in range(cell_q[c], cell_q[c + 1]):
             ydot[c] += J[j] * qd[j]
-    for c in range(nc):
-        for c2 in range(nc):
-            energy += 0.5 * MI[c, c2] * ydot[c] * ydot[c2]
+    for e in range(mi_val.shape[0]):
+        energy += 0.5 * mi_val[e] * ydot[mi_idx[e, 0]] * ydot[mi_idx[e, 1]]
     ie = 2 * nq
     ip = ie + nc * creep
     for c in range(nc):
@@ -349,6 +384,13 @@ def outputs(x, u, A, out):
         out[k + 7] = cap
         out[k + 8] = eps
     k = nc * N_CELL_OUTPUTS
+    P = A[16]
+    for r in range(P.shape[0]):
+        value = 0.0
+        for c in range(nc):
+            value += P[r, c] * y[c]
+        out[k] = value
+        k += 1
     out[k] = energy
     out[k + 1] = pw[0]
     out[k + 2] = pw[1]
@@ -440,7 +482,7 @@ def advance(x, u, A, c, terms, h, n_steps):
         if terms[t, 2] >= 0.0:
             exponential = True
     ws = np.empty(workspace_size(A))
-    Mt = np.empty((A[0][0], A[0][0]))
+    Mt = np.empty((A[0][0], mass_block_size(A)))
     N = np.empty((s, nx))
     X = np.empty(nx)
     L = np.zeros(nx)
@@ -488,7 +530,7 @@ def advance(x, u, A, c, terms, h, n_steps):
         _shift_charge(x, u, A, -1.0)
     for _ in range(n_steps):
         if exponential:
-            status = stiff_rates(x, A, L)
+            status = stiff_rates(x, A, L, ws)
             if status != OK:
                 x[:] = x_start
                 return status
@@ -502,9 +544,19 @@ def advance(x, u, A, c, terms, h, n_steps):
                     k = int(terms[t, 2])
                     if k >= 0:
                         coef[t, m] = terms[t, 4] * phis[arg_index[t], k]
-                for i in range(s):
-                    e_c[i, m] = math.exp(c[i] * z)
-                e_1[m] = math.exp(z)
+                for i in range(s):   # exp(c_i z): reuse phi_0 of an equal argument
+                    e_c[i, m] = 1.0 if c[i] == 0.0 else math.nan
+                    for a in range(n_args):
+                        if args[a] == c[i]:
+                            e_c[i, m] = phis[a, 0]
+                    if math.isnan(e_c[i, m]):
+                        e_c[i, m] = math.exp(c[i] * z)
+                e_1[m] = math.nan
+                for a in range(n_args):
+                    if args[a] == 1.0:
+                        e_1[m] = phis[a, 0]
+                if math.isnan(e_1[m]):
+                    e_1[m] = math.exp(z)
         for i in range(s):
             for m in range(nx):
                 X[m] = e_c[i, m] * x[m]
@@ -535,6 +587,121 @@ def advance(x, u, A, c, terms, h, n_steps):
     return OK
 
 
+@njit(**_INLINE)
+def _charge_transient(x, u_old, u_new, A, z_tol):
+    """
+    After an input jump, how long the charge transient stays above ``z_tol`` (C), and the
+    shortest charge time constant (s): (T, tau_min); T = 0 when no transient matters.
+
+    A jump du moves the charge the circuit relaxes to by dz = C du Rp/(Rs+Rp); the lag decays
+    like dz exp(-t/tau) with tau = C (Rs || Rp). While the lag is large it changes the
+    electrostatic force on the time scale tau, which the explicit mechanics stages cannot
+    resolve with steps >> tau (measured: at 1 ms / 8 steps this alone made the 'step' error
+    1.9e-3; with the transient resolved, 8.6e-6 = the ideal-source error of the same table).
+    """
+    flags, detp, cellp = A[0], A[11], A[10]
+    nq, nc = flags[0], flags[1]
+    y = np.empty(nc)
+    hh = np.empty(nc)
+    J = np.empty(nq)
+    _kinematics(x[:nq], x[nq:2 * nq], A, y, J, hh, None)
+    T = 0.0
+    tau_min = np.inf
+    for i in range(nc):
+        du = abs(u_new[i] - u_old[i])
+        if du == 0.0:
+            continue
+        lam = (cellp[i, 0] - y[i]) / detp[i, 0]
+        Rs, Rp = detp[i, 7], detp[i, 8]
+        cap = detp[i, 2] * lam * lam
+        dz = cap * du * Rp / (Rs + Rp)
+        if dz <= z_tol:
+            continue
+        tau = cap * Rs * Rp / (Rs + Rp)
+        T = max(T, tau * math.log(dz / z_tol))
+        tau_min = min(tau_min, tau)
+    return T, tau_min
+
+
+@njit(**_JIT)
+def period(x, u_old, u, A, c, terms, h, n_sub, z_tol, fine):
+    """
+    One control period dt = n_sub h with the input u held, starting from an input u_old.
+
+    With ``z_tol`` > 0 (exponential methods on an RC scene) a charge transient after an input
+    jump is resolved first: steps of ``fine`` * tau (at most h) until the lag has decayed below z_tol (see
+    :func:`_charge_transient`), then steps of at most h to the end of the period. The period
+    still ends exactly at dt; the split depends only on the state and the inputs, so runs stay
+    deterministic. Returns a status code; on failure x holds the state at the period's start.
+    """
+    if z_tol > 0.0 and A[0][3] == 1:
+        dt = h * n_sub
+        T, tau = _charge_transient(x, u_old, u, A, z_tol)
+        if T > 0.0:
+            x0 = x.copy()
+            T = min(T, dt)
+            n_fine = int(math.ceil(T / min(fine * tau, h) - 1e-9))   # never coarser than h
+            status = advance(x, u, A, c, terms, T / n_fine, n_fine)
+            rest = dt - T
+            if status == OK and rest > 1e-6 * dt:
+                n_rest = int(math.ceil(rest / h - 1e-9))
+                status = advance(x, u, A, c, terms, rest / n_rest, n_rest)
+            if status != OK:
+                x[:] = x0
+            return status
+    return advance(x, u, A, c, terms, h, n_sub)
+
+
+@njit(**_JIT)
+def book_input_jump(x, u_old, u_new, A):
+    """
+    Ideal source with the power monitor: book an instantaneous recharge (in place).
+
+    A voltage step moves the charge C dv at once: the source supplies v_new C dv and the
+    vanishing series resistance dissipates C dv^2 / 2 (the R -> 0 limit of the RC charging
+    loss). Nothing to do for RC scenes or without the monitor.
+    """
+    flags, detp, cellp = A[0], A[11], A[10]
+    nq, nc, rcsrc, power = flags[0], flags[1], flags[3], flags[4]
+    if rcsrc or not power:
+        return
+    y = np.empty(nc)
+    hh = np.empty(nc)
+    J = np.empty(nq)
+    _kinematics(x[:nq], x[nq:2 * nq], A, y, J, hh, None)
+    for i in range(nc):
+        lam = (cellp[i, 0] - y[i]) / detp[i, 0]
+        cap = detp[i, 2] * lam * lam
+        dv = u_new[i] - u_old[i]
+        x[-2] += u_new[i] * cap * dv
+        x[-1] += 0.5 * cap * dv * dv
+
+
+@njit(**_JIT)
+def run(x, u_held, u_last, U, A, c, terms, h, n_sub, z_tol, fine, X, Y):
+    """
+    Many control periods in one call (offline runs): period k holds U[k]; X[k + 1] and Y[k + 1]
+    receive the state and outputs after it. ``u_held`` is the input held now (already booked),
+    ``u_last`` the one the last period ran with. Returns (status, periods completed); x is left
+    at the last good state.
+    """
+    u_book = u_held.copy()
+    u_prev = u_last.copy()
+    for k in range(U.shape[0]):
+        u = U[k]
+        book_input_jump(x, u_book, u, A)
+        u_book = u
+        status = period(x, u_prev, u, A, c, terms, h, n_sub, z_tol, fine)
+        if status != OK:
+            return status, k
+        status = outputs(x, u, A, Y[k + 1])
+        if status != OK:
+            return status, k
+        X[k + 1] = x
+        u_prev = u
+    return OK, U.shape[0]
+
+
 @njit(**_JIT)
 def advance_batch(X, U, A, c, terms, h, n_steps, status):
     """Advance N independent copies (rows of X, inputs U) with the same model arrays."""
@@ -544,9 +711,9 @@ def advance_batch(X, U, A, c, terms, h, n_steps, status):
 
 
 @njit(**_JIT)
-def advance_and_output(x, u, A, c, terms, h, n_steps, out):
-    """One control period in one call: advance, then fill the outputs (status of the first error)."""
-    status = advance(x, u, A, c, terms, h, n_steps)
+def period_and_output(x, u_old, u, A, c, terms, h, n_sub, z_tol, fine, out):
+    """One control period in one call: :func:`period`, then the outputs."""
+    status = period(x, u_old, u, A, c, terms, h, n_sub, z_tol, fine)
     if status != OK:
         return status
     return outputs(x, u, A, out)

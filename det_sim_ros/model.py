@@ -84,6 +84,14 @@ class Model:
     output_names: tuple
     n_inputs: int
     bases: tuple
+    input_names: tuple = ('det0',)      # DET names, in voltage-command order
+    structure_output_names: tuple = ()  # e.g. ('plate_y', 'plate_phi')
+
+    def channel(self, base: str) -> list:
+        """Indices in ``output_names`` of a per-DET output ('q', 'y', 'q_p', ...), DET order."""
+        if self.n_inputs == 1:
+            return [self.output_names.index(base)]
+        return [self.output_names.index(f'{base}[{d}]') for d in self.input_names]
 
     @property
     def n_states(self) -> int:
@@ -94,8 +102,8 @@ class Model:
         """q = q0 at the first Ritz coordinate of each cell, everything else 0 (scenarios.md)."""
         x = np.zeros(self.n_states)
         cell_q = self.arrays[1]
-        for c in range(len(cell_q) - 1):
-            x[cell_q[c]] = self.scene.physics.q0 / self.bases[c].reference_row()[0]
+        for c, physics in enumerate(self.scene.cell_physics()):
+            x[cell_q[c]] = physics.q0 / self.bases[c].reference_row()[0]
         return x
 
     def f(self, t, x, u, params=None) -> np.ndarray:  # noqa: ARG002 - nlsys signature
@@ -106,7 +114,8 @@ class Model:
             check(_kernels.NON_FINITE)
         check(_kernels.rhs(np.asarray(x, dtype=float), self._u(u), self.arrays, dx,
                            np.empty(2), np.empty(_kernels.workspace_size(self.arrays)),
-                           np.empty((self.arrays[0][0],) * 2)))
+                           np.empty((self.arrays[0][0],
+                                     _kernels.mass_block_size(self.arrays)))))
         return dx
 
     def output_vector(self, x, u) -> np.ndarray:
@@ -120,28 +129,15 @@ class Model:
         return dict(zip(self.output_names, self.output_vector(x, u)))
 
     def apply_input_jump(self, x, u_old, u_new) -> None:
-        """
-        Book the energy of an instantaneous recharge into the monitor states (in place).
-
-        With an ideal source a voltage step moves the charge C dv at once: the source supplies
-        v_new C dv and the vanishing series resistance dissipates C dv^2 / 2 (the R -> 0 limit of
-        the RC charging loss). Nothing to do for RC scenes or without the power monitor.
-        """
-        if self.scene.source != 'ideal' or not self.scene.monitor_power:
-            return
-        u_old, u_new = self._u(u_old), self._u(u_new)
-        out = self.output_vector(x, u_new)
-        n_cell = len(CELL_OUTPUTS)
-        for c in range(self.n_inputs):
-            cap = out[c * n_cell + CELL_OUTPUTS.index('C')]
-            dv = u_new[c] - u_old[c]
-            x[-2] += u_new[c] * cap * dv
-            x[-1] += 0.5 * cap * dv * dv
+        """Ideal source: book an instantaneous recharge in the power monitor (in place; see
+        :func:`det_sim_ros._kernels.book_input_jump`)."""
+        _kernels.book_input_jump(x, self._u(u_old), self._u(u_new), self.arrays)
 
     def stiff_rates(self, x) -> np.ndarray:
         """Diagonal of the stiff linear part (1/s): -1/(C Rs||Rp) at the charge states."""
         L = np.empty(self.n_states)
-        check(_kernels.stiff_rates(np.asarray(x, dtype=float), self.arrays, L))
+        check(_kernels.stiff_rates(np.asarray(x, dtype=float), self.arrays, L,
+                                   np.empty(_kernels.workspace_size(self.arrays))))
         return L
 
     def _u(self, u):
@@ -152,28 +148,68 @@ class Model:
 
 
 def build_model(scene: Scene) -> Model:
-    """Assemble the model arrays from a scene (Ritz integrals computed once, here)."""
-    p = scene.physics
-    length = scene.beam_length
-    basis = make_basis(scene.beam, length, scene.fidelity, scene.n_ritz)
-    cells = [basis]            # one cell (beam pair + DET) per scene for now
-    MI = np.array([[p.m]])
-    return _assemble(scene, cells, MI, [p])
+    """
+    Assemble the model arrays from a scene (Ritz integrals computed once, here).
+
+    Every cell (one DET and its beam pair, Section 3) brings its own Ritz basis and physics;
+    the structure decides how the cells' end shortenings y_c meet inertia (MI, the kinetic
+    energy 1/2 ydot' MI ydot) and which structure outputs exist:
+
+    - 'single', 'array': each cell carries its own interface mass m (MI = diag(m_c)); an array
+      is N independent copies stepped together;
+    - 'plate': two cells at x = -w/2 (first DET) and +w/2 (second) under one rigid plate of mass
+      M and inertia J. With the plate's height Y = (y_1 + y_2)/2 and small rotation
+      phi = (y_1 - y_2)/w, T = 1/2 M Ydot^2 + 1/2 J phidot^2 gives
+      MI = M/4 [[1, 1], [1, 1]] + J/w^2 [[1, -1], [-1, 1]] (the plate replaces the cells' m).
+      Outputs plate_y = Y (end shortening at the centre) and plate_phi = phi (rad, positive when
+      the second cell's side rises more, i.e. its Delta-y = y0 - y is larger).
+    """
+    physics = scene.cell_physics()
+    cells = [make_basis(scene.beam, ph.l0 * (1.0 + scene.eps_b), scene.fidelity, scene.n_ritz)
+             for ph in physics]
+    kind = scene.structure['type']
+    if kind == 'plate':
+        w = scene.structure['plate_width']
+        M, Jp = scene.structure['plate_mass'], scene.structure['plate_inertia']
+        MI = M / 4.0 * np.ones((2, 2)) + Jp / w ** 2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
+        P = np.array([[0.5, 0.5], [1.0 / w, -1.0 / w]])
+        structure_names = ('plate_y', 'plate_phi')
+    else:
+        MI = np.diag([ph.m for ph in physics])
+        P = np.zeros((0, len(cells)))
+        structure_names = ()
+    return _assemble(scene, cells, MI, physics, P, structure_names)
 
 
-def _assemble(scene, cells, MI, det_physics):
+def _groups(MI):
+    """Connected groups of cells under MI (cells of a group must be contiguous)."""
+    n = MI.shape[0]
+    group = np.arange(n)
+    for i in range(n):           # union of coupled cells; coupling is local in practice
+        for j in np.nonzero(MI[i])[0]:
+            a, b = group[i], group[j]
+            if a != b:
+                group[group == max(a, b)] = min(a, b)
+    labels, cell_grp = np.unique(group, return_inverse=True)
+    if np.any(np.diff(cell_grp) < 0) or np.any(np.diff(cell_grp) > 1):
+        raise ValueError('cells coupled by the structure must be listed next to each other')
+    return cell_grp.astype(np.int64), len(labels)
+
+
+def _assemble(scene, cells, MI, det_physics, P, structure_names):
     nc = len(cells)
     r = [b.n_ritz for b in cells]
     nq = int(sum(r))
+    r_max = max(r)
     cell_q = np.concatenate([[0], np.cumsum(r)]).astype(np.int64)
     nodes = [b.quadrature() for b in cells]
     cell_g = np.concatenate([[0], np.cumsum([len(x) for x, _ in nodes])]).astype(np.int64)
-    B1 = np.zeros((cell_g[-1], max(r)))
+    B1 = np.zeros((cell_g[-1], r_max))
     B2 = np.zeros_like(B1)
     W = np.zeros(cell_g[-1])
-    Mb = np.zeros((nq, nq))
-    K = np.zeros((nq, nq))
-    D = np.zeros((nq, nq))
+    Mb = np.zeros((nq, r_max))     # block rows by cell (see _kernels module docstring)
+    K = np.zeros((nq, r_max))
+    D = np.zeros((nq, r_max))
     ref = np.zeros(nq)
     cellp = np.zeros((nc, 6))
     detp = np.zeros((nc, 9))
@@ -187,10 +223,10 @@ def _assemble(scene, cells, MI, det_physics):
         W[g] = w
         EI = ph.E_b * ph.I
         # both beams: factor 2 on every beam integral (eqs 49, 51, 55 with B1 = B2)
-        Mb[s, s] = 2.0 * ph.rho_b * (ph.I * S1.T @ (w[:, None] * S1)
-                                     + ph.area * S0.T @ (w[:, None] * S0))
-        K[s, s] = 2.0 * EI * S2.T @ (w[:, None] * S2)
-        D[s, s] = 2.0 * ph.eta_b * ph.I * S2.T @ (w[:, None] * S2)
+        Mb[s, :basis.n_ritz] = 2.0 * ph.rho_b * (ph.I * S1.T @ (w[:, None] * S1)
+                                                 + ph.area * S0.T @ (w[:, None] * S0))
+        K[s, :basis.n_ritz] = 2.0 * EI * S2.T @ (w[:, None] * S2)
+        D[s, :basis.n_ritz] = 2.0 * ph.eta_b * ph.I * S2.T @ (w[:, None] * S2)
         ref[s] = basis.reference_row()
         c2 = 0.5 * w @ S1[:, 0] ** 2
         c4 = 0.125 * w @ S1[:, 0] ** 4
@@ -198,6 +234,13 @@ def _assemble(scene, cells, MI, det_physics):
         cellp[c] = (basis.length, EI, kappa, c2, c4, e4)  # last three used when n_ritz == 1
         detp[c] = (ph.l0, ph.volume * ph.Y, ph.C0, ph.volume, ph.E_M, ph.eta_M, ph.eta_v,
                    ph.Rs, ph.Rp)
+    MI = np.asarray(MI, dtype=float)
+    mi_idx = np.argwhere(MI != 0.0).astype(np.int64).reshape(-1, 2)
+    mi_val = MI[MI != 0.0].astype(float)
+    cell_grp, n_groups = _groups(MI)
+    grp_q = np.zeros(n_groups + 1, dtype=np.int64)
+    for c in range(nc):
+        grp_q[cell_grp[c] + 1] = cell_q[c + 1]
     creep, rc, power = int(scene.creep), int(scene.source == 'rc'), int(scene.monitor_power)
     names = [f'q[{j}]' for j in range(nq)] + [f'q_dot[{j}]' for j in range(nq)]
     if creep:
@@ -207,10 +250,13 @@ def _assemble(scene, cells, MI, det_physics):
     if power:
         names += ['W_in', 'W_diss']
     flags = np.array([nq, nc, creep, rc, power, len(names)], dtype=np.int64)
-    arrays = (flags, cell_q, cell_g, B1, B2, W, Mb, K, D, np.asarray(MI, dtype=float), cellp,
-              detp, ref)
+    arrays = (flags, cell_q, cell_g, B1, B2, W, Mb, K, D, mi_val, cellp, detp, ref, mi_idx,
+              grp_q, cell_grp, np.ascontiguousarray(P, dtype=float))
+    det_names = scene.det_names
     if nc == 1:
         out_names = CELL_OUTPUTS
     else:
-        out_names = tuple(f'{n}[{c}]' for c in range(nc) for n in CELL_OUTPUTS)
-    return Model(scene, arrays, tuple(names), out_names + GLOBAL_OUTPUTS, nc, tuple(cells))
+        out_names = tuple(f'{n}[{d}]' for d in det_names for n in CELL_OUTPUTS)
+    return Model(scene, arrays, tuple(names),
+                 out_names + tuple(structure_names) + GLOBAL_OUTPUTS, nc, tuple(cells),
+                 tuple(det_names), tuple(structure_names))

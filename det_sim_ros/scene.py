@@ -19,14 +19,16 @@ import os
 import sys
 from typing import Any, Mapping
 
+import numpy as np
 import yaml
 
 __all__ = ['SceneError', 'Physics', 'Scene', 'load_scene', 'scene_to_dict', 'find_config',
-           'BEAMS', 'FIDELITIES', 'SOURCES']
+           'BEAMS', 'FIDELITIES', 'SOURCES', 'STRUCTURES']
 
 BEAMS = ('simply_supported', 'fixed')
 FIDELITIES = ('paper', 'consistent')
 SOURCES = ('rc', 'ideal')
+STRUCTURES = ('single', 'plate', 'array')
 EPS0 = 8.8541878128e-12  # F/m, vacuum permittivity
 
 
@@ -71,6 +73,27 @@ INTEGRATOR_SPEC = {
     'tolerance': ('float', 0.0, False, 0.1, '-', 'target error of auto'),
     'substeps': ('int', 0, True, 100000, '-', 'internal steps per control period (0 = auto)'),
 }
+# Optional section: how cells (each one DET and its pair of buckled beams, Section 3) are put
+# together. Missing keys take STRUCTURE_DEFAULTS, so scene files without the section (and logs
+# written before it existed) still load as one cell.
+STRUCTURE_SPEC = {
+    'type': ('choice', STRUCTURES, "'single' cell, two cells under a rigid 'plate' (Fig. 7), "
+             "or an 'array' of independent copies"),
+    'dets': ('names', 'DET names = order of the voltage command (default det0, det1, ...; '
+             'left, right for a plate)'),
+    'copies': ('int', 1, True, 100000, '-', 'array: number of independent actuators'),
+    'plate_width': ('float', *_POS, 'm', 'plate: distance w between the two cells'),
+    'plate_mass': ('float', 0.0, True, math.inf, 'kg', 'plate: mass (replaces the cells\' m)'),
+    'plate_inertia': ('float', 0.0, True, math.inf, 'kg m^2',
+                      'plate: rotational inertia J about its centre'),
+    'spread': ('float', 0.0, True, 0.3, '-', 'array: relative standard deviation of the '
+               'spread_keys physics values per copy'),
+    'spread_keys': ('names', 'array: physics keys that get the spread'),
+    'seed': ('int', 0, True, 2 ** 31 - 1, '-', 'array: random seed of the spread'),
+}
+STRUCTURE_DEFAULTS = {'type': 'single', 'dets': [], 'copies': 1, 'plate_width': 0.06,
+                      'plate_mass': 4.0e-3, 'plate_inertia': 1.2e-6, 'spread': 0.0,
+                      'spread_keys': ['Y', 'E_b', 'Rs', 'm'], 'seed': 0}
 TOP_SPEC = {
     'rate_hz': ('float', 0.0, False, 1.0e6, 'Hz', 'control rate'),
 }
@@ -140,6 +163,45 @@ class Scene:
     substeps: int
     rate_hz: float
     node: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    structure: Mapping[str, Any] = dataclasses.field(
+        default_factory=lambda: copy.deepcopy(STRUCTURE_DEFAULTS))
+    dets: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
+
+    @property
+    def det_names(self) -> tuple:
+        """DET names in voltage-command order (one cell per DET)."""
+        return tuple(self.structure['dets'])
+
+    @property
+    def n_dets(self) -> int:
+        return len(self.structure['dets'])
+
+    def cell_physics(self) -> tuple:
+        """
+        The physics of each cell: ``physics`` with the ``dets.<name>`` overrides and, for an
+        array, the seeded spread (each spread_key times 1 + spread N(0, 1), clipped to +-3
+        sigma); deterministic for a given scene.
+        """
+        base = dataclasses.asdict(self.physics)
+        spread = self.structure['spread']
+        rng = np.random.default_rng(self.structure['seed'])
+        keys = list(self.structure['spread_keys'])
+        cells = []
+        for name in self.det_names:
+            values = dict(base)
+            if spread > 0.0:
+                factors = np.clip(rng.standard_normal(len(keys)), -3.0, 3.0) * spread + 1.0
+                for key, factor in zip(keys, factors):
+                    values[key] = values[key] * float(factor)
+            values.update(self.dets.get(name, {}))
+            cells.append(Physics(**values))
+        return tuple(cells)
+
+    def cell_scene(self, index: int) -> 'Scene':
+        """Cell ``index`` alone as a single-cell scene (its physics; for statics)."""
+        physics = self.cell_physics()[index]
+        return dataclasses.replace(self, physics=physics, dets={},
+                                   structure=dict(STRUCTURE_DEFAULTS, dets=['det0']))
 
     @property
     def dt(self) -> float:
@@ -170,6 +232,13 @@ def _check_value(key, value, spec):
         if value not in spec[1]:
             _fail(key, value, 'must be one of ' + ', '.join(repr(c) for c in spec[1]))
         return value
+    if kind == 'names':
+        if (not isinstance(value, (list, tuple))
+                or not all(isinstance(v, str) and v for v in value)):
+            _fail(key, value, 'must be a list of non-empty strings')
+        if len(set(value)) != len(value):
+            _fail(key, value, 'names must be unique')
+        return list(value)
     if kind == 'str':
         if not isinstance(value, str) or not value:
             _fail(key, value, 'must be a non-empty string')
@@ -263,10 +332,12 @@ def _apply_override(data, key, value):
             raise SceneError(f'override {key!r} is ambiguous: write one of '
                              + ', '.join(f'{o}.{key}' for o in owners))
         key = f'{owners[0]}.{key}'
-    section, _, leaf = key.partition('.')
-    target = data.setdefault(section, {})
-    if not isinstance(target, dict):
-        raise SceneError(f'override {key!r}: section {section!r} is not a mapping')
+    *path, leaf = key.split('.')
+    target = data
+    for part in path:   # 'physics.Rs', 'structure.type', 'dets.left.Rs'
+        target = target.setdefault(part, {})
+        if not isinstance(target, dict):
+            raise SceneError(f'override {key!r}: {part!r} is not a mapping')
     target[leaf] = value
 
 
@@ -302,10 +373,11 @@ def load_scene(source: Any = 'default', overrides: Mapping[str, Any] | None = No
                     pass
         _apply_override(data, key, value)
 
-    unknown = set(data) - set(SECTIONS) - set(TOP_SPEC) - {'node'}
+    unknown = set(data) - set(SECTIONS) - set(TOP_SPEC) - {'node', 'structure', 'dets'}
     if unknown:
         raise SceneError(f'unknown scene key {sorted(unknown)[0]!r}; known sections: '
-                         + ', '.join(list(SECTIONS) + list(TOP_SPEC) + ['node']))
+                         + ', '.join(list(SECTIONS) + list(TOP_SPEC)
+                                     + ['structure', 'dets', 'node']))
     values = {}
     for section, spec in SECTIONS.items():
         content = data.get(section)
@@ -328,10 +400,16 @@ def load_scene(source: Any = 'default', overrides: Mapping[str, Any] | None = No
     if not isinstance(node, dict):
         raise SceneError(f"scene key 'node': must be a mapping (got {node!r})")
 
+    structure, dets = _check_structure(data)
     physics = Physics(**{k: values[('physics', k)] for k in PHYSICS_SPEC})
     scene = Scene(**{k: values[('scene', k)] for k in SCENE_SPEC}, physics=physics,
                   **{k: values[('integrator', k)] for k in INTEGRATOR_SPEC},
-                  rate_hz=values[('', 'rate_hz')], node=node)
+                  rate_hz=values[('', 'rate_hz')], node=node, structure=structure, dets=dets)
+    for name, cell in zip(scene.det_names, scene.cell_physics()):
+        if cell.l0 * (1.0 + scene.eps_b) <= 0.0 or not all(
+                math.isfinite(v) and v >= 0 for k, v in dataclasses.asdict(cell).items()
+                if k != 'q0'):
+            raise SceneError(f'DET {name!r}: physics out of range after overrides/spread')
     if scene.fidelity == 'paper' and scene.n_ritz != 1:
         raise SceneError(f"scene key 'scene.n_ritz': the 'paper' fidelity is one Ritz term; "
                          f"use fidelity 'consistent' for more (got {scene.n_ritz!r})")
@@ -342,6 +420,50 @@ def load_scene(source: Any = 'default', overrides: Mapping[str, Any] | None = No
     return scene
 
 
+def _check_structure(data):
+    """The optional 'structure' and 'dets' sections, validated, with names filled in."""
+    content = data.get('structure', {})
+    if not isinstance(content, dict):
+        raise SceneError(f"scene key 'structure': must be a mapping (got {content!r})")
+    for key in content:
+        if key not in STRUCTURE_SPEC:
+            raise SceneError(f'unknown scene key structure.{key!r}; allowed: '
+                             + ', '.join(STRUCTURE_SPEC))
+    structure = {key: _check_value(f'structure.{key}', content.get(key, default),
+                                   STRUCTURE_SPEC[key])
+                 for key, default in STRUCTURE_DEFAULTS.items()}
+    kind = structure['type']
+    count = {'single': 1, 'plate': 2, 'array': structure['copies']}[kind]
+    names = structure['dets']
+    if not names:
+        names = ['left', 'right'] if kind == 'plate' else [f'det{i}' for i in range(count)]
+    if len(names) != count:
+        raise SceneError(f"scene key 'structure.dets': a {kind!r} structure has {count} DET(s), "
+                         f'got {len(names)} name(s) {names}')
+    structure['dets'] = names
+    for key in structure['spread_keys']:
+        if key not in PHYSICS_SPEC or PHYSICS_SPEC[key][0] != 'float':
+            raise SceneError(f"scene key 'structure.spread_keys': {key!r} is not a float "
+                             'physics key')
+    dets = data.get('dets', {}) or {}
+    if not isinstance(dets, dict):
+        raise SceneError(f"scene key 'dets': must be a mapping of DET name to physics "
+                         f'overrides (got {dets!r})')
+    checked = {}
+    for name, overrides in dets.items():
+        if name not in names:
+            raise SceneError(f'scene key dets.{name!r}: no DET of that name (DETs: {names})')
+        if not isinstance(overrides, dict):
+            raise SceneError(f'scene key dets.{name!r}: must be a mapping of physics keys')
+        checked[name] = {}
+        for key, value in overrides.items():
+            if key not in PHYSICS_SPEC:
+                raise SceneError(f'unknown scene key dets.{name}.{key!r}; allowed: '
+                                 + ', '.join(PHYSICS_SPEC))
+            checked[name][key] = _check_value(f'dets.{name}.{key}', value, PHYSICS_SPEC[key])
+    return structure, checked
+
+
 def scene_to_dict(scene: Scene, wrap: bool = False) -> dict:
     """Return the scene as the nested mapping a scene file holds (round-trips through load)."""
     data = {
@@ -350,6 +472,9 @@ def scene_to_dict(scene: Scene, wrap: bool = False) -> dict:
         'integrator': {k: getattr(scene, k) for k in INTEGRATOR_SPEC},
         'rate_hz': scene.rate_hz,
     }
+    data['structure'] = copy.deepcopy(dict(scene.structure))
+    if scene.dets:
+        data['dets'] = copy.deepcopy({k: dict(v) for k, v in scene.dets.items()})
     if scene.node:
         data['node'] = copy.deepcopy(dict(scene.node))
     return {'sim_node': {'ros__parameters': data}} if wrap else data

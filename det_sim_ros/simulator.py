@@ -19,7 +19,7 @@ from typing import Callable
 import numpy as np
 
 from . import _kernels
-from .integrators import choose_substeps, get_method, Method
+from .integrators import choose_substeps, get_method, Method, transient_settings
 from .model import build_model, Model, ModelDomainError
 from .scene import load_scene, Scene
 
@@ -41,7 +41,7 @@ class Simulator:
 
     :param scene: a :class:`Scene`, a scene file/name, or a built :class:`Model`.
     :param method: stepper name (default: the scene's ``integrator.method``; 'auto' picks
-        'lawson5' when the scene has a stiff charge state and 'dp5' otherwise: the cheapest
+        'etdrk4' when the scene has a stiff charge state and 'dp5' otherwise: the cheapest
         per accuracy in bench/work_precision.py).
     :param substeps: internal steps per control period (default: the scene's, 0 = from the
         scene's tolerance).
@@ -63,6 +63,7 @@ class Simulator:
         self.substeps = substeps or choose_substeps(self.method, self.dt, self.scene.tolerance)
         self.h = self.dt / self.substeps
         self._c, self._terms = self.method.arrays()
+        self._z_tol, self._fine = transient_settings(self.method, self.scene)
         self.output_names = self.model.output_names
         self._out = np.empty(len(self.output_names))
         self.reset()
@@ -70,7 +71,7 @@ class Simulator:
     def _pick_method(self, name: str) -> Method:
         if name == 'auto':
             stiff = self.scene.source == 'rc'
-            return get_method('lawson5' if stiff else 'dp5')
+            return get_method('etdrk4' if stiff else 'dp5')
         return get_method(name)
 
     # -- state ----------------------------------------------------------------------------
@@ -81,6 +82,7 @@ class Simulator:
         if self.x.shape != (self.model.n_states,):
             raise ValueError(f'x0 must have {self.model.n_states} entries')
         self.u = np.zeros(self.model.n_inputs)
+        self._u_prev = self.u.copy()    # input of the last period: a jump starts a transient
         self.fault = ''
         status = _kernels.outputs(self.x, self.u, self.model.arrays, self._out)
         if status != _kernels.OK:
@@ -128,8 +130,9 @@ class Simulator:
         if self.fault:
             raise ModelDomainError(_kernels.NON_FINITE, f'(faulted: {self.fault})')
         x_new = self.x.copy()
-        status = _kernels.advance_and_output(x_new, self.u, self.model.arrays, self._c,
-                                             self._terms, self.h, self.substeps, self._out)
+        status = _kernels.period_and_output(x_new, self._u_prev, self.u, self.model.arrays,
+                                            self._c, self._terms, self.h, self.substeps,
+                                            self._z_tol, self._fine, self._out)
         if status != _kernels.OK:
             error = ModelDomainError(status, f'at t = {self.t + self.dt:.6g} s')
             self.fault = str(error)
@@ -137,6 +140,7 @@ class Simulator:
             _kernels.outputs(self.x, self.u, self.model.arrays, self._out)
             raise error
         self.x = x_new
+        self._u_prev = self.u
         self.k += 1
         return self._out
 
@@ -187,22 +191,35 @@ def simulate(scene, voltage: Callable[[float], float] | np.ndarray, t_end: float
     n = int(round(t_end / sim.dt))
     n_in = sim.model.n_inputs
     if callable(voltage):
-        volts = np.array([np.broadcast_to(voltage(k * sim.dt), (n_in,)) for k in range(n)],
-                         dtype=float)
+        volts = np.array([np.broadcast_to(voltage((sim.k + k) * sim.dt), (n_in,))
+                          for k in range(n)], dtype=float).reshape(n, n_in)
     else:
         volts = np.asarray(voltage, dtype=float).reshape(n, -1) if n else np.zeros((0, n_in))
-    t = np.arange(n + 1) * sim.dt
+        if volts.shape[1] != n_in:
+            raise ValueError(f'expected {n_in} voltage(s) per sample, got {volts.shape[1]}')
+    bad = ~np.all(np.isfinite(volts), axis=1)
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        raise ValueError(f'voltage sample {k}: non-finite voltage {volts[k].tolist()}')
+    if sim.fault:
+        raise ModelDomainError(_kernels.NON_FINITE, f'(faulted: {sim.fault})')
+    U = np.clip(volts, 0.0, sim.scene.physics.v_max)
+    t = (sim.k + np.arange(n + 1)) * sim.dt
     Y = np.empty((n + 1, len(sim.output_names)))
     X = np.empty((n + 1, sim.model.n_states))
-    U = np.zeros((n + 1, n_in))
     Y[0] = list(sim.outputs().values())
     X[0] = sim.x
-    for k in range(n):
-        check = sim.set_input(volts[k])
-        if not check.accepted:
-            raise ValueError(f'voltage sample {k}: {check.reason}')
-        U[k] = sim.u
-        Y[k + 1] = sim.step()
-        X[k + 1] = sim.x
-    U[n] = sim.u
-    return SimulationResult(t, U, X, {name: Y[:, i] for i, name in enumerate(sim.output_names)})
+    # the whole run in one compiled call (same periods as n calls of Simulator.step)
+    x = sim.x.copy()
+    status, done = _kernels.run(x, sim.u, sim._u_prev, U, sim.model.arrays, sim._c, sim._terms, sim.h,
+                                sim.substeps, sim._z_tol, sim._fine, X, Y)
+    if done:
+        sim.x, sim.u, sim._u_prev = X[done].copy(), U[done - 1].copy(), U[done - 1].copy()
+        sim.k += done
+    if status != _kernels.OK:
+        error = ModelDomainError(status, f'at t = {sim.t + sim.dt:.6g} s')
+        sim.fault = str(error)
+        raise error
+    U_out = np.vstack([U, U[-1:] if n else sim.u[None, :]])
+    return SimulationResult(t, U_out, X, {name: Y[:, i]
+                                          for i, name in enumerate(sim.output_names)})
