@@ -117,12 +117,14 @@ def get_method(name: str) -> Method:
                          + ', '.join(sorted(METHODS)) + ", or 'auto'") from None
 
 
-# Step size that meets a tolerance, measured by bench/work_precision.py on the 'step' scenario
-# (so far the fixed beam at eps_b = 0.20 only): a method of order p reaches a relative Delta-y
-# error of about ERROR_CONSTANT * (h / 1 ms)^p. The 0.5 safety factor is meant to cover the
-# spread between scenes until all six are measured.
-ERROR_CONSTANT = {'lawson5': 20.0, 'etdrk4': 21.0}
-MAX_STEP = 1.0e-3   # s: keeps h * omega_beam < 0.6 and the frozen-L remainder well resolved
+# Step size that meets a tolerance: a method of order p reaches a relative Delta-y error of
+# about ERROR_CONSTANT * (h / 1 ms)^p on the 'step' scenario. Measured on all six scenes (both
+# beams, eps_b 0.15/0.20/0.25) against Radau/DOP853 rtol 1e-12 references, with the charge
+# transients resolved (_kernels.period): etdrk4 (RC source) 0.035...0.14, dp5 (ideal source)
+# 0.0013...0.05; the largest, at eps_b = 0.15 where the snap-through is most sensitive, is used
+# so the tolerance holds on every shared scene.
+ERROR_CONSTANT = {'etdrk4': 0.15, 'dp5': 0.06}
+MAX_STEP = 1.0e-3   # s: keeps h * omega_beam < 0.6 (stable for every table here)
 
 
 def choose_substeps(method: Method, dt: float, tolerance: float) -> int:
@@ -130,7 +132,7 @@ def choose_substeps(method: Method, dt: float, tolerance: float) -> int:
     const = ERROR_CONSTANT.get(method.name)
     h_max = MAX_STEP
     if const is not None:
-        h_max = min(h_max, 0.5 * 1.0e-3 * (tolerance / const) ** (1.0 / method.order))
+        h_max = min(h_max, 1.0e-3 * (tolerance / const) ** (1.0 / method.order))
     return max(1, int(math.ceil(dt / h_max - 1e-9)))
 
 
