@@ -457,6 +457,12 @@ def _phi_all(z, out):
 
 @njit(**_JIT)
 def advance(x, u, A, c, terms, h, n_steps):
+    """Advance x in place by n_steps fixed steps of size h (see :func:`advance_graded`)."""
+    return advance_graded(x, u, A, c, terms, h, n_steps, 1.0)
+
+
+@njit(**_JIT)
+def advance_graded(x, u, A, c, terms, h, n_steps, growth):
     """
     Advance x in place by n_steps fixed steps of size h with the input u held (zero-order hold).
 
@@ -472,7 +478,9 @@ def advance(x, u, A, c, terms, h, n_steps):
     z is the small lag behind the charge the circuit relaxes to, so the part of the charge
     equation left to the explicit stages (the change of 1/(C Rs) along the step) acts on z
     instead of on the full charge, which makes the frozen-L splitting error tiny.
-    Returns a status code; on failure x holds the last good state.
+    Step k has size h * growth^k (growth = 1: fixed steps; > 1: the graded steps that follow a
+    charge transient, see :func:`period`). Returns a status code; on failure x holds the last
+    good state.
     """
     nx = x.shape[0]
     s = c.shape[0]
@@ -582,6 +590,7 @@ def advance(x, u, A, c, terms, h, n_steps):
                 return NON_FINITE
         for m in range(nx):
             x[m] = x_new[m]
+        h *= growth
     if qs:
         _shift_charge(x, u, A, 1.0)
     return OK
@@ -640,8 +649,18 @@ def period(x, u_old, u, A, c, terms, h, n_sub, z_tol, fine):
         if T > 0.0:
             x0 = x.copy()
             T = min(T, dt)
-            n_fine = int(math.ceil(T / min(fine * tau, h) - 1e-9))   # never coarser than h
-            status = advance(x, u, A, c, terms, T / n_fine, n_fine)
+            # The local error of a step is about lag(t) (h/tau)^5 and the lag decays like
+            # exp(-t/tau), so the step may grow like exp(t / (5 tau)): geometric steps with
+            # ratio exp(fine/5) from fine*tau (half the steps of uniform fine*tau steps).
+            h0 = min(fine * tau, h)
+            g = math.exp(h0 / (5.0 * tau))
+            n_fine = int(math.ceil(math.log(1.0 + T * (g - 1.0) / h0) / math.log(g) - 1e-9))
+            h0 = T * (g - 1.0) / (g ** n_fine - 1.0)
+            if h0 * g ** (n_fine - 1) > h:   # never coarser than the regular step
+                n_fine = int(math.ceil(T / h0 - 1e-9))
+                h0 = T / n_fine
+                g = 1.0
+            status = advance_graded(x, u, A, c, terms, h0, n_fine, g)
             rest = dt - T
             if status == OK and rest > 1e-6 * dt:
                 n_rest = int(math.ceil(rest / h - 1e-9))
