@@ -176,9 +176,9 @@ def rhs(x, u, A, dx, pw, ws, Mt, quasi_static=False):
 
     State layout: q (n_q), qdot (n_q), eps_E (n_p, if creep), q_p (n_p, if rc source), then the
     supplied and dissipated energy (2, if the power monitor is on). ``pw`` receives the
-    supplied and dissipated power (W) whether or not the monitor integrates them. ``ws`` is an
-    scratch buffer of :func:`workspace_size` floats and ``Mt`` an (n_q, n_q) one for the mass
-    matrix (allocated once by the caller: allocations and reshapes cost more than the physics).
+    supplied and dissipated power (W) whether or not the monitor integrates them. ``ws`` is a
+    scratch buffer of :func:`workspace_size` floats and ``Mt`` an (n_q, mass_block_size) one for
+    the mass matrix (allocated once by the caller: allocations and reshapes cost more than the physics).
 
     With ``quasi_static`` the charge slots hold z = q_p - C(q) v_inf (v_inf = v Rp/(Rs+Rp), the
     charge the circuit relaxes to for frozen q) and receive dz/dt; see :func:`advance`.
@@ -457,14 +457,82 @@ def _phi_all(z, out):
 
 @njit(**_JIT)
 def advance(x, u, A, c, terms, h, n_steps):
-    """Advance x in place by n_steps fixed steps of size h (see :func:`advance_graded`)."""
-    return advance_graded(x, u, A, c, terms, h, n_steps, 1.0)
+    """Advance x in place by n_steps fixed steps of size h (see :func:`advance_core`)."""
+    return advance_core(x, u, A, h, n_steps, 1.0, prepare(A, c, terms))
 
 
 @njit(**_JIT)
 def advance_graded(x, u, A, c, terms, h, n_steps, growth):
+    """Steps of h, h growth, h growth^2, ... (see :func:`advance_core`)."""
+    return advance_core(x, u, A, h, n_steps, growth, prepare(A, c, terms))
+
+
+@njit(**_JIT)
+def prepare(A, c, terms):
     """
-    Advance x in place by n_steps fixed steps of size h with the input u held (zero-order hold).
+    Decode a method table and allocate the stepping scratch once (per call of :func:`run`,
+    :func:`period` or :func:`advance`): a tuple read by :func:`advance_core`.
+    """
+    nx = A[0][5]
+    s = c.shape[0]
+    nt = terms.shape[0]
+    tj = np.empty(nt, dtype=np.int64)   # stage whose N the term multiplies
+    tk = np.empty(nt, dtype=np.int64)   # phi index (-1: constant weight)
+    tw = np.empty(nt)
+    # distinct phi arguments of the table, so each step needs one exp per argument and state
+    arg_index = np.zeros(nt, dtype=np.int64)
+    args_all = np.empty(nt + 1)
+    n_args = 0
+    k_max = 0
+    for t in range(nt):
+        tj[t] = int(terms[t, 1])
+        tk[t] = int(terms[t, 2])
+        tw[t] = terms[t, 4]
+        found = -1
+        for a in range(n_args):
+            if args_all[a] == terms[t, 3]:
+                found = a
+        if found < 0:
+            args_all[n_args] = terms[t, 3]
+            found = n_args
+            n_args += 1
+        arg_index[t] = found
+        k_max = max(k_max, tk[t])
+    args = args_all[:n_args].copy()
+    # terms are grouped by stage row (tables list them in order): row i uses t_start[i]..[i+1]
+    t_start = np.zeros(s + 2, dtype=np.int64)
+    for t in range(nt):
+        t_start[int(terms[t, 0]) + 1] = t + 1
+    for i in range(1, s + 2):
+        t_start[i] = max(t_start[i], t_start[i - 1])
+    # exp(c_i z) and exp(z) are phi_0 of a table argument when one is equal (-1: compute)
+    ec_arg = np.full(s + 1, -1, dtype=np.int64)
+    for i in range(s + 1):
+        ci = c[i] if i < s else 1.0
+        for a in range(n_args):
+            if args[a] == ci:
+                ec_arg[i] = a
+    phis = np.empty((max(n_args, 1), k_max + 1))
+    coef0 = np.empty(nt)   # L = 0 values: phi_k(0) = 1/k!
+    for a in range(n_args):
+        _phi_all(0.0, phis[a])
+    for t in range(nt):
+        coef0[t] = tw[t] * (1.0 if tk[t] < 0 else phis[arg_index[t], tk[t]])
+    coef = np.empty((nt, nx))
+    for t in range(nt):
+        for m in range(nx):
+            coef[t, m] = coef0[t]
+    ws = np.empty(workspace_size(A))
+    Mt = np.empty((A[0][0], mass_block_size(A)))
+    scratch = (np.empty((s, nx)), np.empty(nx), np.zeros(nx), np.empty(2), np.ones((s, nx)),
+               np.ones(nx), np.empty(nx), np.empty(nx))
+    return (c, tj, tk, tw, arg_index, args, t_start, ec_arg, phis, coef, ws, Mt, scratch)
+
+
+@njit(**_JIT)
+def advance_core(x, u, A, h, n_steps, growth, P):
+    """
+    Advance x in place by n_steps steps with the input u held (zero-order hold).
 
     One core for every method: an exponential Runge-Kutta scheme for x' = L x + N(x) with the
     diagonal L of :func:`stiff_rates` frozen per step,
@@ -479,61 +547,24 @@ def advance_graded(x, u, A, c, terms, h, n_steps, growth):
     equation left to the explicit stages (the change of 1/(C Rs) along the step) acts on z
     instead of on the full charge, which makes the frozen-L splitting error tiny.
     Step k has size h * growth^k (growth = 1: fixed steps; > 1: the graded steps that follow a
-    charge transient, see :func:`period`). Returns a status code; on failure x holds the last
-    good state.
+    charge transient, see :func:`period`). ``P`` is :func:`prepare`'s tuple. Returns a status
+    code; on failure x holds the last good state.
     """
+    c, tj, tk, tw, arg_index, args, t_start, ec_arg, phis, coef, ws, Mt, scratch = P
+    N, X, L, pw, e_c, e_1, x_new, x_start = scratch
     nx = x.shape[0]
     s = c.shape[0]
-    nt = terms.shape[0]
+    nt = tj.shape[0]
+    n_args = args.shape[0]
     exponential = False   # a table with any phi_k term is an exponential method
     for t in range(nt):
-        if terms[t, 2] >= 0.0:
+        if tk[t] >= 0:
             exponential = True
-    ws = np.empty(workspace_size(A))
-    Mt = np.empty((A[0][0], mass_block_size(A)))
-    N = np.empty((s, nx))
-    X = np.empty(nx)
-    L = np.zeros(nx)
-    pw = np.empty(2)
-    coef = np.empty((nt, nx))
-    e_c = np.ones((s, nx))
-    e_1 = np.ones(nx)
-    x_new = np.empty(nx)
-    # distinct phi arguments of the table, so each step needs one exp per argument and state
-    arg_index = np.zeros(nt, dtype=np.int64)
-    args = np.empty(nt + 1)
-    n_args = 0
-    k_max = 0
-    for t in range(nt):
-        found = -1
-        for a in range(n_args):
-            if args[a] == terms[t, 3]:
-                found = a
-        if found < 0:
-            args[n_args] = terms[t, 3]
-            found = n_args
-            n_args += 1
-        arg_index[t] = found
-        k_max = max(k_max, int(terms[t, 2]))
-    # terms are grouped by stage row (tables list them in order): row i uses t_start[i]..[i+1]
-    t_start = np.zeros(s + 2, dtype=np.int64)
-    for t in range(nt):
-        t_start[int(terms[t, 0]) + 1] = t + 1
-    for i in range(1, s + 2):
-        t_start[i] = max(t_start[i], t_start[i - 1])
-    phis = np.empty((n_args, k_max + 1))
-    for a in range(n_args):
-        _phi_all(0.0, phis[a])
-    for t in range(nt):  # L = 0 values: phi_k(0) = 1/k!
-        k = int(terms[t, 2])
-        for m in range(nx):
-            coef[t, m] = terms[t, 4] * (1.0 if k < 0 else phis[arg_index[t], k])
-    rcsrc = A[0][3] == 1
-    qs = exponential and rcsrc
+    qs = exponential and A[0][3] == 1
     for m in range(nx):
         if not math.isfinite(x[m]):
             return NON_FINITE
-    x_start = x.copy()
+    x_start[:] = x
     if qs:
         _shift_charge(x, u, A, -1.0)
     for _ in range(n_steps):
@@ -549,27 +580,21 @@ def advance_graded(x, u, A, c, terms, h, n_steps, growth):
                 for a in range(n_args):
                     _phi_all(args[a] * z, phis[a])
                 for t in range(nt):
-                    k = int(terms[t, 2])
-                    if k >= 0:
-                        coef[t, m] = terms[t, 4] * phis[arg_index[t], k]
-                for i in range(s):   # exp(c_i z): reuse phi_0 of an equal argument
-                    e_c[i, m] = 1.0 if c[i] == 0.0 else math.nan
-                    for a in range(n_args):
-                        if args[a] == c[i]:
-                            e_c[i, m] = phis[a, 0]
-                    if math.isnan(e_c[i, m]):
-                        e_c[i, m] = math.exp(c[i] * z)
-                e_1[m] = math.nan
-                for a in range(n_args):
-                    if args[a] == 1.0:
-                        e_1[m] = phis[a, 0]
-                if math.isnan(e_1[m]):
-                    e_1[m] = math.exp(z)
+                    if tk[t] >= 0:
+                        coef[t, m] = tw[t] * phis[arg_index[t], tk[t]]
+                for i in range(s + 1):
+                    a = ec_arg[i]
+                    ci = c[i] if i < s else 1.0
+                    e = 1.0 if ci == 0.0 else (phis[a, 0] if a >= 0 else math.exp(ci * z))
+                    if i < s:
+                        e_c[i, m] = e
+                    else:
+                        e_1[m] = e
         for i in range(s):
             for m in range(nx):
                 X[m] = e_c[i, m] * x[m]
             for t in range(t_start[i], t_start[i + 1]):
-                j = int(terms[t, 1])
+                j = tj[t]
                 for m in range(nx):
                     X[m] += h * coef[t, m] * N[j, m]
             status = rhs(X, u, A, N[i], pw, ws, Mt, qs)
@@ -581,7 +606,7 @@ def advance_graded(x, u, A, c, terms, h, n_steps, growth):
         for m in range(nx):
             x_new[m] = e_1[m] * x[m]
         for t in range(t_start[s], t_start[s + 1]):
-            j = int(terms[t, 1])
+            j = tj[t]
             for m in range(nx):
                 x_new[m] += h * coef[t, m] * N[j, m]
         for m in range(nx):
@@ -634,6 +659,12 @@ def _charge_transient(x, u_old, u_new, A, z_tol):
 
 @njit(**_JIT)
 def period(x, u_old, u, A, c, terms, h, n_sub, z_tol, fine):
+    """:func:`period_core` with its own scratch (one control period)."""
+    return period_core(x, u_old, u, A, h, n_sub, z_tol, fine, prepare(A, c, terms))
+
+
+@njit(**_JIT)
+def period_core(x, u_old, u, A, h, n_sub, z_tol, fine, P):
     """
     One control period dt = n_sub h with the input u held, starting from an input u_old.
 
@@ -660,15 +691,15 @@ def period(x, u_old, u, A, c, terms, h, n_sub, z_tol, fine):
                 n_fine = int(math.ceil(T / h0 - 1e-9))
                 h0 = T / n_fine
                 g = 1.0
-            status = advance_graded(x, u, A, c, terms, h0, n_fine, g)
+            status = advance_core(x, u, A, h0, n_fine, g, P)
             rest = dt - T
             if status == OK and rest > 1e-6 * dt:
                 n_rest = int(math.ceil(rest / h - 1e-9))
-                status = advance(x, u, A, c, terms, rest / n_rest, n_rest)
+                status = advance_core(x, u, A, rest / n_rest, n_rest, 1.0, P)
             if status != OK:
                 x[:] = x0
             return status
-    return advance(x, u, A, c, terms, h, n_sub)
+    return advance_core(x, u, A, h, n_sub, 1.0, P)
 
 
 @njit(**_JIT)
@@ -706,11 +737,12 @@ def run(x, u_held, u_last, U, A, c, terms, h, n_sub, z_tol, fine, X, Y):
     """
     u_book = u_held.copy()
     u_prev = u_last.copy()
+    P = prepare(A, c, terms)
     for k in range(U.shape[0]):
         u = U[k]
         book_input_jump(x, u_book, u, A)
         u_book = u
-        status = period(x, u_prev, u, A, c, terms, h, n_sub, z_tol, fine)
+        status = period_core(x, u_prev, u, A, h, n_sub, z_tol, fine, P)
         if status != OK:
             return status, k
         status = outputs(x, u, A, Y[k + 1])
