@@ -145,7 +145,14 @@ def _solve(beam: str, ys: tuple) -> ElasticaPath:
     u = np.array([a * d2(0.0), p0, a * (d3(0.0) + p0 * d1(0.0))])
     hist = []                             # (y, u) of the solved points, for extrapolation
     rows = []
-    for y in (y_prev,) + tuple(ys):
+    # continuation grid: the requested points plus enough intermediate ones (doubling from
+    # 1e-4, then steps <= 0.005) that every shooting solve starts close to its solution
+    grid = [y_prev]
+    for y in ys:
+        while grid[-1] < y:
+            grid.append(min(y, 2.0 * grid[-1], grid[-1] + 0.005))
+    wanted = set(ys)
+    for y in grid:
         guess = u.copy()
         if hist:                          # theta'(0), v ~ sqrt(y); p linear in y
             y1, u1 = hist[-1]
@@ -161,12 +168,14 @@ def _solve(beam: str, ys: tuple) -> ElasticaPath:
             raise RuntimeError(f'elastica shooting failed at y/l = {y}: residual {res}')
         u = sol.x
         hist.append((y, u))
+        if y not in wanted:
+            continue
         ivp = _shoot(beam, u)
         w_ref = float(ivp.sol(REFERENCE_POINT[beam])[3])
         sign = -1.0 if w_ref < 0.0 else 1.0
         rows.append((y, u[1], sign * u[2], sign * w_ref, _max_deflection(ivp),
                      float(np.max(np.abs(ivp.sol(s)[0])))))
-    rows = np.array(rows[1:]) if ys else np.zeros((0, 6))
+    rows = np.array(rows) if ys else np.zeros((0, 6))
     return ElasticaPath(beam, *(rows[:, k].copy() for k in range(6)))
 
 

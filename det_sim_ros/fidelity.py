@@ -191,3 +191,26 @@ def beam_ritz(beam: str, fidelity: str = 'consistent', n_ritz: int = 1,
     p = scene.physics
     kappa = 1.0 if scene.fidelity == 'consistent' else 0.0
     return BeamRitz(model.bases[0], p.E_b * p.I, kappa), model
+
+
+def stable_substeps(model, dt: float, substeps: int, limit: float = 2.0) -> int:
+    """
+    Internal steps per control period that keep an explicit stepper stable for a many-term
+    model: h times the fastest beam rate (the largest undamped frequency of (K, Mb) or the largest
+    Kelvin-Voigt decay rate of (D, Mb), which grows like omega^2 eta_b/E_b and dominates from
+    about 6 Ritz terms) at most ``limit``. Returns max(substeps, that count).
+
+    The simulator's own choice (integrators.choose_substeps) looks only at the tolerance, so with
+    the default parameters the 'step' scenario diverges for n_ritz >= 6 (simply supported) or 7
+    (fixed); see test_fidelity.py.
+    """
+    p = model.scene.physics
+    basis = model.bases[0]
+    x, w = basis.quadrature()
+    S0, S1, S2 = (basis.values(x, k) for k in range(3))
+    Mb = p.rho_b * (p.I * S1.T @ (w[:, None] * S1) + p.area * S0.T @ (w[:, None] * S0))
+    bend = S2.T @ (w[:, None] * S2)          # same factor 2 (two beams) on all: ratios only
+    K, D = p.E_b * p.I * bend, p.eta_b * p.I * bend
+    omega = math.sqrt(max(scipy.linalg.eigh(K, Mb, eigvals_only=True)))
+    decay = max(scipy.linalg.eigh(D, Mb, eigvals_only=True))
+    return max(int(substeps), int(math.ceil(dt * max(omega, decay) / limit)))
