@@ -200,9 +200,8 @@ def stable_substeps(model, dt: float, substeps: int, limit: float = 2.0) -> int:
     Kelvin-Voigt decay rate of (D, Mb), which grows like omega^2 eta_b/E_b and dominates from
     about 6 Ritz terms) at most ``limit``. Returns max(substeps, that count).
 
-    The simulator's own choice (integrators.choose_substeps) looks only at the tolerance, so with
-    the default parameters the 'step' scenario diverges for n_ritz >= 6 (simply supported) or 7
-    (fixed); see test_fidelity.py.
+    An independent check of Model.fastest_beam_rate, which the simulator's automatic substeps
+    use (without it the 'step' scenario diverged for n_ritz >= 6 simply supported, 7 fixed).
     """
     p = model.scene.physics
     basis = model.bases[0]

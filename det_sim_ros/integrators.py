@@ -127,10 +127,17 @@ ERROR_CONSTANT = {'etdrk4': 0.15, 'dp5': 0.06}
 MAX_STEP = 1.0e-3   # s: keeps h * omega_beam < 0.6 (stable for every table here)
 
 
-def choose_substeps(method: Method, dt: float, tolerance: float) -> int:
-    """Internal steps per control period so that the expected error is below ``tolerance``."""
+STABLE_STEP = 2.0   # h * fastest beam rate: inside every table's stability region (RK4 2.8)
+
+
+def choose_substeps(method: Method, dt: float, tolerance: float, beam_rate: float = 0.0) -> int:
+    """
+    Internal steps per control period so that the expected error is below ``tolerance`` and the
+    explicit stages stay stable for the fastest beam mode (``beam_rate``, 1/s; see
+    Model.fastest_beam_rate: it decides from about 6 Ritz terms on).
+    """
     const = ERROR_CONSTANT.get(method.name)
-    h_max = MAX_STEP
+    h_max = MAX_STEP if beam_rate <= 0.0 else min(MAX_STEP, STABLE_STEP / beam_rate)
     if const is not None:
         h_max = min(h_max, 1.0e-3 * (tolerance / const) ** (1.0 / method.order))
     return max(1, int(math.ceil(dt / h_max - 1e-9)))

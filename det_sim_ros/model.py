@@ -133,6 +133,23 @@ class Model:
         :func:`det_sim_ros._kernels.book_input_jump`)."""
         _kernels.book_input_jump(x, self._u(u_old), self._u(u_new), self.arrays)
 
+    def fastest_beam_rate(self) -> float:
+        """
+        Fastest rate (1/s) of the beams' linear modes: the largest undamped frequency of
+        (K, Mb) or Kelvin-Voigt decay rate of (D, Mb) over the cells. With many Ritz terms the
+        decay rate ~ omega^2 eta_b / E_b of the highest mode (4e5...1e6 1/s at n_r = 6...7)
+        bounds the explicit stages' step size, not the tolerance.
+        """
+        from scipy.linalg import eigh
+        cell_q, Mb, K, D = self.arrays[1], self.arrays[6], self.arrays[7], self.arrays[8]
+        rate = 0.0
+        for c in range(len(cell_q) - 1):
+            s, r = slice(cell_q[c], cell_q[c + 1]), cell_q[c + 1] - cell_q[c]
+            omega2 = eigh(K[s, :r], Mb[s, :r], eigvals_only=True)
+            decay = eigh(D[s, :r], Mb[s, :r], eigvals_only=True)
+            rate = max(rate, float(np.sqrt(max(omega2.max(), 0.0))), float(decay.max()))
+        return rate
+
     def stiff_rates(self, x) -> np.ndarray:
         """Diagonal of the stiff linear part (1/s): -1/(C Rs||Rp) at the charge states."""
         L = np.empty(self.n_states)

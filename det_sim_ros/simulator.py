@@ -60,7 +60,8 @@ class Simulator:
         if substeps < 0:
             raise ValueError(f'substeps must be >= 0 (got {substeps})')
         self.dt = self.scene.dt
-        self.substeps = substeps or choose_substeps(self.method, self.dt, self.scene.tolerance)
+        self.substeps = substeps or choose_substeps(self.method, self.dt, self.scene.tolerance,
+                                                    self.model.fastest_beam_rate())
         self.h = self.dt / self.substeps
         self._c, self._terms = self.method.arrays()
         self._z_tol, self._fine = transient_settings(self.method, self.scene)
