@@ -40,6 +40,20 @@ def _cpu(fn, repeats):
     return statistics.median(times), result
 
 
+def _rhs_for_solvers(model):
+    """f(t, x, u) that returns NaN outside the model's domain instead of raising: an implicit
+    solver's Newton iterate or a rejected trial step may leave the domain, and scipy's
+    solvers answer NaN with a smaller step (an exception would end the run)."""
+    nan = np.full(model.n_states, np.nan)
+
+    def f(t, x, u):
+        try:
+            return model.f(t, x, u)
+        except ArithmeticError:
+            return nan
+    return f
+
+
 def _scipy_run(model, method, rtol, t_end):
     volts = step_voltage(model.scene.physics.v_max)
     dt = model.scene.dt
@@ -48,10 +62,13 @@ def _scipy_run(model, method, rtol, t_end):
     scale = np.maximum(np.abs(x), 1e-3)
     X = np.empty((n + 1, model.n_states))
     X[0] = x
+    f = _rhs_for_solvers(model)
     for k in range(n):
         u = np.array([volts(k * dt)])
-        sol = solve_ivp(lambda t, z: model.f(t, z, u), (k * dt, (k + 1) * dt), x,
+        sol = solve_ivp(lambda t, z: f(t, z, u), (k * dt, (k + 1) * dt), x,
                         method=method, rtol=rtol, atol=rtol * scale * 1e-3)
+        if not sol.success or not np.all(np.isfinite(sol.y[:, -1])):
+            raise ArithmeticError(f'{method} failed at t = {k * dt:g} s: {sol.message}')
         x = sol.y[:, -1]
         X[k + 1] = x
     return X
@@ -60,7 +77,8 @@ def _scipy_run(model, method, rtol, t_end):
 def _control_run(model, rtol, t_end):
     import control
     volts = step_voltage(model.scene.physics.v_max)
-    sys_ = control.nlsys(lambda t, x, u, params: model.f(t, x, u), None,
+    f = _rhs_for_solvers(model)
+    sys_ = control.nlsys(lambda t, x, u, params: f(t, x, u), None,
                          inputs=1, states=model.n_states, outputs=model.n_states)
     t = np.arange(int(round(t_end / model.scene.dt)) + 1) * model.scene.dt
     u = np.array([volts(tk) for tk in t])
