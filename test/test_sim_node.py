@@ -295,12 +295,18 @@ def last_sample(h, topic):
 def run_plate(h, volts, t_end):
     """From a reset: hold the vector command, run to t_end (s), return the final samples."""
     assert h.call('pause', data=True).success
+    for topic in h.samples:
+        h.samples[topic].clear()
     assert h.call('reset').success
+    # samples of the previous run may still be in flight: wait for the reset's t = 0 sample,
+    # which comes after them on each topic, then forget everything before it
+    topics = h.TOPICS + (h.STRUCTURE,)
+    h.spin_until(lambda: all(0 in h.samples[topic] for topic in topics), 'the reset sample')
     for topic in h.samples:
         h.samples[topic].clear()
     h.command(volts)
     assert h.call('pause', data=False).success
-    for topic in h.TOPICS + (h.STRUCTURE,):
+    for topic in topics:
         h.spin_until_sim_time(t_end, topic)
     assert h.call('pause', data=True).success
     return {topic: last_sample(h, topic) for topic in h.samples}
