@@ -19,6 +19,7 @@ crashed (unfinished) log as a finished, indexed file.
 from __future__ import annotations
 
 import argparse
+import ast
 import dataclasses
 import math
 import sys
@@ -28,11 +29,14 @@ from typing import Callable, Iterable, Mapping, Sequence
 from .mcap_log import LogReader, Recorder, deserialize, recover
 
 __all__ = ['OUTPUT_FIELDS', 'COMMAND_TOPICS', 'ResimResult', 'resimulate', 'play', 'PlayStats',
-           'simulate_to_log', 'output_messages', 'main']
+           'simulate_to_log', 'output_messages', 'OutputContract', 'main']
 
-# Topic contract of sim_node: output topic -> JointState field -> simulator output (one value
-# per DET: 'q' for one DET, 'q_0', 'q_1', ... for several). displacement is y0 - y, with y0 the
-# rest shortening at 0 V (logged as metadata 'y0', else from det_sim_ros.statics).
+# Topic contract of sim_node: output topic -> JointState field -> per-DET model output (one value
+# per DET in the scene's structure.dets order, JointState names = those DET names; see
+# Model.channel). displacement is y0_i - y_i, with y0_i the rest shortening of cell i at 0 V
+# (logged as metadata 'y0': a float for one DET, a list for several; else from the statics).
+# A scene with structure outputs (the plate) also has the topic 'structure' (see
+# det_sim_ros.sim_node.structure_channels).
 OUTPUT_FIELDS: dict[str, dict[str, str]] = {
     'deflection': {'position': 'q', 'velocity': 'q_dot'},
     'displacement': {'position': 'y'},
@@ -51,17 +55,20 @@ def _stamp_ns(stamp) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
-def command_volts(type_name: str, msg, held: Sequence[float]) -> list[float] | None:
+def command_volts(type_name: str, msg, held: Sequence[float],
+                  det_names: Sequence[str] | None = None) -> list[float] | None:
     """
     The voltages a logged command sets, as the node reads it (None: the node refuses it).
 
-    Float64MultiArray: ``data``. JointState: ``position`` by ``name`` ('det0', 'det1', ...),
-    DETs not named keep their ``held`` voltage.
+    Float64MultiArray: ``data``. JointState: ``position`` by ``name`` (the DET names
+    ``det_names``, default 'det0', 'det1', ...), DETs not named keep their ``held`` voltage.
     """
     if not type_name.endswith('/JointState'):
         return list(msg.data)
     names, values = list(msg.name), list(msg.position)
-    index = {f'det{i}': i for i in range(len(held))}
+    if det_names is None:
+        det_names = [f'det{i}' for i in range(len(held))]
+    index = {name: i for i, name in enumerate(det_names)}
     if len(names) != len(values) or not names or any(n not in index for n in names):
         return None
     volts = [float(v) for v in held]
@@ -70,16 +77,81 @@ def command_volts(type_name: str, msg, held: Sequence[float]) -> list[float] | N
     return volts
 
 
-def _indices(names: Sequence[str], base: str, n: int) -> list[int]:
-    if base in names and n == 1:
-        return [names.index(base)]
-    return [names.index(f'{base}_{i}') for i in range(n)]
-
-
 def rest_shortening(scene) -> float:
-    """y0 as the node computes it."""
+    """y0 of a single-cell scene as the node computes it (see :func:`rest_shortenings`)."""
     from .statics import rest_shortening as y0
     return float(y0(scene))
+
+
+def rest_shortenings(scene) -> list[float]:
+    """y0_i of every cell, DET order, as the node computes them."""
+    from .sim_node import rest_shortenings as y0
+    return y0(scene)
+
+
+def _logged_y0(text: str | None, n: int) -> list[float] | None:
+    """Metadata 'y0' (a float for one DET, a list for several), None if absent or not n values."""
+    if not text:
+        return None
+    try:
+        value = ast.literal_eval(text)
+    except (ValueError, SyntaxError):
+        return None
+    values = value if isinstance(value, (list, tuple)) else [value]
+    return [float(v) for v in values] if len(values) == n else None
+
+
+class OutputContract:
+    """
+    What sim_node publishes for a model, as arrays: per-DET channels (names ``det_names``, rest
+    shortenings ``y0``) and the structure topic (``structure_names``, empty if none).
+
+    :param y0: per-DET rest shortenings (default: computed as the node does).
+    """
+
+    def __init__(self, model, y0: Sequence[float] | None = None,
+                 fields: Mapping[str, Mapping[str, str]] | None = None):
+        import numpy as np
+        from .sim_node import STRUCTURE_TOPIC, structure_channels
+        self.det_names = list(model.input_names)
+        self.y0 = np.array(rest_shortenings(model.scene) if y0 is None else y0, dtype=float)
+        self.fields = dict(fields or OUTPUT_FIELDS)
+        self.index = {(topic, field): np.array(model.channel(output))
+                      for topic, mapping in self.fields.items()
+                      for field, output in mapping.items()}
+        self.structure_topic = STRUCTURE_TOPIC
+        self.structure_outputs = tuple(model.structure_output_names)
+        idx, self.structure_names, signs, rest = structure_channels(model, self.y0)
+        self._s_idx, self._s_sign, self._s_rest = (np.array(idx, dtype=int), np.array(signs),
+                                                   np.array(rest))
+
+    def values(self, out, topic: str, field: str):
+        """The published array of one topic field from an output vector (output_names order)."""
+        values = out[self.index[(topic, field)]]
+        return self.y0 - values if (topic, field) in RELATIVE_TO_Y0 else values
+
+    def structure(self, out):
+        """The structure topic's positions from an output vector."""
+        return self._s_sign * (out[self._s_idx] - self._s_rest)
+
+    def messages(self, out, stamp_ns: int) -> dict:
+        """The node's output messages (topic -> JointState) for one output vector."""
+        from builtin_interfaces.msg import Time
+        from sensor_msgs.msg import JointState
+        stamp = Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)
+        messages = {}
+        for topic, mapping in self.fields.items():
+            msg = JointState(name=list(self.det_names))
+            msg.header.stamp = stamp
+            for field in mapping:
+                setattr(msg, field, self.values(out, topic, field).tolist())
+            messages[topic] = msg
+        if self.structure_names:
+            msg = JointState(name=list(self.structure_names))
+            msg.header.stamp = stamp
+            msg.position = self.structure(out).tolist()
+            messages[self.structure_topic] = msg
+        return messages
 
 
 # -- re-simulation -------------------------------------------------------------------------------
@@ -147,10 +219,10 @@ def resimulate(log, method: str | None = None, substeps: int | None = None,
         substeps = int(info['substeps'])
     fields = dict(output_fields or OUTPUT_FIELDS)
     sim = Simulator(scene, method=method, substeps=substeps)
-    n = sim.model.n_inputs
-    y0 = float(info['y0']) if info.get('y0') else rest_shortening(scene)
-    index = {(topic, field): np.array(_indices(sim.output_names, output, n))
-             for topic, mapping in fields.items() for field, output in mapping.items()}
+    det_names = list(sim.model.input_names)
+    contract = OutputContract(sim.model, _logged_y0(info.get('y0'), sim.model.n_inputs), fields)
+    structure_key = (f"{contract.structure_topic}.position "
+                     f"({', '.join(contract.structure_outputs)})")
     dt_ns = sim.dt * 1e9
     result = ResimResult({}, {}, method=sim.method.name, substeps=sim.substeps)
     initial = sim.outputs()
@@ -176,11 +248,13 @@ def resimulate(log, method: str | None = None, substeps: int | None = None,
                     break
                 result.skipped += 1
                 continue
-            volts = command_volts(message.type_name, message.decode(), sim.u.tolist())
+            volts = command_volts(message.type_name, message.decode(), sim.u.tolist(),
+                                  det_names)
             if volts is not None:
                 sim.set_input(volts)
             result.commands += 1
-        elif name in fields:
+        elif name in fields or (name == contract.structure_topic
+                                and contract.structure_names):
             msg = message.decode()
             k = round(_stamp_ns(msg.header.stamp) / dt_ns)
             if not advance_to(k):
@@ -188,16 +262,20 @@ def resimulate(log, method: str | None = None, substeps: int | None = None,
                     break
                 result.skipped += 1
                 continue
-            for field, output in fields[name].items():
-                key = f'{name}.{field} ({output})'
+            if name in fields:
+                names = det_names
+                compare = [(f'{name}.{field} ({output})', field,
+                            contract.values(current, name, field))
+                           for field, output in fields[name].items()]
+            else:
+                names = list(contract.structure_names)
+                compare = [(structure_key, 'position', contract.structure(current))]
+            for key, field, expected in compare:
                 logged = np.asarray(getattr(msg, field), dtype=float)
                 if logged.size == 0:
                     continue
-                expected = current[index[(name, field)]]
-                if (name, field) in RELATIVE_TO_Y0:
-                    expected = y0 - expected
-                if logged.shape != expected.shape:
-                    deviation = math.inf
+                if logged.shape != expected.shape or list(msg.name) != names:
+                    deviation = math.inf   # a different channel count or order
                 else:
                     deviation = float(np.max(np.abs(logged - expected)))
                 if math.isnan(deviation):
@@ -212,7 +290,10 @@ def resimulate(log, method: str | None = None, substeps: int | None = None,
 
 def output_messages(values: Mapping[str, float], stamp_ns: int, y0: float,
                     joint: str = 'det0') -> dict:
-    """The node's output messages (topic -> JointState) for one set of (one-DET) outputs."""
+    """
+    The node's output messages (topic -> JointState) for one set of one-DET outputs (a mapping
+    output name -> value). For several DETs use :meth:`OutputContract.messages`.
+    """
     from builtin_interfaces.msg import Time
     from sensor_msgs.msg import JointState
     stamp = Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)
@@ -231,7 +312,8 @@ def output_messages(values: Mapping[str, float], stamp_ns: int, y0: float,
 def simulate_to_log(recorder: Recorder, sim, commands: Mapping[int, Sequence[float]] | Callable,
                     n_steps: int, joint_commands: bool = False) -> None:
     """
-    Run ``sim`` (one DET) for ``n_steps`` and record commands and outputs as the node does.
+    Run ``sim`` (any number of DETs) for ``n_steps`` and record commands and outputs as the node
+    does (joint commands name every DET; the structure topic when the scene has one).
 
     The initial state is recorded at t_0, then each step's outputs at its end time.
 
@@ -240,11 +322,12 @@ def simulate_to_log(recorder: Recorder, sim, commands: Mapping[int, Sequence[flo
     """
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
+    import numpy as np
     get = commands if callable(commands) else commands.get
-    names = sim.output_names
-    y0 = rest_shortening(sim.scene)
+    contract = OutputContract(sim.model)
     t_ns = round(sim.k * sim.dt * 1e9)
-    for topic, msg in output_messages(sim.outputs(), t_ns, y0).items():
+    initial = np.array(list(sim.outputs().values()))
+    for topic, msg in contract.messages(initial, t_ns).items():
         recorder.record(topic, msg, t_ns)
     for _ in range(n_steps):
         k = sim.k
@@ -252,7 +335,8 @@ def simulate_to_log(recorder: Recorder, sim, commands: Mapping[int, Sequence[flo
         if volts is not None:
             t_ns = round(k * sim.dt * 1e9)
             if joint_commands:
-                msg = JointState(name=['det0'], position=[float(v) for v in volts])
+                msg = JointState(name=list(contract.det_names),
+                                 position=[float(v) for v in volts])
                 recorder.record('voltage_command_joint', msg, t_ns)
             else:
                 msg = Float64MultiArray(data=[float(v) for v in volts])
@@ -260,7 +344,7 @@ def simulate_to_log(recorder: Recorder, sim, commands: Mapping[int, Sequence[flo
             sim.set_input(volts)
         out = sim.step()
         t_ns = round(sim.k * sim.dt * 1e9)
-        for topic, msg in output_messages(dict(zip(names, out)), t_ns, y0).items():
+        for topic, msg in contract.messages(out, t_ns).items():
             recorder.record(topic, msg, t_ns)
 
 

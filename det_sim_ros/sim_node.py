@@ -7,6 +7,7 @@ Topic, parameter and service contract: see README.md.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 import time
@@ -30,16 +31,26 @@ from .model import ModelDomainError
 from .scene import load_scene, scene_to_dict, SceneError
 from .simulator import Simulator
 
-__all__ = ['SimNode', 'main', 'OUTPUT_TOPICS']
+__all__ = ['SimNode', 'main', 'OUTPUT_TOPICS', 'STRUCTURE_TOPIC', 'rest_shortenings',
+           'structure_channels']
 
 NODE_NAME = 'sim_node'
-SCENE_SECTIONS = ('scene', 'physics', 'integrator')
-# topic: (output name, unit); displacement is y0 - y, computed here
+SCENE_SECTIONS = ('scene', 'physics', 'integrator', 'structure', 'dets')
+# topic: (per-DET model output, unit); one value per DET in voltage-command order (the names in
+# scene structure.dets); displacement is y0_i - y_i, computed here
 OUTPUT_TOPICS = {
     'deflection': ('q', 'm'),
     'displacement': ('y', 'm'),
     'charge': ('q_p', 'C'),
     'current': ('i_DE', 'A'),
+}
+# Topic of the structure outputs (only for a structure that has them: the plate). Published
+# relative to rest (0 V) and in the displacement's sign: value = sign * (output - output at rest).
+# model structure output -> (published name, sign)
+STRUCTURE_TOPIC = 'structure'
+STRUCTURE_NAMES = {
+    'plate_y': ('plate_dy', -1.0),     # m: y0_plate - plate_y = mean of the two displacements
+    'plate_phi': ('plate_phi', 1.0),   # rad: phi - phi0 = (dy_right - dy_left) / w
 }
 # name: (default, description, read_only, range (lo, hi) or None)
 NODE_PARAMS = {
@@ -68,7 +79,7 @@ NODE_PARAMS = {
 
 def _rest_shortening(scene) -> float:
     """
-    End shortening y0 (m) of the stable buckled equilibrium at 0 V.
+    End shortening y0 (m) of the stable buckled equilibrium at 0 V (a single-cell scene).
 
     Uses :func:`det_sim_ros.statics.rest_shortening` when available, otherwise settles the
     simulator at 0 V for 1.5 s of sim time.
@@ -81,6 +92,47 @@ def _rest_shortening(scene) -> float:
             sim.step()
         return sim.outputs()['y']
     return float(rest_shortening(scene))
+
+
+def rest_shortenings(scene) -> list:
+    """
+    Rest shortening y0_i (m) of each cell in DET order: cell i alone at 0 V
+    (``scene.cell_scene(i)``). Cells with identical physics share one statics solve, so an array
+    of identical copies costs one solve; an array with spread costs one per copy (about 20 ms).
+    """
+    cells = scene.cell_physics()
+    template = scene.cell_scene(0)
+    solved = {}
+    for physics in cells:
+        if physics not in solved:
+            solved[physics] = _rest_shortening(dataclasses.replace(template, physics=physics))
+    return [solved[physics] for physics in cells]
+
+
+def structure_channels(model, y0) -> tuple:
+    """
+    The structure topic's contract for a model: (output indices, published names, signs, rest
+    values). Empty for structures without outputs ('single', 'array').
+
+    The structure outputs are linear in the cells' end shortenings (rows of the model's map P,
+    see det_sim_ros._kernels), so their rest values are P @ y0.
+    """
+    names = tuple(model.structure_output_names)
+    if not names:
+        return (), (), (), ()
+    P = np.asarray(model.arrays[16], dtype=float)
+    rest = P @ np.asarray(y0, dtype=float)
+    indices = tuple(model.output_names.index(name) for name in names)
+    published = tuple(STRUCTURE_NAMES.get(name, (name, 1.0))[0] for name in names)
+    signs = tuple(STRUCTURE_NAMES.get(name, (name, 1.0))[1] for name in names)
+    return indices, published, signs, tuple(float(r) for r in rest)
+
+
+def _name_list(names, limit=6) -> str:
+    names = list(names)
+    if len(names) <= limit:
+        return ', '.join(names)
+    return ', '.join(names[:limit]) + f', ... ({len(names)} channels)'
 
 
 def _flatten(data, prefix=''):
@@ -131,14 +183,17 @@ class SimNode(Node):
                                'compiles the model kernels: up to a minute)')
         self._sim = Simulator(self.scene)
         self._dt = self._sim.dt
-        names = self._sim.output_names
-        n = self._sim.model.n_inputs
-        self.det_names = [f'det{i}' for i in range(n)]
+        model = self._sim.model
+        self.det_names = list(model.input_names)   # voltage-command and output channel order
         self._det_index = {name: i for i, name in enumerate(self.det_names)}
-        self._channels = {topic: self._output_indices(names, out, n)
-                          for topic, (out, _) in OUTPUT_TOPICS.items()}
-        self._qdot = self._output_indices(names, 'q_dot', n)
-        self.y0 = _rest_shortening(self.scene)
+        self._channels = {topic: model.channel(out) for topic, (out, _) in OUTPUT_TOPICS.items()}
+        self._qdot = model.channel('q_dot')
+        self.y0 = rest_shortenings(self.scene)     # per DET, m
+        self._y0 = np.array(self.y0)
+        (self._struct_idx, self.structure_names, signs,
+         rest) = structure_channels(model, self.y0)
+        self._struct_sign, self._struct_rest = np.array(signs), np.array(rest)
+        self.last_refused = ''
 
         # counters (reported on /diagnostics)
         self.refused_commands = 0
@@ -157,6 +212,10 @@ class SimNode(Node):
         self._pubs = {topic: self.create_publisher(JointState, topic, out_qos)
                       for topic in OUTPUT_TOPICS}
         self._msgs = {topic: JointState(name=list(self.det_names)) for topic in OUTPUT_TOPICS}
+        if self.structure_names:
+            self._pubs[STRUCTURE_TOPIC] = self.create_publisher(JointState, STRUCTURE_TOPIC,
+                                                                out_qos)
+            self._msgs[STRUCTURE_TOPIC] = JointState(name=list(self.structure_names))
         self._clock_pub = (None if self._p('real_time')
                            else self.create_publisher(ClockMsg, '/clock', QoSProfile(depth=10)))
         self._clock_msg = ClockMsg()
@@ -186,7 +245,10 @@ class SimNode(Node):
         self.get_logger().info(
             f'scene {scene_file!r}: {self.scene.beam} beam, eps_b = {self.scene.eps_b:g}, '
             f'{self.scene.rate_hz:g} Hz, {self._sim.method.name} x{self._sim.substeps}; '
-            f'{mode}{", paused" if self.paused else ""}; DETs {self.det_names}')
+            f'{mode}{", paused" if self.paused else ""}; {len(self.det_names)} DET(s), '
+            f'voltage command order: [{", ".join(self.det_names)}]'
+            + (f'; structure outputs [{", ".join(self.structure_names)}]'
+               if self.structure_names else ''))
 
     # -- set-up ---------------------------------------------------------------------------
     def _start_recorder(self, out_qos):
@@ -194,14 +256,15 @@ class SimNode(Node):
         if not self._p('log.enabled'):
             return
         from .mcap_log import Recorder
-        qos = {topic: out_qos for topic in OUTPUT_TOPICS}
+        qos = {topic: out_qos for topic in self._pubs}
         qos.update({'voltage_command': QoSProfile(depth=10),
                     'voltage_command_joint': QoSProfile(depth=10)})
         self._recorder = Recorder(
             self._p('log.path'), self.scene, qos_by_topic=qos, split_mb=self._p('log.split_mb'),
             namespace=self.get_namespace(),
             metadata={'method': self._sim.method.name, 'substeps': self._sim.substeps,
-                      'y0': repr(self.y0), 'node': self.get_fully_qualified_name()},
+                      'y0': repr(self.y0[0]) if len(self.y0) == 1 else repr(self.y0),
+                      'node': self.get_fully_qualified_name()},
             on_fault=lambda text: self.get_logger().error(text))
         if self._recorder.active:
             self.get_logger().info(f'logging to {self._recorder.path}')
@@ -245,12 +308,6 @@ class SimNode(Node):
         self._rtf = self._p('real_time_factor')
         self._steps_per_tick = self._p('steps_per_tick')
         self._max_catchup = self._p('max_catchup_steps')
-
-    @staticmethod
-    def _output_indices(names, base, n):
-        if base in names and n == 1:
-            return [names.index(base)]
-        return [names.index(f'{base}_{i}') for i in range(n)]
 
     def _p(self, name):
         return self.get_parameter(name).value
@@ -329,15 +386,24 @@ class SimNode(Node):
         for topic, indices in self._channels.items():
             msg = self._msgs[topic]
             msg.header.stamp = stamp
-            values = [float(out[i]) for i in indices]
             if topic == 'displacement':
-                values = [self.y0 - v for v in values]
-            elif topic == 'deflection':
-                msg.velocity = [float(out[i]) for i in self._qdot]
+                values = (self._y0 - out[indices]).tolist()
+            else:
+                values = out[indices].tolist()
+                if topic == 'deflection':
+                    msg.velocity = out[self._qdot].tolist()
             msg.position = values
             self._pubs[topic].publish(msg)
             if self._recorder is not None:
                 self._recorder.record(topic, msg, t_ns)
+        if self.structure_names:
+            msg = self._msgs[STRUCTURE_TOPIC]
+            msg.header.stamp = stamp
+            msg.position = (self._struct_sign * (out[list(self._struct_idx)]
+                                                 - self._struct_rest)).tolist()
+            self._pubs[STRUCTURE_TOPIC].publish(msg)
+            if self._recorder is not None:
+                self._recorder.record(STRUCTURE_TOPIC, msg, t_ns)
         if self._clock_pub is not None:
             self._clock_msg.clock = stamp
             self._clock_pub.publish(self._clock_msg)
@@ -376,15 +442,30 @@ class SimNode(Node):
             self._recorder.record(topic, msg, int(round(self._sim.k * self._dt * 1e9)))
 
     def _apply_command(self, volts, topic):
+        """Hold a full voltage vector (DET order); the checks are the simulator's, named here."""
         check = self._sim.set_input(volts)
         if not check.accepted:
-            self._refuse(f'{topic}: {check.reason}; holding {self._sim.u.tolist()} V')
+            reason = check.reason
+            if len(volts) != len(self.det_names):
+                reason = (f'expected {len(self.det_names)} voltage(s) '
+                          f'[{_name_list(self.det_names)}], got {len(volts)}')
+            else:
+                bad = [name for name, v in zip(self.det_names, volts)
+                       if not (isinstance(v, (int, float)) and math.isfinite(v))]
+                if bad:
+                    reason = f'non-finite voltage on {_name_list(bad)}'
+            self._refuse(f'{topic}: {reason}; holding the previous voltages')
         elif check.clamped:
             self.clamped_commands += 1
-            self.get_logger().warning(f'{topic}: {check.reason}', throttle_duration_sec=1.0)
+            v_max = self.scene.physics.v_max
+            named = [f'{name} {v:g} V' for name, v in zip(self.det_names, volts)
+                     if not 0.0 <= v <= v_max]
+            self.get_logger().warning(f'{topic}: voltage clamped to [0, {v_max:g}] V on '
+                                      f'{_name_list(named)}', throttle_duration_sec=1.0)
 
     def _refuse(self, reason):
         self.refused_commands += 1
+        self.last_refused = reason
         self.get_logger().warning(f'command refused: {reason}', throttle_duration_sec=1.0)
 
     # -- services -------------------------------------------------------------------------
@@ -470,6 +551,7 @@ class SimNode(Node):
             'overruns': str(self.overruns),
             'backlog_steps': str(backlog),
             'refused_commands': str(self.refused_commands),
+            'last_refused': self.last_refused,
             'clamped_commands': str(self.clamped_commands),
             'power_residual': f'{residual:.3e}',
             'voltage_V': str(self._sim.u.tolist()),
@@ -488,11 +570,23 @@ class SimNode(Node):
 
     def _log_info(self):
         rate, self._info_window = self._window_rate(self._info_window)
-        out = self._sim.outputs()
+        out = self._current_outputs()
         state = 'FAULT' if self._sim.fault else ('paused' if self.paused else 'running')
+        q = out[self._channels['deflection']] * 1e3
+        dy = (self._y0 - out[self._channels['displacement']]) * 1e3
+
+        def mm(values):
+            if len(values) == 1:
+                return f'{values[0]:.3f}'
+            if len(values) <= 4:
+                return '[' + ', '.join(f'{v:.3f}' for v in values) + ']'
+            return f'{values.min():.3f}..{values.max():.3f}'
+
+        volts = self._sim.u
+        v = volts.tolist() if len(volts) <= 4 else f'{volts.min():g}..{volts.max():g}'
         self.get_logger().info(
-            f't={self._sim.t:.3f} s v={self._sim.u.tolist()} V q={out["q"] * 1e3:.3f} mm '
-            f'dy={(self.y0 - out["y"]) * 1e3:.3f} mm RTF={rate * self._dt:.2f} {state}')
+            f't={self._sim.t:.3f} s v={v} V q={mm(q)} mm dy={mm(dy)} mm '
+            f'RTF={rate * self._dt:.2f} {state}')
 
 
 def main(args=None):

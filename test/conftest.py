@@ -40,10 +40,13 @@ class Harness:
     The node under test plus a test node that commands it and records what it publishes.
 
     ``samples[topic]`` maps the sample's sim time (ns) to its ``position`` values
-    (``deflection`` also stores ``velocity`` in ``velocities``).
+    (``deflection`` also stores ``velocity`` in ``velocities``); ``names[topic]`` holds the
+    channel names of the latest sample. The ``structure`` topic is recorded when the node's
+    scene has structure outputs (the plate).
     """
 
     TOPICS = ('deflection', 'displacement', 'charge', 'current')
+    STRUCTURE = 'structure'
 
     def __init__(self, context, namespace='', **params):
         from rclpy.executors import SingleThreadedExecutor
@@ -67,7 +70,8 @@ class Harness:
         self.executor = SingleThreadedExecutor(context=context)
         self.executor.add_node(self.node)
         self.executor.add_node(self.test)
-        self.samples = {topic: {} for topic in self.TOPICS}
+        self.samples = {topic: {} for topic in self.TOPICS + (self.STRUCTURE,)}
+        self.names = {}
         self.velocities = {}
         self.clock = []
         self.diagnostics = []
@@ -75,19 +79,26 @@ class Harness:
         self.subs = [self.test.create_subscription(
             JointState, topic, lambda msg, topic=topic: self._on_sample(topic, msg), 100)
             for topic in self.TOPICS]
+        structure_subs = []
+        if self.node.structure_names:
+            structure_subs.append(self.test.create_subscription(
+                JointState, self.STRUCTURE,
+                lambda msg: self._on_sample(self.STRUCTURE, msg), 100))
         self.subs.append(self.test.create_subscription(
             Clock, '/clock', lambda msg: self.clock.append(stamp_ns(msg.clock)), 100))
         self.subs.append(self.test.create_subscription(
             DiagnosticArray, '/diagnostics', self.diagnostics.append, 10))
         self.cmd = self.test.create_publisher(Float64MultiArray, 'voltage_command', 10)
         self.joint_cmd = self.test.create_publisher(JointState, 'voltage_command_joint', 10)
+        self.subs += structure_subs
         self.clients = {
             'pause': self.test.create_client(SetBool, 'sim_node/pause'),
             'step': self.test.create_client(Trigger, 'sim_node/step'),
             'reset': self.test.create_client(Trigger, 'sim_node/reset'),
         }
         self.executor.spin_once(timeout_sec=0)
-        self.spin_until(lambda: all(s.get_publisher_count() > 0 for s in self.subs[:4])
+        self.spin_until(lambda: all(s.get_publisher_count() > 0
+                                    for s in self.subs[:4] + structure_subs)
                         and self.cmd.get_subscription_count() > 0
                         and self.joint_cmd.get_subscription_count() > 0
                         and all(c.service_is_ready() for c in self.clients.values()),
@@ -99,6 +110,7 @@ class Harness:
             self.non_finite.append((topic, values))
         t = stamp_ns(msg.header.stamp)
         self.samples[topic][t] = list(msg.position)
+        self.names[topic] = list(msg.name)
         if topic == 'deflection':
             self.velocities[t] = list(msg.velocity)
 

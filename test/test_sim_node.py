@@ -55,7 +55,7 @@ def test_step_response_matches_offline_model(harness, how):
     dt = scene.dt
     ref = offline(scene, [volts], t_end + 0.1)
     y0 = _rest_shortening(scene)
-    assert y0 == pytest.approx(h.node.y0)
+    assert [y0] == pytest.approx(h.node.y0)
     assert not h.non_finite
     channels = {'deflection': 'q', 'charge': 'q_p', 'current': 'i_DE'}
     n_checked = 0
@@ -174,7 +174,8 @@ def test_pause_step_reset(harness):
     assert h.node._sim.k == 0 and h.node._sim.u.tolist() == [0.0]
     h.spin_until(lambda: 0 in h.samples['displacement'], 'the t = 0 sample after reset')
     initial = Simulator(h.node.scene).outputs()
-    assert h.samples['displacement'][0][0] == pytest.approx(h.node.y0 - initial['y'], rel=1e-12)
+    assert h.samples['displacement'][0][0] == pytest.approx(h.node.y0[0] - initial['y'],
+                                                            rel=1e-12)
     assert h.samples['deflection'][0][0] == pytest.approx(initial['q'], rel=1e-12)
     assert not h.non_finite
 
@@ -283,3 +284,115 @@ def test_scene_loads_by_default():
     scene = load_scene('default')
     assert scene.beam == 'fixed' and scene.eps_b == 0.20 and scene.rate_hz == 1000.0
     assert scene.creep and scene.source == 'rc'
+
+
+# -- several DETs (issue 7): the two-DET plate ------------------------------------------------
+
+def last_sample(h, topic):
+    return h.samples[topic][h.latest(topic)]
+
+
+def run_plate(h, volts, t_end):
+    """From a reset: hold the vector command, run to t_end (s), return the final samples."""
+    assert h.call('pause', data=True).success
+    for topic in h.samples:
+        h.samples[topic].clear()
+    assert h.call('reset').success
+    # samples of the previous run may still be in flight: wait for the reset's t = 0 sample,
+    # which comes after them on each topic, then forget everything before it
+    topics = h.TOPICS + (h.STRUCTURE,)
+    h.spin_until(lambda: all(0 in h.samples[topic] for topic in topics), 'the reset sample')
+    for topic in h.samples:
+        h.samples[topic].clear()
+    h.command(volts)
+    assert h.call('pause', data=False).success
+    for topic in topics:
+        h.spin_until_sim_time(t_end, topic)
+    assert h.call('pause', data=True).success
+    return {topic: last_sample(h, topic) for topic in h.samples}
+
+
+def test_plate_vector_command_drives_both_outputs(harness):
+    """The plate: a 2-vector command in ['left', 'right'] order; every topic carries both named
+    channels (equal to the offline model), the structure topic plate_dy and plate_phi."""
+    h = harness(scene_file='plate', start_paused=True)
+    node = h.node
+    scene = node.scene
+    w = scene.structure['plate_width']
+    assert node.det_names == ['left', 'right']
+    assert node.structure_names == ('plate_dy', 'plate_phi')
+    y0 = [_rest_shortening(scene.cell_scene(i)) for i in range(2)]
+    assert node.y0 == pytest.approx(y0, rel=1e-12)
+
+    # equal voltages: equal deflections in both channels, no tilt
+    t_end = 0.3
+    last = run_plate(h, [2500.0, 2500.0], t_end)
+    for topic in h.TOPICS:
+        assert h.names[topic] == ['left', 'right'], topic
+    assert h.names['structure'] == ['plate_dy', 'plate_phi']
+    assert not h.non_finite
+    q_l, q_r = last['deflection']
+    assert q_l > 1e-3 and q_l == pytest.approx(q_r, rel=1e-9)
+    dy_l, dy_r = last['displacement']
+    assert dy_l > 0.0 and dy_l == pytest.approx(dy_r, rel=1e-9)
+    plate_dy, plate_phi = last['structure']
+    assert plate_dy == pytest.approx(0.5 * (dy_l + dy_r), rel=1e-9)
+    assert abs(plate_phi) < 1e-9 * dy_l / w
+    # both channels equal the offline model at the same samples
+    ref = offline(scene, [2500.0, 2500.0], t_end + 0.1)
+    n_checked = 0
+    for topic, base in (('deflection', 'q'), ('charge', 'q_p'), ('current', 'i_DE')):
+        for t_ns, values in h.samples[topic].items():
+            k = k_of(t_ns, scene.dt)
+            if k == 0 or k not in ref:  # t = 0 is published at reset, before the command
+                continue
+            n_checked += 1
+            assert values == pytest.approx([ref[k][f'{base}[left]'], ref[k][f'{base}[right]']],
+                                           rel=1e-9, abs=1e-15), (topic, k)
+    assert n_checked > 100
+
+    # the left DET only: the left side moves more, the plate tilts to the left (phi < 0)
+    last = run_plate(h, [3000.0, 0.0], t_end)
+    dy_l, dy_r = last['displacement']
+    assert dy_l > dy_r
+    plate_dy, plate_phi = last['structure']
+    assert plate_phi < 0.0
+    assert plate_phi == pytest.approx((dy_r - dy_l) / w, rel=1e-9, abs=1e-15)
+    assert plate_dy == pytest.approx(0.5 * (dy_l + dy_r), rel=1e-9)
+    assert not h.non_finite
+
+
+def test_plate_bad_inputs_per_channel(harness):
+    """Vector commands: a NaN in one channel is refused naming it (count on /diagnostics),
+    out-of-range channels are clamped, a wrong length is refused, joint commands update by name."""
+    h = harness(scene_file='plate', start_paused=True)
+    u = lambda: h.node._sim.u.tolist()  # noqa: E731
+    h.command([1000.0, 2000.0])
+    assert u() == [1000.0, 2000.0]
+    h.command([1500.0, math.nan])
+    assert u() == [1000.0, 2000.0]
+    assert h.node.refused_commands == 1
+    assert 'right' in h.node.last_refused and 'left' not in h.node.last_refused
+    h.command([math.inf, 100.0])
+    assert u() == [1000.0, 2000.0] and 'left' in h.node.last_refused
+    h.command([1.0, 2.0, 3.0])
+    assert u() == [1000.0, 2000.0] and h.node.refused_commands == 3
+    assert 'left, right' in h.node.last_refused
+    h.command([5000.0, 100.0])
+    assert u() == [h.node.scene.physics.v_max, 100.0] and h.node.clamped_commands == 1
+    # joint commands: partial updates by name, the other channel holds
+    h.joint_command(['right'], [700.0])
+    assert u() == [h.node.scene.physics.v_max, 700.0]
+    h.joint_command(['left'], [math.nan])
+    assert u() == [h.node.scene.physics.v_max, 700.0] and 'left' in h.node.last_refused
+    h.joint_command(['det0'], [1.0])
+    assert h.node.refused_commands == 5
+    h.joint_command(['right', 'left'], [10.0, 20.0])
+    assert u() == [20.0, 10.0]
+    assert h.call('pause', data=False).success
+    h.spin_until_sim_time(0.05, 'structure')
+    assert not h.non_finite
+    h.spin_until(lambda: any(
+        {kv.key: kv.value for kv in s.values}.get('refused_commands') == '5'
+        and 'left' in {kv.key: kv.value for kv in s.values}.get('last_refused', '')
+        for d in h.diagnostics for s in d.status), 'diagnostics with the refused count')
