@@ -87,6 +87,11 @@ class Model:
     input_names: tuple = ('det0',)      # DET names, in voltage-command order
     structure_output_names: tuple = ()  # e.g. ('plate_y', 'plate_phi')
 
+    @property
+    def structure_map(self) -> np.ndarray:
+        """P (n_structure_outputs x n_cells): structure outputs = P @ y (cells' end shortenings)."""
+        return self.arrays[16]
+
     def channel(self, base: str) -> list:
         """Indices in ``output_names`` of a per-DET output ('q', 'y', 'q_p', ...), DET order."""
         if self.n_inputs == 1:

@@ -114,13 +114,13 @@ def structure_channels(model, y0) -> tuple:
     The structure topic's contract for a model: (output indices, published names, signs, rest
     values). Empty for structures without outputs ('single', 'array').
 
-    The structure outputs are linear in the cells' end shortenings (rows of the model's map P,
-    see det_sim_ros._kernels), so their rest values are P @ y0.
+    The structure outputs are linear in the cells' end shortenings (Model.structure_map P), so
+    their rest values are P @ y0.
     """
     names = tuple(model.structure_output_names)
     if not names:
         return (), (), (), ()
-    P = np.asarray(model.arrays[16], dtype=float)
+    P = np.asarray(model.structure_map, dtype=float)
     rest = P @ np.asarray(y0, dtype=float)
     indices = tuple(model.output_names.index(name) for name in names)
     published = tuple(STRUCTURE_NAMES.get(name, (name, 1.0))[0] for name in names)
