@@ -762,9 +762,10 @@ def advance_batch(X, U, A, c, terms, h, n_steps, status):
 
 
 @njit(**_JIT)
-def period_and_output(x, u_old, u, A, c, terms, h, n_sub, z_tol, fine, out):
-    """One control period in one call: :func:`period`, then the outputs."""
-    status = period(x, u_old, u, A, c, terms, h, n_sub, z_tol, fine)
+def period_and_output(x, u_old, u, A, h, n_sub, z_tol, fine, P, out):
+    """One control period in one call (:func:`period_core` with the scratch ``P`` of
+    :func:`prepare`, kept by the caller between periods), then the outputs."""
+    status = period_core(x, u_old, u, A, h, n_sub, z_tol, fine, P)
     if status != OK:
         return status
     return outputs(x, u, A, out)

@@ -65,6 +65,7 @@ class Simulator:
         self.h = self.dt / self.substeps
         self._c, self._terms = self.method.arrays()
         self._z_tol, self._fine = transient_settings(self.method, self.scene)
+        self._scratch = _kernels.prepare(self.model.arrays, self._c, self._terms)
         self.output_names = self.model.output_names
         self._out = np.empty(len(self.output_names))
         self.reset()
@@ -132,8 +133,8 @@ class Simulator:
             raise ModelDomainError(_kernels.NON_FINITE, f'(faulted: {self.fault})')
         x_new = self.x.copy()
         status = _kernels.period_and_output(x_new, self._u_prev, self.u, self.model.arrays,
-                                            self._c, self._terms, self.h, self.substeps,
-                                            self._z_tol, self._fine, self._out)
+                                            self.h, self.substeps, self._z_tol, self._fine,
+                                            self._scratch, self._out)
         if status != _kernels.OK:
             error = ModelDomainError(status, f'at t = {self.t + self.dt:.6g} s')
             self.fault = str(error)
