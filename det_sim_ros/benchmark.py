@@ -25,7 +25,8 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from .model import build_model
-from .scenarios import reference_solution, step_error, step_scene, step_voltage, STEP_END
+from .scenarios import (reference_solution, step_error, step_scene, step_voltage, STEP_END,
+                        STEP_SWITCH_TIMES)
 from .simulator import simulate, Simulator
 
 __all__ = ['main', 'run_scene']
@@ -80,12 +81,18 @@ def _control_run(model, rtol, t_end):
     f = _rhs_for_solvers(model)
     sys_ = control.nlsys(lambda t, x, u, params: f(t, x, u), None,
                          inputs=1, states=model.n_states, outputs=model.n_states)
-    t = np.arange(int(round(t_end / model.scene.dt)) + 1) * model.scene.dt
+    dt = model.scene.dt
+    samples = np.arange(int(round(t_end / dt)) + 1) * dt
+    # python-control interpolates the input linearly between time points: a point 1 ns before
+    # every switch makes that a zero-order hold up to a 1 ns ramp
+    switches = np.array([ts for ts in STEP_SWITCH_TIMES if ts < t_end])
+    t = np.sort(np.concatenate([samples, switches - 1e-9]))
     u = np.array([volts(tk) for tk in t])
     resp = control.input_output_response(sys_, t, u, model.initial_state(),
                                          solve_ivp_method='Radau',
                                          solve_ivp_kwargs={'rtol': rtol, 'atol': rtol * 1e-6})
-    return resp.states.T
+    keep = np.searchsorted(t, samples)
+    return resp.states.T[keep]
 
 
 def run_scene(beam, eps_b, quick=False, repeats=3, log=print, reference_dir=None):
@@ -147,7 +154,7 @@ def run_scene(beam, eps_b, quick=False, repeats=3, log=print, reference_dir=None
         for rtol in ((1e-6,) if quick else (1e-4, 1e-6, 1e-8)):
             try:
                 cpu, X = _cpu(lambda: _scipy_run(model, method, rtol, t_end), 1)
-            except ArithmeticError:   # a loose rtol can step out of the domain: no point
+            except (ArithmeticError, ValueError):   # solver failure (domain, NaN Jacobian)
                 cpu, X = np.nan, None
             add(f'scipy {method}', f'rtol {rtol:g}', cpu, X)
     try:
@@ -160,7 +167,7 @@ def run_scene(beam, eps_b, quick=False, repeats=3, log=print, reference_dir=None
         for rtol in ((1e-6,) if quick else (1e-6, 1e-8)):
             try:
                 cpu, X = _cpu(lambda: _control_run(model, rtol, t_end), 1)
-            except ArithmeticError:   # stepped out of the model's domain: no point
+            except (ArithmeticError, ValueError):   # solver failure (domain, NaN Jacobian)
                 cpu, X = np.nan, None
             add('python-control', f'rtol {rtol:g}', cpu, X)
     return rows
@@ -222,6 +229,7 @@ def main(argv=None) -> int:
             rows += run_scene(beam, e, args.quick, args.repeats,
                               log=lambda s: print(s, file=sys.stderr, flush=True),
                               reference_dir=args.reference_dir)
+            _write(rows, args.out)   # after every scene: a long run keeps what it measured
     _write(rows, args.out)
     print(f'wrote {args.out}/work_precision.{{csv,md,png}}')
     return 0
