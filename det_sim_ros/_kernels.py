@@ -19,7 +19,8 @@ The model arrays ``A`` (built by :func:`det_sim_ros.model.build_model`) are a tu
     mi_val (n_nz,)     nonzero entries of the interface mass matrix MI (n_c x n_c) that acts on
                        the end shortenings y_c (a cell's interface mass, or a plate shared by
                        several cells) ...
-    cellp  (n_c, 6)    l, EI, kappa (1 for the consistent w'^4/8 end-shortening term), and for
+    cellp  (n_c, 6)    l, EI, kappa (1: the consistent w'^4/8 end-shortening term, 2: exact
+                       kinematics 1 - cos(theta), curvature^2 = w''^2/(1 - w'^2)), and for
                        one-term cells the same integrals in closed form: c2 = 1/2 int S'^2,
                        c4 = 1/8 int S'^4, e4 = EI int S''^2 S'^2 (quadrature skipped)
     detp   (n_c, 9)    l0, V*Y, C0, V, E_M, eta_M, eta_v, Rs, Rp of the DET spanning cell c
@@ -59,7 +60,7 @@ def _kinematics(q, qd, A, y, J, h, Us4):
         r = cell_q[c + 1] - o
         EI = cellp[c, 1]
         kap = cellp[c, 2]
-        if r == 1:  # one Ritz term: polynomials in q, ~5x cheaper than the quadrature loop
+        if r == 1 and kap < 2.0:  # one term: polynomials in q, ~5x cheaper than quadrature
             c2, c4 = cellp[c, 3], kap * cellp[c, 4]
             qc = q[o]
             q2 = qc * qc
@@ -82,16 +83,25 @@ def _kinematics(q, qd, A, y, J, h, Us4):
                 wd += B1[g, j] * qd[o + j]
             wg = W[g]
             wp2 = wp * wp
-            yc += wg * (0.5 * wp2 + 0.125 * kap * wp2 * wp2)
-            hc += wg * (1.0 + 1.5 * kap * wp2) * wd * wd
-            gy = wg * (wp + 0.5 * kap * wp2 * wp)
+            if kap == 2.0:   # exact: y = int 1 - cos(theta), sin(theta) = w'
+                cos2 = 1.0 - wp2
+                cos = math.sqrt(cos2)          # NaN for |w'| >= 1: caught as non-finite
+                yc += wg * (1.0 - cos)
+                hc += wg * wd * wd / (cos2 * cos)
+                gy = wg * wp / cos
+            else:
+                yc += wg * (0.5 * wp2 + 0.125 * kap * wp2 * wp2)
+                hc += wg * (1.0 + 1.5 * kap * wp2) * wd * wd
+                gy = wg * (wp + 0.5 * kap * wp2 * wp)
             for j in range(r):
                 J[o + j] += gy * B1[g, j]
             if Us4 is not None:
                 wpp = 0.0
                 for j in range(r):
                     wpp += B2[g, j] * q[o + j]
-                u4 += EI * wg * wpp * wpp * wp2
+                # bending energy beyond EI int w''^2: w'^2 (eq 51), or w'^2/(1 - w'^2) (exact,
+                # curvature^2 = w''^2 / (1 - w'^2))
+                u4 += EI * wg * wpp * wpp * (wp2 / (1.0 - wp2) if kap == 2.0 else wp2)
         y[c] = yc
         h[c] = hc
         if Us4 is not None:
@@ -100,24 +110,34 @@ def _kinematics(q, qd, A, y, J, h, Us4):
 
 @njit(**_INLINE)
 def _quartic_force(q, A, F):
-    """Subtract the gradient of the quartic bending energy EI int w''^2 w'^2 dx from F."""
+    """
+    Subtract from F the gradient of the bending energy beyond EI int w''^2 dx: EI int w''^2 g dx
+    with g = w'^2 (eq 51) or, exact, g = w'^2 / (1 - w'^2).
+    """
     flags, cell_q, cell_g, B1, B2, W = A[0], A[1], A[2], A[3], A[4], A[5]
     cellp = A[10]
     for c in range(flags[1]):
         o = cell_q[c]
         r = cell_q[c + 1] - o
-        if r == 1:
+        exact = cellp[c, 2] == 2.0
+        if r == 1 and not exact:
             F[o] -= 4.0 * cellp[c, 5] * q[o] ** 3
             continue
-        EI2 = 2.0 * cellp[c, 1]
+        EI = cellp[c, 1]
+        EI2 = 2.0 * EI
         for g in range(cell_g[c], cell_g[c + 1]):
             wp = 0.0
             wpp = 0.0
             for j in range(r):
                 wp += B1[g, j] * q[o + j]
                 wpp += B2[g, j] * q[o + j]
-            s1 = EI2 * W[g] * wpp * wpp * wp
-            s2 = EI2 * W[g] * wpp * wp * wp
+            if exact:   # d/dw' and d/dw'' of EI w''^2 w'^2 / (1 - w'^2)
+                cos2 = 1.0 - wp * wp
+                s1 = EI2 * W[g] * wpp * wpp * wp / (cos2 * cos2)
+                s2 = EI2 * W[g] * wpp * wp * wp / cos2
+            else:
+                s1 = EI2 * W[g] * wpp * wpp * wp
+                s2 = EI2 * W[g] * wpp * wp * wp
             for j in range(r):
                 F[o + j] -= s1 * B1[g, j] + s2 * B2[g, j]
 

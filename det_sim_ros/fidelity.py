@@ -8,7 +8,8 @@ model's (model.py): per beam
 
     U(q) = 1/2 EI int w''^2 (1 + w'^2) dx,      y(q) = int (1/2 w'^2 + kappa/8 w'^4) dx,
 
-w = sum_j q_j S_j, kappa = 1 for the 'consistent' fidelity and 0 for 'paper' (eq 65). The model's
+w = sum_j q_j S_j, kappa = 1 for the 'consistent' fidelity and 0 for 'paper' (eq 65); for
+'exact', U = 1/2 EI int w''^2 / (1 - w'^2) dx and y = int (1 - sqrt(1 - w'^2)) dx. The model's
 U_s and y are those of the beam pair (twice U; the same y for both beams, which share their ends);
 :meth:`BeamRitz.check_against_model` verifies that these formulas reproduce the model's outputs
 'H' (minus the DET energy) and 'y', so this module and the simulator have one source of truth.
@@ -70,12 +71,15 @@ class BeamRitz:
         self.EI = float(EI)
         self.kappa = float(kappa)
         self.length = basis.length
-        # a Gauss rule exact for w''^2 w'^2 and w'^4 is the model's own; use a finer one so
-        # the statics do not depend on the model's choice (they agree to round-off, see tests)
-        n = basis.degree * 2 + 2
-        xi, w = np.polynomial.legendre.leggauss(n)
-        self.x = 0.5 * self.length * (xi + 1.0)
-        self.w = 0.5 * self.length * w
+        if self.kappa == 2.0:   # exact kinematics: the model's rule for smooth integrands
+            self.x, self.w = basis.quadrature(nonpolynomial=True)
+        else:
+            # a Gauss rule exact for w''^2 w'^2 and w'^4 is the model's own; use a finer one so
+            # the statics do not depend on the model's choice (they agree to round-off, tests)
+            n = basis.degree * 2 + 2
+            xi, w = np.polynomial.legendre.leggauss(n)
+            self.x = 0.5 * self.length * (xi + 1.0)
+            self.w = 0.5 * self.length * w
         self.B1 = basis.values(self.x, 1)
         self.B2 = basis.values(self.x, 2)
         self.K = self.EI * self.B2.T @ (self.w[:, None] * self.B2)
@@ -89,26 +93,45 @@ class BeamRitz:
         return self.basis.n_ritz
 
     # -- energies (per beam) -------------------------------------------------------------------
+    def _bending_factor(self, wp):
+        """a(w') in U = 1/2 EI int w''^2 a dx and its first two derivatives: 1 + w'^2 (eq 51)
+        or 1/(1 - w'^2) (exact)."""
+        if self.kappa == 2.0:
+            c2 = 1.0 - wp * wp
+            return 1.0 / c2, 2.0 * wp / c2 ** 2, (2.0 + 6.0 * wp * wp) / c2 ** 3
+        return 1.0 + wp * wp, 2.0 * wp, 2.0 + 0.0 * wp
+
+    def _shortening_density(self, wp):
+        """f(w') in y = int f dx and its first two derivatives: w'^2/2 + kappa w'^4/8, or
+        1 - sqrt(1 - w'^2) (exact)."""
+        if self.kappa == 2.0:
+            c = np.sqrt(1.0 - wp * wp)
+            return 1.0 - c, wp / c, 1.0 / c ** 3
+        k = self.kappa
+        return (0.5 * wp ** 2 + 0.125 * k * wp ** 4, wp + 0.5 * k * wp ** 3,
+                1.0 + 1.5 * k * wp * wp)
+
     def energy(self, q) -> float:
-        """U = 1/2 EI int w''^2 (1 + w'^2) dx, J."""
+        """U = 1/2 EI int w''^2 a(w') dx, J (see _bending_factor)."""
         wp, wpp = self.B1 @ q, self.B2 @ q
-        return 0.5 * self.EI * float(self.w @ (wpp * wpp * (1.0 + wp * wp)))
+        return 0.5 * self.EI * float(self.w @ (wpp * wpp * self._bending_factor(wp)[0]))
 
     def shortening(self, q) -> float:
-        """y = int (w'^2/2 + kappa w'^4/8) dx, m."""
-        wp2 = (self.B1 @ q) ** 2
-        return float(self.w @ (0.5 * wp2 + 0.125 * self.kappa * wp2 * wp2))
+        """y = int f(w') dx, m (see _shortening_density)."""
+        return float(self.w @ self._shortening_density(self.B1 @ q)[0])
 
     def _derivatives(self, q):
         wp, wpp = self.B1 @ q, self.B2 @ q
-        w, B1, B2, EI, k = self.w, self.B1, self.B2, self.EI, self.kappa
-        gU = EI * (B2.T @ (w * wpp * (1.0 + wp * wp)) + B1.T @ (w * wpp * wpp * wp))
-        HU = EI * (B2.T @ ((w * (1.0 + wp * wp))[:, None] * B2)
-                   + B2.T @ ((2.0 * w * wpp * wp)[:, None] * B1)
-                   + B1.T @ ((2.0 * w * wpp * wp)[:, None] * B2)
-                   + B1.T @ ((w * wpp * wpp)[:, None] * B1))
-        gy = B1.T @ (w * (wp + 0.5 * k * wp ** 3))
-        Hy = B1.T @ ((w * (1.0 + 1.5 * k * wp * wp))[:, None] * B1)
+        w, B1, B2, EI = self.w, self.B1, self.B2, self.EI
+        a, da, dda = self._bending_factor(wp)
+        gU = EI * (B2.T @ (w * wpp * a) + B1.T @ (0.5 * w * wpp * wpp * da))
+        HU = EI * (B2.T @ ((w * a)[:, None] * B2)
+                   + B2.T @ ((w * wpp * da)[:, None] * B1)
+                   + B1.T @ ((w * wpp * da)[:, None] * B2)
+                   + B1.T @ ((0.5 * w * wpp * wpp * dda)[:, None] * B1))
+        _, df, ddf = self._shortening_density(wp)
+        gy = B1.T @ (w * df)
+        Hy = B1.T @ ((w * ddf)[:, None] * B1)
         return gU, HU, gy, Hy
 
     def deflection(self, q) -> tuple:
@@ -189,7 +212,7 @@ def beam_ritz(beam: str, fidelity: str = 'consistent', n_ritz: int = 1,
     scene = scene or fidelity_scene(beam, fidelity, n_ritz)
     model = build_model(scene)
     p = scene.physics
-    kappa = 1.0 if scene.fidelity == 'consistent' else 0.0
+    kappa = {'paper': 0.0, 'consistent': 1.0, 'exact': 2.0}[scene.fidelity]
     return BeamRitz(model.bases[0], p.E_b * p.I, kappa), model
 
 

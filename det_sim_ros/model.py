@@ -30,7 +30,9 @@ For one cell and the paper's one-term shape this is the paper's eq 71 with its e
 5. eq 78's pre-strain energy is a constant already contained in U_DE.
 
 The 'consistent' fidelity uses the fourth-order end shortening y = int (w'^2/2 + w'^4/8) dx that
-matches eq 51's energy (eq 65 drops it). Reductions: no creep drops eps_E; the ideal source
+matches eq 51's energy (eq 65 drops it). The 'exact' fidelity keeps the inextensible kinematics
+untruncated: with sin(theta) = w', y = int (1 - cos theta) dx and the bending energy
+EI int w''^2 / (1 - w'^2) dx (curvature theta' = w''/cos theta), which converge to the elastica. Reductions: no creep drops eps_E; the ideal source
 (Rs -> 0) makes q_p = C0 lambda^2 v algebraic and drops the stiff charge state; a dropped state
 is neither stored nor computed.
 """
@@ -224,7 +226,7 @@ def _assemble(scene, cells, MI, det_physics, P, structure_names):
     nq = int(sum(r))
     r_max = max(r)
     cell_q = np.concatenate([[0], np.cumsum(r)]).astype(np.int64)
-    nodes = [b.quadrature() for b in cells]
+    nodes = [b.quadrature(nonpolynomial=scene.fidelity == 'exact') for b in cells]
     cell_g = np.concatenate([[0], np.cumsum([len(x) for x, _ in nodes])]).astype(np.int64)
     B1 = np.zeros((cell_g[-1], r_max))
     B2 = np.zeros_like(B1)
@@ -235,7 +237,7 @@ def _assemble(scene, cells, MI, det_physics, P, structure_names):
     ref = np.zeros(nq)
     cellp = np.zeros((nc, 6))
     detp = np.zeros((nc, 9))
-    kappa = 1.0 if scene.fidelity == 'consistent' else 0.0
+    kappa = {'paper': 0.0, 'consistent': 1.0, 'exact': 2.0}[scene.fidelity]
     for c, (basis, (x, w), ph) in enumerate(zip(cells, nodes, det_physics)):
         g = slice(cell_g[c], cell_g[c + 1])
         s = slice(cell_q[c], cell_q[c + 1])

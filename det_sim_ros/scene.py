@@ -26,7 +26,7 @@ __all__ = ['SceneError', 'Physics', 'Scene', 'load_scene', 'scene_to_dict', 'fin
            'BEAMS', 'FIDELITIES', 'SOURCES', 'STRUCTURES']
 
 BEAMS = ('simply_supported', 'fixed')
-FIDELITIES = ('paper', 'consistent')
+FIDELITIES = ('paper', 'consistent', 'exact')
 SOURCES = ('rc', 'ideal')
 STRUCTURES = ('single', 'plate', 'array')
 EPS0 = 8.8541878128e-12  # F/m, vacuum permittivity
