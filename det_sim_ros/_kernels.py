@@ -32,7 +32,8 @@ The model arrays ``A`` (built by :func:`det_sim_ros.model.build_model`) are a tu
     cell_grp int64[n_c]    group of each cell
     P      (n_s, n_c)  structure outputs as linear maps of the end shortenings (plate_y, ...)
 
-Status codes returned by kernels: 0 ok, 1 stretch lambda <= 0 (l - y <= 0), 2 non-finite state.
+Status codes returned by kernels: 0 ok, 1 stretch lambda <= 0 (l - y <= 0), 2 non-finite state,
+3 beam slope |w'| >= 1 (only the 'exact' kinematics, where w' = sin(theta), have that limit).
 """
 
 import math
@@ -40,7 +41,7 @@ import math
 import numpy as np
 from numba import njit
 
-OK, BAD_STRETCH, NON_FINITE = 0, 1, 2
+OK, BAD_STRETCH, NON_FINITE, BAD_SLOPE = 0, 1, 2, 3
 N_CELL_OUTPUTS = 9   # q_ref, qdot_ref, y, lambda, q_p, v_p, i_DE, C, eps_E
 N_GLOBAL_OUTPUTS = 3  # H, P_in, P_diss (after the structure outputs)
 _JIT = dict(cache=True, nogil=True, error_model='numpy')  # numpy: no zero-division branches
@@ -106,6 +107,15 @@ def _kinematics(q, qd, A, y, J, h, Us4):
         h[c] = hc
         if Us4 is not None:
             Us4[c] = u4
+
+
+@njit(**_INLINE)
+def _slope_status(y, nc):
+    """BAD_SLOPE if an end shortening is NaN: with exact kinematics, |w'| >= 1 somewhere."""
+    for c in range(nc):
+        if y[c] != y[c]:
+            return BAD_SLOPE
+    return OK
 
 
 @njit(**_INLINE)
@@ -218,6 +228,8 @@ def rhs(x, u, A, dx, pw, ws, Mt, quasi_static=False):
     J = ws[2 * nc:2 * nc + nq]
     F = ws[2 * nc + nq:2 * nc + 2 * nq]
     _kinematics(q, qd, A, y, J, h, None)
+    if _slope_status(y, nc) != OK:
+        return BAD_SLOPE
     p_diss = 0.0
     for c in range(nc):   # cell blocks of K, D and Mb
         o = cell_q[c]
@@ -321,6 +333,8 @@ def stiff_rates(x, A, L, ws):
     h = ws[nc:2 * nc]
     J = ws[2 * nc:2 * nc + nq]
     _kinematics(x[:nq], x[nq:2 * nq], A, y, J, h, None)
+    if _slope_status(y, nc) != OK:
+        return BAD_SLOPE
     ip = 2 * nq + nc * creep
     for i in range(nc):
         lam = (cellp[i, 0] - y[i]) / detp[i, 0]

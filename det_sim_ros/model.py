@@ -54,6 +54,8 @@ GLOBAL_OUTPUTS = ('H', 'P_in', 'P_diss')
 _STATUS_TEXT = {
     _kernels.BAD_STRETCH: 'DET stretch lambda = (l - y)/l0 <= 0: the beam ends met (l - y <= 0)',
     _kernels.NON_FINITE: 'non-finite state or output (NaN or inf)',
+    _kernels.BAD_SLOPE: "beam slope |w'| reached 1 (theta = 90 deg): outside the 'exact' "
+                        "kinematics (w' = sin theta); use fidelity 'consistent' for such motions",
 }
 
 

@@ -15,6 +15,7 @@ import pytest
 from det_sim_ros import elastica as E
 from det_sim_ros import fidelity as F
 from det_sim_ros.scenarios import step_scene, step_voltage
+from det_sim_ros.model import ModelDomainError
 from det_sim_ros.simulator import simulate, Simulator
 
 BEAMS = ('simply_supported', 'fixed')
@@ -136,6 +137,14 @@ def test_step_scenario_exact_fidelity_runs(beam):
     sim = Simulator(scene)
     simulate(sim, lambda t: 3000.0 * (t > 0.01), 0.05)
     assert abs(sim.power_residual()) < 1e-4
+
+
+def test_exact_kinematics_name_their_limit():
+    """w' = sin(theta) cannot pass 90 degrees: the simply supported beam's dynamic buckling at
+    eps_b = 0.25 reaches it within 10 ms, and the domain error says so (not 'ends met')."""
+    scene = step_scene('simply_supported', 0.25, **{'scene.fidelity': 'exact', 'scene.n_ritz': 3})
+    with pytest.raises(ModelDomainError, match="slope"):
+        simulate(scene, step_voltage(scene.physics.v_max), 0.05, substeps=100)
 
 
 @pytest.mark.parametrize('beam', BEAMS)
