@@ -2,13 +2,14 @@
 Model fidelity benchmark (issue 6): what each fidelity level gets right and what it costs.
 
 (a) Ritz critical load of one beam vs n_r against the Euler load (both beams).
-(b) Model error vs CPU: for 'paper' (n_r = 1) and 'consistent' (n_r = 1..7), the max relative
+(b) Model error vs CPU: for 'paper' (n_r = 1), 'consistent' (n_r = 1..7) and 'exact' (n_r = 3, 5,
+    7, 9), the max relative
     error of the static load P l^2/EI, the reference-point deflection (the published q) and the
     max deflection against the exact elastica for y/l in [0.01, 0.15], next to the simulator's
     CPU seconds per simulated second on the 'step' scenario (eps_b = 0.20, median of 3 runs,
-    time.process_time; internal steps raised by fidelity.stable_substeps where the default count
-    would be unstable, and that count is listed).
-(c) The 'step' scenario, both beams, eps_b in {0.15, 0.20, 0.25}: paper vs consistent n_r = 5,
+    time.process_time; the automatic internal step count, listed, follows the fastest beam mode).
+(c) The 'step' scenario, both beams, eps_b in {0.15, 0.20, 0.25}: paper vs consistent and exact
+    n_r = 5,
     eps_y at the end of the 3 kV phase and whether the beam switched (sign of q at the end of the
     3 kV phase differs from the sign at its start, as in `det_sim step`).
 
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import math
 import os
 import statistics
 import sys
@@ -31,10 +33,12 @@ import numpy as np
 from det_sim_ros import elastica as E
 from det_sim_ros import fidelity as F
 from det_sim_ros.scenarios import STEP_SWITCH_TIMES, delta_y, step_scene, step_voltage
+from det_sim_ros.model import ModelDomainError
 from det_sim_ros.simulator import Simulator, simulate
 
 BEAMS = ('simply_supported', 'fixed')
-LEVELS = [('paper', 1)] + [('consistent', n) for n in range(1, 8)]
+LEVELS = ([('paper', 1)] + [('consistent', n) for n in range(1, 8)]
+          + [('exact', n) for n in (3, 5, 7, 9)])
 
 
 def _write_csv(path, header, rows):
@@ -95,9 +99,15 @@ def step_comparison(eps_list, n_cons):
     t_on, t_off = STEP_SWITCH_TIMES
     for beam in BEAMS:
         for eps in eps_list:
-            for fidelity, n in (('paper', 1), ('consistent', n_cons)):
+            for fidelity, n in (('paper', 1), ('consistent', n_cons), ('exact', n_cons)):
                 scene, sim = _sim(beam, fidelity, n, eps, 4.5)
-                run = simulate(sim, step_voltage(scene.physics.v_max), 4.5)
+                try:
+                    run = simulate(sim, step_voltage(scene.physics.v_max), 4.5)
+                except ModelDomainError as exc:   # exact kinematics: |w'| reached 1
+                    rows.append((beam, eps, fidelity, n, math.nan, None, math.nan, math.nan,
+                                 math.nan))
+                    print(f'  step {beam} eps_b={eps} {fidelity} n_r={n}: {exc}', flush=True)
+                    continue
                 t, q = run.t, run['q']
                 _, eps_y = delta_y(t, run['y'], scene.beam_length)
                 i_on = int(np.searchsorted(t, t_on - 1e-9))
@@ -134,17 +144,23 @@ def markdown(crit, err, step, args):
               'CPU s / sim s | substeps |', '|---|---|---|---|---|---|---|---|']
     for b, f, n, ep, eq, em, cpu, sub in err:
         lines.append(f'| {b} | {f} | {n} | {ep:.2%} | {eq:.2%} | {em:.2%} | {cpu:.3f} | {sub} |')
-    lines += ['', '## Step scenario: paper vs consistent', '',
+    lines += ['', '## Step scenario: paper vs consistent vs exact', '',
               'eps_y at the end of the 3 kV phase; switched = sign of q at the end of the 3 kV '
-              'phase differs from its sign at the start.', '',
-              '| beam | eps_b | eps_y paper | eps_y consistent | switched paper | '
-              'switched consistent |', '|---|---|---|---|---|---|']
+              "phase differs from its sign at the start; 'slope limit': the exact kinematics' "
+              "w' = sin(theta) reached 1 in the run (a domain error, see README).", '',
+              '| beam | eps_b | eps_y paper | eps_y consistent | eps_y exact | switched paper | '
+              'switched consistent | switched exact |', '|---|---|---|---|---|---|---|---|']
     tab = {(b, e, f): (ey, sw) for b, e, f, _, ey, sw, *_ in step}
+
+    def cell(value, switched):
+        if switched is None:
+            return 'slope limit', 'slope limit'
+        return f'{value:.2%}', 'yes' if switched else 'no'
     for b in BEAMS:
         for e in args.eps:
-            (ep, sp), (ec, sc) = tab[(b, e, 'paper')], tab[(b, e, 'consistent')]
-            lines.append(f'| {b} | {e:.2f} | {ep:.2%} | {ec:.2%} | {"yes" if sp else "no"} | '
-                         f'{"yes" if sc else "no"} |')
+            cols = [cell(*tab[(b, e, f)]) for f in ('paper', 'consistent', 'exact')]
+            lines.append(f'| {b} | {e:.2f} | ' + ' | '.join(c[0] for c in cols) + ' | '
+                         + ' | '.join(c[1] for c in cols) + ' |')
     return '\n'.join(lines) + '\n'
 
 
@@ -162,19 +178,19 @@ def plot(err, runs, args, path):
         pts = [(cpu, ep, f, n) for bb, f, n, ep, eq, em, cpu, sub in err if bb == b]
         ax.loglog([p[0] for p in pts], [p[1] for p in pts], mk + '-', label=f'{b}: load')
         for cpu, ep, f, n in pts:
-            ax.annotate('paper' if f == 'paper' else str(n), (cpu, ep), fontsize=8)
+            ax.annotate('paper' if f == 'paper' else f'{f[0]}{n}', (cpu, ep), fontsize=8)
     ax.set_xlabel('CPU s per simulated s (step scenario)')
     ax.set_ylabel('max rel. load error vs elastica (y/l <= 0.15)')
-    ax.set_title('model error vs CPU (labels: n_r)')
+    ax.set_title('model error vs CPU (labels: c/e = consistent/exact, n_r)')
     ax.grid(True, which='both', alpha=0.3)
     ax.legend()
     ax = axes[1]
     for (b, e, f), (t, ey) in runs.items():
-        ax.plot(t, 100 * ey, '-' if f == 'paper' else '--',
+        ax.plot(t, 100 * ey, {'paper': '-', 'consistent': '--'}.get(f, ':'),
                 label=f'{b} {e:.2f} {f}')
     ax.set_xlabel('t (s)')
     ax.set_ylabel('eps_y (%)')
-    ax.set_title('step scenario: paper (solid) vs consistent (dashed)')
+    ax.set_title('step scenario: paper (solid), consistent (dashed), exact (dotted)')
     ax.legend(fontsize=6, ncol=2)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
