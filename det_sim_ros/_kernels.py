@@ -31,6 +31,7 @@ The model arrays ``A`` (built by :func:`det_sim_ros.model.build_model`) are a tu
                        cost O(N), not O(N^3)
     cell_grp int64[n_c]    group of each cell
     P      (n_s, n_c)  structure outputs as linear maps of the end shortenings (plate_y, ...)
+    (empty) float64[0] only for fidelity 'exact': marks the tuple type (see _kinematics)
 
 Status codes returned by kernels: 0 ok, 1 stretch lambda <= 0 (l - y <= 0), 2 non-finite state,
 3 beam slope |w'| >= 1 (only the 'exact' kinematics, where w' = sin(theta), have that limit).
@@ -44,6 +45,7 @@ from numba import njit
 OK, BAD_STRETCH, NON_FINITE, BAD_SLOPE = 0, 1, 2, 3
 N_CELL_OUTPUTS = 9   # q_ref, qdot_ref, y, lambda, q_p, v_p, i_DE, C, eps_E
 N_GLOBAL_OUTPUTS = 3  # H, P_in, P_diss (after the structure outputs)
+N_ARRAYS_EXACT = 18   # len(A) of a scene with exact kinematics (see _kinematics)
 _JIT = dict(cache=True, nogil=True, error_model='numpy')  # numpy: no zero-division branches
 # Helpers called in the step loop are inlined at numba-IR level: a real call would incref and
 # decref every array of the model tuple, which cost more than the physics (measured 4x).
@@ -51,8 +53,17 @@ _INLINE = dict(_JIT, inline='always')
 
 
 @njit(**_INLINE)
-def _kinematics(q, qd, A, y, J, h, Us4):
-    """End shortening y_c, its gradient J, qd' H_y qd per cell, and the quartic bending energy."""
+def _kinematics(q, qd, A, y, J, h, Us4, exact):
+    """
+    End shortening y_c, its gradient J, qd' H_y qd per cell, and the bending energy beyond
+    EI int w''^2 (Us4). ``exact`` is a compile-time constant: len(A), and a scene with exact
+    kinematics carries one extra (empty) array in A, so numba compiles its own kernels for it
+    and the paper/consistent kernels do not contain the exact branch at all. Compiling both
+    branches into the common rhs made it 2x slower (measured), even when never taken.
+
+    exact: sin(theta) = w', y = int 1 - cos(theta), bending beyond EI int w''^2 is
+    EI int w''^2 w'^2 / (1 - w'^2) (curvature^2 = w''^2 / (1 - w'^2)); |w'| >= 1 gives NaN.
+    """
     flags, cell_q, cell_g, B1, B2, W = A[0], A[1], A[2], A[3], A[4], A[5]
     cellp = A[10]
     nc = flags[1]
@@ -61,7 +72,7 @@ def _kinematics(q, qd, A, y, J, h, Us4):
         r = cell_q[c + 1] - o
         EI = cellp[c, 1]
         kap = cellp[c, 2]
-        if r == 1 and kap < 2.0:  # one term: polynomials in q, ~5x cheaper than quadrature
+        if r == 1 and not exact:  # one term: polynomials in q, ~5x cheaper than quadrature
             c2, c4 = cellp[c, 3], kap * cellp[c, 4]
             qc = q[o]
             q2 = qc * qc
@@ -84,9 +95,9 @@ def _kinematics(q, qd, A, y, J, h, Us4):
                 wd += B1[g, j] * qd[o + j]
             wg = W[g]
             wp2 = wp * wp
-            if kap == 2.0:   # exact: y = int 1 - cos(theta), sin(theta) = w'
+            if exact:
                 cos2 = 1.0 - wp2
-                cos = math.sqrt(cos2)          # NaN for |w'| >= 1: caught as non-finite
+                cos = math.sqrt(cos2)
                 yc += wg * (1.0 - cos)
                 hc += wg * wd * wd / (cos2 * cos)
                 gy = wg * wp / cos
@@ -100,48 +111,40 @@ def _kinematics(q, qd, A, y, J, h, Us4):
                 wpp = 0.0
                 for j in range(r):
                     wpp += B2[g, j] * q[o + j]
-                # bending energy beyond EI int w''^2: w'^2 (eq 51), or w'^2/(1 - w'^2) (exact,
-                # curvature^2 = w''^2 / (1 - w'^2))
-                u4 += EI * wg * wpp * wpp * (wp2 / (1.0 - wp2) if kap == 2.0 else wp2)
+                u4 += EI * wg * wpp * wpp * (wp2 / (1.0 - wp2) if exact else wp2)
         y[c] = yc
         h[c] = hc
         if Us4 is not None:
             Us4[c] = u4
 
-
 @njit(**_INLINE)
-def _slope_status(y, nc):
-    """BAD_SLOPE if an end shortening is NaN: with exact kinematics, |w'| >= 1 somewhere."""
-    for c in range(nc):
-        if y[c] != y[c]:
-            return BAD_SLOPE
-    return OK
+def _kinematics_any(q, qd, A, y, J, h, Us4):
+    """:func:`_kinematics` with the scene's kinematics (known from the tuple's type)."""
+    _kinematics(q, qd, A, y, J, h, Us4, len(A) == N_ARRAYS_EXACT)
 
 
 @njit(**_INLINE)
-def _quartic_force(q, A, F):
+def _quartic_force(q, A, F, exact):
     """
-    Subtract from F the gradient of the bending energy beyond EI int w''^2 dx: EI int w''^2 g dx
-    with g = w'^2 (eq 51) or, exact, g = w'^2 / (1 - w'^2).
+    Subtract from F the gradient of the bending energy beyond EI int w''^2 dx: EI int w''^2 g
+    with g = w'^2 (eq 51) or, ``exact`` (a call-site constant), g = w'^2 / (1 - w'^2).
     """
     flags, cell_q, cell_g, B1, B2, W = A[0], A[1], A[2], A[3], A[4], A[5]
     cellp = A[10]
     for c in range(flags[1]):
         o = cell_q[c]
         r = cell_q[c + 1] - o
-        exact = cellp[c, 2] == 2.0
         if r == 1 and not exact:
             F[o] -= 4.0 * cellp[c, 5] * q[o] ** 3
             continue
-        EI = cellp[c, 1]
-        EI2 = 2.0 * EI
+        EI2 = 2.0 * cellp[c, 1]
         for g in range(cell_g[c], cell_g[c + 1]):
             wp = 0.0
             wpp = 0.0
             for j in range(r):
                 wp += B1[g, j] * q[o + j]
                 wpp += B2[g, j] * q[o + j]
-            if exact:   # d/dw' and d/dw'' of EI w''^2 w'^2 / (1 - w'^2)
+            if exact:
                 cos2 = 1.0 - wp * wp
                 s1 = EI2 * W[g] * wpp * wpp * wp / (cos2 * cos2)
                 s2 = EI2 * W[g] * wpp * wp * wp / cos2
@@ -150,7 +153,6 @@ def _quartic_force(q, A, F):
                 s2 = EI2 * W[g] * wpp * wp * wp
             for j in range(r):
                 F[o + j] -= s1 * B1[g, j] + s2 * B2[g, j]
-
 
 @njit(**_INLINE)
 def _solve_spd(Mt, F, out):
@@ -213,6 +215,12 @@ def rhs(x, u, A, dx, pw, ws, Mt, quasi_static=False):
     With ``quasi_static`` the charge slots hold z = q_p - C(q) v_inf (v_inf = v Rp/(Rs+Rp), the
     charge the circuit relaxes to for frozen q) and receive dz/dt; see :func:`advance`.
     """
+    return _rhs_impl(x, u, A, dx, pw, ws, Mt, quasi_static, len(A) == N_ARRAYS_EXACT)
+
+
+@njit(**_INLINE)
+def _rhs_impl(x, u, A, dx, pw, ws, Mt, quasi_static, exact):
+    """The body of :func:`rhs`; ``exact`` is a constant at both call sites."""
     flags, cell_q = A[0], A[1]
     Mb, K, D, mi_val, cellp, detp = A[6], A[7], A[8], A[9], A[10], A[11]
     mi_idx, grp_q, cell_grp = A[13], A[14], A[15]
@@ -227,9 +235,7 @@ def rhs(x, u, A, dx, pw, ws, Mt, quasi_static=False):
     h = ws[nc:2 * nc]
     J = ws[2 * nc:2 * nc + nq]
     F = ws[2 * nc + nq:2 * nc + 2 * nq]
-    _kinematics(q, qd, A, y, J, h, None)
-    if _slope_status(y, nc) != OK:
-        return BAD_SLOPE
+    _kinematics(q, qd, A, y, J, h, None, exact)
     p_diss = 0.0
     for c in range(nc):   # cell blocks of K, D and Mb
         o = cell_q[c]
@@ -249,7 +255,7 @@ def rhs(x, u, A, dx, pw, ws, Mt, quasi_static=False):
                 Mt[i, k] = 0.0
             for k in range(r):
                 Mt[i, col + k] = Mb[i, k]
-    _quartic_force(q, A, F)
+    _quartic_force(q, A, F, exact)
     # Interface mass on the end shortenings: T_I = 1/2 ydot' MI ydot with ydot_c = J_c . qdot.
     for e in range(mi_val.shape[0]):
         c = mi_idx[e, 0]
@@ -265,8 +271,8 @@ def rhs(x, u, A, dx, pw, ws, Mt, quasi_static=False):
         l0, VY, C0, V = detp[i, 0], detp[i, 1], detp[i, 2], detp[i, 3]
         EM, etaM, etav, Rs, Rp = detp[i, 4], detp[i, 5], detp[i, 6], detp[i, 7], detp[i, 8]
         lam = (cellp[i, 0] - y[i]) / l0
-        if not lam > 0.0:
-            return BAD_STRETCH
+        if not lam > 0.0:   # NaN: exact kinematics past |w'| = 1 (states are finite here)
+            return BAD_STRETCH if lam == lam else BAD_SLOPE
         lam2 = lam * lam
         # dU_DE/dlambda without the sign of dlambda/dq = -J/l0 (eq 53, corrected eq 71)
         if rcsrc:
@@ -332,14 +338,12 @@ def stiff_rates(x, A, L, ws):
     y = ws[:nc]
     h = ws[nc:2 * nc]
     J = ws[2 * nc:2 * nc + nq]
-    _kinematics(x[:nq], x[nq:2 * nq], A, y, J, h, None)
-    if _slope_status(y, nc) != OK:
-        return BAD_SLOPE
+    _kinematics_any(x[:nq], x[nq:2 * nq], A, y, J, h, None)
     ip = 2 * nq + nc * creep
     for i in range(nc):
         lam = (cellp[i, 0] - y[i]) / detp[i, 0]
-        if not lam > 0.0:
-            return BAD_STRETCH
+        if not lam > 0.0:   # NaN: exact kinematics past |w'| = 1 (states are finite here)
+            return BAD_STRETCH if lam == lam else BAD_SLOPE
         L[ip + i] = -(1.0 / detp[i, 7] + 1.0 / detp[i, 8]) / (detp[i, 2] * lam * lam)
     return OK
 
@@ -370,7 +374,7 @@ def outputs(x, u, A, out):
     h = np.empty(nc)
     J = np.empty(nq)
     Us4 = np.empty(nc)
-    _kinematics(q, qd, A, y, J, h, Us4)
+    _kinematics_any(q, qd, A, y, J, h, Us4)
     energy = 0.0
     ydot = np.zeros(nc)
     for c in range(nc):
@@ -442,7 +446,7 @@ def _shift_charge(x, u, A, sign):
     y = np.empty(nc)
     h = np.empty(nc)
     J = np.empty(nq)
-    _kinematics(x[:nq], x[nq:2 * nq], A, y, J, h, None)
+    _kinematics_any(x[:nq], x[nq:2 * nq], A, y, J, h, None)
     ip = 2 * nq + nc * creep
     for i in range(nc):
         lam = (cellp[i, 0] - y[i]) / detp[i, 0]
@@ -672,7 +676,7 @@ def _charge_transient(x, u_old, u_new, A, z_tol):
     y = np.empty(nc)
     hh = np.empty(nc)
     J = np.empty(nq)
-    _kinematics(x[:nq], x[nq:2 * nq], A, y, J, hh, None)
+    _kinematics_any(x[:nq], x[nq:2 * nq], A, y, J, hh, None)
     T = 0.0
     tau_min = np.inf
     for i in range(nc):
@@ -752,7 +756,7 @@ def book_input_jump(x, u_old, u_new, A):
     y = np.empty(nc)
     hh = np.empty(nc)
     J = np.empty(nq)
-    _kinematics(x[:nq], x[nq:2 * nq], A, y, J, hh, None)
+    _kinematics_any(x[:nq], x[nq:2 * nq], A, y, J, hh, None)
     for i in range(nc):
         lam = (cellp[i, 0] - y[i]) / detp[i, 0]
         cap = detp[i, 2] * lam * lam

@@ -278,6 +278,8 @@ def _assemble(scene, cells, MI, det_physics, P, structure_names):
     flags = np.array([nq, nc, creep, rc, power, len(names)], dtype=np.int64)
     arrays = (flags, cell_q, cell_g, B1, B2, W, Mb, K, D, mi_val, cellp, detp, ref, mi_idx,
               grp_q, cell_grp, np.ascontiguousarray(P, dtype=float))
+    if scene.fidelity == 'exact':   # a different tuple type: its own compiled kernels
+        arrays = arrays + (np.zeros(0),)
     det_names = scene.det_names
     if nc == 1:
         out_names = CELL_OUTPUTS
