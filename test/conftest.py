@@ -57,6 +57,7 @@ class Harness:
         from std_srvs.srv import SetBool, Trigger
         from diagnostic_msgs.msg import DiagnosticArray
         import rclpy
+        self.closed = False
 
         from det_sim_ros.sim_node import SimNode
 
@@ -156,7 +157,10 @@ class Harness:
         self.spin_until(lambda: self.node.commands_received > before, 'command delivery')
 
     def close(self):
-        """Destroy the nodes and the executor."""
+        """Destroy the nodes and the executor (once: tests may close early to flush a log)."""
+        if self.closed:
+            return
+        self.closed = True
         self.executor.shutdown()
         self.test.destroy_node()
         self.node.destroy_node()

@@ -1,6 +1,5 @@
 """Replay of MCAP logs: bit-exact re-simulation, republishing with the recorded timing, CLI."""
 
-import os
 import threading
 
 import pytest
@@ -105,17 +104,6 @@ def test_info_and_recover_cli(tmp_path, log_path, capsys):
     assert resimulate(str(tmp_path / 'fixed.mcap')).ok()
 
 
-@pytest.fixture
-def ros_context():
-    os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 100)
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    import rclpy
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.shutdown(context=context)
-
-
 def _subscribe(context, topics):
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -209,33 +197,21 @@ def test_play_preserves_order_stamps_and_rate(tmp_path, scene, ros_context):
         node.destroy_node()
 
 
-def test_node_log_resimulates_bit_for_bit(tmp_path):
+def test_node_log_resimulates_bit_for_bit(tmp_path, harness):
     """The node's own log (free-run, commands at arbitrary steps, a reset) re-simulates exactly."""
-    import rclpy
-    from rclpy.context import Context
-    from conftest import DOMAIN_ID, Harness
-    context = Context()
-    rclpy.init(context=context, domain_id=DOMAIN_ID)
-    harness = None
-    try:
-        harness = Harness(context, **{'log.path': str(tmp_path / 'logs'), 'steps_per_tick': 5})
-        recorder = harness.node._recorder
-        assert recorder is not None and recorder.active
-        for volts in (800.0, 1500.0, 400.0):
-            harness.command([volts])
-            harness.spin_until(lambda: harness.node.commands_received >= 1, 'command')
-            harness.spin_until_sim_time(harness.node._sim.t + 0.02)
-        harness.joint_command(['det0'], [1200.0])
-        harness.spin_until_sim_time(harness.node._sim.t + 0.02)
-        harness.call('reset')
-        harness.command([600.0])
-        harness.spin_until_sim_time(0.03)
-        harness.close()
-        harness = None
-    finally:
-        if harness is not None:
-            harness.close()
-        rclpy.try_shutdown(context=context)
+    h = harness(**{'log.path': str(tmp_path / 'logs'), 'steps_per_tick': 5})
+    recorder = h.node._recorder
+    assert recorder is not None and recorder.active
+    for volts in (800.0, 1500.0, 400.0):
+        h.command([volts])
+        h.spin_until(lambda: h.node.commands_received >= 1, 'command')
+        h.spin_until_sim_time(h.node._sim.t + 0.02)
+    h.joint_command(['det0'], [1200.0])
+    h.spin_until_sim_time(h.node._sim.t + 0.02)
+    h.call('reset')
+    h.command([600.0])
+    h.spin_until_sim_time(0.03)
+    h.close()   # destroys the node: the recorder closes its file
     assert recorder.fault == '' and len(recorder.paths) == 2  # reset starts a new file
     for path in recorder.paths:
         result = resimulate(path)
@@ -275,30 +251,17 @@ def test_resim_plate_log(tmp_path, joint_commands):
     assert all(value == 0.0 for value in result.max_deviation.values())
 
 
-def test_node_plate_log_resimulates_bit_for_bit(tmp_path):
+def test_node_plate_log_resimulates_bit_for_bit(tmp_path, harness):
     """The node's log of a plate run (vector and joint commands) re-simulates exactly, the
     per-DET y0 logged as a list."""
-    import rclpy
-    from rclpy.context import Context
-    from conftest import DOMAIN_ID, Harness
-    context = Context()
-    rclpy.init(context=context, domain_id=DOMAIN_ID)
-    harness = None
-    try:
-        harness = Harness(context, scene_file='plate', steps_per_tick=5,
-                          **{'log.path': str(tmp_path / 'logs')})
-        recorder = harness.node._recorder
-        for volts in ([800.0, 1500.0], [400.0, 3000.0]):
-            harness.command(volts)
-            harness.spin_until_sim_time(harness.node._sim.t + 0.02)
-        harness.joint_command(['left'], [2000.0])
-        harness.spin_until_sim_time(harness.node._sim.t + 0.02, 'structure')
-        harness.close()
-        harness = None
-    finally:
-        if harness is not None:
-            harness.close()
-        rclpy.try_shutdown(context=context)
+    h = harness(scene_file='plate', steps_per_tick=5, **{'log.path': str(tmp_path / 'logs')})
+    recorder = h.node._recorder
+    for volts in ([800.0, 1500.0], [400.0, 3000.0]):
+        h.command(volts)
+        h.spin_until_sim_time(h.node._sim.t + 0.02)
+    h.joint_command(['left'], [2000.0])
+    h.spin_until_sim_time(h.node._sim.t + 0.02, 'structure')
+    h.close()   # destroys the node: the recorder closes its file
     assert recorder.fault == '' and len(recorder.paths) == 1
     assert LogReader(recorder.paths[0]).info['y0'].startswith('[')
     result = resimulate(recorder.paths[0])
