@@ -238,7 +238,7 @@ def _assemble(scene, cells, MI, det_physics, P, structure_names):
     D = np.zeros((nq, r_max))
     ref = np.zeros(nq)
     cellp = np.zeros((nc, 6))
-    detp = np.zeros((nc, 9))
+    detp = np.zeros((nc, 15))
     kappa = {'paper': 0.0, 'consistent': 1.0, 'exact': 2.0}[scene.fidelity]
     for c, (basis, (x, w), ph) in enumerate(zip(cells, nodes, det_physics)):
         g = slice(cell_g[c], cell_g[c + 1])
@@ -259,7 +259,9 @@ def _assemble(scene, cells, MI, det_physics, P, structure_names):
         e4 = EI * w @ (S2[:, 0] * S1[:, 0]) ** 2
         cellp[c] = (basis.length, EI, kappa, c2, c4, e4)  # last three used when n_ritz == 1
         detp[c] = (ph.l0, ph.volume * ph.Y, ph.C0, ph.volume, ph.E_M, ph.eta_M, ph.eta_v,
-                   ph.Rs, ph.Rp)
+                   ph.Rs, ph.Rp,   # then reciprocals and ratios, so the rhs need not divide
+                   1.0 / ph.l0, 1.0 / ph.C0, 1.0 / ph.Rs, 1.0 / ph.Rp, ph.Rp / (ph.Rs + ph.Rp),
+                   ph.E_M / ph.eta_M if ph.eta_M > 0.0 else 0.0)
     MI = np.asarray(MI, dtype=float)
     mi_idx = np.argwhere(MI != 0.0).astype(np.int64).reshape(-1, 2)
     mi_val = MI[MI != 0.0].astype(float)
