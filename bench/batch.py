@@ -83,17 +83,17 @@ def main(argv=None) -> int:
                         s.set_input([U[k, i]])
                         s.step()
             cost_sep = _cpu(separate, args.repeats) / args.sim_time
-        rows.append((n, sim.method.name, sim.substeps, cost_step, cost_run, cost_sep))
-        print(f'N={n:5d} {sim.method.name} x{sim.substeps}: step {cost_step:.4f} '
+        rows.append((n, sim.describe_stepper(), cost_step, cost_run, cost_sep))
+        print(f'N={n:5d} {sim.describe_stepper()}: step {cost_step:.4f} '
               f'run {cost_run:.4f} separate {cost_sep:.4f} CPU s/sim s', file=sys.stderr,
               flush=True)
     print('| N | stepper | array step: CPU s/sim s | RTF | per actuator (us/period) | '
           'array run: CPU s/sim s | RTF | N x SISO step: CPU s/sim s | array vs separate |')
     print('|---|---|---|---|---|---|---|---|---|')
-    for n, method, sub, step, run, sep in rows:
+    for n, stepper, step, run, sep in rows:
         per_act = step / n * 1e3   # us of CPU per actuator per 1 ms period
         ratio = sep / step if np.isfinite(sep) else float('nan')
-        print(f'| {n} | {method} x{sub} | {step:.4g} | {1 / step:.3g} | {per_act:.3g} | '
+        print(f'| {n} | {stepper} | {step:.4g} | {1 / step:.3g} | {per_act:.3g} | '
               f'{run:.4g} | {1 / run:.3g} | {sep:.4g} | {ratio:.3g}x |')
     return 0
 

@@ -518,14 +518,19 @@ def _phi_all(z, out):
 @njit(**_JIT)
 def advance(x, u, A, c, terms, h, n_steps):
     """Advance x in place by n_steps fixed steps of size h (see :func:`advance_core`)."""
-    return advance_core(x, u, A, h, n_steps, 1.0, prepare(A, c, terms))
+    return advance_core(x, u, A, h, n_steps, 1.0,
+                        prepare(A, c, terms, np.zeros(0), np.zeros(x.shape[0])))
 
 
 @njit(**_JIT)
-def prepare(A, c, terms):
+def prepare(A, c, terms, embedded, inv_scale):
     """
-    Decode a method table and allocate the stepping scratch once (per :func:`run`, per
-    Simulator, or per :func:`advance` call): a tuple read by :func:`advance_core`.
+    Decode a method table and allocate the stepping scratch once (per Simulator, per
+    :func:`advance` call): a tuple read by :func:`advance_core` and :func:`period_core`.
+
+    ``embedded``: weights e_0..e_s of the error estimate h sum_j e_j N_j (e_s multiplies
+    f(x_new), the first stage of the next step), empty for a method without one;
+    ``inv_scale``: 1 / scale of each state in the error norm (0: not in the norm).
     """
     nx = A[0][5]
     s = c.shape[0]
@@ -570,17 +575,48 @@ def prepare(A, c, terms):
     coef0 = np.empty(nt)   # L = 0 values: phi_k(0) = 1/k!
     for a in range(n_args):
         _phi_all(0.0, phis[a])
+    exponential = False    # a table with any phi_k term is an exponential method
     for t in range(nt):
         coef0[t] = tw[t] * (1.0 if tk[t] < 0 else phis[arg_index[t], tk[t]])
+        if tk[t] >= 0:
+            exponential = True
+    # The same table at L = 0, terms of equal (row, stage) merged and zeros dropped: what the
+    # states without a stiff rate use (Krogstad's 16 terms are classical RK4's 7 there).
+    w0 = np.zeros((s + 1, s))
+    for t in range(nt):
+        w0[int(terms[t, 0]), tj[t]] += coef0[t]
+    m_start = np.zeros(s + 2, dtype=np.int64)
+    m_j = np.empty(nt, dtype=np.int64)
+    m_w = np.empty(nt)
+    n_m = 0
+    for i in range(s + 1):
+        for j in range(s):
+            if w0[i, j] != 0.0:
+                m_j[n_m] = j
+                m_w[n_m] = w0[i, j]
+                n_m += 1
+        m_start[i + 1] = n_m
     coef = np.empty((nt, nx))
     for t in range(nt):
         for m in range(nx):
             coef[t, m] = coef0[t]
+    flags = A[0]
+    nq, nc, creep, rcsrc = flags[0], flags[1], flags[2], flags[3]
+    # states with a stiff rate (the charges of an RC scene under an exponential method) are
+    # the contiguous slots [s0, s1); all others take the merged table
+    s0 = 2 * nq + nc * creep
+    s1 = s0 + (nc if exponential and rcsrc else 0)
+    # the error estimate needs stage 0 at the step's start (c_0 = 0) for its FSAL term
+    n_emb = embedded.shape[0] if (embedded.shape[0] == s + 1 and c[0] == 0.0) else 0
+    ints = np.array([s0, s1, n_emb, int(exponential)], dtype=np.int64)
     ws = np.empty(workspace_size(A))
-    Mt = np.empty((A[0][0], mass_block_size(A)))
+    Mt = np.empty((nq, mass_block_size(A)))
+    # est[0]: largest error estimate of the steps since the caller reset it; est[1]: steps taken
+    est = np.zeros(2)
     scratch = (np.empty((s, nx)), np.empty(nx), np.zeros(nx), np.empty(2), np.ones((s, nx)),
-               np.ones(nx), np.empty(nx), np.empty(nx))
-    return (c, tj, tk, tw, arg_index, args, t_start, ec_arg, phis, coef, ws, Mt, scratch)
+               np.ones(nx), np.empty(nx), np.empty(nx), np.zeros(nx), np.empty(nx), np.empty(nx))
+    return (c, tj, tk, tw, arg_index, args, t_start, ec_arg, phis, coef, ws, Mt, scratch,
+            m_start, m_j, m_w, ints, embedded[:n_emb].copy(), inv_scale.copy(), est)
 
 
 @njit(**_JIT)
@@ -601,20 +637,20 @@ def advance_core(x, u, A, h, n_steps, growth, P):
     equation left to the explicit stages (the change of 1/(C Rs) along the step) acts on z
     instead of on the full charge, which makes the frozen-L splitting error tiny.
     Step k has size h * growth^k (growth = 1: fixed steps; > 1: the graded steps that follow a
-    charge transient, see :func:`period`). ``P`` is :func:`prepare`'s tuple. Returns a status
+    charge transient, see :func:`period_core`). ``P`` is :func:`prepare`'s tuple; with an
+    embedded table the largest weighted error estimate of these steps is max'ed into P's
+    ``est[0]`` (one extra rhs at the end for the last step's FSAL term). Returns a status
     code; on failure x holds the last good state.
     """
-    c, tj, tk, tw, arg_index, args, t_start, ec_arg, phis, coef, ws, Mt, scratch = P
-    N, X, L, pw, e_c, e_1, x_new, x_start = scratch
+    c, tj, tk, tw, arg_index, args, t_start, ec_arg, phis, coef, ws, Mt, scratch = P[:13]
+    m_start, m_j, m_w, ints, emb, inv_scale, est = P[13:]
+    N, X, L, pw, e_c, e_1, x_new, x_start, pend = scratch[:9]
     nx = x.shape[0]
     s = c.shape[0]
-    nt = tj.shape[0]
     n_args = args.shape[0]
-    exponential = False   # a table with any phi_k term is an exponential method
-    for t in range(nt):
-        if tk[t] >= 0:
-            exponential = True
-    qs = exponential and A[0][3] == 1
+    s0, s1, n_emb, exponential = ints[0], ints[1], ints[2], ints[3]
+    nmech = 2 * A[0][0]
+    qs = exponential == 1 and A[0][3] == 1
     for m in range(nx):
         if not math.isfinite(x[m]):
             return NON_FINITE
@@ -622,17 +658,17 @@ def advance_core(x, u, A, h, n_steps, growth, P):
     if qs:
         _shift_charge(x, u, A, -1.0)
     status = OK
+    err = 0.0
+    h_prev = 0.0
     for _ in range(n_steps):
-        status = stiff_rates(x, A, L, ws, exponential)
+        status = stiff_rates(x, A, L, ws, exponential == 1)
         if status != OK:
             break
-        for m in range(nx):
-            if L[m] == 0.0:
-                continue
+        for m in range(s0, s1):
             z = h * L[m]
             for a in range(n_args):
                 _phi_all(args[a] * z, phis[a])
-            for t in range(nt):
+            for t in range(tj.shape[0]):
                 if tk[t] >= 0:
                     coef[t, m] = tw[t] * phis[arg_index[t], tk[t]]
             for i in range(s + 1):
@@ -645,23 +681,44 @@ def advance_core(x, u, A, h, n_steps, growth, P):
                     e_1[m] = e
         for i in range(s):
             for m in range(nx):
+                X[m] = x[m]
+            for t in range(m_start[i], m_start[i + 1]):
+                j = m_j[t]
+                w = h * m_w[t]
+                for m in range(s0):
+                    X[m] += w * N[j, m]
+                for m in range(s1, nx):
+                    X[m] += w * N[j, m]
+            for m in range(s0, s1):
                 X[m] = e_c[i, m] * x[m]
             for t in range(t_start[i], t_start[i + 1]):
                 j = tj[t]
-                for m in range(nx):
+                for m in range(s0, s1):
                     X[m] += h * coef[t, m] * N[j, m]
             status = rhs(X, u, A, N[i], pw, ws, Mt, qs)
             if status != OK:
                 break
-            for m in range(nx):
+            for m in range(s0, s1):
                 N[i, m] -= L[m] * X[m]
+            if i == 0 and h_prev > 0.0:   # FSAL: N_0 = f(x) completes the last step's estimate
+                for m in range(nmech):
+                    err = max(err, abs(h_prev * (pend[m] + emb[s] * N[0, m])) * inv_scale[m])
         if status != OK:
             break
         for m in range(nx):
+            x_new[m] = x[m]
+        for t in range(m_start[s], m_start[s + 1]):
+            j = m_j[t]
+            w = h * m_w[t]
+            for m in range(s0):
+                x_new[m] += w * N[j, m]
+            for m in range(s1, nx):
+                x_new[m] += w * N[j, m]
+        for m in range(s0, s1):
             x_new[m] = e_1[m] * x[m]
         for t in range(t_start[s], t_start[s + 1]):
             j = tj[t]
-            for m in range(nx):
+            for m in range(s0, s1):
                 x_new[m] += h * coef[t, m] * N[j, m]
         for m in range(nx):
             if not math.isfinite(x_new[m]):
@@ -670,10 +727,23 @@ def advance_core(x, u, A, h, n_steps, growth, P):
             break
         for m in range(nx):
             x[m] = x_new[m]
+        if n_emb > 0:
+            for m in range(nmech):
+                acc = 0.0
+                for j in range(s):
+                    acc += emb[j] * N[j, m]
+                pend[m] = acc
+            h_prev = h
         h *= growth
+    if status == OK and h_prev > 0.0:   # the last step's FSAL term: one more rhs
+        status = rhs(x, u, A, N[0], pw, ws, Mt, qs)
+        for m in range(nmech):
+            err = max(err, abs(h_prev * (pend[m] + emb[s] * N[0, m])) * inv_scale[m])
     if status != OK:
         x[:] = x_start
         return status
+    est[0] = max(est[0], err)
+    est[1] += n_steps
     if qs:
         _shift_charge(x, u, A, 1.0)
     return OK
@@ -692,9 +762,14 @@ def _charge_transient(x, u_old, u_new, A, z_tol):
     1.9e-3; with the transient resolved, 8.6e-6 = the ideal-source error of the same table).
     """
     detp = A[11]
-    stretch = _stretches(x, A)
     T = 0.0
     tau_min = np.inf
+    jump = False
+    for i in range(A[0][1]):
+        jump = jump or u_new[i] != u_old[i]
+    if not jump:   # the common case: no stretches needed (they cost an allocation)
+        return T, tau_min
+    stretch = _stretches(x, A)
     for i in range(A[0][1]):
         du = abs(u_new[i] - u_old[i])
         if du == 0.0:
@@ -712,22 +787,23 @@ def _charge_transient(x, u_old, u_new, A, z_tol):
 
 
 @njit(**_JIT)
-def period_core(x, u_old, u, A, h, n_sub, z_tol, fine, P):
+def _fixed_period(x, u_old, u, A, h, n_sub, z_tol, fine, P):
     """
     One control period dt = n_sub h with the input u held, starting from an input u_old.
 
     With ``z_tol`` > 0 (exponential methods on an RC scene) a charge transient after an input
     jump is resolved first: graded steps from ``fine`` * tau (never coarser than h) until the
     lag has decayed below z_tol (see :func:`_charge_transient`), then steps of at most h to the
-    end of the period. The period
-    still ends exactly at dt; the split depends only on the state and the inputs, so runs stay
-    deterministic. Returns a status code; on failure x holds the state at the period's start.
+    end of the period. The period still ends exactly at dt; the split depends only on the
+    state and the inputs, so runs stay deterministic. Returns a status code; on failure x
+    holds the state at the period's start.
     """
     if z_tol > 0.0 and A[0][3] == 1:
         dt = h * n_sub
         T, tau = _charge_transient(x, u_old, u, A, z_tol)
         if T > 0.0:
-            x0 = x.copy()
+            x0 = P[12][9]
+            x0[:] = x
             T = min(T, dt)
             # The local error of a step is about lag(t) (h/tau)^5 and the lag decays like
             # exp(-t/tau), so the step may grow like exp(t / (5 tau)): geometric steps with
@@ -751,6 +827,50 @@ def period_core(x, u_old, u, A, h, n_sub, z_tol, fine, P):
     return advance_core(x, u, A, h, n_sub, 1.0, P)
 
 
+# ctl, the step-count controller's state and settings (float64[5], see period_core)
+CTL_N, CTL_TOL, CTL_N_MIN, CTL_N_MAX, CTL_EXPONENT = 0, 1, 2, 3, 4
+CTL_SAFETY = 0.5   # aim the next period's estimate at half the local tolerance
+
+
+@njit(**_JIT)
+def period_core(x, u_old, u, A, dt, z_tol, fine, P, ctl):
+    """
+    One control period dt with the input u held, in ``ctl[CTL_N]`` steps (plus the graded
+    steps of a charge transient, see :func:`_fixed_period`).
+
+    With a local tolerance ``ctl[CTL_TOL]`` > 0 the step count adapts from period to period
+    (fixed steps inside each period): a period whose largest embedded error estimate exceeds
+    the tolerance, or that left the domain, is repeated with more steps (up to CTL_N_MAX), and
+    the next period starts from the count the estimate predicts (estimate ~ n^-CTL_EXPONENT),
+    never below CTL_N_MIN nor below half the current count. Everything depends only on the
+    state and the inputs, so runs stay deterministic. Returns a status code; on failure x
+    holds the state at the period's start.
+    """
+    tol = ctl[CTL_TOL]
+    if tol <= 0.0:
+        n = int(ctl[CTL_N])
+        return _fixed_period(x, u_old, u, A, dt / n, n, z_tol, fine, P)
+    est = P[19]
+    n_max = int(ctl[CTL_N_MAX])
+    x_keep = P[12][10]
+    x_keep[:] = x
+    while True:
+        n = int(ctl[CTL_N])
+        est[0] = 0.0
+        status = _fixed_period(x, u_old, u, A, dt / n, n, z_tol, fine, P)
+        if n < n_max and (status != OK or est[0] > tol):
+            grow = 4.0 if status != OK else 1.2 * (est[0] / tol) ** (1.0 / ctl[CTL_EXPONENT])
+            ctl[CTL_N] = min(n_max, max(n + 1, int(math.ceil(n * grow))))
+            x[:] = x_keep
+            continue
+        if status != OK:
+            return status
+        ratio = (est[0] / (CTL_SAFETY * tol)) ** (1.0 / ctl[CTL_EXPONENT])
+        n_next = int(math.ceil(n * ratio - 1e-9))
+        ctl[CTL_N] = min(n_max, max(ctl[CTL_N_MIN], (n + 1) // 2, n_next))
+        return OK
+
+
 @njit(**_JIT)
 def book_input_jump(x, u_old, u_new, A):
     """
@@ -772,21 +892,20 @@ def book_input_jump(x, u_old, u_new, A):
 
 
 @njit(**_JIT)
-def run(x, u_held, u_last, U, A, c, terms, h, n_sub, z_tol, fine, X, Y):
+def run(x, u_held, u_last, U, A, dt, z_tol, fine, P, ctl, X, Y):
     """
     Many control periods in one call (offline runs): period k holds U[k]; X[k + 1] and Y[k + 1]
     receive the state and outputs after it. ``u_held`` is the input held now (already booked),
-    ``u_last`` the one the last period ran with. Returns (status, periods completed); x is left
-    at the last good state.
+    ``u_last`` the one the last period ran with; ``P`` and ``ctl`` as for :func:`period_core`.
+    Returns (status, periods completed); x is left at the last good state.
     """
     u_book = u_held.copy()
     u_prev = u_last.copy()
-    P = prepare(A, c, terms)
     for k in range(U.shape[0]):
         u = U[k]
         book_input_jump(x, u_book, u, A)
         u_book = u
-        status = period_core(x, u_prev, u, A, h, n_sub, z_tol, fine, P)
+        status = period_core(x, u_prev, u, A, dt, z_tol, fine, P, ctl)
         if status != OK:
             return status, k
         status = outputs(x, u, A, Y[k + 1])
@@ -798,10 +917,10 @@ def run(x, u_held, u_last, U, A, c, terms, h, n_sub, z_tol, fine, X, Y):
 
 
 @njit(**_JIT)
-def period_and_output(x, u_old, u, A, h, n_sub, z_tol, fine, P, out):
+def period_and_output(x, u_old, u, A, dt, z_tol, fine, P, ctl, out):
     """One control period in one call (:func:`period_core` with the scratch ``P`` of
     :func:`prepare`, kept by the caller between periods), then the outputs."""
-    status = period_core(x, u_old, u, A, h, n_sub, z_tol, fine, P)
+    status = period_core(x, u_old, u, A, dt, z_tol, fine, P, ctl)
     if status != OK:
         return status
     return outputs(x, u, A, out)

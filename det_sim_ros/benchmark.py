@@ -146,7 +146,7 @@ def run_scene(beam, eps_b, quick=False, repeats=3, log=print, reference_dir=None
         cpu, r = _cpu(lambda: simulate(sc, volts, t_end), repeats)
         sim = Simulator(sc)
         rows.append(dict(beam=beam, eps_b=eps_b, solver=f'auto ({label})',
-                         setting=f'tol 1e-06, {sim.method.name} x{sim.substeps}',
+                         setting=f'tol 1e-06, {sim.describe_stepper()}',
                          cpu_per_sim_s=cpu / t_end, err_dy=np.nan, err_qp=np.nan,
                          realtime_factor=t_end / cpu))
         log(f'  {label:>24}  cpu/sim-s {cpu / t_end:9.4f} (reduced model: own error not shown)')

@@ -168,7 +168,7 @@ class ResimResult:
     fault: str = ''
     complete: bool = True            # the log was a finished file
     method: str = ''
-    substeps: int = 0
+    substeps: int = 0                # 0: adaptive
 
     def ok(self, tolerance: float = 0.0) -> bool:
         """True if every compared output is within ``tolerance`` and nothing went wrong."""
@@ -181,8 +181,9 @@ class ResimResult:
         lines = [f"{'output':<{width}}  {'samples':>8}  max |deviation|"]
         for key, value in self.max_deviation.items():
             lines.append(f'{key:<{width}}  {self.compared[key]:>8}  {value:.6g}')
-        lines.append(f'{self.commands} commands, {self.steps} steps, stepper {self.method} x '
-                     f'{self.substeps}' + ('' if self.complete else ', log unfinished (recovered)')
+        stepping = f'x {self.substeps}' if self.substeps else 'adaptive'
+        lines.append(f'{self.commands} commands, {self.steps} steps, stepper {self.method} '
+                     f'{stepping}' + ('' if self.complete else ', log unfinished (recovered)')
                      + (f', {self.skipped} outputs unmatched' if self.skipped else '')
                      + (f', fault: {self.fault}' if self.fault else ''))
         return '\n'.join(lines)
@@ -224,7 +225,7 @@ def resimulate(log, method: str | None = None, substeps: int | None = None,
     structure_key = (f"{contract.structure_topic}.position "
                      f"({', '.join(contract.structure_outputs)})")
     dt_ns = sim.dt * 1e9
-    result = ResimResult({}, {}, method=sim.method.name, substeps=sim.substeps)
+    result = ResimResult({}, {}, method=sim.method.name, substeps=sim.substeps_setting)
     initial = sim.outputs()
     current = np.array([initial[name] for name in sim.output_names])
 

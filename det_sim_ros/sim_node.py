@@ -244,7 +244,7 @@ class SimNode(Node):
         mode = 'real-time x%g' % self._rtf if self._p('real_time') else 'free-run'
         self.get_logger().info(
             f'scene {scene_file!r}: {self.scene.beam} beam, eps_b = {self.scene.eps_b:g}, '
-            f'{self.scene.rate_hz:g} Hz, {self._sim.method.name} x{self._sim.substeps}; '
+            f'{self.scene.rate_hz:g} Hz, {self._sim.describe_stepper()}; '
             f'{mode}{", paused" if self.paused else ""}; {len(self.det_names)} DET(s), '
             f'voltage command order: [{", ".join(self.det_names)}]'
             + (f'; structure outputs [{", ".join(self.structure_names)}]'
@@ -262,7 +262,7 @@ class SimNode(Node):
         self._recorder = Recorder(
             self._p('log.path'), self.scene, qos_by_topic=qos, split_mb=self._p('log.split_mb'),
             namespace=self.get_namespace(),
-            metadata={'method': self._sim.method.name, 'substeps': self._sim.substeps,
+            metadata={'method': self._sim.method.name, 'substeps': self._sim.substeps_setting,
                       'y0': repr(self.y0[0]) if len(self.y0) == 1 else repr(self.y0),
                       'node': self.get_fully_qualified_name()},
             on_fault=lambda text: self.get_logger().error(text))

@@ -19,7 +19,7 @@ from typing import Callable
 import numpy as np
 
 from . import _kernels
-from .integrators import choose_substeps, get_method, Method, transient_settings
+from .integrators import error_weights, get_method, Method, step_control, transient_settings
 from .model import build_model, Model, ModelDomainError
 from .scene import load_scene, Scene
 
@@ -60,12 +60,13 @@ class Simulator:
         if substeps < 0:
             raise ValueError(f'substeps must be >= 0 (got {substeps})')
         self.dt = self.scene.dt
-        self.substeps = substeps or choose_substeps(self.method, self.dt, self.scene.tolerance,
-                                                    self.model.fastest_beam_rate())
-        self.h = self.dt / self.substeps
-        self._c, self._terms = self.method.arrays()
+        self._ctl_initial = step_control(self.method, self.model, substeps)
+        self.adaptive = bool(self._ctl_initial[_kernels.CTL_TOL] > 0.0)
         self._z_tol, self._fine = transient_settings(self.method, self.scene)
-        self._scratch = _kernels.prepare(self.model.arrays, self._c, self._terms)
+        c, terms = self.method.arrays()
+        self._scratch = _kernels.prepare(self.model.arrays, c, terms,
+                                         np.asarray(self.method.embedded, dtype=float),
+                                         error_weights(self.model))
         self.output_names = self.model.output_names
         self._out = np.empty(len(self.output_names))
         self.reset()
@@ -80,6 +81,7 @@ class Simulator:
     def reset(self, x0=None) -> None:
         """Back to t = 0, the initial state (or ``x0``), 0 V input, no fault."""
         self.k = 0
+        self._ctl = self._ctl_initial.copy()   # the step count starts over: runs repeat exactly
         self.x = self.model.initial_state() if x0 is None else np.array(x0, dtype=float)
         if self.x.shape != (self.model.n_states,):
             raise ValueError(f'x0 must have {self.model.n_states} entries')
@@ -95,6 +97,33 @@ class Simulator:
     def t(self) -> float:
         """Simulated time k * dt, s."""
         return self.k * self.dt
+
+    @property
+    def substeps(self) -> int:
+        """Internal steps the next control period starts with (fixed unless ``adaptive``)."""
+        return int(self._ctl[_kernels.CTL_N])
+
+    @property
+    def h(self) -> float:
+        """Internal step size of the next control period, s."""
+        return self.dt / self.substeps
+
+    @property
+    def steps_taken(self) -> int:
+        """Internal steps taken since construction (all periods, repeated ones included)."""
+        return int(self._scratch[-1][1])
+
+    @property
+    def substeps_setting(self) -> int:
+        """The step count as a setting: 0 = adaptive, else the fixed count (logs record this,
+        so a re-simulation uses the same stepping and reproduces the run exactly)."""
+        return 0 if self.adaptive else self.substeps
+
+    def describe_stepper(self) -> str:
+        """'etdrk4 x20' or 'etdrk4 adaptive (now x12)', for logs and diagnostics."""
+        if self.adaptive:
+            return f'{self.method.name} adaptive (now x{self.substeps})'
+        return f'{self.method.name} x{self.substeps}'
 
     # -- input ----------------------------------------------------------------------------
     def set_input(self, volts) -> InputCheck:
@@ -133,8 +162,8 @@ class Simulator:
             raise ModelDomainError(_kernels.NON_FINITE, f'(faulted: {self.fault})')
         x_new = self.x.copy()
         status = _kernels.period_and_output(x_new, self._u_prev, self.u, self.model.arrays,
-                                            self.h, self.substeps, self._z_tol, self._fine,
-                                            self._scratch, self._out)
+                                            self.dt, self._z_tol, self._fine, self._scratch,
+                                            self._ctl, self._out)
         if status != _kernels.OK:
             error = ModelDomainError(status, f'at t = {self.t + self.dt:.6g} s')
             self.fault = str(error)
@@ -217,8 +246,8 @@ def simulate(scene, voltage: Callable[[float], float] | np.ndarray, t_end: float
     X[0] = sim.x
     # the whole run in one compiled call (same periods as n calls of Simulator.step)
     x = sim.x.copy()
-    status, done = _kernels.run(x, sim.u, sim._u_prev, U, sim.model.arrays, sim._c, sim._terms, sim.h,
-                                sim.substeps, sim._z_tol, sim._fine, X, Y)
+    status, done = _kernels.run(x, sim.u, sim._u_prev, U, sim.model.arrays, sim.dt, sim._z_tol,
+                                sim._fine, sim._scratch, sim._ctl, X, Y)
     if done:
         sim.x, sim.u, sim._u_prev = X[done].copy(), U[done - 1].copy(), U[done - 1].copy()
         sim.k += done

@@ -32,7 +32,7 @@ def logged_run(tmp_path_factory):
     sim = Simulator(scene)
     path = str(tmp_path_factory.mktemp('log') / 'run.mcap')
     recorder = Recorder(path, scene, metadata={'method': sim.method.name,
-                                                'substeps': sim.substeps})
+                                                'substeps': sim.substeps_setting})
     simulate_to_log(recorder, sim, _command, N_STEPS)
     recorder.close()
     assert recorder.fault == ''

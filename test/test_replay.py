@@ -23,7 +23,7 @@ def _commands(k):
 def _write_log(path, scene, joint_commands=False, n_steps=N_STEPS, commands=_commands):
     sim = Simulator(scene)
     recorder = Recorder(path, scene, metadata={'method': sim.method.name,
-                                                'substeps': sim.substeps})
+                                                'substeps': sim.substeps_setting})
     simulate_to_log(recorder, sim, commands, n_steps, joint_commands=joint_commands)
     recorder.close()
     assert recorder.fault == ''
