@@ -113,11 +113,11 @@ def run_scene(beam, eps_b, quick=False, repeats=3, log=print, reference_dir=None
             np.save(cached, X_ref)
     rows = []
 
-    def add(solver, setting, cpu, X):
+    def add(solver, setting, cpu, X, steps=np.nan):
         err_y, err_q = step_error(model, t, X, X_ref) if X is not None else (np.nan, np.nan)
         rows.append(dict(beam=beam, eps_b=eps_b, solver=solver, setting=setting,
                          cpu_per_sim_s=cpu / t_end, err_dy=err_y, err_qp=err_q,
-                         realtime_factor=t_end / cpu))
+                         realtime_factor=t_end / cpu, steps_per_period=steps))
         log(f'  {solver:>14} {setting:>10}  cpu/sim-s {cpu / t_end:9.4f}  err {err_y:.2e}')
 
     volts = step_voltage(scene.physics.v_max)
@@ -138,17 +138,21 @@ def run_scene(beam, eps_b, quick=False, repeats=3, log=print, reference_dir=None
         sc = step_scene(beam, eps_b, **{'integrator.tolerance': tol})
         simulate(sc, volts, 0.01)
         cpu, r = _cpu(lambda: simulate(sc, volts, t_end), repeats)
-        add('auto', f'tol {tol:g}', cpu, r.x)
+        counted = Simulator(sc)   # the same run once more, to count its internal steps
+        simulate(counted, volts, t_end)
+        add('auto', f'tol {tol:g}', cpu, r.x, counted.steps_taken / round(t_end / sc.dt))
     # reductions at the same tolerance (auto picks method and substeps for each model)
     for label, over in {'full model': {}, **reduced}.items():
         sc = step_scene(beam, eps_b, **over)
         simulate(sc, volts, 0.01)
         cpu, r = _cpu(lambda: simulate(sc, volts, t_end), repeats)
         sim = Simulator(sc)
+        simulate(sim, volts, t_end)
         rows.append(dict(beam=beam, eps_b=eps_b, solver=f'auto ({label})',
-                         setting=f'tol 1e-06, {sim.describe_stepper()}',
+                         setting=f'tol 1e-06, {sim.method.name}',
                          cpu_per_sim_s=cpu / t_end, err_dy=np.nan, err_qp=np.nan,
-                         realtime_factor=t_end / cpu))
+                         realtime_factor=t_end / cpu,
+                         steps_per_period=sim.steps_taken / round(t_end / sc.dt)))
         log(f'  {label:>24}  cpu/sim-s {cpu / t_end:9.4f} (reduced model: own error not shown)')
     for method in ('RK45', 'DOP853', 'Radau', 'BDF', 'LSODA'):
         for rtol in ((1e-6,) if quick else (1e-4, 1e-6, 1e-8)):
@@ -180,12 +184,15 @@ def _write(rows, out):
         writer.writeheader()
         writer.writerows(rows)
     with open(os.path.join(out, 'work_precision.md'), 'w') as stream:
-        stream.write('| beam | eps_b | solver | setting | CPU s / sim s | RTF | err Δy | err q_p |\n')
-        stream.write('|---|---|---|---|---|---|---|---|\n')
+        stream.write('| beam | eps_b | solver | setting | CPU s / sim s | RTF | err Δy | err q_p '
+                     '| steps / period |\n')
+        stream.write('|---|---|---|---|---|---|---|---|---|\n')
         for r in rows:
+            steps = r['steps_per_period']
             stream.write(f"| {r['beam']} | {r['eps_b']} | {r['solver']} | {r['setting']} | "
                          f"{r['cpu_per_sim_s']:.4g} | {r['realtime_factor']:.3g} | "
-                         f"{r['err_dy']:.2e} | {r['err_qp']:.2e} |\n")
+                         f"{r['err_dy']:.2e} | {r['err_qp']:.2e} | "
+                         f"{'' if np.isnan(steps) else f'{steps:.1f}'} |\n")
     try:
         import matplotlib
         matplotlib.use('Agg')

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from det_sim_ros import integrators
+from det_sim_ros import _kernels, integrators
 from det_sim_ros.model import build_model, ModelDomainError
 from det_sim_ros.scene import load_scene
 from det_sim_ros.simulator import simulate, Simulator
@@ -101,14 +101,84 @@ def test_zero_order_hold_and_time_grid():
 
 
 def test_auto_step_meets_its_tolerance_on_the_step_scenario():
-    """The default stepper's error on a 0.5 s piece of the step scenario vs a 4x finer run."""
+    """The default (adaptive) stepper's error on a 0.5 s piece of the step scenario against a
+    fixed run 4x finer than the tolerance's fixed count, in fewer steps than that count."""
     scene = load_scene('default', {'integrator.tolerance': 1e-6})
     sim = Simulator(scene)
+    assert sim.adaptive
+    fixed = integrators.choose_substeps(sim.method, sim.dt, 1e-6, sim.model.fastest_beam_rate())
     volts = lambda t: 3000.0 * (t >= 0.2)  # noqa: E731
     coarse = simulate(sim, volts, 0.5)
-    fine = simulate(scene, volts, 0.5, method=sim.method.name, substeps=4 * sim.substeps)
+    fine = simulate(scene, volts, 0.5, method=sim.method.name, substeps=4 * fixed)
     stroke = np.ptp(fine['y'])
     assert np.max(np.abs(coarse['y'] - fine['y'])) / stroke <= 1e-6
+    # over the whole 'step' scenario (4.5 s, mostly settled) it takes under half those steps
+    from det_sim_ros.scenarios import STEP_END, step_voltage
+    sim = Simulator(scene)
+    simulate(sim, step_voltage(3000.0), STEP_END)
+    assert sim.steps_taken < 0.5 * fixed * sim.k
+
+
+def _steps_per_period(sim, volts, n):
+    counts = []
+    for k in range(n):
+        sim.set_input([volts(k * sim.dt)])
+        before = sim.steps_taken
+        sim.step()
+        counts.append(sim.steps_taken - before)
+    return np.array(counts)
+
+
+def test_adaptive_step_count_follows_the_dynamics():
+    """Many steps while the beam snaps after the 3 kV step, few once it has settled."""
+    sim = Simulator(load_scene('default'))
+    counts = _steps_per_period(sim, lambda t: 3000.0 * (t >= 0.5), 1500)
+    settled = counts[1300:].mean()
+    snapping = counts[500:520].mean()
+    assert snapping > 2.0 * settled
+    assert counts.min() >= sim._ctl_initial[_kernels.CTL_N_MIN] >= 1
+
+
+def test_adaptive_step_repeats_a_period_over_its_tolerance():
+    """A period started with too few steps is repeated with more (and the run stays exact:
+    the same inputs give the same outputs, whether stepped or simulated in one call)."""
+    scene = load_scene('default', {'integrator.tolerance': 1e-7})
+    sim = Simulator(scene)
+    sim.set_input([3000.0])
+    for _ in range(30):
+        sim.step()
+    sim._ctl[_kernels.CTL_N] = sim._ctl[_kernels.CTL_N_MIN]   # force a bad start
+    n_min = sim.substeps
+    before = sim.steps_taken
+    sim.step()
+    assert sim.steps_taken - before > 2 * n_min       # the rejected try plus the repeat
+    assert sim.substeps > n_min
+
+    stepped = Simulator(scene)
+    volts = lambda t: 3000.0 * (t >= 0.01) - 1500.0 * (t >= 0.05)  # noqa: E731
+    _steps_per_period(stepped, volts, 100)
+    at_once = simulate(scene, volts, 0.1)
+    assert np.array_equal(stepped.x, at_once.x[-1])
+
+
+@pytest.mark.parametrize('name', ['etdrk4', 'rk4', 'dp5'])
+def test_embedded_error_estimate_has_the_order_of_its_pair(name):
+    """The estimate h sum e_j N_j is the local error of the embedded solution: it scales as
+    h^(p+1) with p the embedded order (RK4(3) FSAL pair: h^4; Dormand-Prince 5(4): h^5)."""
+    sim = Simulator(load_scene('default', {'scene.source': 'ideal'}), method=name)
+    method = sim.method
+    x0 = sim.model.initial_state()
+    x0[0], x0[1] = 4e-3, 0.3          # a buckled beam in motion
+    estimates = []
+    for h in (2e-5, 1e-5):
+        P = sim._scratch
+        P[-1][0] = 0.0
+        x = x0.copy()
+        assert _kernels.advance_core(x, np.array([1500.0]), sim.model.arrays, h, 1, 1.0, P) == 0
+        estimates.append(P[-1][0])
+    ratio = estimates[0] / estimates[1]
+    expected = 2.0 ** (method.embedded_order + 1)
+    assert 0.7 * expected < ratio < 1.4 * expected
 
 
 # ---------------- stability stress suite (behaviour, never wall time) ----------------
