@@ -11,6 +11,12 @@ classical Runge-Kutta method with the same table (phi_k(0) = 1/k!).
 Why exponential: the electrical time constant Rs C ~ 30 us is 300 times shorter than the beam's
 period, so explicit RK4 at a 1 ms step diverges; an exponential update keeps every step size
 stable (tested from Rs = 1 Ohm to 1 MOhm) at the cost of one exp per step and charge state.
+
+How many steps: within a control period the steps are equal; their number is either fixed
+(``integrator.substeps`` > 0, or a method without an embedded pair) or adapts per period to the
+scene's tolerance from the method's embedded error estimate (:func:`step_control`). The 'step'
+scenario spends most of its time settled, where one step per 1 ms period suffices, and a
+snap-through needs ~30: adapting took 2.4x fewer steps than the fixed count at tolerance 1e-6.
 """
 
 from __future__ import annotations

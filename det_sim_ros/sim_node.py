@@ -556,6 +556,8 @@ class SimNode(Node):
             'power_residual': f'{residual:.3e}',
             'voltage_V': str(self._sim.u.tolist()),
             'fault': self._sim.fault,
+            'stepper': self._sim.describe_stepper(),      # adaptive: the current step count
+            'internal_steps': str(self._sim.steps_taken),
         }
         recorder = self._recorder
         if recorder is not None:

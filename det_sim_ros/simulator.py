@@ -2,8 +2,11 @@
 The simulator: state, the sim-time grid t = k dt, and inputs held between commands.
 
 :class:`Simulator` advances exactly one control period dt per :meth:`Simulator.step` with the
-input held constant (zero-order hold), in ``substeps`` fixed internal steps of the chosen method.
-Time is always ``k * dt`` (never accumulated), and the same inputs give bit-identical outputs.
+input held constant (zero-order hold), in fixed internal steps of the chosen method. With
+``integrator.substeps: 0`` and a method that has an embedded error estimate (the default) their
+number adapts from period to period to the scene's tolerance (see _kernels.period_core); else it
+is fixed. Time is always ``k * dt`` (never accumulated), and the same inputs give bit-identical
+outputs: the step count depends only on the state and the inputs.
 A state that leaves the model's domain puts the simulator in a fault: the last good state is kept,
 ``fault`` names the cause, and :meth:`Simulator.reset` recovers. No NaN ever leaves it.
 
@@ -37,14 +40,15 @@ class InputCheck:
 
 class Simulator:
     """
-    Fixed-step simulation of one scene.
+    Fixed-rate simulation of one scene (fixed internal steps within each control period).
 
     :param scene: a :class:`Scene`, a scene file/name, or a built :class:`Model`.
     :param method: stepper name (default: the scene's ``integrator.method``; 'auto' picks
         'etdrk4' when the scene has a stiff charge state and 'dp5' otherwise: the cheapest
         per accuracy in bench/work_precision.py).
-    :param substeps: internal steps per control period (default: the scene's, 0 = from the
-        scene's tolerance).
+    :param substeps: internal steps per control period (default: the scene's; 0 = adaptive
+        from the scene's tolerance when the method has an embedded estimate, else a fixed count
+        from the tolerance).
     """
 
     def __init__(self, scene=None, method: str | None = None, substeps: int | None = None):

@@ -121,6 +121,9 @@ def test_bad_inputs_refused_or_clamped(harness):
     h.spin_until(lambda: any(kv.key == 'refused_commands' and kv.value == '7'
                              for d in h.diagnostics for s in d.status for kv in s.values),
                  'diagnostics with the refused count')
+    values = {kv.key: kv.value for kv in h.diagnostics[-1].status[0].values}
+    assert values['stepper'].startswith('etdrk4 adaptive (now x')   # the default stepping
+    assert int(values['internal_steps']) > 0
 
 
 def test_invalid_parameters_refused(harness):
