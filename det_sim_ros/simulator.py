@@ -115,7 +115,7 @@ class Simulator:
     @property
     def steps_taken(self) -> int:
         """Internal steps taken since construction (all periods, repeated ones included)."""
-        return int(self._scratch[-1][1])
+        return int(self._scratch[_kernels.P_EST][1])
 
     @property
     def substeps_setting(self) -> int:

@@ -172,10 +172,10 @@ def test_embedded_error_estimate_has_the_order_of_its_pair(name):
     estimates = []
     for h in (2e-5, 1e-5):
         P = sim._scratch
-        P[-1][0] = 0.0
+        P[_kernels.P_EST][0] = 0.0
         x = x0.copy()
         assert _kernels.advance_core(x, np.array([1500.0]), sim.model.arrays, h, 1, 1.0, P) == 0
-        estimates.append(P[-1][0])
+        estimates.append(P[_kernels.P_EST][0])
     ratio = estimates[0] / estimates[1]
     expected = 2.0 ** (method.embedded_order + 1)
     assert 0.7 * expected < ratio < 1.4 * expected
