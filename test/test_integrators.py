@@ -140,8 +140,7 @@ def test_adaptive_step_count_follows_the_dynamics():
 
 
 def test_adaptive_step_repeats_a_period_over_its_tolerance():
-    """A period started with too few steps is repeated with more (and the run stays exact:
-    the same inputs give the same outputs, whether stepped or simulated in one call)."""
+    """A period started with too few steps is repeated with more."""
     scene = load_scene('default', {'integrator.tolerance': 1e-7})
     sim = Simulator(scene)
     sim.set_input([3000.0])
@@ -154,11 +153,19 @@ def test_adaptive_step_repeats_a_period_over_its_tolerance():
     assert sim.steps_taken - before > 2 * n_min       # the rejected try plus the repeat
     assert sim.substeps > n_min
 
+
+
+@pytest.mark.parametrize('source', ['rc', 'ideal'])
+def test_stepping_equals_one_call_bit_for_bit(source):
+    """Simulator.set_input/step per period (the node's path, with set_input's fast path for
+    one float) and simulate() in one compiled call give the same states, energy book included."""
+    scene = load_scene('default', {'integrator.tolerance': 1e-7, 'scene.source': source})
     stepped = Simulator(scene)
     volts = lambda t: 3000.0 * (t >= 0.01) - 1500.0 * (t >= 0.05)  # noqa: E731
     _steps_per_period(stepped, volts, 100)
     at_once = simulate(scene, volts, 0.1)
     assert np.array_equal(stepped.x, at_once.x[-1])
+    assert stepped.x[-1] > 0.0    # the monitor booked dissipation
 
 
 @pytest.mark.parametrize('name', ['etdrk4', 'rk4', 'dp5'])

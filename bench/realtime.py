@@ -1,0 +1,57 @@
+"""
+Real-time factor of the default stepper (issue 3's target: >= 100x real time at 1 kHz with an
+error <= 1e-6): the 4.5 s 'step' scenario on all six scenes at integrator.tolerance 1e-6, the
+whole run in one simulate() call as the offline path and Simulator.step() per period as the node
+does. Cost = process CPU seconds per simulated second; min and median of --repeats (a shared
+host only ever adds time, so the min is the closest to the code's own cost). The error is in
+bench/work_precision.py (same scenes, same settings). Run: python bench/realtime.py (~1 min).
+"""
+
+import argparse
+import statistics
+import time
+
+from det_sim_ros.scenarios import STEP_END, step_scene, step_voltage
+from det_sim_ros.simulator import simulate, Simulator
+
+
+def _cpu(fn):
+    t0 = time.process_time()
+    fn()
+    return time.process_time() - t0
+
+
+def _stepped(scene, volts):
+    sim = Simulator(scene)
+    for k in range(int(round(STEP_END / sim.dt))):
+        sim.set_input([volts(k * sim.dt)])
+        sim.step()
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
+    parser.add_argument('--repeats', type=int, default=7)
+    parser.add_argument('--tolerance', type=float, default=1e-6)
+    args = parser.parse_args(argv)
+    print('| beam | ε_b | steps / period | simulate(): CPU s/sim s min (median) | RTF (min) '
+          '| step() per period: CPU s/sim s min (median) | RTF (min) |')
+    print('|---|---|---|---|---|---|---|')
+    for beam in ('fixed', 'simply_supported'):
+        for eps_b in (0.15, 0.20, 0.25):
+            scene = step_scene(beam, eps_b, **{'integrator.tolerance': args.tolerance})
+            volts = step_voltage(scene.physics.v_max)
+            counted = Simulator(scene)
+            simulate(counted, volts, STEP_END)   # compiles, and counts the internal steps
+            steps = counted.steps_taken / counted.k
+            run = [_cpu(lambda: simulate(scene, volts, STEP_END)) / STEP_END
+                   for _ in range(args.repeats)]
+            step = [_cpu(lambda: _stepped(scene, volts)) / STEP_END
+                    for _ in range(max(3, args.repeats // 2))]
+            print(f"| {beam.replace('_', ' ')} | {eps_b:.2f} | {steps:.1f} | {min(run):.4f} "
+                  f'({statistics.median(run):.4f}) | {1 / min(run):.0f}× | {min(step):.4f} '
+                  f'({statistics.median(step):.4f}) | {1 / min(step):.0f}× |', flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
