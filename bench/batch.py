@@ -51,10 +51,12 @@ def main(argv=None) -> int:
     parser.add_argument('--max-separate', type=int, default=100)
     parser.add_argument('--tolerance', type=float, default=1e-6)
     parser.add_argument('--synchronized', action='store_true', help='all copies switch together')
+    parser.add_argument('--substeps', type=int, default=0, help='fixed steps per period (0: adaptive)')
     args = parser.parse_args(argv)
     rows = []
     for n in (int(s) for s in args.sizes.split(',')):
-        scene = load_scene('array', {'structure.copies': n, 'integrator.tolerance': args.tolerance})
+        scene = load_scene('array', {'structure.copies': n, 'integrator.tolerance': args.tolerance,
+                                     'integrator.substeps': args.substeps})
         sim = Simulator(scene)
         periods = int(round(args.sim_time / sim.dt))
         U = _commands(n, periods, sim.dt, scene.physics.v_max, args.synchronized)
