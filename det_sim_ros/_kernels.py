@@ -368,12 +368,11 @@ def outputs(x, u, A, out):
     """
     nq, nc, nx = A[0][0], A[0][1], A[0][5]
     return _outputs(x, u, A, out, np.empty(nx), np.empty(2), np.empty(workspace_size(A)),
-                    np.empty((nq, mass_block_size(A))), np.empty(workspace_size(A)),
-                    np.empty(nc), np.empty(nc))
+                    np.empty((nq, mass_block_size(A))), np.empty(nc), np.empty(nc))
 
 
 @njit(**_JIT)
-def _outputs(x, u, A, out, dx, pw, ws, Mt, kin, Us4, ydot):
+def _outputs(x, u, A, out, dx, pw, ws, Mt, Us4, ydot):
     """:func:`outputs` with caller-owned scratch (the per-period path: no allocation). Compiled
     once and called, not inlined: three inlined copies (outputs, run, period_and_output) made a
     cold start compile 106 s instead of ~60 (measured), for 0.2 us per period."""
@@ -387,7 +386,7 @@ def _outputs(x, u, A, out, dx, pw, ws, Mt, kin, Us4, ydot):
     rhs_status = rhs(x, u, A, dx, pw, ws, Mt)
     if status == OK:
         status = rhs_status
-    _kinematics_any(x, A, kin, Us4)
+    _kinematics_any(x, A, ws, Us4)   # the rhs's kinematics again, now with Us4, in ws
     energy = 0.0
     for c in range(nc):
         ydot[c] = 0.0
@@ -399,7 +398,7 @@ def _outputs(x, u, A, out, dx, pw, ws, Mt, kin, Us4, ydot):
                            + 0.5 * x[i] * K[i, k] * x[o + k])
         energy += Us4[c]
         for j in range(cell_q[c], cell_q[c + 1]):
-            ydot[c] += kin[2 * nc + j] * x[nq + j]
+            ydot[c] += ws[2 * nc + j] * x[nq + j]
     for e in range(mi_val.shape[0]):
         energy += 0.5 * mi_val[e] * ydot[mi_idx[e, 0]] * ydot[mi_idx[e, 1]]
     ie = 2 * nq
@@ -407,7 +406,7 @@ def _outputs(x, u, A, out, dx, pw, ws, Mt, kin, Us4, ydot):
     for c in range(nc):
         l0, VY, C0, V, EM, Rs, Rp = (detp[c, 0], detp[c, 1], detp[c, 2], detp[c, 3],
                                      detp[c, 4], detp[c, 7], detp[c, 8])
-        lam = (cellp[c, 0] - kin[c]) / l0
+        lam = (cellp[c, 0] - ws[c]) / l0
         lam2 = lam * lam
         cap = C0 * lam2
         if rcsrc:
@@ -429,7 +428,7 @@ def _outputs(x, u, A, out, dx, pw, ws, Mt, kin, Us4, ydot):
         k = c * N_CELL_OUTPUTS
         out[k] = qr
         out[k + 1] = qdr
-        out[k + 2] = kin[c]
+        out[k + 2] = ws[c]
         out[k + 3] = lam
         out[k + 4] = qp
         out[k + 5] = vp
@@ -441,7 +440,7 @@ def _outputs(x, u, A, out, dx, pw, ws, Mt, kin, Us4, ydot):
     for r in range(P.shape[0]):
         value = 0.0
         for c in range(nc):
-            value += P[r, c] * kin[c]
+            value += P[r, c] * ws[c]
         out[k] = value
         k += 1
     out[k] = energy
@@ -617,9 +616,11 @@ def prepare(A, c, terms, embedded, inv_scale):
     Mt = np.empty((nq, mass_block_size(A)))
     # est[0]: largest error estimate of the steps since the caller reset it; est[1]: steps taken
     est = np.zeros(2)
-    scratch = (np.empty((s, nx)), np.empty(nx), np.zeros(nx), np.empty(2), np.ones((s, nx)),
-               np.ones(nx), np.empty(nx), np.empty(nx), np.zeros(nx), np.empty(nx), np.empty(nx))
-    out_scratch = (np.empty(workspace_size(A)), np.empty(nc), np.empty(nc))   # for _outputs
+    # N (stage rates), X (stage state, then the new state), L, pw, e_c (exp(c_i h L), row s:
+    # exp(h L)), x_start, pend (partial error estimate), x0 (_fixed_period), x_keep (period_core)
+    scratch = (np.empty((s, nx)), np.empty(nx), np.zeros(nx), np.empty(2), np.ones((s + 1, nx)),
+               np.empty(nx), np.zeros(nx), np.empty(nx), np.empty(nx))
+    out_scratch = (np.empty(nc), np.empty(nc))   # Us4 and ydot for _outputs
     # (index P_EST of this tuple is est)
     return (c, tj, tk, tw, arg_index, args, t_start, ec_arg, phis, coef, ws, Mt, scratch,
             m_start, m_j, m_w, ints, embedded[:n_emb].copy(), inv_scale.copy(), est,
@@ -651,7 +652,7 @@ def advance_core(x, u, A, h, n_steps, growth, P):
     """
     c, tj, tk, tw, arg_index, args, t_start, ec_arg, phis, coef, ws, Mt, scratch = P[:13]
     m_start, m_j, m_w, ints, emb, inv_scale, est = P[13:20]
-    N, X, L, pw, e_c, e_1, x_new, x_start, pend = scratch[:9]
+    N, X, L, pw, e_c, x_start, pend = scratch[:7]
     nx = x.shape[0]
     s = c.shape[0]
     n_args = args.shape[0]
@@ -682,12 +683,9 @@ def advance_core(x, u, A, h, n_steps, growth, P):
             for i in range(s + 1):
                 a = ec_arg[i]
                 ci = c[i] if i < s else 1.0
-                e = 1.0 if ci == 0.0 else (phis[a, 0] if a >= 0 else math.exp(ci * z))
-                if i < s:
-                    e_c[i, m] = e
-                else:
-                    e_1[m] = e
-        for i in range(s):
+                e_c[i, m] = 1.0 if ci == 0.0 else (phis[a, 0] if a >= 0 else math.exp(ci * z))
+        # rows 0..s-1 of the table build the stages, row s (the weights b) the new state in X
+        for i in range(s + 1):
             for m in range(nx):
                 X[m] = x[m]
             for t in range(m_start[i], m_start[i + 1]):
@@ -703,6 +701,8 @@ def advance_core(x, u, A, h, n_steps, growth, P):
                 j = tj[t]
                 for m in range(s0, s1):
                     X[m] += h * coef[t, m] * N[j, m]
+            if i == s:
+                break
             status = rhs(X, u, A, N[i], pw, ws, Mt, qs)
             if status != OK:
                 break
@@ -714,27 +714,12 @@ def advance_core(x, u, A, h, n_steps, growth, P):
         if status != OK:
             break
         for m in range(nx):
-            x_new[m] = x[m]
-        for t in range(m_start[s], m_start[s + 1]):
-            j = m_j[t]
-            w = h * m_w[t]
-            for m in range(s0):
-                x_new[m] += w * N[j, m]
-            for m in range(s1, nx):
-                x_new[m] += w * N[j, m]
-        for m in range(s0, s1):
-            x_new[m] = e_1[m] * x[m]
-        for t in range(t_start[s], t_start[s + 1]):
-            j = tj[t]
-            for m in range(s0, s1):
-                x_new[m] += h * coef[t, m] * N[j, m]
-        for m in range(nx):
-            if not math.isfinite(x_new[m]):
+            if not math.isfinite(X[m]):
                 status = NON_FINITE
         if status != OK:
             break
         for m in range(nx):
-            x[m] = x_new[m]
+            x[m] = X[m]
         if n_emb > 0:
             for m in range(nmech):
                 acc = 0.0
@@ -812,7 +797,7 @@ def _fixed_period(x, u_old, u, A, h, n_sub, z_tol, fine, P):
         dt = h * n_sub
         T, tau = _charge_transient(x, u_old, u, A, z_tol)
         if T > 0.0:
-            x0 = P[12][9]
+            x0 = P[12][7]
             x0[:] = x
             T = min(T, dt)
             # The local error of a step is about lag(t) (h/tau)^5 and the lag decays like
@@ -864,7 +849,7 @@ def period_core(x, u_old, u, A, dt, z_tol, fine, P, ctl):
         return _fixed_period(x, u_old, u, A, dt / n, n, z_tol, fine, P)
     est = P[19]
     n_max = int(ctl[CTL_N_MAX])
-    x_keep = P[12][10]
+    x_keep = P[12][8]
     x_keep[:] = x
     while True:
         n = int(ctl[CTL_N])
@@ -913,8 +898,8 @@ def _period_outputs(x, u, A, out, P):
     """:func:`outputs` after a period, in the stepping scratch of ``P`` (stage buffers are free
     between periods)."""
     scratch = P[12]
-    kin, Us4, ydot = P[20]
-    return _outputs(x, u, A, out, scratch[1], scratch[3], P[10], P[11], kin, Us4, ydot)
+    Us4, ydot = P[20]
+    return _outputs(x, u, A, out, scratch[1], scratch[3], P[10], P[11], Us4, ydot)
 
 
 @njit(**_JIT)

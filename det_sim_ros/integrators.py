@@ -16,7 +16,8 @@ How many steps: within a control period the steps are equal; their number is eit
 (``integrator.substeps`` > 0, or a method without an embedded pair) or adapts per period to the
 scene's tolerance from the method's embedded error estimate (:func:`step_control`). The 'step'
 scenario spends most of its time settled, where one step per 1 ms period suffices, and a
-snap-through needs ~30: adapting took 2.4x fewer steps than the fixed count at tolerance 1e-6.
+snap-through needs ~30: at tolerance 1e-6 adapting takes 5.3-11.9 steps per period on the six
+'step' scenes instead of the fixed 20.
 """
 
 from __future__ import annotations
@@ -163,9 +164,15 @@ def choose_substeps(method: Method, dt: float, tolerance: float, beam_rate: floa
     Model.fastest_beam_rate: it decides from about 6 Ritz terms on).
     """
     const = ERROR_CONSTANT.get(method.name)
+    if const is None:
+        return min_substeps(dt, beam_rate)
+    h_max = 1.0e-3 * (tolerance / const) ** (1.0 / method.order)
+    return max(min_substeps(dt, beam_rate), int(math.ceil(dt / h_max - 1e-9)))
+
+
+def min_substeps(dt: float, beam_rate: float = 0.0) -> int:
+    """The fewest steps per period: h <= MAX_STEP and h * beam_rate <= STABLE_STEP."""
     h_max = MAX_STEP if beam_rate <= 0.0 else min(MAX_STEP, STABLE_STEP / beam_rate)
-    if const is not None:
-        h_max = min(h_max, 1.0e-3 * (tolerance / const) ** (1.0 / method.order))
     return max(1, int(math.ceil(dt / h_max - 1e-9)))
 
 
@@ -201,7 +208,7 @@ def step_control(method: Method, model, substeps: int = 0) -> np.ndarray:
     n0 = substeps or choose_substeps(method, scene.dt, scene.tolerance, beam_rate)
     if substeps or not method.adaptive:
         return np.array([n0, 0.0, n0, n0, 1.0])
-    n_min = choose_substeps(dataclasses.replace(method, name=''), scene.dt, 1.0, beam_rate)
+    n_min = min_substeps(scene.dt, beam_rate)
     tol = LOCAL_TOLERANCE[method.embedded_order] * scene.tolerance
     return np.array([max(n0, n_min), tol, n_min, MAX_SUBSTEPS_FACTOR * max(n0, n_min),
                      method.embedded_order + 1.0])
