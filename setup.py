@@ -1,16 +1,64 @@
-"""Packaging for det_sim_ros (ament_python layout; also installs with plain pip)."""
+"""Packaging for det_sim_ros (ament_python layout; also installs with plain pip).
+
+The kernel (det_sim_ros/_csrc) is a C extension compiled here, at install time, with the
+machine's C compiler: `pip install .` and `colcon build` take a few seconds and nothing is
+compiled when the node runs. It uses only Python's headers (arrays cross by the buffer
+protocol), so the build needs no numpy headers and works with any numpy.
+"""
 
 from glob import glob
 import os
+import sys
+import tempfile
 
-from setuptools import find_packages, setup
+from setuptools import Extension, find_packages, setup
+from setuptools.command.build_ext import build_ext
 
 package_name = 'det_sim_ros'
+KERNEL_SOURCES = sorted(glob('det_sim_ros/_csrc/*.c'))
+# -O3 without -ffast-math: IEEE semantics (NaN checks, bit-identical runs) are kept;
+# -fno-math-errno lets sqrt/exp compile to plain instructions.
+KERNEL_FLAGS = ['-O3', '-std=c99', '-fno-math-errno']
+
+
+class BuildKernel(build_ext):
+    """build_ext with a one-line reason when there is no C compiler, and OpenMP when the
+    compiler has it (batch stepping over threads; results do not depend on it)."""
+
+    def build_extensions(self):
+        compiler = self.compiler
+        if not self._compiles([]):
+            sys.exit('det_sim_ros: a C compiler is needed to build its kernel '
+                     f'({" ".join(compiler.compiler_so[:1])} failed); install gcc or clang, '
+                     'e.g. `apt-get install gcc`, then install again')
+        openmp = os.environ.get('DET_SIM_OPENMP', '1') != '0' and self._compiles(['-fopenmp'])
+        for ext in self.extensions:
+            if openmp:
+                ext.extra_compile_args = ext.extra_compile_args + ['-fopenmp']
+                ext.extra_link_args = ext.extra_link_args + ['-fopenmp']
+        super().build_extensions()
+
+    def _compiles(self, flags):
+        with tempfile.TemporaryDirectory() as tmp:
+            src = os.path.join(tmp, 'probe.c')
+            with open(src, 'w') as f:
+                f.write('int main(void) { return 0; }\n')
+            try:
+                objects = self.compiler.compile([src], output_dir=tmp, extra_postargs=flags)
+                self.compiler.link_executable(objects, os.path.join(tmp, 'probe'),
+                                              extra_postargs=flags)
+            except Exception:  # noqa: BLE001 - any failure means: not usable
+                return False
+        return True
 
 setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*', 'bench']),
+    ext_modules=[Extension('det_sim_ros._ckernel', KERNEL_SOURCES,
+                           depends=glob('det_sim_ros/_csrc/*.h'),
+                           extra_compile_args=KERNEL_FLAGS)],
+    cmdclass={'build_ext': BuildKernel},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         (os.path.join('share', package_name), ['package.xml']),
@@ -23,7 +71,6 @@ setup(
         'setuptools',
         'numpy>=1.26,<3',
         'scipy>=1.11,<2',
-        'numba>=0.60,<1',
         'pyyaml>=6.0,<7',
         'mcap>=1.6,<2',
         'mcap-ros2-support>=0.5,<1',

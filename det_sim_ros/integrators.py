@@ -2,8 +2,8 @@
 Fixed-step steppers declared as coefficient tables over one compiled stepping core.
 
 Each :class:`Method` is data: stage nodes ``c`` and the coefficients a_ij, b_i written as sums of
-``weight * phi_k(c_arg * h * L)`` (``k = -1``: a constant weight). The core
-(:func:`det_sim_ros._kernels.advance`) treats x' = L x + N(x) with the stiff diagonal L of the
+``weight * phi_k(c_arg * h * L)`` (``k = -1``: a constant weight). The compiled core
+(``ds_advance`` in det_sim_ros/_csrc/stepping.c) treats x' = L x + N(x) with the stiff diagonal L of the
 charge equation (dq_p/dt = -q_p / (C0 lam^2 Rs||Rp) + v/Rs, linear in q_p for frozen q) exactly
 and everything else explicitly; for states with L = 0 every exponential method reduces to the
 classical Runge-Kutta method with the same table (phi_k(0) = 1/k!).
@@ -27,10 +27,10 @@ import math
 
 import numpy as np
 
-from . import _kernels
+from . import kernel
 
 __all__ = ['Method', 'METHODS', 'get_method', 'choose_substeps', 'step_control', 'error_weights',
-           'transient_settings']
+           'transient_settings', 'StepControl', 'make_stepper', 'advance']
 
 
 @dataclasses.dataclass(frozen=True)
@@ -147,7 +147,7 @@ def get_method(name: str) -> Method:
 # Step size that meets a tolerance: a method of order p reaches a relative Delta-y error of
 # about ERROR_CONSTANT * (h / 1 ms)^p on the 'step' scenario. Measured on all six scenes (both
 # beams, eps_b 0.15/0.20/0.25) against Radau/DOP853 rtol 1e-12 references, with the charge
-# transients resolved (_kernels.period): etdrk4 (RC source) 0.035...0.14, dp5 (ideal source)
+# transients resolved (fixed_period in _csrc/stepping.c): etdrk4 (RC source) 0.035...0.14, dp5 (ideal source)
 # 0.0013...0.05; the largest, at eps_b = 0.15 where the snap-through is most sensitive, is used
 # so the tolerance holds on every shared scene.
 ERROR_CONSTANT = {'etdrk4': 0.15, 'dp5': 0.06}
@@ -176,7 +176,7 @@ def min_substeps(dt: float, beam_rate: float = 0.0) -> int:
     return max(1, int(math.ceil(dt / h_max - 1e-9)))
 
 
-# Adaptive step counts (_kernels.period_core): fixed steps inside each control period, their
+# Adaptive step counts (period_core in _csrc/stepping.c): fixed steps inside each control period, their
 # number chosen per period from the method's embedded error estimate, weighted per Ritz
 # coordinate by 1/l (deflection) and dt/l (velocity) with l the cell's beam length. The local
 # tolerance is LOCAL_TOLERANCE[embedded order] times the scene tolerance: the scene tolerance
@@ -197,41 +197,66 @@ LOCAL_TOLERANCE = {3: 5e-4, 4: 5e-4}
 MAX_SUBSTEPS_FACTOR = 2
 
 
-def step_control(method: Method, model, substeps: int = 0) -> np.ndarray:
+@dataclasses.dataclass(frozen=True)
+class StepControl:
+    """The per-period step-count controller's settings (period_core in _csrc/stepping.c):
+    fixed at ``substeps`` when ``tolerance`` is 0, else adaptive between ``min_substeps`` and
+    ``max_substeps`` from the embedded estimate (which scales as n^-``exponent``)."""
+
+    substeps: int
+    tolerance: float = 0.0
+    min_substeps: int = 1
+    max_substeps: int = 1
+    exponent: float = 1.0
+
+    @property
+    def adaptive(self) -> bool:
+        return self.tolerance > 0.0
+
+
+def step_control(method: Method, model, substeps: int = 0) -> StepControl:
     """
-    The step-count controller's array for _kernels.period_core (see the CTL_* indices there):
-    adaptive when ``substeps`` is 0 and the method has an embedded estimate, else fixed at
-    ``substeps`` (0: :func:`choose_substeps`).
+    The step-count controller's settings: adaptive when ``substeps`` is 0 and the method has
+    an embedded estimate, else fixed at ``substeps`` (0: :func:`choose_substeps`).
     """
     scene = model.scene
     beam_rate = model.fastest_beam_rate()
     n0 = substeps or choose_substeps(method, scene.dt, scene.tolerance, beam_rate)
     if substeps or not method.adaptive:
-        return np.array([n0, 0.0, n0, n0, 1.0])
+        return StepControl(n0, 0.0, n0, n0, 1.0)
     n_min = min_substeps(scene.dt, beam_rate)
     tol = LOCAL_TOLERANCE[method.embedded_order] * scene.tolerance
-    return np.array([max(n0, n_min), tol, n_min, MAX_SUBSTEPS_FACTOR * max(n0, n_min),
-                     method.embedded_order + 1.0])
+    return StepControl(max(n0, n_min), tol, n_min, MAX_SUBSTEPS_FACTOR * max(n0, n_min),
+                       method.embedded_order + 1.0)
+
+
+def make_stepper(model, method: Method, control: StepControl, dt: float,
+                 z_tol: float = 0.0, fine: float = 1.0):
+    """The compiled stepper (det_sim_ros.kernel.Stepper) of ``method`` for ``model``."""
+    c, terms = method.arrays()
+    return kernel.Stepper(model.kernel, c, np.ascontiguousarray(terms.reshape(-1, 5)),
+                          np.asarray(method.embedded, dtype=float), error_weights(model),
+                          float(dt), float(z_tol), float(fine), int(control.substeps),
+                          float(control.tolerance), int(control.min_substeps),
+                          int(control.max_substeps), float(control.exponent))
 
 
 def error_weights(model) -> np.ndarray:
     """1 / scale of each state in the embedded error norm: q_j by its cell's beam length l,
     qdot_j by l / dt; the other states are not in the norm (0)."""
-    A = model.arrays
-    flags, cell_q, cellp = A[0], A[1], A[10]
-    nq = int(flags[0])
-    w = np.zeros(int(flags[5]))
-    for c in range(int(flags[1])):
-        length = cellp[c, 0]
-        w[cell_q[c]:cell_q[c + 1]] = 1.0 / length
-        w[nq + cell_q[c]:nq + cell_q[c + 1]] = model.scene.dt / length
+    a = model.arrays
+    w = np.zeros(a.n_state)
+    for c in range(a.n_cells):
+        s = a.cell_slice(c)
+        w[s] = 1.0 / a.length[c]
+        w[a.n_q + s.start:a.n_q + s.stop] = model.scene.dt / a.length[c]
     return w
 
 
-# Resolving the charge transient after an input jump (see _kernels.period): steps of
+# Resolving the charge transient after an input jump (fixed_period in _csrc/stepping.c): steps of
 # TRANSIENT_FINE * tau while the charge lag exceeds TRANSIENT_CHARGE * tolerance * C0 v_max.
 # The first step after a jump is TRANSIENT_FINE * tau, later ones grow geometrically (see
-# _kernels.period). Measured on 'step' with etdrk4 (fixed 0.15/0.20, simply supported 0.15):
+# fixed_period). Measured on 'step' with etdrk4 (fixed 0.15/0.20, simply supported 0.15):
 # 0.35 at 3e-6, scaled as tolerance^(1/4), keeps the error below the tolerance at 1e-6 and 1e-8
 # (2.4e-7...5.7e-7 and 2.5e-9...4.9e-9), so the first step follows the tolerance.
 TRANSIENT_FINE = 0.35      # at a tolerance of 3e-6
@@ -239,7 +264,7 @@ TRANSIENT_CHARGE = 1.0
 
 
 def transient_settings(method: Method, scene) -> tuple:
-    """(z_tol in C, fine step in units of tau) for :func:`_kernels.period`; z_tol = 0: off.
+    """(z_tol in C, fine step in units of tau) for the stepper; z_tol = 0: off.
 
     Only exponential methods on an RC scene use it: explicit methods must step below the
     charge time constant anyway, and an ideal source has no charge transient.
@@ -251,7 +276,8 @@ def transient_settings(method: Method, scene) -> tuple:
     return TRANSIENT_CHARGE * scene.tolerance * p.C0 * p.v_max, fine
 
 
-def advance(x, u, arrays, method: Method, h: float, n_steps: int) -> int:
-    """Advance ``x`` in place by ``n_steps`` steps of ``h`` (see _kernels.advance)."""
-    c, terms = method.arrays()
-    return _kernels.advance(x, u, arrays, c, terms, h, n_steps)
+def advance(x, u, model, method: Method, h: float, n_steps: int) -> int:
+    """Advance ``x`` in place by ``n_steps`` steps of ``h`` with ``u`` held; returns a kernel
+    status (x is unchanged on failure). Builds a stepper per call: for tests and one-offs."""
+    stepper = make_stepper(model, method, StepControl(max(1, n_steps)), max(h, 1e-300))
+    return stepper.advance(x, np.asarray(u, dtype=float), float(h), int(n_steps))

@@ -43,18 +43,19 @@ import dataclasses
 
 import numpy as np
 
-from . import _kernels
+from . import kernel
 from .scene import Scene
 from .shapes import make_basis
 
-__all__ = ['Model', 'ModelDomainError', 'build_model', 'CELL_OUTPUTS', 'GLOBAL_OUTPUTS']
+__all__ = ['Model', 'ModelArrays', 'ModelDomainError', 'build_model', 'CELL_OUTPUTS',
+           'GLOBAL_OUTPUTS']
 
 CELL_OUTPUTS = ('q', 'q_dot', 'y', 'lambda', 'q_p', 'v_p', 'i_DE', 'C', 'eps_E')
 GLOBAL_OUTPUTS = ('H', 'P_in', 'P_diss')
 _STATUS_TEXT = {
-    _kernels.BAD_STRETCH: 'DET stretch lambda = (l - y)/l0 <= 0: the beam ends met (l - y <= 0)',
-    _kernels.NON_FINITE: 'non-finite state or output (NaN or inf)',
-    _kernels.BAD_SLOPE: "beam slope |w'| reached 1 (theta = 90 deg): outside the 'exact' "
+    kernel.BAD_STRETCH: 'DET stretch lambda = (l - y)/l0 <= 0: the beam ends met (l - y <= 0)',
+    kernel.NON_FINITE: 'non-finite state or output (NaN or inf)',
+    kernel.BAD_SLOPE: "beam slope |w'| reached 1 (theta = 90 deg): outside the 'exact' "
                         "kinematics (w' = sin theta); use fidelity 'consistent' for such motions",
 }
 
@@ -70,31 +71,101 @@ class ModelDomainError(ArithmeticError):
 
 def check(status: int, where: str = '') -> None:
     """Raise :class:`ModelDomainError` for a non-zero kernel status."""
-    if status != _kernels.OK:
+    if status != kernel.OK:
         raise ModelDomainError(status, where)
+
+
+KINEMATICS = {'paper': 0, 'consistent': 1, 'exact': 2}
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ModelArrays:
+    """
+    Everything the compiled kernel reads, by name (det_sim_ros/_csrc/module.c reads these
+    fields one attribute at a time; no positional tuple). SI units. Built by :func:`build_model`.
+
+    The state is q (n_q Ritz coordinates, cell by cell), qdot (n_q), eps_E (n_cells, if
+    ``creep``), q_p (n_cells, if ``rc_source``), then W_in, W_diss (if ``power_monitor``).
+    Beam matrices are stored as block rows by cell: row j holds its cell's block row, column k
+    is relative to the cell's first coordinate.
+    """
+
+    n_q: int
+    n_cells: int
+    n_state: int
+    r_max: int                 # most Ritz terms of a cell
+    creep: int
+    rc_source: int
+    power_monitor: int
+    cell_q: np.ndarray         # int64 (n_cells+1): offsets of each cell's coordinates in q
+    cell_g: np.ndarray         # int64 (n_cells+1): offsets of each cell's quadrature nodes
+    cell_group: np.ndarray     # int64 (n_cells): coupled group of each cell
+    group_q: np.ndarray        # int64 (n_groups+1): coordinate offsets of the groups
+    kinematics: np.ndarray     # int64 (n_cells): 0 paper, 1 consistent, 2 exact (KINEMATICS)
+    B1: np.ndarray             # (n_nodes, r_max): S_j'(x_g) of the cell owning node g
+    B2: np.ndarray             # (n_nodes, r_max): S_j''(x_g)
+    W: np.ndarray              # (n_nodes,): quadrature weights, m
+    Mb: np.ndarray             # (n_q, r_max): beam mass, both beams, kg (m^-2 per Ritz unit)
+    K: np.ndarray              # (n_q, r_max): linear bending stiffness
+    D: np.ndarray              # (n_q, r_max): Kelvin-Voigt beam damping
+    ref: np.ndarray            # (n_q,): S_j at the cell's reference point (published q)
+    mi_val: np.ndarray         # nonzero entries of the interface mass MI (n_cells x n_cells), kg
+    mi_row: np.ndarray         # int64: their row cells
+    mi_col: np.ndarray         # int64: their column cells
+    P: np.ndarray              # (n_structure, n_cells): structure outputs = P @ y
+    # per cell (beam pair)
+    length: np.ndarray         # beam length l, m
+    EI: np.ndarray             # bending stiffness, N m^2
+    c2: np.ndarray             # one-term closed forms: 1/2 int S'^2, 1/8 int S'^4,
+    c4: np.ndarray             #   EI int S''^2 S'^2 (quadrature skipped for one-term cells)
+    e4: np.ndarray
+    # per DET (eqs 53-57, 66-67)
+    l0: np.ndarray             # DET length at rest, m
+    VY: np.ndarray             # volume * Young's modulus, N m
+    C0: np.ndarray             # capacitance at lambda = 1, F
+    volume: np.ndarray         # m^3
+    E_M: np.ndarray            # Maxwell creep modulus, Pa
+    eta_M: np.ndarray          # Maxwell viscosity, Pa s
+    eta_v: np.ndarray          # Kelvin-Voigt viscosity, Pa s
+    Rs: np.ndarray             # series resistance, Ohm
+    Rp: np.ndarray             # leakage resistance, Ohm
+
+    @property
+    def n_groups(self) -> int:
+        return len(self.group_q) - 1
+
+    def cell_slice(self, c: int) -> slice:
+        """Coordinates of cell ``c`` in q."""
+        return slice(int(self.cell_q[c]), int(self.cell_q[c + 1]))
 
 
 @dataclasses.dataclass
 class Model:
     """
-    A built model: f(t, x, u), named states and outputs, and the compiled arrays.
+    A built model: f(t, x, u), named states and outputs, and the compiled kernel.
 
-    Create it with :func:`build_model`; ``arrays`` is what the kernels read.
+    Create it with :func:`build_model`; ``arrays`` holds the named arrays the kernel was built
+    from, ``kernel`` the compiled model (det_sim_ros.kernel.Model).
     """
 
     scene: Scene
-    arrays: tuple
+    arrays: ModelArrays
     state_names: tuple
     output_names: tuple
     n_inputs: int
     bases: tuple
     input_names: tuple = ('det0',)      # DET names, in voltage-command order
     structure_output_names: tuple = ()  # e.g. ('plate_y', 'plate_phi')
+    kernel: object = None
+
+    def __post_init__(self):
+        if self.kernel is None:
+            self.kernel = kernel.Model(self.arrays)
 
     @property
     def structure_map(self) -> np.ndarray:
         """P (n_structure_outputs x n_cells): structure outputs = P @ y (cells' end shortenings)."""
-        return self.arrays[16]
+        return self.arrays.P
 
     def channel(self, base: str) -> list:
         """Indices in ``output_names`` of a per-DET output ('q', 'y', 'q_p', ...), DET order."""
@@ -110,7 +181,7 @@ class Model:
     def initial_state(self) -> np.ndarray:
         """q = q0 at the first Ritz coordinate of each cell, everything else 0 (scenarios.md)."""
         x = np.zeros(self.n_states)
-        cell_q = self.arrays[1]
+        cell_q = self.arrays.cell_q
         for c, physics in enumerate(self.scene.cell_physics()):
             x[cell_q[c]] = physics.q0 / self.bases[c].reference_row()[0]
         return x
@@ -119,18 +190,16 @@ class Model:
         """dx/dt at (x, u); python-control's ``updfcn(t, x, u, params)`` signature."""
         del t, params
         dx = np.empty(self.n_states)
+        x = np.ascontiguousarray(x, dtype=float)
         if not np.all(np.isfinite(x)):
-            check(_kernels.NON_FINITE)
-        check(_kernels.rhs(np.asarray(x, dtype=float), self._u(u), self.arrays, dx,
-                           np.empty(2), np.empty(_kernels.workspace_size(self.arrays)),
-                           np.empty((self.arrays[0][0],
-                                     _kernels.mass_block_size(self.arrays)))))
+            check(kernel.NON_FINITE)
+        check(self.kernel.rhs(x, self._u(u), dx)[0])
         return dx
 
     def output_vector(self, x, u) -> np.ndarray:
         """Outputs as one vector in ``output_names`` order."""
         out = np.empty(len(self.output_names))
-        check(_kernels.outputs(np.asarray(x, dtype=float), self._u(u), self.arrays, out))
+        check(self.kernel.outputs(np.ascontiguousarray(x, dtype=float), self._u(u), out))
         return out
 
     def outputs(self, x, u) -> dict:
@@ -139,14 +208,14 @@ class Model:
 
     def apply_input_jump(self, x, u_old, u_new) -> None:
         """Ideal source: book an instantaneous recharge in the power monitor (in place; see
-        :func:`det_sim_ros._kernels.book_input_jump`). Nothing to book for an RC source, without
-        the monitor, or without a change (checked here: a kernel call costs ~5 us)."""
+        ds_book_input_jump in _csrc/physics.c). Nothing to book for an RC source, without the
+        monitor, or without a change."""
         if self.scene.source != 'ideal' or not self.scene.monitor_power:
             return
         u_old, u_new = self._u(u_old), self._u(u_new)
         if np.array_equal(u_old, u_new):
             return
-        _kernels.book_input_jump(x, u_old, u_new, self.arrays)
+        self.kernel.book_input_jump(x, u_old, u_new)
 
     def fastest_beam_rate(self) -> float:
         """
@@ -156,7 +225,8 @@ class Model:
         bounds the explicit stages' step size, not the tolerance.
         """
         from scipy.linalg import eigh
-        cell_q, Mb, K, D = self.arrays[1], self.arrays[6], self.arrays[7], self.arrays[8]
+        a = self.arrays
+        cell_q, Mb, K, D = a.cell_q, a.Mb, a.K, a.D
         rate = 0.0
         for c in range(len(cell_q) - 1):
             s, r = slice(cell_q[c], cell_q[c + 1]), cell_q[c + 1] - cell_q[c]
@@ -168,8 +238,7 @@ class Model:
     def stiff_rates(self, x) -> np.ndarray:
         """Diagonal of the stiff linear part (1/s): -1/(C Rs||Rp) at the charge states."""
         L = np.empty(self.n_states)
-        check(_kernels.stiff_rates(np.asarray(x, dtype=float), self.arrays, L,
-                                   np.empty(_kernels.workspace_size(self.arrays))))
+        check(self.kernel.stiff_rates(np.ascontiguousarray(x, dtype=float), L))
         return L
 
     def _u(self, u):
@@ -239,13 +308,13 @@ def _assemble(scene, cells, MI, det_physics, P, structure_names):
     B1 = np.zeros((cell_g[-1], r_max))
     B2 = np.zeros_like(B1)
     W = np.zeros(cell_g[-1])
-    Mb = np.zeros((nq, r_max))     # block rows by cell (see _kernels module docstring)
+    Mb = np.zeros((nq, r_max))     # block rows by cell (see ModelArrays)
     K = np.zeros((nq, r_max))
     D = np.zeros((nq, r_max))
     ref = np.zeros(nq)
-    cellp = np.zeros((nc, 6))
-    detp = np.zeros((nc, 15))
-    kappa = {'paper': 0.0, 'consistent': 1.0, 'exact': 2.0}[scene.fidelity]
+    cell = {key: np.zeros(nc) for key in ('length', 'EI', 'c2', 'c4', 'e4')}
+    det = {key: np.zeros(nc) for key in ('l0', 'VY', 'C0', 'volume', 'E_M', 'eta_M', 'eta_v',
+                                         'Rs', 'Rp')}
     for c, (basis, (x, w), ph) in enumerate(zip(cells, nodes, det_physics)):
         g = slice(cell_g[c], cell_g[c + 1])
         s = slice(cell_q[c], cell_q[c + 1])
@@ -260,17 +329,15 @@ def _assemble(scene, cells, MI, det_physics, P, structure_names):
         K[s, :basis.n_ritz] = 2.0 * EI * S2.T @ (w[:, None] * S2)
         D[s, :basis.n_ritz] = 2.0 * ph.eta_b * ph.I * S2.T @ (w[:, None] * S2)
         ref[s] = basis.reference_row()
-        c2 = 0.5 * w @ S1[:, 0] ** 2
-        c4 = 0.125 * w @ S1[:, 0] ** 4
-        e4 = EI * w @ (S2[:, 0] * S1[:, 0]) ** 2
-        cellp[c] = (basis.length, EI, kappa, c2, c4, e4)  # last three used when n_ritz == 1
-        detp[c] = (ph.l0, ph.volume * ph.Y, ph.C0, ph.volume, ph.E_M, ph.eta_M, ph.eta_v,
-                   ph.Rs, ph.Rp,   # then reciprocals and ratios, so the rhs need not divide
-                   1.0 / ph.l0, 1.0 / ph.C0, 1.0 / ph.Rs, 1.0 / ph.Rp, ph.Rp / (ph.Rs + ph.Rp),
-                   ph.E_M / ph.eta_M if ph.eta_M > 0.0 else 0.0)
+        values = dict(length=basis.length, EI=EI, c2=0.5 * w @ S1[:, 0] ** 2,   # closed forms:
+                      c4=0.125 * w @ S1[:, 0] ** 4,                            # used when
+                      e4=EI * w @ (S2[:, 0] * S1[:, 0]) ** 2)                  # n_ritz == 1
+        values.update(l0=ph.l0, VY=ph.volume * ph.Y, C0=ph.C0, volume=ph.volume, E_M=ph.E_M,
+                      eta_M=ph.eta_M, eta_v=ph.eta_v, Rs=ph.Rs, Rp=ph.Rp)
+        for key, value in values.items():
+            (cell if key in cell else det)[key][c] = value
     MI = np.asarray(MI, dtype=float)
-    mi_idx = np.argwhere(MI != 0.0).astype(np.int64).reshape(-1, 2)
-    mi_val = MI[MI != 0.0].astype(float)
+    mi_idx = np.argwhere(MI != 0.0)            # row-major: entries of a group are contiguous
     cell_grp, n_groups = _groups(MI)
     grp_q = np.zeros(n_groups + 1, dtype=np.int64)
     for c in range(nc):
@@ -283,11 +350,15 @@ def _assemble(scene, cells, MI, det_physics, P, structure_names):
         names += [f'q_p[{i}]' for i in range(nc)]
     if power:
         names += ['W_in', 'W_diss']
-    flags = np.array([nq, nc, creep, rc, power, len(names)], dtype=np.int64)
-    arrays = (flags, cell_q, cell_g, B1, B2, W, Mb, K, D, mi_val, cellp, detp, ref, mi_idx,
-              grp_q, cell_grp, np.ascontiguousarray(P, dtype=float))
-    if scene.fidelity == 'exact':   # a different tuple type: its own compiled kernels
-        arrays = arrays + (np.zeros(0),)
+    ints = lambda v: np.ascontiguousarray(v, dtype=np.int64)  # noqa: E731
+    arrays = ModelArrays(
+        n_q=nq, n_cells=nc, n_state=len(names), r_max=r_max, creep=creep, rc_source=rc,
+        power_monitor=power, cell_q=ints(cell_q), cell_g=ints(cell_g), cell_group=ints(cell_grp),
+        group_q=ints(grp_q), kinematics=ints(np.full(nc, KINEMATICS[scene.fidelity])),
+        B1=B1, B2=B2, W=W, Mb=Mb, K=K, D=D, ref=ref,
+        mi_val=np.ascontiguousarray(MI[MI != 0.0], dtype=float),
+        mi_row=ints(mi_idx[:, 0]), mi_col=ints(mi_idx[:, 1]),
+        P=np.ascontiguousarray(P, dtype=float), **cell, **det)
     det_names = scene.det_names
     if nc == 1:
         out_names = CELL_OUTPUTS

@@ -4,8 +4,8 @@ The simulator: state, the sim-time grid t = k dt, and inputs held between comman
 :class:`Simulator` advances exactly one control period dt per :meth:`Simulator.step` with the
 input held constant (zero-order hold), in fixed internal steps of the chosen method. With
 ``integrator.substeps: 0`` and a method that has an embedded error estimate (the default) their
-number adapts from period to period to the scene's tolerance (see _kernels.period_core); else it
-is fixed. Time is always ``k * dt`` (never accumulated), and the same inputs give bit-identical
+number adapts from period to period to the scene's tolerance (period_core in _csrc/stepping.c);
+else it is fixed. Independent coupled groups (the copies of an array) each keep their own count. Time is always ``k * dt`` (never accumulated), and the same inputs give bit-identical
 outputs: the step count depends only on the state and the inputs.
 A state that leaves the model's domain puts the simulator in a fault: the last good state is kept,
 ``fault`` names the cause, and :meth:`Simulator.reset` recovers. No NaN ever leaves it.
@@ -21,8 +21,8 @@ from typing import Callable
 
 import numpy as np
 
-from . import _kernels
-from .integrators import error_weights, get_method, Method, step_control, transient_settings
+from . import kernel
+from .integrators import get_method, make_stepper, Method, step_control, transient_settings
 from .model import build_model, Model, ModelDomainError
 from .scene import load_scene, Scene
 
@@ -67,13 +67,11 @@ class Simulator:
         if substeps < 0:
             raise ValueError(f'substeps must be >= 0 (got {substeps})')
         self.dt = self.scene.dt
-        self._ctl_initial = step_control(self.method, self.model, substeps)
-        self.adaptive = bool(self._ctl_initial[_kernels.CTL_TOL] > 0.0)
-        self._z_tol, self._fine = transient_settings(self.method, self.scene)
-        c, terms = self.method.arrays()
-        self._scratch = _kernels.prepare(self.model.arrays, c, terms,
-                                         np.asarray(self.method.embedded, dtype=float),
-                                         error_weights(self.model))
+        self.control = step_control(self.method, self.model, substeps)
+        self.adaptive = self.control.adaptive
+        z_tol, fine = transient_settings(self.method, self.scene)
+        # the compiled stepper keeps its scratch and step counts between periods
+        self.stepper = make_stepper(self.model, self.method, self.control, self.dt, z_tol, fine)
         self.output_names = self.model.output_names
         self._out = np.empty(len(self.output_names))
         self.reset()
@@ -88,15 +86,15 @@ class Simulator:
     def reset(self, x0=None) -> None:
         """Back to t = 0, the initial state (or ``x0``), 0 V input, no fault."""
         self.k = 0
-        self._ctl = self._ctl_initial.copy()   # the step count starts over: runs repeat exactly
+        self.stepper.reset_control()   # the step count starts over: runs repeat exactly
         self.x = self.model.initial_state() if x0 is None else np.array(x0, dtype=float)
         if self.x.shape != (self.model.n_states,):
             raise ValueError(f'x0 must have {self.model.n_states} entries')
         self.u = np.zeros(self.model.n_inputs)
         self._u_prev = self.u.copy()    # input of the last period: a jump starts a transient
         self.fault = ''
-        status = _kernels.outputs(self.x, self.u, self.model.arrays, self._out)
-        if status != _kernels.OK:
+        status = self.model.kernel.outputs(self.x, self.u, self._out)
+        if status != kernel.OK:
             raise ModelDomainError(status, 'in the initial state')
         self.initial_energy = float(self._out[self.output_names.index('H')])
 
@@ -107,8 +105,9 @@ class Simulator:
 
     @property
     def substeps(self) -> int:
-        """Internal steps the next control period starts with (fixed unless ``adaptive``)."""
-        return int(self._ctl[_kernels.CTL_N])
+        """Internal steps the next control period starts with (fixed unless ``adaptive``; the
+        largest over the coupled groups)."""
+        return self.stepper.substeps
 
     @property
     def h(self) -> float:
@@ -117,8 +116,9 @@ class Simulator:
 
     @property
     def steps_taken(self) -> int:
-        """Internal steps taken since construction (all periods, repeated ones included)."""
-        return int(self._scratch[_kernels.P_EST][1])
+        """Internal steps taken since construction (all periods, repeated ones included; summed
+        over the coupled groups)."""
+        return int(self.stepper.steps_taken)
 
     @property
     def substeps_setting(self) -> int:
@@ -175,16 +175,14 @@ class Simulator:
             the last good state until :meth:`reset`.
         """
         if self.fault:
-            raise ModelDomainError(_kernels.NON_FINITE, f'(faulted: {self.fault})')
+            raise ModelDomainError(kernel.NON_FINITE, f'(faulted: {self.fault})')
         x_new = self.x.copy()
-        status = _kernels.period_and_output(x_new, self._u_prev, self.u, self.model.arrays,
-                                            self.dt, self._z_tol, self._fine, self._scratch,
-                                            self._ctl, self._out)
-        if status != _kernels.OK:
+        status = self.stepper.period(x_new, self._u_prev, self.u, self._out)
+        if status != kernel.OK:
             error = ModelDomainError(status, f'at t = {self.t + self.dt:.6g} s')
             self.fault = str(error)
             # leave the outputs buffer at the last good state so nothing faulty can be read
-            _kernels.outputs(self.x, self.u, self.model.arrays, self._out)
+            self.model.kernel.outputs(self.x, self.u, self._out)
             raise error
         self.x = x_new
         self._u_prev = self.u
@@ -193,8 +191,8 @@ class Simulator:
 
     def outputs(self) -> dict:
         """Named outputs at the current state and input."""
-        status = _kernels.outputs(self.x, self.u, self.model.arrays, self._out)
-        if status != _kernels.OK:
+        status = self.model.kernel.outputs(self.x, self.u, self._out)
+        if status != kernel.OK:
             raise ModelDomainError(status)
         return dict(zip(self.output_names, self._out.tolist()))
 
@@ -253,8 +251,8 @@ def simulate(scene, voltage: Callable[[float], float] | np.ndarray, t_end: float
         k = int(np.argmax(bad))
         raise ValueError(f'voltage sample {k}: non-finite voltage {volts[k].tolist()}')
     if sim.fault:
-        raise ModelDomainError(_kernels.NON_FINITE, f'(faulted: {sim.fault})')
-    U = np.clip(volts, 0.0, sim.scene.physics.v_max)
+        raise ModelDomainError(kernel.NON_FINITE, f'(faulted: {sim.fault})')
+    U = np.ascontiguousarray(np.clip(volts, 0.0, sim.scene.physics.v_max))
     t = (sim.k + np.arange(n + 1)) * sim.dt
     Y = np.empty((n + 1, len(sim.output_names)))
     X = np.empty((n + 1, sim.model.n_states))
@@ -262,12 +260,11 @@ def simulate(scene, voltage: Callable[[float], float] | np.ndarray, t_end: float
     X[0] = sim.x
     # the whole run in one compiled call (same periods as n calls of Simulator.step)
     x = sim.x.copy()
-    status, done = _kernels.run(x, sim.u, sim._u_prev, U, sim.model.arrays, sim.dt, sim._z_tol,
-                                sim._fine, sim._scratch, sim._ctl, X, Y)
+    status, done = sim.stepper.run(x, sim.u, sim._u_prev, U, X, Y)
     if done:
         sim.x, sim.u, sim._u_prev = X[done].copy(), U[done - 1].copy(), U[done - 1].copy()
         sim.k += done
-    if status != _kernels.OK:
+    if status != kernel.OK:
         error = ModelDomainError(status, f'at t = {sim.t + sim.dt:.6g} s')
         sim.fault = str(error)
         raise error

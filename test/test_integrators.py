@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from det_sim_ros import _kernels, integrators
+from det_sim_ros import integrators
 from det_sim_ros.model import build_model, ModelDomainError
 from det_sim_ros.scene import load_scene
 from det_sim_ros.simulator import simulate, Simulator
@@ -35,7 +35,7 @@ def _linear_charge_error(method, n_steps):
 
     def run(name, n):
         x = x0.copy()
-        status = integrators.advance(x, np.array([1000.0]), model.arrays,
+        status = integrators.advance(x, np.array([1000.0]), model,
                                      integrators.get_method(name), 0.02 / n, n)
         assert status == 0
         return x
@@ -59,7 +59,7 @@ def test_exponential_methods_solve_pure_charge_relaxation_exactly(name):
     model = build_model(scene)
     x = model.initial_state()
     h = 1e-3   # ~30 electrical time constants per step
-    status = integrators.advance(x, np.array([3000.0]), model.arrays,
+    status = integrators.advance(x, np.array([3000.0]), model,
                                  integrators.get_method(name), h, 1)
     assert status == 0
     p = scene.physics
@@ -136,7 +136,7 @@ def test_adaptive_step_count_follows_the_dynamics():
     settled = counts[1300:].mean()
     snapping = counts[500:520].mean()
     assert snapping > 2.0 * settled
-    assert counts.min() >= sim._ctl_initial[_kernels.CTL_N_MIN] >= 1
+    assert counts.min() >= sim.control.min_substeps >= 1
 
 
 def test_adaptive_step_repeats_a_period_over_its_tolerance():
@@ -146,7 +146,7 @@ def test_adaptive_step_repeats_a_period_over_its_tolerance():
     sim.set_input([3000.0])
     for _ in range(30):
         sim.step()
-    sim._ctl[_kernels.CTL_N] = sim._ctl[_kernels.CTL_N_MIN]   # force a bad start
+    sim.stepper.substeps = sim.control.min_substeps   # force a bad start
     n_min = sim.substeps
     before = sim.steps_taken
     sim.step()
@@ -178,11 +178,10 @@ def test_embedded_error_estimate_has_the_order_of_its_pair(name):
     x0[0], x0[1] = 4e-3, 0.3          # a buckled beam in motion
     estimates = []
     for h in (2e-5, 1e-5):
-        P = sim._scratch
-        P[_kernels.P_EST][0] = 0.0
+        sim.stepper.estimate = 0.0
         x = x0.copy()
-        assert _kernels.advance_core(x, np.array([1500.0]), sim.model.arrays, h, 1, 1.0, P) == 0
-        estimates.append(P[_kernels.P_EST][0])
+        assert sim.stepper.advance(x, np.array([1500.0]), h, 1) == 0
+        estimates.append(sim.stepper.estimate)
     ratio = estimates[0] / estimates[1]
     expected = 2.0 ** (method.embedded_order + 1)
     assert 0.7 * expected < ratio < 1.4 * expected
@@ -239,7 +238,7 @@ def test_stress_long_run_million_steps():
     assert sim.k == 100_000
     for name, values in r.outputs.items():
         assert np.all(np.isfinite(values)), name
-    # the charging transients after each of the 20 switches are resolved (see _kernels.period)
+    # the charging transients after each of the 20 switches are resolved (fixed_period in _csrc/stepping.c)
     assert abs(sim.power_residual()) < 1e-3
 
 

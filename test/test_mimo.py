@@ -85,9 +85,8 @@ def test_array_scene_scales_linearly_in_the_mass_matrix():
     """1000 copies: the mass matrix is solved per copy (block diagonal), not as 1000 x 1000."""
     scene = load_scene('array', {'structure.copies': 1000, 'structure.spread': 0.0})
     model = build_model(scene)
-    assert model.arrays[14].shape == (1001,)         # one group per copy
-    from det_sim_ros import _kernels
-    assert _kernels.mass_block_size(model.arrays) == 1
+    assert model.arrays.group_q.shape == (1001,)     # one group per copy
+    assert model.kernel.mass_block == 1
     r = simulate(Simulator(model), lambda t: np.full(1000, _step(t)), 0.06)
     first = r['q[det0]']
     assert np.array_equal(r['q[det999]'], first)

@@ -1,0 +1,798 @@
+/*
+ * Python binding of the compiled kernel: det_sim_ros._ckernel.
+ *
+ * Model(arrays)   reads the named fields of det_sim_ros.model.ModelArrays (attribute by
+ *                 attribute: never positional) and keeps its own copy in C structs.
+ * Stepper(...)    a method table, transient settings and step-count control for a Model.
+ *
+ * Arrays cross by the buffer protocol (C-contiguous float64 / int64): no numpy C API, so the
+ * module builds with only a C compiler and Python's headers and works with any numpy.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "detsim.h"
+
+/* ---------------------------------------------------------------- buffers */
+
+typedef struct {
+    Py_buffer view;
+    int held;
+} buf;
+
+static void release(buf *b)
+{
+    if (b->held)
+        PyBuffer_Release(&b->view);
+    b->held = 0;
+}
+
+/* A C-contiguous float64 (kind 'd') or int64 (kind 'q') buffer of ``n`` items (n < 0: any). */
+static int get_buffer(PyObject *obj, buf *b, char kind, Py_ssize_t n, int writable,
+                      const char *what)
+{
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    b->held = 0;
+    if (PyObject_GetBuffer(obj, &b->view, flags) < 0) {
+        PyErr_Format(PyExc_TypeError, "%s: expected a %sC-contiguous %s array", what,
+                     writable ? "writable " : "", kind == 'd' ? "float64" : "int64");
+        return -1;
+    }
+    b->held = 1;
+    const char *f = b->view.format ? b->view.format : "B";
+    if (*f == '<' || *f == '=' || *f == '@')
+        f++;
+    int ok = b->view.itemsize == 8 && f[1] == '\0'
+             && (kind == 'd' ? f[0] == 'd' : (f[0] == 'q' || f[0] == 'l'));
+    if (!ok) {
+        PyErr_Format(PyExc_TypeError, "%s: expected %s items (got format '%s')", what,
+                     kind == 'd' ? "float64" : "int64", b->view.format);
+        release(b);
+        return -1;
+    }
+    if (n >= 0 && b->view.len / 8 != n) {
+        PyErr_Format(PyExc_ValueError, "%s: expected %zd values, got %zd", what, n,
+                     b->view.len / 8);
+        release(b);
+        return -1;
+    }
+    return 0;
+}
+
+/* ---------------------------------------------------------------- Model */
+
+typedef struct {
+    PyObject_HEAD
+    ds_model m;
+    ds_work w;
+    void *arena[48];
+    int n_arena;
+} ModelObject;
+
+static void *keep(ModelObject *self, void *p)
+{
+    if (p)
+        self->arena[self->n_arena++] = p;
+    return p;
+}
+
+/* Copy the named array field ``name`` of ``src`` (n items, n < 0: any) into owned memory. */
+static void *copy_field(ModelObject *self, PyObject *src, const char *name, char kind,
+                        Py_ssize_t n, Py_ssize_t *got)
+{
+    PyObject *obj = PyObject_GetAttrString(src, name);
+    if (!obj)
+        return NULL;
+    buf b;
+    if (get_buffer(obj, &b, kind, n, 0, name) < 0) {
+        Py_DECREF(obj);
+        return NULL;
+    }
+    Py_ssize_t len = b.view.len;
+    void *p = keep(self, malloc(len > 0 ? (size_t)len : 8));
+    if (!p) {
+        PyErr_NoMemory();
+    } else {
+        memcpy(p, b.view.buf, (size_t)len);
+        if (got)
+            *got = len / 8;
+    }
+    release(&b);
+    Py_DECREF(obj);
+    return p;
+}
+
+static int int_field(PyObject *src, const char *name, int64_t *out)
+{
+    PyObject *obj = PyObject_GetAttrString(src, name);
+    if (!obj)
+        return -1;
+    long long v = PyLong_AsLongLong(obj);
+    Py_DECREF(obj);
+    if (v == -1 && PyErr_Occurred())
+        return -1;
+    *out = (int64_t)v;
+    return 0;
+}
+
+static void Model_dealloc(ModelObject *self)
+{
+    ds_work_free(&self->w);
+    for (int i = 0; i < self->n_arena; i++)
+        free(self->arena[i]);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static int Model_init(ModelObject *self, PyObject *args, PyObject *kwds)
+{
+    static char *kwlist[] = {"arrays", NULL};
+    PyObject *src;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O", kwlist, &src))
+        return -1;
+    if (self->n_arena)
+        return 0;   /* already built */
+    ds_model *m = &self->m;
+    memset(m, 0, sizeof(*m));
+    int64_t creep, rc, power;
+    if (int_field(src, "n_q", &m->n_q) < 0 || int_field(src, "n_cells", &m->n_cells) < 0
+        || int_field(src, "n_state", &m->n_state) < 0 || int_field(src, "r_max", &m->r_max) < 0
+        || int_field(src, "creep", &creep) < 0 || int_field(src, "rc_source", &rc) < 0
+        || int_field(src, "power_monitor", &power) < 0)
+        return -1;
+    m->creep = (int)creep;
+    m->rc_source = (int)rc;
+    m->power = (int)power;
+    const int64_t nq = m->n_q, nc = m->n_cells, R = m->r_max;
+    if (nq < 1 || nc < 1 || R < 1) {
+        PyErr_SetString(PyExc_ValueError, "a model needs at least one cell and coordinate");
+        return -1;
+    }
+    m->i_eps = 2 * nq;
+    m->i_qp = m->i_eps + nc * m->creep;
+    m->i_power = m->i_qp + nc * m->rc_source;
+    if (m->n_state != m->i_power + 2 * m->power) {
+        PyErr_SetString(PyExc_ValueError, "n_state does not match the state layout");
+        return -1;
+    }
+    Py_ssize_t n_nodes, n_mi, n_groups1, n_p;
+    int64_t *cell_q = copy_field(self, src, "cell_q", 'q', nc + 1, NULL);
+    int64_t *cell_g = cell_q ? copy_field(self, src, "cell_g", 'q', nc + 1, NULL) : NULL;
+    int64_t *cell_group = cell_g ? copy_field(self, src, "cell_group", 'q', nc, NULL) : NULL;
+    int64_t *kin = cell_group ? copy_field(self, src, "kinematics", 'q', nc, NULL) : NULL;
+    if (!kin)
+        return -1;
+    n_nodes = cell_g[nc];
+    if (!(m->W = copy_field(self, src, "W", 'd', n_nodes, NULL))
+        || !(m->B1 = copy_field(self, src, "B1", 'd', n_nodes * R, NULL))
+        || !(m->B2 = copy_field(self, src, "B2", 'd', n_nodes * R, NULL))
+        || !(m->Mb = copy_field(self, src, "Mb", 'd', nq * R, NULL))
+        || !(m->K = copy_field(self, src, "K", 'd', nq * R, NULL))
+        || !(m->D = copy_field(self, src, "D", 'd', nq * R, NULL))
+        || !(m->ref = copy_field(self, src, "ref", 'd', nq, NULL))
+        || !(m->mi_val = copy_field(self, src, "mi_val", 'd', -1, &n_mi))
+        || !(m->mi_row = copy_field(self, src, "mi_row", 'q', n_mi, NULL))
+        || !(m->mi_col = copy_field(self, src, "mi_col", 'q', n_mi, NULL))
+        || !(m->group_q = copy_field(self, src, "group_q", 'q', -1, &n_groups1))
+        || !(m->P = copy_field(self, src, "P", 'd', -1, &n_p)))
+        return -1;
+    m->n_nodes = n_nodes;
+    m->n_mi = n_mi;
+    m->n_groups = n_groups1 - 1;
+    m->n_structure = n_p / nc;
+    if (m->n_groups < 1 || m->group_q[m->n_groups] != nq || n_p % nc) {
+        PyErr_SetString(PyExc_ValueError, "inconsistent group offsets or structure map");
+        return -1;
+    }
+    static const char *cell_names[] = {"length", "EI", "c2", "c4", "e4"};
+    static const char *det_names[] = {"l0", "VY", "C0", "volume", "E_M", "eta_M", "eta_v",
+                                      "Rs", "Rp"};
+    double *cell_f[5], *det_f[9];
+    for (int i = 0; i < 5; i++)
+        if (!(cell_f[i] = copy_field(self, src, cell_names[i], 'd', nc, NULL)))
+            return -1;
+    for (int i = 0; i < 9; i++)
+        if (!(det_f[i] = copy_field(self, src, det_names[i], 'd', nc, NULL)))
+            return -1;
+    m->cell = keep(self, calloc((size_t)nc, sizeof(ds_cell)));
+    m->det = keep(self, calloc((size_t)nc, sizeof(ds_det)));
+    if (!m->cell || !m->det) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    m->mass_block = 1;
+    for (int64_t g = 0; g < m->n_groups; g++)
+        if (m->group_q[g + 1] - m->group_q[g] > m->mass_block)
+            m->mass_block = m->group_q[g + 1] - m->group_q[g];
+    for (int64_t c = 0; c < nc; c++) {
+        ds_cell *cell = &m->cell[c];
+        cell->q0 = cell_q[c];
+        cell->nr = cell_q[c + 1] - cell_q[c];
+        cell->g0 = cell_g[c];
+        cell->g1 = cell_g[c + 1];
+        cell->group = cell_group[c];
+        if (cell->nr < 1 || cell->nr > R || cell->group < 0 || cell->group >= m->n_groups
+            || kin[c] < KIN_PAPER || kin[c] > KIN_EXACT) {
+            PyErr_Format(PyExc_ValueError, "cell %lld: inconsistent layout", (long long)c);
+            return -1;
+        }
+        cell->mass_col = cell->q0 - m->group_q[cell->group];
+        cell->kinematics = (int)kin[c];
+        cell->kappa = kin[c] == KIN_CONSISTENT ? 1.0 : 0.0;
+        cell->length = cell_f[0][c];
+        cell->EI = cell_f[1][c];
+        cell->c2 = cell_f[2][c];
+        cell->c4 = cell_f[3][c];
+        cell->e4 = cell_f[4][c];
+        ds_det *d = &m->det[c];
+        d->l0 = det_f[0][c];
+        d->VY = det_f[1][c];
+        d->C0 = det_f[2][c];
+        d->volume = det_f[3][c];
+        d->E_M = det_f[4][c];
+        d->eta_M = det_f[5][c];
+        d->eta_v = det_f[6][c];
+        d->Rs = det_f[7][c];
+        d->Rp = det_f[8][c];
+        d->inv_l0 = 1.0 / d->l0;
+        d->inv_C0 = 1.0 / d->C0;
+        d->inv_Rs = 1.0 / d->Rs;
+        d->inv_Rp = 1.0 / d->Rp;
+        d->share = d->Rp / (d->Rs + d->Rp);
+        d->relax_M = d->eta_M > 0.0 ? d->E_M / d->eta_M : 0.0;
+    }
+    for (int64_t e = 0; e < n_mi; e++) {
+        if (m->mi_row[e] < 0 || m->mi_row[e] >= nc || m->mi_col[e] < 0 || m->mi_col[e] >= nc
+            || m->cell[m->mi_row[e]].group != m->cell[m->mi_col[e]].group) {
+            PyErr_SetString(PyExc_ValueError, "interface mass couples cells of two groups");
+            return -1;
+        }
+    }
+    m->one_term = nc == 1 && m->cell[0].nr == 1 && m->cell[0].kinematics != KIN_EXACT;
+    if (ds_work_init(&self->w, m) < 0) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    return 0;
+}
+
+/* Parse (x, u, out...) buffers for a model call: x of n_state, u of n_cells. */
+static int model_xu(ModelObject *self, PyObject *const *args, buf *bx, buf *bu, int x_writable)
+{
+    if (get_buffer(args[0], bx, 'd', self->m.n_state, x_writable, "x") < 0)
+        return -1;
+    if (get_buffer(args[1], bu, 'd', self->m.n_cells, 0, "u") < 0) {
+        release(bx);
+        return -1;
+    }
+    return 0;
+}
+
+static PyObject *Model_rhs(ModelObject *self, PyObject *const *args, Py_ssize_t n)
+{
+    if (n < 3 || n > 4) {
+        PyErr_SetString(PyExc_TypeError, "rhs(x, u, dx[, quasi_static])");
+        return NULL;
+    }
+    buf bx, bu, bd;
+    if (model_xu(self, args, &bx, &bu, 0) < 0)
+        return NULL;
+    if (get_buffer(args[2], &bd, 'd', self->m.n_state, 1, "dx") < 0) {
+        release(&bx);
+        release(&bu);
+        return NULL;
+    }
+    int qs = n == 4 ? PyObject_IsTrue(args[3]) : 0;
+    int status = ds_rhs(&self->m, bx.view.buf, bu.view.buf, bd.view.buf, &self->w, qs > 0);
+    release(&bx);
+    release(&bu);
+    release(&bd);
+    return Py_BuildValue("(idd)", status, self->w.p_in, self->w.p_diss);
+}
+
+static PyObject *Model_outputs(ModelObject *self, PyObject *const *args, Py_ssize_t n)
+{
+    if (n != 3) {
+        PyErr_SetString(PyExc_TypeError, "outputs(x, u, out)");
+        return NULL;
+    }
+    buf bx, bu, bo;
+    if (model_xu(self, args, &bx, &bu, 0) < 0)
+        return NULL;
+    if (get_buffer(args[2], &bo, 'd', ds_n_outputs(&self->m), 1, "out") < 0) {
+        release(&bx);
+        release(&bu);
+        return NULL;
+    }
+    int status = ds_outputs(&self->m, bx.view.buf, bu.view.buf, bo.view.buf, &self->w);
+    release(&bx);
+    release(&bu);
+    release(&bo);
+    return PyLong_FromLong(status);
+}
+
+static PyObject *Model_stiff_rates(ModelObject *self, PyObject *const *args, Py_ssize_t n)
+{
+    if (n != 2) {
+        PyErr_SetString(PyExc_TypeError, "stiff_rates(x, L)");
+        return NULL;
+    }
+    buf bx, bl;
+    if (get_buffer(args[0], &bx, 'd', self->m.n_state, 0, "x") < 0)
+        return NULL;
+    if (get_buffer(args[1], &bl, 'd', self->m.n_state, 1, "L") < 0) {
+        release(&bx);
+        return NULL;
+    }
+    int status = ds_stiff_rates(&self->m, bx.view.buf, bl.view.buf, &self->w, 1);
+    release(&bx);
+    release(&bl);
+    return PyLong_FromLong(status);
+}
+
+static PyObject *Model_book_input_jump(ModelObject *self, PyObject *const *args, Py_ssize_t n)
+{
+    if (n != 3) {
+        PyErr_SetString(PyExc_TypeError, "book_input_jump(x, u_old, u_new)");
+        return NULL;
+    }
+    buf bx, bu, bn;
+    if (model_xu(self, args, &bx, &bu, 1) < 0)
+        return NULL;
+    if (get_buffer(args[2], &bn, 'd', self->m.n_cells, 0, "u_new") < 0) {
+        release(&bx);
+        release(&bu);
+        return NULL;
+    }
+    ds_book_input_jump(&self->m, bx.view.buf, bu.view.buf, bn.view.buf, &self->w);
+    release(&bx);
+    release(&bu);
+    release(&bn);
+    Py_RETURN_NONE;
+}
+
+static PyObject *Model_get_int(ModelObject *self, void *which)
+{
+    switch ((intptr_t)which) {
+    case 0: return PyLong_FromLongLong(self->m.n_state);
+    case 1: return PyLong_FromLongLong(ds_n_outputs(&self->m));
+    case 2: return PyLong_FromLongLong(self->m.mass_block);
+    default: return PyLong_FromLongLong(self->m.n_groups);
+    }
+}
+
+static PyMethodDef Model_methods[] = {
+    {"rhs", (PyCFunction)(void (*)(void))Model_rhs, METH_FASTCALL,
+     "rhs(x, u, dx[, quasi_static]) -> (status, P_in, P_diss): dx = f(x, u)"},
+    {"outputs", (PyCFunction)(void (*)(void))Model_outputs, METH_FASTCALL,
+     "outputs(x, u, out) -> status: the named outputs into out"},
+    {"stiff_rates", (PyCFunction)(void (*)(void))Model_stiff_rates, METH_FASTCALL,
+     "stiff_rates(x, L) -> status: diagonal stiff part (1/s) at the charge states"},
+    {"book_input_jump", (PyCFunction)(void (*)(void))Model_book_input_jump, METH_FASTCALL,
+     "book_input_jump(x, u_old, u_new): ideal source + monitor: book the recharge"},
+    {NULL}
+};
+
+static PyGetSetDef Model_getset[] = {
+    {"n_state", (getter)Model_get_int, NULL, "states", (void *)0},
+    {"n_outputs", (getter)Model_get_int, NULL, "outputs", (void *)1},
+    {"mass_block", (getter)Model_get_int, NULL, "largest coupled group's coordinates",
+     (void *)2},
+    {"n_groups", (getter)Model_get_int, NULL, "independent coupled groups", (void *)3},
+    {NULL}
+};
+
+static PyTypeObject ModelType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "det_sim_ros._ckernel.Model",
+    .tp_doc = "Model(arrays): the compiled model, built from ModelArrays' named fields",
+    .tp_basicsize = sizeof(ModelObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)Model_init,
+    .tp_dealloc = (destructor)Model_dealloc,
+    .tp_methods = Model_methods,
+    .tp_getset = Model_getset,
+};
+
+/* ---------------------------------------------------------------- Stepper */
+
+typedef struct {
+    PyObject_HEAD
+    ModelObject *model;
+    ds_stepper st;
+    ds_work out_work;   /* outputs after a period: the stepper's own (run() releases the GIL) */
+    int ready;
+} StepperObject;
+
+static void Stepper_dealloc(StepperObject *self)
+{
+    if (self->ready) {
+        ds_stepper_free(&self->st);
+        ds_work_free(&self->out_work);
+    }
+    Py_XDECREF(self->model);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
+{
+    static char *kwlist[] = {"model", "c", "terms", "embedded", "error_weights", "dt",
+                             "z_tol", "fine", "substeps", "tolerance", "min_substeps",
+                             "max_substeps", "exponent", NULL};
+    PyObject *model, *c, *terms, *embedded, *weights;
+    double dt, z_tol, fine, tol, exponent;
+    long long n0, n_min, n_max;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O!OOOOdddLdLLd", kwlist, &ModelType, &model,
+                                     &c, &terms, &embedded, &weights, &dt, &z_tol, &fine, &n0,
+                                     &tol, &n_min, &n_max, &exponent))
+        return -1;
+    if (self->ready) {
+        PyErr_SetString(PyExc_RuntimeError, "Stepper already initialised");
+        return -1;
+    }
+    if (!(dt > 0.0) || n0 < 1 || n_min < 1 || n_max < n_min || !(exponent > 0.0)) {
+        PyErr_SetString(PyExc_ValueError, "Stepper: need dt > 0, 1 <= min <= max substeps");
+        return -1;
+    }
+    ModelObject *mo = (ModelObject *)model;
+    buf bc, bt, be, bw;
+    if (get_buffer(c, &bc, 'd', -1, 0, "c") < 0)
+        return -1;
+    const Py_ssize_t s = bc.view.len / 8;
+    if (get_buffer(terms, &bt, 'd', -1, 0, "terms") < 0) {
+        release(&bc);
+        return -1;
+    }
+    if (get_buffer(embedded, &be, 'd', -1, 0, "embedded") < 0) {
+        release(&bc);
+        release(&bt);
+        return -1;
+    }
+    if (get_buffer(weights, &bw, 'd', mo->m.n_state, 0, "error_weights") < 0) {
+        release(&bc);
+        release(&bt);
+        release(&be);
+        return -1;
+    }
+    int rc = -1;
+    const Py_ssize_t nt = bt.view.len / 40;
+    const double *tv = bt.view.buf;
+    int valid = s >= 1 && bt.view.len % 40 == 0;
+    for (Py_ssize_t t = 0; valid && t < nt; t++) {
+        const double *row = tv + 5 * t;
+        valid = row[0] >= 0 && row[0] <= s && row[1] >= 0 && row[1] < s && row[2] >= -1
+                && row[2] < 60 && (t == 0 || row[0] >= tv[5 * (t - 1)]);
+    }
+    if (!valid) {
+        PyErr_SetString(PyExc_ValueError, "method table: terms must be rows (i, j, k, c, w) "
+                                          "sorted by stage row i");
+    } else if (ds_method_init(&self->st.method, bc.view.buf, s, tv, nt, be.view.buf,
+                              be.view.len / 8) < 0) {
+        PyErr_NoMemory();
+    } else {
+        ds_control ctl = {n0, n_min, n_max, tol, exponent};
+        if (ds_stepper_init(&self->st, &mo->m, dt, z_tol, fine, &ctl, bw.view.buf) < 0
+            || ds_work_init(&self->out_work, &mo->m) < 0) {
+            ds_stepper_free(&self->st);
+            PyErr_NoMemory();
+        } else {
+            Py_INCREF(model);
+            self->model = mo;
+            self->ready = 1;
+            rc = 0;
+        }
+    }
+    release(&bc);
+    release(&bt);
+    release(&be);
+    release(&bw);
+    return rc;
+}
+
+#define NEED_READY(self)                                                          \
+    if (!(self)->ready) {                                                         \
+        PyErr_SetString(PyExc_RuntimeError, "Stepper not initialised");           \
+        return NULL;                                                              \
+    }
+
+static PyObject *Stepper_advance(StepperObject *self, PyObject *const *args, Py_ssize_t n)
+{
+    NEED_READY(self);
+    if (n < 4 || n > 5) {
+        PyErr_SetString(PyExc_TypeError, "advance(x, u, h, n_steps[, growth])");
+        return NULL;
+    }
+    if (self->st.n_groups != 1) {
+        PyErr_SetString(PyExc_ValueError, "advance() steps a model of one coupled group; "
+                                          "use period() for independent groups");
+        return NULL;
+    }
+    double h = PyFloat_AsDouble(args[2]);
+    long long steps = PyLong_AsLongLong(args[3]);
+    double growth = n == 5 ? PyFloat_AsDouble(args[4]) : 1.0;
+    if (PyErr_Occurred())
+        return NULL;
+    buf bx, bu;
+    if (model_xu(self->model, args, &bx, &bu, 1) < 0)
+        return NULL;
+    int status = ds_advance(&self->st, &self->st.group[0], bx.view.buf, bu.view.buf, h,
+                            steps, growth);
+    release(&bx);
+    release(&bu);
+    return PyLong_FromLong(status);
+}
+
+/* period(x, u_old, u, out) -> status: one control period, then the outputs into out. */
+static PyObject *Stepper_period(StepperObject *self, PyObject *const *args, Py_ssize_t n)
+{
+    NEED_READY(self);
+    if (n != 4) {
+        PyErr_SetString(PyExc_TypeError, "period(x, u_old, u, out)");
+        return NULL;
+    }
+    const ds_model *m = &self->model->m;
+    buf bx, bo, bu, bout;
+    if (model_xu(self->model, args, &bx, &bo, 1) < 0)
+        return NULL;
+    if (get_buffer(args[2], &bu, 'd', m->n_cells, 0, "u") < 0) {
+        release(&bx);
+        release(&bo);
+        return NULL;
+    }
+    if (get_buffer(args[3], &bout, 'd', ds_n_outputs(m), 1, "out") < 0) {
+        release(&bx);
+        release(&bo);
+        release(&bu);
+        return NULL;
+    }
+    int status;
+    if (self->st.n_groups > 1) {   /* batches take long enough to let other threads run */
+        Py_BEGIN_ALLOW_THREADS
+        status = ds_period(&self->st, bx.view.buf, bo.view.buf, bu.view.buf);
+        Py_END_ALLOW_THREADS
+    } else {
+        status = ds_period(&self->st, bx.view.buf, bo.view.buf, bu.view.buf);
+    }
+    if (status == DS_OK)
+        status = ds_outputs(m, bx.view.buf, bu.view.buf, bout.view.buf, &self->out_work);
+    release(&bx);
+    release(&bo);
+    release(&bu);
+    release(&bout);
+    return PyLong_FromLong(status);
+}
+
+/*
+ * run(x, u_held, u_last, U, X, Y) -> (status, periods completed): many periods in one call.
+ * Period k holds U[k]; X[k + 1] and Y[k + 1] receive the state and outputs after it; u_held is
+ * the input held now (already booked), u_last the one the last period ran with. x is left at
+ * the last good state. The GIL is released for the whole run.
+ */
+static PyObject *Stepper_run(StepperObject *self, PyObject *const *args, Py_ssize_t n)
+{
+    NEED_READY(self);
+    if (n != 6) {
+        PyErr_SetString(PyExc_TypeError, "run(x, u_held, u_last, U, X, Y)");
+        return NULL;
+    }
+    ModelObject *mo = self->model;
+    const ds_model *m = &mo->m;
+    const int64_t nx = m->n_state, nu = m->n_cells, ny = ds_n_outputs(m);
+    buf b[6];
+    int held = 0;
+    if (get_buffer(args[0], &b[0], 'd', nx, 1, "x") < 0)
+        goto fail;
+    held = 1;
+    if (get_buffer(args[1], &b[1], 'd', nu, 0, "u_held") < 0)
+        goto fail;
+    held = 2;
+    if (get_buffer(args[2], &b[2], 'd', nu, 0, "u_last") < 0)
+        goto fail;
+    held = 3;
+    if (get_buffer(args[3], &b[3], 'd', -1, 0, "U") < 0)
+        goto fail;
+    held = 4;
+    const Py_ssize_t n_periods = b[3].view.len / 8 / nu;
+    if (n_periods * nu * 8 != b[3].view.len) {
+        PyErr_SetString(PyExc_ValueError, "U: shape (n_periods, n_inputs)");
+        goto fail;
+    }
+    if (get_buffer(args[4], &b[4], 'd', (n_periods + 1) * nx, 1, "X") < 0)
+        goto fail;
+    held = 5;
+    if (get_buffer(args[5], &b[5], 'd', (n_periods + 1) * ny, 1, "Y") < 0)
+        goto fail;
+    held = 6;
+    double *x = b[0].view.buf, *X = b[4].view.buf, *Y = b[5].view.buf;
+    const double *U = b[3].view.buf;
+    const double *u_book = b[1].view.buf, *u_prev = b[2].view.buf;
+    int status = DS_OK;
+    Py_ssize_t k;
+    Py_BEGIN_ALLOW_THREADS
+    for (k = 0; k < n_periods; k++) {
+        const double *u = U + k * nu;
+        ds_book_input_jump(m, x, u_book, u, &self->out_work);
+        u_book = u;
+        status = ds_period(&self->st, x, u_prev, u);
+        if (status != DS_OK)
+            break;
+        status = ds_outputs(m, x, u, Y + (k + 1) * ny, &self->out_work);
+        if (status != DS_OK)
+            break;
+        memcpy(X + (k + 1) * nx, x, (size_t)nx * sizeof(double));
+        u_prev = u;
+    }
+    Py_END_ALLOW_THREADS
+    for (int i = 0; i < held; i++)
+        release(&b[i]);
+    return Py_BuildValue("(in)", status, k);
+fail:
+    for (int i = 0; i < held; i++)
+        release(&b[i]);
+    return NULL;
+}
+
+static PyObject *Stepper_reset_control(StepperObject *self, PyObject *unused)
+{
+    NEED_READY(self);
+    ds_reset_control(&self->st);
+    Py_RETURN_NONE;
+}
+
+static PyObject *Stepper_group_substeps(StepperObject *self, PyObject *unused)
+{
+    NEED_READY(self);
+    PyObject *list = PyList_New(self->st.n_groups);
+    for (int64_t g = 0; list && g < self->st.n_groups; g++)
+        PyList_SET_ITEM(list, g, PyLong_FromLongLong(self->st.group[g].ctl.n));
+    return list;
+}
+
+static PyObject *Stepper_get(StepperObject *self, void *which)
+{
+    NEED_READY(self);
+    const ds_stepper *st = &self->st;
+    double total = 0.0, best = 0.0;
+    int64_t n = 0;
+    for (int64_t g = 0; g < st->n_groups; g++) {
+        total += st->group[g].steps;
+        if (st->group[g].est > best)
+            best = st->group[g].est;
+        if (st->group[g].ctl.n > n)
+            n = st->group[g].ctl.n;
+    }
+    switch ((intptr_t)which) {
+    case 0: return PyLong_FromLongLong(n);
+    case 1: return PyFloat_FromDouble(total);
+    case 2: return PyFloat_FromDouble(best);
+    case 3: return PyLong_FromLongLong(st->n_groups);
+    case 4: return PyLong_FromLong(st->threads);
+    case 5: return PyLong_FromLongLong(st->group[0].ctl_initial.n_min);
+    case 6: return PyLong_FromLongLong(st->group[0].ctl_initial.n_max);
+    case 7: return PyFloat_FromDouble(st->group[0].ctl_initial.tol);
+    default:
+#ifdef _OPENMP
+        Py_RETURN_TRUE;
+#else
+        Py_RETURN_FALSE;
+#endif
+    }
+}
+
+static int Stepper_set(StepperObject *self, PyObject *value, void *which)
+{
+    if (!self->ready || !value) {
+        PyErr_SetString(PyExc_AttributeError, "cannot delete or set before init");
+        return -1;
+    }
+    ds_stepper *st = &self->st;
+    if ((intptr_t)which == 0) {   /* substeps: the count every group starts its next period with */
+        long long n = PyLong_AsLongLong(value);
+        if (n == -1 && PyErr_Occurred())
+            return -1;
+        if (n < 1) {
+            PyErr_SetString(PyExc_ValueError, "substeps must be >= 1");
+            return -1;
+        }
+        for (int64_t g = 0; g < st->n_groups; g++)
+            st->group[g].ctl.n = n;
+        return 0;
+    }
+    if ((intptr_t)which == 2) {   /* estimate: reset before a measurement */
+        double e = PyFloat_AsDouble(value);
+        if (PyErr_Occurred())
+            return -1;
+        for (int64_t g = 0; g < st->n_groups; g++)
+            st->group[g].est = e;
+        return 0;
+    }
+    long t = PyLong_AsLong(value);
+    if (t == -1 && PyErr_Occurred())
+        return -1;
+    if (t < 1 || t > 256) {
+        PyErr_SetString(PyExc_ValueError, "threads must be in [1, 256]");
+        return -1;
+    }
+    st->threads = (int)t;
+    return 0;
+}
+
+static PyMethodDef Stepper_methods[] = {
+    {"advance", (PyCFunction)(void (*)(void))Stepper_advance, METH_FASTCALL,
+     "advance(x, u, h, n_steps[, growth]) -> status: n_steps fixed steps (one group)"},
+    {"period", (PyCFunction)(void (*)(void))Stepper_period, METH_FASTCALL,
+     "period(x, u_old, u, out) -> status: one control period, then the outputs"},
+    {"run", (PyCFunction)(void (*)(void))Stepper_run, METH_FASTCALL,
+     "run(x, u_held, u_last, U, X, Y) -> (status, periods): many periods, GIL released"},
+    {"reset_control", (PyCFunction)Stepper_reset_control, METH_NOARGS,
+     "step counts and error estimates back to their initial values"},
+    {"group_substeps", (PyCFunction)Stepper_group_substeps, METH_NOARGS,
+     "the step count of each coupled group's next period"},
+    {NULL}
+};
+
+static PyGetSetDef Stepper_getset[] = {
+    {"substeps", (getter)Stepper_get, (setter)Stepper_set,
+     "steps the next period starts with (largest over the groups; set: every group)",
+     (void *)0},
+    {"steps_taken", (getter)Stepper_get, NULL, "internal steps taken, all groups", (void *)1},
+    {"estimate", (getter)Stepper_get, (setter)Stepper_set,
+     "largest embedded error estimate since it was last set", (void *)2},
+    {"n_groups", (getter)Stepper_get, NULL, "independent coupled groups", (void *)3},
+    {"threads", (getter)Stepper_get, (setter)Stepper_set,
+     "threads that step independent groups (results do not depend on it)", (void *)4},
+    {"min_substeps", (getter)Stepper_get, NULL, "fewest steps per period", (void *)5},
+    {"max_substeps", (getter)Stepper_get, NULL, "most steps per period", (void *)6},
+    {"tolerance", (getter)Stepper_get, NULL, "local tolerance (0: fixed count)", (void *)7},
+    {"openmp", (getter)Stepper_get, NULL, "built with OpenMP (threads > 1 possible)",
+     (void *)8},
+    {NULL}
+};
+
+static PyTypeObject StepperType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "det_sim_ros._ckernel.Stepper",
+    .tp_doc = "Stepper(model, c, terms, embedded, error_weights, dt, z_tol, fine, substeps, "
+              "tolerance, min_substeps, max_substeps, exponent)",
+    .tp_basicsize = sizeof(StepperObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)Stepper_init,
+    .tp_dealloc = (destructor)Stepper_dealloc,
+    .tp_methods = Stepper_methods,
+    .tp_getset = Stepper_getset,
+};
+
+/* ---------------------------------------------------------------- module */
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_ckernel",
+    "Compiled DET-beam kernel: the model's rhs/outputs and the stepping core (see detsim.h).",
+    -1, NULL,
+};
+
+PyMODINIT_FUNC PyInit__ckernel(void)
+{
+    if (PyType_Ready(&ModelType) < 0 || PyType_Ready(&StepperType) < 0)
+        return NULL;
+    PyObject *mod = PyModule_Create(&module);
+    if (!mod)
+        return NULL;
+    Py_INCREF(&ModelType);
+    Py_INCREF(&StepperType);
+    if (PyModule_AddObject(mod, "Model", (PyObject *)&ModelType) < 0
+        || PyModule_AddObject(mod, "Stepper", (PyObject *)&StepperType) < 0
+        || PyModule_AddIntConstant(mod, "OK", DS_OK) < 0
+        || PyModule_AddIntConstant(mod, "BAD_STRETCH", DS_BAD_STRETCH) < 0
+        || PyModule_AddIntConstant(mod, "NON_FINITE", DS_NON_FINITE) < 0
+        || PyModule_AddIntConstant(mod, "BAD_SLOPE", DS_BAD_SLOPE) < 0
+        || PyModule_AddIntConstant(mod, "CELL_OUTPUTS", DS_CELL_OUTPUTS) < 0) {
+        Py_DECREF(mod);
+        return NULL;
+    }
+    return mod;
+}
