@@ -2,10 +2,19 @@
 Work-precision benchmark on the 'step' scenario (scenarios.md): error against CPU time.
 
 Everything is measured side by side in one run: the project's steppers at several substep counts,
-scipy's solve_ivp (RK45, DOP853, Radau, BDF, LSODA) restarted every 1 ms control period (zero-order
-hold) at several rtol, and python-control's input_output_response. Error: max |Delta-y -
-Delta-y_ref| / stroke over the 1 ms samples, reference Radau rtol 1e-12 restarted every period.
-Cost: process CPU seconds per simulated second, median of ``--repeats`` runs.
+scipy's solve_ivp (RK45, DOP853, Radau, BDF, LSODA) two ways, and python-control's
+input_output_response:
+
+- per period: one solve_ivp call per 1 ms control period (zero-order hold), what a ROS node
+  stepping period by period with scipy would do;
+- whole run (offline): one solve_ivp call per constant-voltage segment of the 4.5 s run, dense
+  1 kHz output (t_eval), and an analytic Jacobian for Radau/BDF/LSODA (:func:`one_term_jacobian`):
+  what a user simulating offline would pick instead.
+
+Error: max |Delta-y - Delta-y_ref| / stroke over the 1 ms samples, reference Radau rtol 1e-12
+restarted every period. Cost: process CPU seconds per simulated second, median of ``--repeats``.
+The summary table (:func:`speedups`) gives, per error level, the CPU of the cheapest competitor
+run that reaches it divided by the CPU of 'auto' at that error.
 
 Writes ``work_precision.csv``, ``work_precision.md`` and (with matplotlib) ``work_precision.png``.
 Run: ``python bench/work_precision.py --out bench/out`` (about 10 min per scene; ``--quick``: one
@@ -72,6 +81,112 @@ def _scipy_run(model, method, rtol, t_end):
             raise ArithmeticError(f'{method} failed at t = {k * dt:g} s: {sol.message}')
         x = sol.y[:, -1]
         X[k + 1] = x
+    return X
+
+
+IMPLICIT = ('Radau', 'BDF', 'LSODA')
+
+
+def one_term_jacobian(model):
+    """
+    The analytic Jacobian df/dx(x, u) of a one-cell, one-term model (the six 'step' scenes):
+    model.py's Lagrange equations for that case written in closed form with the model's own
+    constants and differentiated by sympy. Returns jac(x, v) -> (n_state, n_state) array.
+    Checked against central differences in :func:`run_scene` before it is used.
+    """
+    import sympy as sp
+    a = model.arrays
+    if a.n_cells != 1 or a.n_q != 1 or a.kinematics[0] not in (0, 1):
+        raise ValueError('one_term_jacobian: a one-cell, one-term paper/consistent model only')
+    q, qd, eps, qp, v = sp.symbols('q qd eps qp v')
+    c2, c4 = float(a.c2[0]), float(a.c4[0]) * (a.kinematics[0] == 1)
+    K, D, Mb, e4, mi = (float(a.K[0, 0]), float(a.D[0, 0]), float(a.Mb[0, 0]), float(a.e4[0]),
+                        float(a.mi_val.sum()))
+    l, l0, VY, C0, V = (float(a.length[0]), float(a.l0[0]), float(a.VY[0]), float(a.C0[0]),
+                        float(a.volume[0]))
+    E_M, eta_M, eta_v, Rs, Rp = (float(a.E_M[0]), float(a.eta_M[0]), float(a.eta_v[0]),
+                                 float(a.Rs[0]), float(a.Rp[0]))
+    y = c2 * q ** 2 + c4 * q ** 4
+    J = sp.diff(y, q)
+    h = sp.diff(y, q, 2) * qd ** 2
+    lam = (l - y) / l0
+    creep = eps if a.creep else 0
+    relax = E_M / eta_M if eta_M > 0 else 0.0
+    lzd = J * qd / (l0 * lam ** 2)
+    if a.rc_source:
+        vp = qp / (C0 * lam ** 2)
+        dU = VY / 3 * (lam - lam ** -3) - qp * vp / lam
+        i_de = (v - vp) / Rs
+        p_ohm = (v - vp) * i_de
+    else:
+        vp = v
+        dU = VY / 3 * (lam - lam ** -3) - C0 * lam * v ** 2
+        i_de = -2 * C0 * lam * J * qd / l0 * v + v / Rp
+        p_ohm = 0
+    visc = V * (E_M * creep + eta_v * lzd)
+    F = -K * q - D * qd - 4 * e4 * q ** 3 - mi * J * h + (dU - visc / lam ** 2) / l0 * J
+    states, f = [q, qd], [qd, F / (Mb + mi * J ** 2)]
+    if a.creep:
+        states.append(eps)
+        f.append(lzd - relax * eps)
+    if a.rc_source:
+        states.append(qp)
+        f.append(v / Rs - (1 / Rs + 1 / Rp) * vp)
+    if a.power_monitor:
+        states += list(sp.symbols('W_in W_diss'))
+        f += [v * i_de, qd * D * qd + p_ohm + vp ** 2 / Rp + V * eta_v * lzd ** 2
+              + V * E_M * relax * creep ** 2]
+    jac = sp.lambdify((states, v), sp.Matrix(f).jacobian(states), 'numpy')
+    return lambda x, volts: np.asarray(jac(list(x), float(volts)), dtype=float)
+
+
+def _check_jacobian(model, jac):
+    """The analytic Jacobian against central differences of the compiled rhs (a buckled beam in
+    motion under 2 kV); raises if they disagree."""
+    typical = {'q[0]': 5e-3 / model.bases[0].reference_row()[0], 'q_dot[0]': 0.2,
+               'eps_E[0]': 2e-3, 'q_p[0]': model.arrays.C0[0] * 1500.0, 'W_in': 1e-3,
+               'W_diss': 1e-4}
+    x = np.array([typical[name] for name in model.state_names])
+    u = np.array([2000.0])
+    numeric = np.empty((model.n_states, model.n_states))
+    for j in range(model.n_states):
+        step = 1e-6 * abs(x[j])
+        up, down = x.copy(), x.copy()
+        up[j] += step
+        down[j] -= step
+        numeric[:, j] = (model.f(0, up, u) - model.f(0, down, u)) / (2 * step)
+    analytic = jac(x, 2000.0)
+    scale = np.maximum(np.abs(numeric), np.abs(numeric).max(axis=1, keepdims=True) * 1e-8)
+    worst = float(np.max(np.abs(analytic - numeric) / np.maximum(scale, 1e-300)))
+    if worst > 1e-4:
+        raise AssertionError(f'analytic Jacobian differs from finite differences: {worst:.1e}')
+    return worst
+
+
+def _scipy_offline_run(model, method, rtol, t_end, jac=None):
+    """The whole run the way an offline user would: one solve_ivp call per constant-voltage
+    segment, dense output at the 1 kHz samples, the analytic Jacobian for implicit methods."""
+    volts = step_voltage(model.scene.physics.v_max)
+    dt = model.scene.dt
+    n = int(round(t_end / dt))
+    x = model.initial_state()
+    scale = np.maximum(np.abs(x), 1e-3)
+    X = np.empty((n + 1, model.n_states))
+    X[0] = x
+    f = _rhs_for_solvers(model)
+    edges = [0] + [int(round(ts / dt)) for ts in STEP_SWITCH_TIMES if ts < t_end] + [n]
+    for k0, k1 in zip(edges[:-1], edges[1:]):
+        v = volts(k0 * dt)
+        u = np.array([v])
+        kwargs = {'jac': (lambda t, z: jac(z, v))} if jac is not None else {}
+        sol = solve_ivp(lambda t, z: f(t, z, u), (k0 * dt, k1 * dt), x, method=method,
+                        t_eval=np.arange(k0, k1 + 1) * dt, rtol=rtol, atol=rtol * scale * 1e-3,
+                        **kwargs)
+        if not sol.success or not np.all(np.isfinite(sol.y)):
+            raise ArithmeticError(f'{method} failed in [{k0 * dt:g}, {k1 * dt:g}] s: '
+                                  f'{sol.message}')
+        X[k0:k1 + 1] = sol.y.T
+        x = sol.y[:, -1]
     return X
 
 
@@ -161,6 +276,16 @@ def run_scene(beam, eps_b, quick=False, repeats=3, log=print, reference_dir=None
             except (ArithmeticError, ValueError):   # solver failure (domain, NaN Jacobian)
                 cpu, X = np.nan, None
             add(f'scipy {method}', f'rtol {rtol:g}', cpu, X)
+    jac = one_term_jacobian(model)
+    log(f'  analytic Jacobian vs central differences: {_check_jacobian(model, jac):.1e}')
+    for method in ('RK45', 'DOP853', 'Radau', 'BDF', 'LSODA'):
+        for rtol in ((1e-6,) if quick else (1e-4, 1e-6, 1e-8, 1e-10)):
+            try:
+                cpu, X = _cpu(lambda: _scipy_offline_run(
+                    model, method, rtol, t_end, jac if method in IMPLICIT else None), 1)
+            except (ArithmeticError, ValueError):   # solver failure (domain, NaN Jacobian)
+                cpu, X = np.nan, None
+            add(f'scipy {method} whole run', f'rtol {rtol:g}', cpu, X)
     try:
         import control  # noqa: F401
     except ImportError:
@@ -175,6 +300,36 @@ def run_scene(beam, eps_b, quick=False, repeats=3, log=print, reference_dir=None
                 cpu, X = np.nan, None
             add('python-control', f'rtol {rtol:g}', cpu, X)
     return rows
+
+
+ERROR_LEVELS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
+
+
+def speedups(rows, competitors):
+    """Per scene and error level: CPU of the cheapest run among ``competitors(solver)`` with an
+    error at most that level, divided by the CPU of the cheapest 'auto' run that reaches it
+    (NaN where either never does). Returns {(beam, eps_b): [ratio per ERROR_LEVELS]}."""
+    table = {}
+    for key in dict.fromkeys((r['beam'], r['eps_b']) for r in rows):
+        scene = [r for r in rows if (r['beam'], r['eps_b']) == key
+                 and np.isfinite(r['cpu_per_sim_s']) and np.isfinite(r['err_dy'])]
+
+        def cheapest(pick, level):
+            costs = [r['cpu_per_sim_s'] for r in scene if pick(r['solver'])
+                     and r['err_dy'] <= level]
+            return min(costs) if costs else np.nan
+        table[key] = [cheapest(competitors, e) / cheapest(lambda s: s == 'auto', e)
+                      for e in ERROR_LEVELS]
+    return table
+
+
+def _per_period(solver):
+    return (solver.startswith('scipy') and not solver.endswith('whole run')) \
+        or solver == 'python-control'
+
+
+def _whole_run(solver):
+    return solver.endswith('whole run')
 
 
 def _write(rows, out):
@@ -193,6 +348,17 @@ def _write(rows, out):
                          f"{r['cpu_per_sim_s']:.4g} | {r['realtime_factor']:.3g} | "
                          f"{r['err_dy']:.2e} | {r['err_qp']:.2e} | "
                          f"{'' if np.isnan(steps) else f'{steps:.1f}'} |\n")
+        for title, pick in (('per period (solve_ivp per 1 ms period, python-control)',
+                             _per_period),
+                            ('whole run (solve_ivp per voltage segment, dense output, analytic '
+                             'Jacobian)', _whole_run)):
+            stream.write(f'\nCPU of the cheapest scipy/python-control run, {title}, that '
+                         "reaches an error level, divided by 'auto''s CPU at that level:\n\n")
+            stream.write('| beam | eps_b | ' + ' | '.join(f'≤{e:g}' for e in ERROR_LEVELS)
+                         + ' |\n|---|---|' + '---|' * len(ERROR_LEVELS) + '\n')
+            for (beam, eps_b), ratios in speedups(rows, pick).items():
+                stream.write(f'| {beam} | {eps_b} | ' + ' | '.join(
+                    '—' if not np.isfinite(r) else f'{r:.0f}×' for r in ratios) + ' |\n')
     try:
         import matplotlib
         matplotlib.use('Agg')

@@ -25,6 +25,23 @@ def test_every_method_is_declared_with_its_order():
         assert total == pytest.approx(1.0, abs=1e-14), name
 
 
+def test_dormand_prince_table_is_scipys():
+    """The written-out DP5 table equals scipy's RK45 coefficients to the last bit."""
+    from scipy.integrate import RK45
+    dp5 = integrators.get_method('dp5')
+    c, terms = dp5.arrays()
+    assert np.array_equal(c, RK45.C)
+    a = np.zeros((6, 6))
+    b = np.zeros(6)
+    for i, j, _, _, w in terms:
+        if int(i) == 6:
+            b[int(j)] = w
+        else:
+            a[int(i), int(j)] = w
+    assert np.array_equal(a[:, :5], RK45.A) and np.array_equal(b, RK45.B)
+    assert np.array_equal(np.array(dp5.embedded), RK45.E)
+
+
 def _linear_charge_error(method, n_steps):
     """Small oscillation of the ideal-source model: compare with a much finer run."""
     scene = load_scene('default', {'source': 'ideal', 'creep': False, 'monitor_power': False,

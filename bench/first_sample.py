@@ -1,0 +1,126 @@
+"""
+What a new user meets (issue 14): a fresh venv, `pip install .`, then `sim_node` started as a
+process; seconds from the process start to the first `displacement` sample at a subscriber in
+this process (reliable QoS, own ROS domain, localhost only). The first start after the install
+is reported separately from the following ones; nothing should differ, because nothing is
+compiled at run time. With --colcon the same after `colcon build` of a workspace holding this
+repository (colcon-core and colcon-ros from PyPI, installed into the fresh venv).
+
+Run from the repository with a venv that has rclpy: python bench/first_sample.py [--starts 3]
+"""
+
+import argparse
+import os
+import random
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _env():
+    env = dict(os.environ)
+    env.setdefault('ROS_DOMAIN_ID', str(random.randint(120, 200)))
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    env.pop('PYTHONPATH', None)
+    return env
+
+
+def time_to_first_sample(command, env, timeout=120.0):
+    """Start ``command``; seconds until this process receives its first displacement sample."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from sensor_msgs.msg import JointState
+    os.environ['ROS_DOMAIN_ID'] = env['ROS_DOMAIN_ID']
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    context = Context()
+    rclpy.init(context=context, domain_id=int(env['ROS_DOMAIN_ID']))
+    node = rclpy.create_node('first_sample_probe', context=context)
+    got = []
+    node.create_subscription(JointState, 'displacement', lambda m: got.append(time.perf_counter()),
+                             10)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    log = tempfile.TemporaryFile()
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(command, env=env, stdout=log, stderr=subprocess.STDOUT)
+    try:
+        while not got and time.perf_counter() - t0 < timeout and proc.poll() is None:
+            executor.spin_once(timeout_sec=0.01)
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    log.seek(0)
+    text = log.read().decode(errors='replace')
+    if not got:
+        raise RuntimeError(f'no sample within {timeout} s; node said:\n{text}')
+    prepared = [line for line in text.splitlines() if 'prepared in' in line]
+    return got[0] - t0, (prepared[0].split('] ', 1)[-1] if prepared else '')
+
+
+def _run(cmd, **kw):
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, **kw)
+    return time.perf_counter() - t0
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
+    parser.add_argument('--starts', type=int, default=3)
+    parser.add_argument('--colcon', action='store_true', help='also colcon build')
+    args = parser.parse_args(argv)
+    env = _env()
+    tmp = tempfile.mkdtemp(prefix='det_sim_first_')
+    try:
+        venv = os.path.join(tmp, 'venv')
+        _run([sys.executable, '-m', 'venv', venv])
+        pip = os.path.join(venv, 'bin', 'pip')
+        t_install = _run([pip, 'install', '--quiet', '--disable-pip-version-check', REPO],
+                         env=env)
+        print(f'fresh venv, pip install . : {t_install:.1f} s (dependencies and the C kernel)')
+        node = os.path.join(venv, 'lib', 'det_sim_ros', 'sim_node')   # what ros2 run starts
+        for k in range(args.starts):
+            seconds, line = time_to_first_sample([node], env)
+            label = 'first start after install' if k == 0 else f'start {k + 1}'
+            print(f'{label}: first displacement sample after {seconds:.2f} s   [{line}]')
+        if args.colcon:
+            _run([pip, 'install', '--quiet', '--disable-pip-version-check', 'colcon-core',
+                  'colcon-ros', 'colcon-package-selection'], env=env)
+            ws = os.path.join(tmp, 'ws')
+            os.makedirs(os.path.join(ws, 'src'))
+            shutil.copytree(REPO, os.path.join(ws, 'src', 'det_sim_ros'),
+                            ignore=shutil.ignore_patterns('.git', 'build', 'install', 'log',
+                                                          '*.so', '__pycache__', '.venv'))
+            colcon_env = dict(env, PATH=os.path.join(venv, 'bin') + os.pathsep + env['PATH'])
+            t_build = _run([os.path.join(venv, 'bin', 'colcon'), 'build', '--packages-select',
+                            'det_sim_ros'], cwd=ws, env=colcon_env)
+            print(f'colcon build --packages-select det_sim_ros: {t_build:.1f} s')
+            install = os.path.join(ws, 'install', 'det_sim_ros')
+            site = subprocess.run([os.path.join(venv, 'bin', 'python'), '-c',
+                                   'import sysconfig; print(sysconfig.get_python_version())'],
+                                  capture_output=True, text=True, check=True).stdout.strip()
+            ros_env = dict(colcon_env, AMENT_PREFIX_PATH=install, PYTHONPATH=os.path.join(
+                install, 'lib', f'python{site}', 'site-packages'))
+            for k in range(args.starts):
+                seconds, line = time_to_first_sample(
+                    [os.path.join(venv, 'bin', 'python'),
+                     os.path.join(install, 'lib', 'det_sim_ros', 'sim_node')], ros_env)
+                print(f'colcon install, start {k + 1}: first displacement sample after '
+                      f'{seconds:.2f} s   [{line}]')
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
