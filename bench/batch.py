@@ -10,11 +10,13 @@ period (Python, dispatch, outputs) is shared. Measured side by side in one run:
 - ``N x SISO step``: N separate single-cell Simulators stepped one after another (the baseline
   the array replaces), for N up to --max-separate.
 
-Inputs: each actuator gets its own 0 / v_max square wave (period 0.2 s, phase spread over N), so
-charge transients start at different periods; the batch shares one step size, so a period with a
-transient anywhere takes the graded fine steps for every copy. ``--synchronized``: all switch
-together. Cost: process CPU seconds per simulated second,
-median of --repeats; RTF = 1 / cost. Run: ``python bench/batch.py`` (about 2 min).
+Inputs: each actuator gets its own 0 / v_max square wave (period 0.2 s), either staggered (phases
+spread over N, so charge transients and snaps start at different periods) or synchronized (all
+switch together). Every copy is its own coupled group with its own adaptive step count, so one
+copy snapping does not make the others take its steps. ``array run`` is also timed on
+``--threads`` threads (groups spread over them; results are identical). Cost: process CPU
+seconds per simulated second, median of --repeats; RTF = wall-clock real-time factor (for
+threads > 1, wall time is what a user waits). Run: ``python bench/batch.py`` (about 2 min).
 """
 
 import argparse
@@ -43,6 +45,15 @@ def _cpu(fn, repeats):
     return statistics.median(times)
 
 
+def _wall(fn, repeats):
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--sizes', default='1,10,100,1000')
@@ -50,53 +61,49 @@ def main(argv=None) -> int:
     parser.add_argument('--repeats', type=int, default=3)
     parser.add_argument('--max-separate', type=int, default=100)
     parser.add_argument('--tolerance', type=float, default=1e-6)
-    parser.add_argument('--synchronized', action='store_true', help='all copies switch together')
+    parser.add_argument('--threads', default='1,2', help='thread counts for the array run')
     parser.add_argument('--substeps', type=int, default=0, help='fixed steps per period (0: adaptive)')
     args = parser.parse_args(argv)
-    rows = []
+    threads = [int(t) for t in args.threads.split(',')]
+    print('| N | commands | array step(): µs CPU per actuator and period | RTF | '
+          + ' | '.join(f'simulate() {t} thread(s): µs wall per actuator and period | RTF'
+                       for t in threads)
+          + ' | N × single-cell step(): µs per actuator and period |')
+    print('|---|---|---|---|' + '---|---|' * len(threads) + '---|')
     for n in (int(s) for s in args.sizes.split(',')):
         scene = load_scene('array', {'structure.copies': n, 'integrator.tolerance': args.tolerance,
                                      'integrator.substeps': args.substeps})
         sim = Simulator(scene)
         periods = int(round(args.sim_time / sim.dt))
-        U = _commands(n, periods, sim.dt, scene.physics.v_max, args.synchronized)
-        simulate(Simulator(scene), U[:20], 20 * sim.dt)       # compile outside the timing
-        warm = Simulator(sim.model)
-        warm.set_input(U[0])
-        warm.step()
+        for synchronized in (False, True):
+            U = _commands(n, periods, sim.dt, scene.physics.v_max, synchronized)
 
-        def stepping():
-            s = Simulator(sim.model)
-            for k in range(periods):
-                s.set_input(U[k])
-                s.step()
-        cost_step = _cpu(stepping, args.repeats) / args.sim_time
-        cost_run = _cpu(lambda: simulate(Simulator(sim.model), U, args.sim_time),
-                        args.repeats) / args.sim_time
-        cost_sep = float('nan')
-        if n <= args.max_separate:
-            singles = [Simulator(scene.cell_scene(i)) for i in range(n)]
-
-            def separate():
-                for s in singles:
-                    s.reset()
+            def stepping():
+                s = Simulator(sim.model)
                 for k in range(periods):
-                    for i, s in enumerate(singles):
-                        s.set_input([U[k, i]])
-                        s.step()
-            cost_sep = _cpu(separate, args.repeats) / args.sim_time
-        rows.append((n, sim.describe_stepper(), cost_step, cost_run, cost_sep))
-        print(f'N={n:5d} {sim.describe_stepper()}: step {cost_step:.4f} '
-              f'run {cost_run:.4f} separate {cost_sep:.4f} CPU s/sim s', file=sys.stderr,
-              flush=True)
-    print('| N | stepper | array step: CPU s/sim s | RTF | per actuator (us/period) | '
-          'array run: CPU s/sim s | RTF | N x SISO step: CPU s/sim s | array vs separate |')
-    print('|---|---|---|---|---|---|---|---|---|')
-    for n, stepper, step, run, sep in rows:
-        per_act = step / n * 1e3   # us of CPU per actuator per 1 ms period
-        ratio = sep / step if np.isfinite(sep) else float('nan')
-        print(f'| {n} | {stepper} | {step:.4g} | {1 / step:.3g} | {per_act:.3g} | '
-              f'{run:.4g} | {1 / run:.3g} | {sep:.4g} | {ratio:.3g}x |')
+                    s.set_input(U[k])
+                    s.step()
+            per = 1e6 / (n * periods)     # seconds per run -> us per actuator and period
+            cost_step = _cpu(stepping, args.repeats) * per
+            runs = [_wall(lambda: simulate(Simulator(sim.model, threads=t), U, args.sim_time),
+                          args.repeats) * per for t in threads]
+            cost_sep = float('nan')
+            if n <= args.max_separate:
+                singles = [Simulator(scene.cell_scene(i)) for i in range(n)]
+
+                def separate():
+                    for s in singles:
+                        s.reset()
+                    for k in range(periods):
+                        for i, s in enumerate(singles):
+                            s.set_input([U[k, i]])
+                            s.step()
+                cost_sep = _cpu(separate, args.repeats) * per
+            rtf = lambda us: 1e3 / (us * n)  # noqa: E731 - 1 ms of sim time per period
+            print(f"| {n} | {'synchronized' if synchronized else 'staggered'} | "
+                  f'{cost_step:.3g} | {rtf(cost_step):.3g} | '
+                  + ' | '.join(f'{r:.3g} | {rtf(r):.3g}' for r in runs)
+                  + f' | {cost_sep:.3g} |', flush=True)
     return 0
 
 

@@ -52,9 +52,12 @@ class Simulator:
     :param substeps: internal steps per control period (default: the scene's; 0 = adaptive
         from the scene's tolerance when the method has an embedded estimate, else a fixed count
         from the tolerance).
+    :param threads: threads that step the independent coupled groups of a scene (the copies
+        of an array; 1 for a single or plate scene). Results do not depend on it.
     """
 
-    def __init__(self, scene=None, method: str | None = None, substeps: int | None = None):
+    def __init__(self, scene=None, method: str | None = None, substeps: int | None = None,
+                 threads: int = 1):
         if isinstance(scene, Model):
             self.model = scene
         else:
@@ -72,6 +75,7 @@ class Simulator:
         z_tol, fine = transient_settings(self.method, self.scene)
         # the compiled stepper keeps its scratch and step counts between periods
         self.stepper = make_stepper(self.model, self.method, self.control, self.dt, z_tol, fine)
+        self.stepper.threads = threads
         self.output_names = self.model.output_names
         self._out = np.empty(len(self.output_names))
         self.reset()
@@ -176,15 +180,14 @@ class Simulator:
         """
         if self.fault:
             raise ModelDomainError(kernel.NON_FINITE, f'(faulted: {self.fault})')
-        x_new = self.x.copy()
-        status = self.stepper.period(x_new, self._u_prev, self.u, self._out)
+        # in place: on failure the kernel leaves x at the period's start (the last good state)
+        status = self.stepper.period(self.x, self._u_prev, self.u, self._out)
         if status != kernel.OK:
             error = ModelDomainError(status, f'at t = {self.t + self.dt:.6g} s')
             self.fault = str(error)
             # leave the outputs buffer at the last good state so nothing faulty can be read
             self.model.kernel.outputs(self.x, self.u, self._out)
             raise error
-        self.x = x_new
         self._u_prev = self.u
         self.k += 1
         return self._out

@@ -194,3 +194,24 @@ def test_kernel_reads_named_fields_and_checks_them():
         model.kernel.outputs(np.zeros(3), np.zeros(1), np.zeros(len(model.output_names)))
     with pytest.raises(AttributeError, match='n_q'):
         kernel.Model(object())
+
+
+@pytest.mark.parametrize('overrides', [{}, {'scene.source': 'ideal'},
+                                       {'integrator.substeps': 4}])
+def test_a_failing_period_leaves_the_last_good_state(overrides):
+    """Simulator.step() steps x in place; a period that leaves the domain (here the beam ends
+    meet, lambda <= 0, within the period) must leave x exactly at the period's start."""
+    from det_sim_ros.model import ModelDomainError
+    sim = Simulator(load_scene('default', overrides))
+    a = sim.model.arrays
+    x0 = sim.model.initial_state()
+    # near the end of the domain and moving fast towards it: y -> l within 1 ms
+    x0[0] = 0.97 * np.sqrt(a.length[0] / a.c2[0])
+    x0[1] = 5000.0 * x0[0]   # (slower: the adaptive stepper finds the beam turns back)
+    sim.reset(x0)
+    before = sim.x.copy()
+    with pytest.raises(ModelDomainError, match='lambda'):
+        sim.step()
+    assert np.array_equal(sim.x, before)
+    assert sim.fault and sim.k == 0
+    assert np.all(np.isfinite(sim._out))
