@@ -64,15 +64,20 @@ def _rhs_for_solvers(model):
     return f
 
 
-def _scipy_run(model, method, rtol, t_end):
-    volts = step_voltage(model.scene.physics.v_max)
+def _run_start(model, t_end):
+    """What every solver run starts from: the voltage profile, dt, the number of samples, the
+    initial state, the absolute-tolerance scale, the sample array and the rhs."""
     dt = model.scene.dt
     n = int(round(t_end / dt))
     x = model.initial_state()
-    scale = np.maximum(np.abs(x), 1e-3)
     X = np.empty((n + 1, model.n_states))
     X[0] = x
-    f = _rhs_for_solvers(model)
+    return (step_voltage(model.scene.physics.v_max), dt, n, x, np.maximum(np.abs(x), 1e-3), X,
+            _rhs_for_solvers(model))
+
+
+def _scipy_run(model, method, rtol, t_end):
+    volts, dt, n, x, scale, X, f = _run_start(model, t_end)
     for k in range(n):
         u = np.array([volts(k * dt)])
         sol = solve_ivp(lambda t, z: f(t, z, u), (k * dt, (k + 1) * dt), x,
@@ -166,14 +171,7 @@ def _check_jacobian(model, jac):
 def _scipy_offline_run(model, method, rtol, t_end, jac=None):
     """The whole run the way an offline user would: one solve_ivp call per constant-voltage
     segment, dense output at the 1 kHz samples, the analytic Jacobian for implicit methods."""
-    volts = step_voltage(model.scene.physics.v_max)
-    dt = model.scene.dt
-    n = int(round(t_end / dt))
-    x = model.initial_state()
-    scale = np.maximum(np.abs(x), 1e-3)
-    X = np.empty((n + 1, model.n_states))
-    X[0] = x
-    f = _rhs_for_solvers(model)
+    volts, dt, n, x, scale, X, f = _run_start(model, t_end)
     edges = [0] + [int(round(ts / dt)) for ts in STEP_SWITCH_TIMES if ts < t_end] + [n]
     for k0, k1 in zip(edges[:-1], edges[1:]):
         v = volts(k0 * dt)

@@ -75,6 +75,13 @@ def _blocks(a, M):
     return full
 
 
+def _interface_mass(a):
+    """MI (n_cells x n_cells): the interface/plate mass acting on the end shortenings."""
+    MI = np.zeros((a.n_cells, a.n_cells))
+    MI[a.mi_row, a.mi_col] = a.mi_val
+    return MI
+
+
 def _charge_offset(a, x, u):
     """C(q) v_inf per DET: the charge the circuit relaxes to for frozen q (quasi-static
     coordinates z = q_p - C v_inf, used by the exponential methods on RC scenes)."""
@@ -102,8 +109,7 @@ def rhs(a, x, u, quasi_static: bool = False):
     q, qd = x[:nq], x[nq:2 * nq]
     kin = kinematics(a, x)
     K, D, Mb = _blocks(a, a.K), _blocks(a, a.D), _blocks(a, a.Mb)
-    MI = np.zeros((nc, nc))
-    MI[a.mi_row, a.mi_col] = a.mi_val
+    MI = _interface_mass(a)
     Jc = np.zeros((nc, nq))                  # row c: dy_c/dq
     for c in range(nc):
         s = a.cell_slice(c)
@@ -177,8 +183,7 @@ def outputs(a, x, u) -> np.ndarray:
         qp = cap * vp
         i_de = -2.0 * a.C0 * lam * ydot / a.l0 * vp + vp / a.Rp
     eps = x[i_eps:i_eps + nc] if a.creep else np.zeros(nc)
-    MI = np.zeros((nc, nc))
-    MI[a.mi_row, a.mi_col] = a.mi_val
+    MI = _interface_mass(a)
     energy = (0.5 * qd @ _blocks(a, a.Mb) @ qd + 0.5 * q @ _blocks(a, a.K) @ q + kin.U4.sum()
               + 0.5 * ydot @ MI @ ydot
               + np.sum(a.VY / 6.0 * (lam ** 2 + lam ** -2 - 2.0) + 0.5 * qp ** 2 / cap
