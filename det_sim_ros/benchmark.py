@@ -13,6 +13,9 @@ input_output_response:
 
 Error: max |Delta-y - Delta-y_ref| / stroke over the 1 ms samples, reference Radau rtol 1e-12
 restarted every period. Cost: process CPU seconds per simulated second, median of ``--repeats``.
+Every solver gets the same start: the model built and the inputs prepared outside the timing
+(scipy the voltage per segment or period, the project's runs the per-period voltage array); the
+project's timing includes constructing its Simulator (stepper set-up), scipy's its solve_ivp set-up.
 The summary table (:func:`speedups`) gives, per error level, the CPU of the cheapest competitor
 run that reaches it divided by the CPU of 'auto' at that error.
 
@@ -234,38 +237,36 @@ def run_scene(beam, eps_b, quick=False, repeats=3, log=print, reference_dir=None
         log(f'  {solver:>14} {setting:>10}  cpu/sim-s {cpu / t_end:9.4f}  err {err_y:.2e}')
 
     volts = step_voltage(scene.physics.v_max)
+    U = np.array([volts(k * scene.dt) for k in range(int(round(t_end / scene.dt)))])
     reduced = {'ideal source': {'scene.source': 'ideal'}, 'no creep': {'scene.creep': False},
                'no power monitor': {'scene.monitor_power': False}}
     for method, subs in (('etdrk4', (4, 8, 16, 32, 64)), ('lawson5', (8, 16, 32, 64)),
                          ('etd2', (32, 128)), ('rk4', (64, 128, 256))):
         for sub in (subs[1:3] if quick else subs):
-            simulate(scene, volts, 0.01, method=method, substeps=sub)   # compile outside timing
             try:
-                cpu, r = _cpu(lambda: simulate(scene, volts, t_end, method=method,
-                                               substeps=sub), repeats)
+                cpu, r = _cpu(lambda: simulate(Simulator(model, method, sub), U, t_end),
+                              repeats)
                 add(method, f'{sub} sub', cpu, r.x)
             except ArithmeticError:
                 add(method, f'{sub} sub', np.nan, None)
     # default 'auto' stepper at several tolerances, and the reductions at equal settings
     for tol in ((1e-4, 1e-6) if quick else (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)):
-        sc = step_scene(beam, eps_b, **{'integrator.tolerance': tol})
-        simulate(sc, volts, 0.01)
-        cpu, r = _cpu(lambda: simulate(sc, volts, t_end), repeats)
-        counted = Simulator(sc)   # the same run once more, to count its internal steps
-        simulate(counted, volts, t_end)
-        add('auto', f'tol {tol:g}', cpu, r.x, counted.steps_taken / round(t_end / sc.dt))
+        tol_model = build_model(step_scene(beam, eps_b, **{'integrator.tolerance': tol}))
+        cpu, r = _cpu(lambda: simulate(Simulator(tol_model), U, t_end), repeats)
+        counted = Simulator(tol_model)   # the same run once more, to count its internal steps
+        simulate(counted, U, t_end)
+        add('auto', f'tol {tol:g}', cpu, r.x, counted.steps_taken / round(t_end / scene.dt))
     # reductions at the same tolerance (auto picks method and substeps for each model)
     for label, over in {'full model': {}, **reduced}.items():
-        sc = step_scene(beam, eps_b, **over)
-        simulate(sc, volts, 0.01)
-        cpu, r = _cpu(lambda: simulate(sc, volts, t_end), repeats)
-        sim = Simulator(sc)
-        simulate(sim, volts, t_end)
+        reduced_model = build_model(step_scene(beam, eps_b, **over))
+        cpu, r = _cpu(lambda: simulate(Simulator(reduced_model), U, t_end), repeats)
+        sim = Simulator(reduced_model)
+        simulate(sim, U, t_end)
         rows.append(dict(beam=beam, eps_b=eps_b, solver=f'auto ({label})',
                          setting=f'tol 1e-06, {sim.method.name}',
                          cpu_per_sim_s=cpu / t_end, err_dy=np.nan, err_qp=np.nan,
                          realtime_factor=t_end / cpu,
-                         steps_per_period=sim.steps_taken / round(t_end / sc.dt)))
+                         steps_per_period=sim.steps_taken / round(t_end / scene.dt)))
         log(f'  {label:>24}  cpu/sim-s {cpu / t_end:9.4f} (reduced model: own error not shown)')
     for method in ('RK45', 'DOP853', 'Radau', 'BDF', 'LSODA'):
         for rtol in ((1e-6,) if quick else (1e-4, 1e-6, 1e-8)):
@@ -303,21 +304,46 @@ def run_scene(beam, eps_b, quick=False, repeats=3, log=print, reference_dir=None
 ERROR_LEVELS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
 
 
+def cost_at_error(points, level):
+    """CPU needed to reach an error ``level`` along a solver's work-precision curve: the runs'
+    Pareto front (cheapest for their error), interpolated log-log between the two front points
+    that bracket the level; the cheapest run when every run reaches it; NaN when none does.
+    ``points``: (error, cost) of one solver's runs."""
+    points = sorted((e, c) for e, c in points if np.isfinite(e) and np.isfinite(c) and e > 0)
+    front = []                          # error ascending, cost strictly descending
+    for err, cost in points:
+        if not front or cost < front[-1][1]:
+            front.append((err, cost))
+    if not front or front[0][0] > level:
+        return np.nan
+    if front[-1][0] <= level:
+        return front[-1][1]
+    for (e0, c0), (e1, c1) in zip(front, front[1:]):
+        if e0 <= level < e1:
+            w = np.log(level / e0) / np.log(e1 / e0)
+            return float(np.exp(np.log(c0) + w * np.log(c1 / c0)))
+    return np.nan
+
+
 def speedups(rows, competitors):
-    """Per scene and error level: CPU of the cheapest run among ``competitors(solver)`` with an
-    error at most that level, divided by the CPU of the cheapest 'auto' run that reaches it
-    (NaN where either never does). Returns {(beam, eps_b): [ratio per ERROR_LEVELS]}."""
+    """Per scene and error level: the CPU the cheapest of ``competitors(solver)`` needs to reach
+    that error, divided by what 'auto' needs (both from :func:`cost_at_error`: each solver's
+    Pareto front, interpolated log-log; NaN where either cannot reach the level). Returns
+    {(beam, eps_b): [ratio per ERROR_LEVELS]}."""
     table = {}
     for key in dict.fromkeys((r['beam'], r['eps_b']) for r in rows):
-        scene = [r for r in rows if (r['beam'], r['eps_b']) == key
-                 and np.isfinite(r['cpu_per_sim_s']) and np.isfinite(r['err_dy'])]
+        scene = [r for r in rows if (r['beam'], r['eps_b']) == key]
+        solvers = dict.fromkeys(r['solver'] for r in scene)
 
-        def cheapest(pick, level):
-            costs = [r['cpu_per_sim_s'] for r in scene if pick(r['solver'])
-                     and r['err_dy'] <= level]
-            return min(costs) if costs else np.nan
-        table[key] = [cheapest(competitors, e) / cheapest(lambda s: s == 'auto', e)
-                      for e in ERROR_LEVELS]
+        def cost(solver, level):
+            return cost_at_error([(r['err_dy'], r['cpu_per_sim_s']) for r in scene
+                                  if r['solver'] == solver], level)
+        ratios = []
+        for level in ERROR_LEVELS:
+            best = [cost(s, level) for s in solvers if competitors(s)]
+            best = min((c for c in best if np.isfinite(c)), default=np.nan)
+            ratios.append(best / cost('auto', level))
+        table[key] = ratios
     return table
 
 
@@ -350,8 +376,9 @@ def _write(rows, out):
                              _per_period),
                             ('whole run (solve_ivp per voltage segment, dense output, analytic '
                              'Jacobian)', _whole_run)):
-            stream.write(f'\nCPU of the cheapest scipy/python-control run, {title}, that '
-                         "reaches an error level, divided by 'auto''s CPU at that level:\n\n")
+            stream.write(f'\nCPU that the cheapest scipy/python-control solver, {title}, needs '
+                         "to reach an error level, divided by what 'auto' needs (each solver's "
+                         'runs interpolated log-log along their error-cost Pareto front):\n\n')
             stream.write('| beam | eps_b | ' + ' | '.join(f'≤{e:g}' for e in ERROR_LEVELS)
                          + ' |\n|---|---|' + '---|' * len(ERROR_LEVELS) + '\n')
             for (beam, eps_b), ratios in speedups(rows, pick).items():
