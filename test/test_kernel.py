@@ -168,17 +168,26 @@ def test_array_copies_keep_their_own_step_counts():
         assert np.array_equal(run[f'y[{det}]'], own['y'])
 
 
-def test_batch_results_do_not_depend_on_threads():
-    scene = load_scene('array', {'structure.copies': 6})
-    n = 200
+@pytest.mark.parametrize('source', ['rc', 'ideal'])
+@pytest.mark.parametrize('periods', [200, 45])   # whole chunks of 32 periods, and a part one
+def test_batch_results_do_not_depend_on_threads(source, periods):
+    """States, outputs and the energy book (input-jump bookkeeping included) are bit-identical
+    whether the copies step on one thread (per period) or on two (chunks of periods)."""
+    scene = load_scene('array', {'structure.copies': 6, 'scene.source': source})
     rng = np.random.default_rng(3)
-    volts = np.repeat(rng.uniform(0, 3000, (4, 6)), n // 4, axis=0)
+    volts = np.repeat(rng.uniform(0, 3000, (5, 6)), 40, axis=0)[:periods]
     runs = []
     for threads in (1, 2):
-        sim = Simulator(scene)
-        sim.stepper.threads = threads
-        runs.append(simulate(sim, volts, n * sim.dt).x)
-    assert np.array_equal(runs[0], runs[1])
+        sim = Simulator(scene, threads=threads)
+        runs.append(simulate(sim, volts, periods * sim.dt))
+    assert np.array_equal(runs[0].x, runs[1].x)
+    assert all(np.array_equal(runs[0][n], runs[1][n]) for n in runs[0].outputs)
+    assert runs[0].x[-1, -1] > 0.0           # the monitor booked dissipation
+    stepped = Simulator(scene)               # and the node's path, period by period
+    for k in range(periods):
+        stepped.set_input(volts[k].tolist())
+        stepped.step()
+    assert np.array_equal(stepped.x, runs[1].x[-1])
 
 
 def test_kernel_reads_named_fields_and_checks_them():

@@ -154,5 +154,7 @@ int ds_advance(const ds_stepper *st, ds_group *g, double *x, const double *u, do
                int64_t n_steps, double growth);
 int ds_period(ds_stepper *st, double *x, const double *u_old, const double *u);
 void ds_reset_control(ds_stepper *st);
+int ds_run(ds_stepper *st, ds_work *ow, double *x, const double *u_held, const double *u_last,
+           const double *U, int64_t n, double *X, double *Y, int64_t *done);
 
 #endif

@@ -608,28 +608,15 @@ static PyObject *Stepper_run(StepperObject *self, PyObject *const *args, Py_ssiz
         goto fail;
     held = 6;
     double *x = b[0].view.buf, *X = b[4].view.buf, *Y = b[5].view.buf;
-    const double *U = b[3].view.buf;
-    const double *u_book = b[1].view.buf, *u_prev = b[2].view.buf;
-    int status = DS_OK;
-    Py_ssize_t k;
+    int status;
+    int64_t k;
     Py_BEGIN_ALLOW_THREADS
-    for (k = 0; k < n_periods; k++) {
-        const double *u = U + k * nu;
-        ds_book_input_jump(m, x, u_book, u, &self->out_work);
-        u_book = u;
-        status = ds_period(&self->st, x, u_prev, u);
-        if (status != DS_OK)
-            break;
-        status = ds_outputs(m, x, u, Y + (k + 1) * ny, &self->out_work);
-        if (status != DS_OK)
-            break;
-        memcpy(X + (k + 1) * nx, x, (size_t)nx * sizeof(double));
-        u_prev = u;
-    }
+    status = ds_run(&self->st, &self->out_work, x, b[1].view.buf, b[2].view.buf,
+                    b[3].view.buf, n_periods, X, Y, &k);
     Py_END_ALLOW_THREADS
     for (int i = 0; i < held; i++)
         release(&b[i]);
-    return Py_BuildValue("(in)", status, k);
+    return Py_BuildValue("(iL)", status, (long long)k);
 fail:
     for (int i = 0; i < held; i++)
         release(&b[i]);

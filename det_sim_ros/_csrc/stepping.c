@@ -663,3 +663,139 @@ int ds_period(ds_stepper *st, double *x, const double *u_old, const double *u)
     }
     return DS_OK;
 }
+
+/*
+ * Many control periods (offline runs): period k holds U[k]; X[k + 1] and Y[k + 1] receive the
+ * state and the outputs after it. ``u_held`` is the input held now (already booked), ``u_last``
+ * the one the last period ran with. Returns a status; *done = periods completed, and x is left at
+ * the last good state. ``ow``: scratch for the outputs and the input-jump bookkeeping.
+ */
+static int run_serial(ds_stepper *st, ds_work *ow, double *x, const double *u_held,
+                      const double *u_last, const double *U, int64_t n, double *X, double *Y,
+                      int64_t *done)
+{
+    const ds_model *m = st->model;
+    const int64_t nx = m->n_state, nu = m->n_cells, ny = ds_n_outputs(m);
+    const double *u_book = u_held, *u_prev = u_last;
+    int status = DS_OK;
+    int64_t k;
+    for (k = 0; k < n; k++) {
+        const double *u = U + k * nu;
+        ds_book_input_jump(m, x, u_book, u, ow);
+        u_book = u;
+        status = ds_period(st, x, u_prev, u);
+        if (status != DS_OK)
+            break;
+        status = ds_outputs(m, x, u, Y + (k + 1) * ny, ow);
+        if (status != DS_OK)
+            break;
+        memcpy(X + (k + 1) * nx, x, (size_t)nx * sizeof(double));
+        u_prev = u;
+    }
+    *done = k;
+    return status;
+}
+
+#define RUN_CHUNK 32   /* periods a thread runs its groups through between two joins */
+
+/*
+ * ds_run for independent groups on several threads without a join per period: each thread
+ * runs its groups through RUN_CHUNK periods (states straight into their columns of X, the
+ * energies each group books per period into ``booked``), then one thread completes those
+ * periods in order: input-jump bookkeeping, energies added in group order, outputs. The
+ * arithmetic is that of run_serial, so results are bit-identical for any thread count.
+ */
+static int run_chunked(ds_stepper *st, ds_work *ow, double *x, const double *u_held,
+                       const double *u_last, const double *U, int64_t n, double *X, double *Y,
+                       int64_t *done)
+{
+    const ds_model *m = st->model;
+    const int64_t nx = m->n_state, nu = m->n_cells, ny = ds_n_outputs(m);
+    const int64_t n_groups = st->n_groups;
+    double *booked = m->power ? malloc((size_t)(n_groups * RUN_CHUNK * 2) * sizeof(double))
+                              : NULL;
+    int64_t *failed_at = malloc((size_t)n_groups * sizeof(int64_t));
+    if ((m->power && !booked) || !failed_at) {
+        free(booked);
+        free(failed_at);
+        return run_serial(st, ow, x, u_held, u_last, U, n, X, Y, done);
+    }
+    for (int64_t gi = 0; gi < n_groups; gi++) {
+        gather(m, &st->group[gi], x, st->group[gi].x_local);
+        st->group[gi].status = DS_OK;
+        failed_at[gi] = n;
+    }
+    const double *u_book = u_held;
+    int status = DS_OK;
+    int64_t k = 0;
+    for (int64_t c0 = 0; c0 < n && status == DS_OK; c0 += RUN_CHUNK) {
+        const int64_t c1 = c0 + RUN_CHUNK < n ? c0 + RUN_CHUNK : n;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 8) num_threads(st->threads)
+#endif
+        for (int64_t gi = 0; gi < n_groups; gi++) {
+            ds_group *g = &st->group[gi];
+            for (int64_t j = c0; j < c1 && g->status == DS_OK; j++) {
+                const double *u = U + j * nu + g->c_first;
+                const double *u_old = (j == 0 ? u_last : U + (j - 1) * nu) + g->c_first;
+                if (m->power)
+                    g->x_local[g->m->i_power] = g->x_local[g->m->i_power + 1] = 0.0;
+                g->status = period_core(st, g, g->x_local, u_old, u);
+                if (g->status != DS_OK) {
+                    failed_at[gi] = j;
+                    break;
+                }
+                scatter(m, g, g->x_local, X + (j + 1) * nx);
+                if (m->power) {
+                    double *b = booked + (gi * RUN_CHUNK + (j - c0)) * 2;
+                    b[0] = g->x_local[g->m->i_power];
+                    b[1] = g->x_local[g->m->i_power + 1];
+                }
+            }
+        }
+        for (k = c0; k < c1; k++) {   /* complete the chunk's periods in order */
+            const double *u = U + k * nu;
+            ds_book_input_jump(m, x, u_book, u, ow);
+            u_book = u;
+            for (int64_t gi = 0; gi < n_groups && status == DS_OK; gi++)
+                if (failed_at[gi] == k)
+                    status = st->group[gi].status;
+            if (status != DS_OK)
+                break;
+            double *row = X + (k + 1) * nx;
+            double w_in = 0.0, w_diss = 0.0;
+            if (m->power) {
+                w_in = x[m->i_power];
+                w_diss = x[m->i_power + 1];
+                for (int64_t gi = 0; gi < n_groups; gi++) {
+                    const double *b = booked + (gi * RUN_CHUNK + (k - c0)) * 2;
+                    w_in += b[0];
+                    w_diss += b[1];
+                }
+            }
+            memcpy(x, row, (size_t)nx * sizeof(double));
+            if (m->power) {
+                x[m->i_power] = w_in;
+                x[m->i_power + 1] = w_diss;
+            }
+            status = ds_outputs(m, x, u, Y + (k + 1) * ny, ow);
+            if (status != DS_OK)
+                break;
+            memcpy(row, x, (size_t)nx * sizeof(double));
+        }
+    }
+    free(booked);
+    free(failed_at);
+    *done = k;
+    return status;
+}
+
+int ds_run(ds_stepper *st, ds_work *ow, double *x, const double *u_held, const double *u_last,
+           const double *U, int64_t n, double *X, double *Y, int64_t *done)
+{
+#ifdef _OPENMP
+    if (st->n_groups > 1 && st->threads > 1)
+        return run_chunked(st, ow, x, u_held, u_last, U, n, X, Y, done);
+#endif
+    return run_serial(st, ow, x, u_held, u_last, U, n, X, Y, done);
+}
