@@ -108,11 +108,23 @@ class Model:
         return len(self.state_names)
 
     def initial_state(self) -> np.ndarray:
+        """
+        The scene's initial state (``scene.initial_state``): 'rest' = every cell at its stable
+        buckled equilibrium at 0 V, stationary (:func:`det_sim_ros.statics.rest_state`);
+        'released' = :meth:`released_state`.
+        """
+        if self.scene.initial_state == 'rest':
+            from .statics import rest_state
+            return rest_state(self)
+        return self.released_state()
+
+    def released_state(self) -> np.ndarray:
         """q = q0 at the first Ritz coordinate of each cell, everything else 0 (scenarios.md)."""
         x = np.zeros(self.n_states)
-        cell_q = self.arrays[1]
-        for c, physics in enumerate(self.scene.cell_physics()):
-            x[cell_q[c]] = physics.q0 / self.bases[c].reference_row()[0]
+        offset = 0
+        for basis, physics in zip(self.bases, self.scene.cell_physics()):
+            x[offset] = physics.q0 / basis.reference_row()[0]
+            offset += basis.n_ritz
         return x
 
     def f(self, t, x, u, params=None) -> np.ndarray:  # noqa: ARG002 - nlsys signature

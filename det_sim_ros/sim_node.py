@@ -188,6 +188,8 @@ class SimNode(Node):
         self._det_index = {name: i for i, name in enumerate(self.det_names)}
         self._channels = {topic: model.channel(out) for topic, (out, _) in OUTPUT_TOPICS.items()}
         self._qdot = model.channel('q_dot')
+        self._initial_text = (f'rest ({self.scene.rest_branch}, 0 V)'
+                              if self.scene.initial_state == 'rest' else 'released from q0')
         self.y0 = rest_shortenings(self.scene)     # per DET, m
         self._y0 = np.array(self.y0)
         (self._struct_idx, self.structure_names, signs,
@@ -245,7 +247,8 @@ class SimNode(Node):
         self.get_logger().info(
             f'scene {scene_file!r}: {self.scene.beam} beam, eps_b = {self.scene.eps_b:g}, '
             f'{self.scene.rate_hz:g} Hz, {self._sim.describe_stepper()}; '
-            f'{mode}{", paused" if self.paused else ""}; {len(self.det_names)} DET(s), '
+            f'{mode}{", paused" if self.paused else ""}; initial state {self._initial_text}; '
+            f'{len(self.det_names)} DET(s), '
             f'voltage command order: [{", ".join(self.det_names)}]'
             + (f'; structure outputs [{", ".join(self.structure_names)}]'
                if self.structure_names else ''))
@@ -264,6 +267,8 @@ class SimNode(Node):
             namespace=self.get_namespace(),
             metadata={'method': self._sim.method.name, 'substeps': self._sim.substeps_setting,
                       'y0': repr(self.y0[0]) if len(self.y0) == 1 else repr(self.y0),
+                      'initial_state': self._initial_text,
+                      'x0': repr(self._sim.x0.tolist()),   # what ~/reset returns to
                       'node': self.get_fully_qualified_name()},
             on_fault=lambda text: self.get_logger().error(text))
         if self._recorder.active:
@@ -494,7 +499,8 @@ class SimNode(Node):
         self._fault_reported = ''
         self._run_timer(not self.paused)
         self._publish_sample(self._current_outputs())
-        response.success, response.message = True, 'reset to t = 0, initial state, 0 V'
+        response.success = True
+        response.message = f'reset to t = 0, initial state {self._initial_text}, 0 V'
         return response
 
     # -- parameters -----------------------------------------------------------------------

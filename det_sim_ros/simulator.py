@@ -76,6 +76,7 @@ class Simulator:
                                          error_weights(self.model))
         self.output_names = self.model.output_names
         self._out = np.empty(len(self.output_names))
+        self.x0 = self.model.initial_state()   # the scene's initial state (reset returns here)
         self.reset()
 
     def _pick_method(self, name: str) -> Method:
@@ -86,10 +87,10 @@ class Simulator:
 
     # -- state ----------------------------------------------------------------------------
     def reset(self, x0=None) -> None:
-        """Back to t = 0, the initial state (or ``x0``), 0 V input, no fault."""
+        """Back to t = 0, the scene's initial state (or ``x0``), 0 V input, no fault."""
         self.k = 0
         self._ctl = self._ctl_initial.copy()   # the step count starts over: runs repeat exactly
-        self.x = self.model.initial_state() if x0 is None else np.array(x0, dtype=float)
+        self.x = self.x0.copy() if x0 is None else np.array(x0, dtype=float)
         if self.x.shape != (self.model.n_states,):
             raise ValueError(f'x0 must have {self.model.n_states} entries')
         self.u = np.zeros(self.model.n_inputs)
