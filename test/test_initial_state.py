@@ -153,3 +153,62 @@ def test_missing_rest_state_is_refused_with_a_reason(monkeypatch):
     with pytest.raises(RestStateError, match='no stable buckled\\+ equilibrium') as info:
         rest_coords(scene, 'buckled+')
     assert isinstance(info.value, SceneError) and '\n' not in str(info.value)
+
+
+# -- the node: starts in, and resets to, the configured initial state; the log records it ------
+
+MS = 1_000_000  # ns
+
+
+@pytest.mark.parametrize('initial_state', ['rest', 'released'])
+def test_node_starts_and_resets_to_the_initial_state_and_logs_it(tmp_path, harness,
+                                                                 initial_state):
+    """What the node published (its MCAP log holds every sample): the first 100 ms at 0 V are
+    stationary at rest; ~/reset returns to the same initial state (the same samples again);
+    the log records it and re-simulates bit for bit."""
+    from det_sim_ros.mcap_log import LogReader
+    from det_sim_ros.replay import resimulate
+    h = harness(steps_per_tick=5, **{'log.path': str(tmp_path / 'logs'),
+                                     'scene.initial_state': initial_state})
+    h.spin_until(lambda: h.node._sim.k >= 110, 'sim time 0.11 s')
+    h.command([2000.0])
+    h.spin_until_sim_time(h.node._sim.t + 0.03)
+    assert initial_state in h.call('reset').message
+    h.spin_until(lambda: h.node._sim.k >= 110, 'sim time 0.11 s after the reset')
+    recorder, x0 = h.node._recorder, h.node._sim.x0.tolist()
+    h.close()
+    assert len(recorder.paths) == 2        # a reset starts a new file
+    runs = []
+    for path in recorder.paths:
+        reader = LogReader(path)
+        samples = {m.log_time: m.decode().position[0]
+                   for m in reader.messages(['displacement'])}
+        runs.append([samples[k * MS] for k in range(101)])
+        assert reader.info['initial_state'].startswith(initial_state)
+        assert eval(reader.info['x0']) == x0   # noqa: S307 - our own log
+        result = resimulate(path)
+        assert result.complete and result.steps > 0
+        assert all(v == 0.0 for v in result.max_deviation.values()), result.table()
+    if initial_state == 'rest':
+        assert max(abs(v) for v in runs[0]) <= TOL        # stationary from t = 0
+    else:
+        assert runs[0][0] == pytest.approx(h.node.y0[0], rel=1e-2)   # the buckling transient
+    assert runs[1] == runs[0]                                         # reset: the same start
+
+
+def test_log_without_the_key_replays_as_released(tmp_path):
+    """Logs written before scene.initial_state existed started released from q0."""
+    from det_sim_ros.mcap_log import Recorder
+    from det_sim_ros.replay import resimulate, simulate_to_log
+    from det_sim_ros.scene import scene_to_dict
+    scene = load_scene('default', {'scene.initial_state': 'released'})
+    old = scene_to_dict(scene, wrap=True)
+    for key in ('initial_state', 'rest_branch'):
+        del old['sim_node']['ros__parameters']['scene'][key]
+    sim = Simulator(scene)
+    recorder = Recorder(tmp_path / 'old.mcap', old, metadata={'method': sim.method.name,
+                                                              'substeps': 0})
+    simulate_to_log(recorder, sim, {0: [0.0], 50: [2500.0]}, 120)
+    recorder.close()
+    result = resimulate(str(tmp_path / 'old.mcap'))
+    assert result.steps == 120 and all(v == 0.0 for v in result.max_deviation.values())
