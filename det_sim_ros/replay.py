@@ -69,8 +69,9 @@ def command_volts(type_name: str, msg, held: Sequence[float],
     if det_names is None:
         det_names = [f'det{i}' for i in range(len(held))]
     index = {name: i for i, name in enumerate(det_names)}
-    if len(names) != len(values) or not names or any(n not in index for n in names):
-        return None
+    if (len(names) != len(values) or not names or any(n not in index for n in names)
+            or len(set(names)) != len(names)):
+        return None      # refused by the node (see SimNode._on_joint_command)
     volts = [float(v) for v in held]
     for name, value in zip(names, values):
         volts[index[name]] = value

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import signal
 import sys
 import time
 
@@ -18,9 +19,12 @@ import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 import rclpy
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
@@ -143,8 +147,10 @@ def _flatten(data, prefix=''):
             yield f'{prefix}{key}', value
 
 
-def _check_node_value(name, value):
-    default = NODE_PARAMS[name][0]
+def _check_node_value(name, value, where='scene key node.'):
+    """A node parameter's value checked against its type and range (an integer is accepted
+    for a double); :class:`SceneError` naming the key otherwise."""
+    default, bounds = NODE_PARAMS[name][0], NODE_PARAMS[name][3]
     if isinstance(default, bool):
         ok = isinstance(value, bool)
     elif isinstance(default, int):
@@ -154,8 +160,12 @@ def _check_node_value(name, value):
     else:
         ok = isinstance(value, (int, float)) and not isinstance(value, bool)
         value = float(value) if ok else value
+    kind = {bool: 'true or false', int: 'an integer', str: 'a string',
+            float: 'a number'}[type(default)]
     if not ok:
-        raise SceneError(f"scene key 'node.{name}': must be of type {type(default).__name__} "
+        raise SceneError(f"{where}{name}: must be {kind} (got {value!r})")
+    if bounds is not None and not (math.isfinite(value) and bounds[0] <= value <= bounds[1]):
+        raise SceneError(f'{where}{name}: out of range [{bounds[0]:g}, {bounds[1]:g}] '
                          f'(got {value!r})')
     return value
 
@@ -171,11 +181,20 @@ class SimNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         overrides = dict(getattr(self, '_parameter_overrides', {}) or {})
+        if 'scene_file' in overrides and not isinstance(overrides['scene_file'].value, str):
+            raise SceneError(f"parameter scene_file: must be a string (a name in config/ or a "
+                             f"path; got {overrides['scene_file'].value!r})")
         scene_file = self.declare_parameter('scene_file', 'default', ParameterDescriptor(
             description='scene file: a name in config/ or a path', read_only=True)).value
         scene_overrides = {name: p.value for name, p in overrides.items()
                            if name.split('.')[0] in SCENE_SECTIONS or name == 'rate_hz'}
         self.scene = load_scene(scene_file, overrides=scene_overrides)
+        if self.scene.method != 'auto':      # checked here, before the (long) preparation
+            from .integrators import get_method
+            try:
+                get_method(self.scene.method)
+            except ValueError as exc:
+                raise SceneError(f"scene key 'integrator.method': {exc}") from None
         self._declare_scene_parameters()
         self._declare_node_parameters(overrides)
 
@@ -282,11 +301,18 @@ class SimNode(Node):
             self._recorder.close()
         return super().destroy_node()
 
+    def _set_override(self, name, value):
+        """Replace a -p override by its checked value: rclpy refuses an override whose type
+        differs from the declared one (an integer given for a double, e.g. physics.Rs:=1)."""
+        if name in self._parameter_overrides:
+            self._parameter_overrides[name] = Parameter(name, value=value)
+
     def _declare_scene_parameters(self):
         """Expose the loaded scene as read-only parameters (set them in the scene file)."""
         for name, value in _flatten(scene_to_dict(self.scene)):
             if name.startswith('node.'):
                 continue
+            self._set_override(name, value)   # the scene's checked value (e.g. 1 -> 1.0)
             self.declare_parameter(name, value, ParameterDescriptor(
                 description='scene value (read-only; set in the scene file or with -p at start)',
                 read_only=True))
@@ -301,7 +327,11 @@ class SimNode(Node):
             raise SceneError(f"scene key 'node.{unknown[0]}': unknown (allowed: "
                              + ', '.join(NODE_PARAMS) + ')')
         for name, (default, description, read_only, bounds) in NODE_PARAMS.items():
-            value = _check_node_value(name, node_section.get(name, default))
+            if name in overrides:          # -p name:=value wins over the scene file
+                value = _check_node_value(name, overrides[name].value, 'parameter ')
+                self._set_override(name, value)
+            else:
+                value = _check_node_value(name, node_section.get(name, default))
             descriptor = ParameterDescriptor(description=description, read_only=read_only)
             if bounds is not None and isinstance(default, float):
                 descriptor.floating_point_range = [FloatingPointRange(
@@ -432,10 +462,17 @@ class SimNode(Node):
         if len(names) != len(values):
             return self._refuse(f'voltage_command_joint: {len(names)} name(s) but '
                                 f'{len(values)} position value(s)')
+        if not names:
+            return self._refuse('voltage_command_joint: empty JointState (no DET name); name '
+                                f'one or more of {self.det_names}')
         unknown = [name for name in names if name not in self._det_index]
-        if unknown or not names:
-            return self._refuse(f'voltage_command_joint: unknown DET name(s) {unknown or names} '
+        if unknown:
+            return self._refuse(f'voltage_command_joint: unknown DET name(s) {unknown} '
                                 f'(expected {self.det_names})')
+        repeated = sorted({name for name in names if names.count(name) > 1})
+        if repeated:
+            return self._refuse(f'voltage_command_joint: DET name(s) {repeated} given more '
+                                'than once; name each DET at most once')
         volts = self._sim.u.tolist()
         for name, value in zip(names, values):
             volts[self._det_index[name]] = value
@@ -597,23 +634,89 @@ class SimNode(Node):
             f'RTF={rate * self._dt:.2f} {state}')
 
 
-def main(args=None):
-    """Run the simulator node until Ctrl-C; exit 1 with one line for a malformed scene."""
-    rclpy.init(args=args)
-    node = None
+class _StopRequested(BaseException):
+    """SIGINT/SIGTERM during start-up: unwinds the preparation (nothing to finish yet)."""
+
+
+class _StopSignals:
+    """
+    SIGINT and SIGTERM end the node cleanly at any moment, exit code 0 and a finished log.
+
+    rclpy's own handlers shut the context down from inside the signal handler, while a
+    stepping-timer callback may be publishing: that callback then fails (``RCLError:
+    publisher's context is invalid``, ``failed to initialize wait set``) and the node exits with
+    a traceback. Here the handlers only take note: during start-up (scene, model, first compile)
+    they unwind it at once; once running, the spin loop stops between two callbacks (so no
+    callback and no log write is ever cut in half), then the log is finished and the context
+    shut down, in that order.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self):
+        self.requested = 0            # the signal number once a stop was asked for
+        self.preparing = True
+        self._previous = {}
+
+    def __enter__(self):
+        for sig in self.SIGNALS:
+            self._previous[sig] = signal.signal(sig, self._on_signal)
+        return self
+
+    def __exit__(self, *exc):
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+
+    def _on_signal(self, signum, frame):
+        self.requested = signum
+        if self.preparing:
+            self.preparing = False
+            raise _StopRequested()
+
+
+def _spin_until_stopped(node, stop) -> None:
+    """Run the node's callbacks until a stop signal (checked at least every 0.1 s)."""
+    from rclpy.executors import SingleThreadedExecutor
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
     try:
-        node = SimNode()
-        rclpy.spin(node)
-    except SceneError as exc:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {exc}')
-        return 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        while not stop.requested and node.context.ok():
+            executor.spin_once(timeout_sec=0.1)
     finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+        executor.remove_node(node)
+        executor.shutdown(timeout_sec=0.0)
+
+
+def main(args=None):
+    """
+    Run the simulator node until SIGINT or SIGTERM (exit 0, log finished); exit 1 with one
+    line for a start-up input that cannot be used (scene, parameter, initial state).
+    """
+    from rclpy.signals import SignalHandlerOptions
+    node = None
+    code = 0
+    with _StopSignals() as stop:
+        try:
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+            node = SimNode()
+            stop.preparing = False
+            if not stop.requested:
+                _spin_until_stopped(node, stop)
+        except _StopRequested:
+            pass
+        except (SceneError, ParameterException, ModelDomainError, RCLError) as exc:
+            stop.preparing = False       # one line, exit 1: an input that cannot be used
+            text = ' '.join(str(exc).split()) or type(exc).__name__
+            rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {text}')
+            code = 1
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        finally:
+            stop.preparing = False
+            if node is not None:
+                node.destroy_node()          # finishes and indexes the MCAP log
+            rclpy.try_shutdown()
+    return code
 
 
 if __name__ == '__main__':

@@ -24,7 +24,7 @@ import numpy as np
 from . import _kernels
 from .integrators import error_weights, get_method, Method, step_control, transient_settings
 from .model import build_model, Model, ModelDomainError
-from .scene import load_scene, Scene
+from .scene import load_scene, Scene, SceneError
 
 __all__ = ['Simulator', 'InputCheck', 'simulate', 'SimulationResult']
 
@@ -83,7 +83,10 @@ class Simulator:
         if name == 'auto':
             stiff = self.scene.source == 'rc'
             return get_method('etdrk4' if stiff else 'dp5')
-        return get_method(name)
+        try:
+            return get_method(name)
+        except ValueError as exc:   # a scene value: one line naming the key and the choices
+            raise SceneError(f"scene key 'integrator.method': {exc}") from None
 
     # -- state ----------------------------------------------------------------------------
     def reset(self, x0=None) -> None:
