@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import signal
 import sys
 import time
@@ -74,8 +75,12 @@ NODE_PARAMS = {
                     True, None),
     'log.path': ('./det_sim_logs', 'MCAP log directory (a new file per run) or a .mcap file',
                  True, None),
-    'log.split_mb': (0.0, 'start a new log file after this many MiB (0 = one file per run)',
-                     True, (0.0, 1.0e6)),
+    'log.split_mb': (256.0, 'start a new log file after this many MiB (0 = one file per run '
+                     'and reset; then log.max_mb cannot cut a long run)', True, (0.0, 1.0e6)),
+    'log.max_mb': (2048.0, "keep the log directory's det_sim_*.mcap files under this many MiB "
+                   'in all, oldest deleted first (0 = no limit)', True, (0.0, 1.0e9)),
+    'log.max_files': (100, "keep at most this many det_sim_*.mcap files in the log directory, "
+                      'oldest deleted first (0 = no limit)', True, (0, 1000000)),
     'info_period': (5.0, 'seconds between INFO status lines (wall clock), 0 = off', True,
                     (0.0, 3600.0)),
 }
@@ -277,12 +282,19 @@ class SimNode(Node):
         """MCAP logging (det_sim_ros.mcap_log): on unless log.enabled is false."""
         if not self._p('log.enabled'):
             return
-        from .mcap_log import Recorder
+        from .mcap_log import Recorder, recover_unfinished
+        path = self._p('log.path')
+        if not path.endswith('.mcap') and os.path.isdir(path):
+            # a log cut by a crash (power loss, SIGKILL inside a flush): repaired at this start
+            for repaired, outcome in recover_unfinished(path):
+                self.get_logger().warning(f'recovered unfinished log {repaired}: '
+                                          f"{outcome['messages']} messages readable")
         qos = {topic: out_qos for topic in self._pubs}
         qos.update({'voltage_command': QoSProfile(depth=10),
                     'voltage_command_joint': QoSProfile(depth=10)})
         self._recorder = Recorder(
-            self._p('log.path'), self.scene, qos_by_topic=qos, split_mb=self._p('log.split_mb'),
+            path, self.scene, qos_by_topic=qos, split_mb=self._p('log.split_mb'),
+            max_total_mb=self._p('log.max_mb'), max_files=self._p('log.max_files'),
             namespace=self.get_namespace(),
             metadata={'method': self._sim.method.name, 'substeps': self._sim.substeps_setting,
                       'y0': repr(self.y0[0]) if len(self.y0) == 1 else repr(self.y0),
@@ -291,7 +303,17 @@ class SimNode(Node):
                       'node': self.get_fully_qualified_name()},
             on_fault=lambda text: self.get_logger().error(text))
         if self._recorder.active:
-            self.get_logger().info(f'logging to {self._recorder.path}')
+            split, max_mb, max_files = (self._p('log.split_mb'), self._p('log.max_mb'),
+                                        self._p('log.max_files'))
+            self.get_logger().info(
+                f'logging to {self._recorder.path} (a new file at every ~/reset'
+                + (f' and after {split:g} MiB' if split else '') + '; log directory limit: '
+                + (f'{max_mb:g} MiB' if max_mb else 'no size limit') + ', '
+                + (f'{max_files} files' if max_files else 'no file limit')
+                + ', oldest deleted first)')
+            if self._recorder.deleted:
+                self.get_logger().info(f'log limit: deleted {len(self._recorder.deleted)} '
+                                       'old log file(s)')
             self.create_timer(self._recorder.flush_period_s, self._recorder.maybe_flush,
                               clock=self._steady)
 
@@ -533,6 +555,8 @@ class SimNode(Node):
         self._sim.reset()
         if self._recorder is not None:
             self._recorder.new_file()  # sim time restarts: one file per continuous run
+            if self._recorder.active:
+                self.get_logger().info(f'reset: the log continues in {self._recorder.path}')
         self._fault_reported = ''
         self._run_timer(not self.paused)
         self._publish_sample(self._current_outputs())
