@@ -229,6 +229,7 @@ class SimNode(Node):
         self.steps_total = 0
         self.lateness_log = None  # set to a list to record real-time tick lateness (bench)
         self._fault_reported = ''
+        self._distrust_reported = ''
 
         # MCAP recording hook (issue 5): an object with record(topic, msg, sim_time_ns), or None.
         # Called for every published output and every received command.
@@ -601,8 +602,14 @@ class SimNode(Node):
             elapsed = time.perf_counter() - self._wall0
             backlog = max(0, self._k0 + int(elapsed * self._rtf / self._dt) - self._sim.k - 1)
         status = DiagnosticStatus(name=f'{self.get_name()}: simulation', hardware_id='det_sim_ros')
+        distrust = self._sim.trust_issue()
+        if distrust and distrust != self._distrust_reported:
+            self.get_logger().warning(distrust)          # once per cause, until a reset
+        self._distrust_reported = distrust
         if self._sim.fault:
             status.level, status.message = DiagnosticStatus.ERROR, f'fault: {self._sim.fault}'
+        elif distrust:
+            status.level, status.message = DiagnosticStatus.WARN, distrust
         elif backlog > 0:
             status.level, status.message = DiagnosticStatus.WARN, f'behind by {backlog} steps'
         else:

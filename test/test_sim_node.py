@@ -409,3 +409,21 @@ def test_plate_bad_inputs_per_channel(harness):
         {kv.key: kv.value for kv in s.values}.get('refused_commands') == '7'
         and 'empty' in {kv.key: kv.value for kv in s.values}.get('last_refused', '')
         for d in h.diagnostics for s in d.status), 'diagnostics with the refused count')
+
+
+def test_implausible_physics_is_flagged_on_diagnostics(harness):
+    """Issue 17: v_max = 1e5 V driven at 1e5 V: the power-balance residual leaves its bound,
+    /diagnostics says WARN with the cause (not OK); nothing non-finite is published."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+    from det_sim_ros.simulator import POWER_RESIDUAL_LIMIT
+    h = harness(diagnostics_period=0.05, **{'physics.v_max': 1.0e5,
+                                            'scene.initial_state': 'released'})
+    h.command([1.0e5])
+    h.spin_until(lambda: any(s.level == DiagnosticStatus.WARN and 'residual' in s.message
+                             for d in h.diagnostics for s in d.status), 'a WARN on the residual')
+    assert abs(h.node._sim.power_residual()) > POWER_RESIDUAL_LIMIT
+    assert not h.non_finite
+    h.call('reset')
+    h.diagnostics.clear()
+    h.spin_until(lambda: h.diagnostics, 'diagnostics after the reset')
+    assert h.diagnostics[-1].status[0].level == DiagnosticStatus.OK
