@@ -72,7 +72,8 @@ def main(argv=None) -> int:
     print('|---|---|---|---|' + '---|---|' * len(threads) + '---|')
     for n in (int(s) for s in args.sizes.split(',')):
         scene = load_scene('array', {'structure.copies': n, 'integrator.tolerance': args.tolerance,
-                                     'integrator.substeps': args.substeps})
+                                     'integrator.substeps': args.substeps,
+                                     'scene.initial_state': 'released'})
         sim = Simulator(scene)
         periods = int(round(args.sim_time / sim.dt))
         for synchronized in (False, True):

@@ -18,7 +18,7 @@ from det_sim_ros.simulator import Simulator
 
 
 def main(n_steps=20000):
-    scene = load_scene('default')
+    scene = load_scene('default', {'scene.initial_state': 'released'})
     sim = Simulator(scene)
     y0 = rest_shortening(scene)
     names = sim.output_names

@@ -423,6 +423,9 @@ def cmd_step(args) -> int:
     out = _out_dir(args)
     if not _user_set(args, 'rate_hz'):
         base = base.replace(rate_hz=1000.0)          # scenarios.md: 1 ms samples
+    if not _user_set(args, 'scene.initial_state', 'initial_state'):
+        # scenarios.md: released from q0 (the 0 V phase is the beam buckling into rest)
+        base = base.replace(**{'scene.initial_state': 'released'})
     runs = {}
     rows = []
     bar = Progress(len(args.beams) * len(args.eps_b), 'step')

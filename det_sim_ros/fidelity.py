@@ -48,7 +48,8 @@ def fidelity_scene(beam: str, fidelity: str = 'consistent', n_ritz: int = 1,
     return load_scene('default', {'scene.beam': beam, 'scene.eps_b': eps_b,
                                   'scene.fidelity': fidelity, 'scene.n_ritz': n_ritz,
                                   'scene.source': 'ideal', 'scene.creep': False,
-                                  'scene.monitor_power': False})
+                                  'scene.monitor_power': False,
+                                  'scene.initial_state': 'released'})
 
 
 @dataclasses.dataclass(frozen=True)

@@ -179,6 +179,17 @@ class Model:
         return len(self.state_names)
 
     def initial_state(self) -> np.ndarray:
+        """
+        The scene's initial state (``scene.initial_state``): 'rest' = every cell at its stable
+        buckled equilibrium at 0 V, stationary (:func:`det_sim_ros.statics.rest_state`);
+        'released' = :meth:`released_state`.
+        """
+        if self.scene.initial_state == 'rest':
+            from .statics import rest_state
+            return rest_state(self)
+        return self.released_state()
+
+    def released_state(self) -> np.ndarray:
         """q = q0 at the first Ritz coordinate of each cell, everything else 0 (scenarios.md)."""
         x = np.zeros(self.n_states)
         cell_q = self.arrays.cell_q

@@ -69,8 +69,9 @@ def command_volts(type_name: str, msg, held: Sequence[float],
     if det_names is None:
         det_names = [f'det{i}' for i in range(len(held))]
     index = {name: i for i, name in enumerate(det_names)}
-    if len(names) != len(values) or not names or any(n not in index for n in names):
-        return None
+    if (len(names) != len(values) or not names or any(n not in index for n in names)
+            or len(set(names)) != len(names)):
+        return None      # refused by the node (see SimNode._on_joint_command)
     volts = [float(v) for v in held]
     for name, value in zip(names, values):
         volts[index[name]] = value
@@ -99,6 +100,18 @@ def _logged_y0(text: str | None, n: int) -> list[float] | None:
         return None
     values = value if isinstance(value, (list, tuple)) else [value]
     return [float(v) for v in values] if len(values) == n else None
+
+
+def _logged_x0(text: str | None, n: int):
+    """Metadata 'x0' (the initial state vector the run started from), None if absent or not n
+    finite values."""
+    if not text:
+        return None
+    try:
+        values = [float(v) for v in ast.literal_eval(text)]
+    except (ValueError, SyntaxError, TypeError):
+        return None
+    return values if len(values) == n and all(math.isfinite(v) for v in values) else None
 
 
 class OutputContract:
@@ -195,7 +208,17 @@ def _scene_from_log(reader: LogReader):
     text = reader.scene_yaml
     if not text:
         raise ValueError(f'{reader.files[0]}: the log holds no scene (det_sim_ros metadata)')
-    return load_scene(yaml.safe_load(text))
+    data = yaml.safe_load(text)
+    inner = data
+    if isinstance(data, dict) and len(data) == 1:
+        (only,) = data.values()
+        if isinstance(only, dict) and 'ros__parameters' in only:
+            inner = only['ros__parameters']
+    section = inner.get('scene') if isinstance(inner, dict) else None
+    if isinstance(section, dict):
+        # logs written before scene.initial_state existed started released from q0
+        section.setdefault('initial_state', 'released')
+    return load_scene(data)
 
 
 def resimulate(log, method: str | None = None, substeps: int | None = None,
@@ -220,6 +243,10 @@ def resimulate(log, method: str | None = None, substeps: int | None = None,
         substeps = int(info['substeps'])
     fields = dict(output_fields or OUTPUT_FIELDS)
     sim = Simulator(scene, method=method, substeps=substeps)
+    x0 = _logged_x0(info.get('x0'), sim.model.n_states)
+    if x0 is not None:   # the logged initial state itself (bit-exact even if its solve changes)
+        sim.x0 = np.array(x0)
+        sim.reset()
     det_names = list(sim.model.input_names)
     contract = OutputContract(sim.model, _logged_y0(info.get('y0'), sim.model.n_inputs), fields)
     structure_key = (f"{contract.structure_topic}.position "

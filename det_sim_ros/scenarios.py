@@ -30,9 +30,9 @@ def step_voltage(v_max: float):
 
 
 def step_scene(beam: str = 'fixed', eps_b: float = 0.20, **overrides):
-    """The default scene set up for the 'step' scenario (1 kHz sampling)."""
+    """The default scene set up for the 'step' scenario (1 kHz sampling, released from q0)."""
     return load_scene('default', {'scene.beam': beam, 'scene.eps_b': eps_b, 'rate_hz': 1000.0,
-                                  **overrides})
+                                  'scene.initial_state': 'released', **overrides})
 
 
 def delta_y(t, y, l_beam):

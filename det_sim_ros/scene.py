@@ -23,12 +23,16 @@ import numpy as np
 import yaml
 
 __all__ = ['SceneError', 'Physics', 'Scene', 'load_scene', 'scene_to_dict', 'find_config',
-           'BEAMS', 'FIDELITIES', 'SOURCES', 'STRUCTURES']
+           'BEAMS', 'FIDELITIES', 'SOURCES', 'STRUCTURES', 'INITIAL_STATES', 'REST_BRANCHES']
 
 BEAMS = ('simply_supported', 'fixed')
 FIDELITIES = ('paper', 'consistent', 'exact')
 SOURCES = ('rc', 'ideal')
 STRUCTURES = ('single', 'plate', 'array')
+# 'rest': every cell at its stable buckled equilibrium at 0 V (on rest_branch), at rest, no
+# charge, no creep; 'released': the paper's start, q = q0 (nearly straight), released at t = 0
+INITIAL_STATES = ('rest', 'released')
+REST_BRANCHES = ('buckled+', 'buckled-')
 EPS0 = 8.8541878128e-12  # F/m, vacuum permittivity
 
 
@@ -67,7 +71,14 @@ SCENE_SPEC = {
     'creep': ('bool', 'Maxwell creep state'),
     'source': ('choice', SOURCES, 'electrical source model'),
     'monitor_power': ('bool', 'integrate the power balance'),
+    'initial_state': ('choice', INITIAL_STATES, "initial state: 'rest' (stable buckled "
+                      "equilibrium at 0 V) or 'released' (q = q0, the paper's start)"),
+    'rest_branch': ('choice', REST_BRANCHES, "the rest state's side: 'buckled+' (q > 0) or "
+                    "'buckled-' (q < 0)"),
 }
+# Optional keys and their values when a scene (or a log written before the key existed) omits
+# them; every other key of SECTIONS must be given.
+SECTION_DEFAULTS = {('scene', 'initial_state'): 'rest', ('scene', 'rest_branch'): 'buckled+'}
 INTEGRATOR_SPEC = {
     'method': ('str', 'stepper name or auto'),
     'tolerance': ('float', 0.0, False, 0.1, '-', 'target error of auto'),
@@ -166,6 +177,8 @@ class Scene:
     structure: Mapping[str, Any] = dataclasses.field(
         default_factory=lambda: copy.deepcopy(STRUCTURE_DEFAULTS))
     dets: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
+    initial_state: str = 'rest'     # 'rest' | 'released' (INITIAL_STATES)
+    rest_branch: str = 'buckled+'   # 'buckled+' | 'buckled-' (REST_BRANCHES)
 
     @property
     def det_names(self) -> tuple:
@@ -389,6 +402,9 @@ def load_scene(source: Any = 'default', overrides: Mapping[str, Any] | None = No
                 raise SceneError(f'unknown scene key {section}.{key!r}; allowed: '
                                  + ', '.join(spec))
         for key, key_spec in spec.items():
+            if key not in content and (section, key) in SECTION_DEFAULTS:
+                values[(section, key)] = SECTION_DEFAULTS[(section, key)]
+                continue
             if key not in content:
                 raise SceneError(f'scene key {section}.{key!r}: missing ({key_spec[-1]})')
             values[(section, key)] = _check_value(f'{section}.{key}', content[key], key_spec)

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import signal
 import sys
 import time
 
@@ -18,9 +20,12 @@ import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 import rclpy
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
@@ -70,8 +75,12 @@ NODE_PARAMS = {
                     True, None),
     'log.path': ('./det_sim_logs', 'MCAP log directory (a new file per run) or a .mcap file',
                  True, None),
-    'log.split_mb': (0.0, 'start a new log file after this many MiB (0 = one file per run)',
-                     True, (0.0, 1.0e6)),
+    'log.split_mb': (256.0, 'start a new log file after this many MiB (0 = one file per run '
+                     'and reset; then log.max_mb cannot cut a long run)', True, (0.0, 1.0e6)),
+    'log.max_mb': (2048.0, "keep the log directory's det_sim_*.mcap files under this many MiB "
+                   'in all, oldest deleted first (0 = no limit)', True, (0.0, 1.0e9)),
+    'log.max_files': (100, "keep at most this many det_sim_*.mcap files in the log directory, "
+                      'oldest deleted first (0 = no limit)', True, (0, 1000000)),
     'info_period': (5.0, 'seconds between INFO status lines (wall clock), 0 = off', True,
                     (0.0, 3600.0)),
 }
@@ -143,8 +152,10 @@ def _flatten(data, prefix=''):
             yield f'{prefix}{key}', value
 
 
-def _check_node_value(name, value):
-    default = NODE_PARAMS[name][0]
+def _check_node_value(name, value, where='scene key node.'):
+    """A node parameter's value checked against its type and range (an integer is accepted
+    for a double); :class:`SceneError` naming the key otherwise."""
+    default, bounds = NODE_PARAMS[name][0], NODE_PARAMS[name][3]
     if isinstance(default, bool):
         ok = isinstance(value, bool)
     elif isinstance(default, int):
@@ -154,8 +165,12 @@ def _check_node_value(name, value):
     else:
         ok = isinstance(value, (int, float)) and not isinstance(value, bool)
         value = float(value) if ok else value
+    kind = {bool: 'true or false', int: 'an integer', str: 'a string',
+            float: 'a number'}[type(default)]
     if not ok:
-        raise SceneError(f"scene key 'node.{name}': must be of type {type(default).__name__} "
+        raise SceneError(f"{where}{name}: must be {kind} (got {value!r})")
+    if bounds is not None and not (math.isfinite(value) and bounds[0] <= value <= bounds[1]):
+        raise SceneError(f'{where}{name}: out of range [{bounds[0]:g}, {bounds[1]:g}] '
                          f'(got {value!r})')
     return value
 
@@ -171,11 +186,20 @@ class SimNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         overrides = dict(getattr(self, '_parameter_overrides', {}) or {})
+        if 'scene_file' in overrides and not isinstance(overrides['scene_file'].value, str):
+            raise SceneError(f"parameter scene_file: must be a string (a name in config/ or a "
+                             f"path; got {overrides['scene_file'].value!r})")
         scene_file = self.declare_parameter('scene_file', 'default', ParameterDescriptor(
             description='scene file: a name in config/ or a path', read_only=True)).value
         scene_overrides = {name: p.value for name, p in overrides.items()
                            if name.split('.')[0] in SCENE_SECTIONS or name == 'rate_hz'}
         self.scene = load_scene(scene_file, overrides=scene_overrides)
+        if self.scene.method != 'auto':      # checked here, before the (long) preparation
+            from .integrators import get_method
+            try:
+                get_method(self.scene.method)
+            except ValueError as exc:
+                raise SceneError(f"scene key 'integrator.method': {exc}") from None
         self._declare_scene_parameters()
         self._declare_node_parameters(overrides)
 
@@ -187,6 +211,8 @@ class SimNode(Node):
         self._det_index = {name: i for i, name in enumerate(self.det_names)}
         self._channels = {topic: model.channel(out) for topic, (out, _) in OUTPUT_TOPICS.items()}
         self._qdot = model.channel('q_dot')
+        self._initial_text = (f'rest ({self.scene.rest_branch}, 0 V)'
+                              if self.scene.initial_state == 'rest' else 'released from q0')
         self.y0 = rest_shortenings(self.scene)     # per DET, m
         self._y0 = np.array(self.y0)
         # nothing is compiled at run time (the kernel is built at install): this is the model's
@@ -206,6 +232,7 @@ class SimNode(Node):
         self.steps_total = 0
         self.lateness_log = None  # set to a list to record real-time tick lateness (bench)
         self._fault_reported = ''
+        self._distrust_reported = ''
 
         # MCAP recording hook (issue 5): an object with record(topic, msg, sim_time_ns), or None.
         # Called for every published output and every received command.
@@ -248,7 +275,8 @@ class SimNode(Node):
         self.get_logger().info(
             f'scene {scene_file!r}: {self.scene.beam} beam, eps_b = {self.scene.eps_b:g}, '
             f'{self.scene.rate_hz:g} Hz, {self._sim.describe_stepper()}; '
-            f'{mode}{", paused" if self.paused else ""}; {len(self.det_names)} DET(s), '
+            f'{mode}{", paused" if self.paused else ""}; initial state {self._initial_text}; '
+            f'{len(self.det_names)} DET(s), '
             f'voltage command order: [{", ".join(self.det_names)}]'
             + (f'; structure outputs [{", ".join(self.structure_names)}]'
                if self.structure_names else ''))
@@ -258,19 +286,38 @@ class SimNode(Node):
         """MCAP logging (det_sim_ros.mcap_log): on unless log.enabled is false."""
         if not self._p('log.enabled'):
             return
-        from .mcap_log import Recorder
+        from .mcap_log import Recorder, recover_unfinished
+        path = self._p('log.path')
+        if not path.endswith('.mcap') and os.path.isdir(path):
+            # a log cut by a crash (power loss, SIGKILL inside a flush): repaired at this start
+            for repaired, outcome in recover_unfinished(path):
+                self.get_logger().warning(f'recovered unfinished log {repaired}: '
+                                          f"{outcome['messages']} messages readable")
         qos = {topic: out_qos for topic in self._pubs}
         qos.update({'voltage_command': QoSProfile(depth=10),
                     'voltage_command_joint': QoSProfile(depth=10)})
         self._recorder = Recorder(
-            self._p('log.path'), self.scene, qos_by_topic=qos, split_mb=self._p('log.split_mb'),
+            path, self.scene, qos_by_topic=qos, split_mb=self._p('log.split_mb'),
+            max_total_mb=self._p('log.max_mb'), max_files=self._p('log.max_files'),
             namespace=self.get_namespace(),
             metadata={'method': self._sim.method.name, 'substeps': self._sim.substeps_setting,
                       'y0': repr(self.y0[0]) if len(self.y0) == 1 else repr(self.y0),
+                      'initial_state': self._initial_text,
+                      'x0': repr(self._sim.x0.tolist()),   # what ~/reset returns to
                       'node': self.get_fully_qualified_name()},
             on_fault=lambda text: self.get_logger().error(text))
         if self._recorder.active:
-            self.get_logger().info(f'logging to {self._recorder.path}')
+            split, max_mb, max_files = (self._p('log.split_mb'), self._p('log.max_mb'),
+                                        self._p('log.max_files'))
+            self.get_logger().info(
+                f'logging to {self._recorder.path} (a new file at every ~/reset'
+                + (f' and after {split:g} MiB' if split else '') + '; log directory limit: '
+                + (f'{max_mb:g} MiB' if max_mb else 'no size limit') + ', '
+                + (f'{max_files} files' if max_files else 'no file limit')
+                + ', oldest deleted first)')
+            if self._recorder.deleted:
+                self.get_logger().info(f'log limit: deleted {len(self._recorder.deleted)} '
+                                       'old log file(s)')
             self.create_timer(self._recorder.flush_period_s, self._recorder.maybe_flush,
                               clock=self._steady)
 
@@ -280,11 +327,18 @@ class SimNode(Node):
             self._recorder.close()
         return super().destroy_node()
 
+    def _set_override(self, name, value):
+        """Replace a -p override by its checked value: rclpy refuses an override whose type
+        differs from the declared one (an integer given for a double, e.g. physics.Rs:=1)."""
+        if name in self._parameter_overrides:
+            self._parameter_overrides[name] = Parameter(name, value=value)
+
     def _declare_scene_parameters(self):
         """Expose the loaded scene as read-only parameters (set them in the scene file)."""
         for name, value in _flatten(scene_to_dict(self.scene)):
             if name.startswith('node.'):
                 continue
+            self._set_override(name, value)   # the scene's checked value (e.g. 1 -> 1.0)
             self.declare_parameter(name, value, ParameterDescriptor(
                 description='scene value (read-only; set in the scene file or with -p at start)',
                 read_only=True))
@@ -299,7 +353,11 @@ class SimNode(Node):
             raise SceneError(f"scene key 'node.{unknown[0]}': unknown (allowed: "
                              + ', '.join(NODE_PARAMS) + ')')
         for name, (default, description, read_only, bounds) in NODE_PARAMS.items():
-            value = _check_node_value(name, node_section.get(name, default))
+            if name in overrides:          # -p name:=value wins over the scene file
+                value = _check_node_value(name, overrides[name].value, 'parameter ')
+                self._set_override(name, value)
+            else:
+                value = _check_node_value(name, node_section.get(name, default))
             descriptor = ParameterDescriptor(description=description, read_only=read_only)
             if bounds is not None and isinstance(default, float):
                 descriptor.floating_point_range = [FloatingPointRange(
@@ -430,10 +488,17 @@ class SimNode(Node):
         if len(names) != len(values):
             return self._refuse(f'voltage_command_joint: {len(names)} name(s) but '
                                 f'{len(values)} position value(s)')
+        if not names:
+            return self._refuse('voltage_command_joint: empty JointState (no DET name); name '
+                                f'one or more of {self.det_names}')
         unknown = [name for name in names if name not in self._det_index]
-        if unknown or not names:
-            return self._refuse(f'voltage_command_joint: unknown DET name(s) {unknown or names} '
+        if unknown:
+            return self._refuse(f'voltage_command_joint: unknown DET name(s) {unknown} '
                                 f'(expected {self.det_names})')
+        repeated = sorted({name for name in names if names.count(name) > 1})
+        if repeated:
+            return self._refuse(f'voltage_command_joint: DET name(s) {repeated} given more '
+                                'than once; name each DET at most once')
         volts = self._sim.u.tolist()
         for name, value in zip(names, values):
             volts[self._det_index[name]] = value
@@ -494,10 +559,13 @@ class SimNode(Node):
         self._sim.reset()
         if self._recorder is not None:
             self._recorder.new_file()  # sim time restarts: one file per continuous run
+            if self._recorder.active:
+                self.get_logger().info(f'reset: the log continues in {self._recorder.path}')
         self._fault_reported = ''
         self._run_timer(not self.paused)
         self._publish_sample(self._current_outputs())
-        response.success, response.message = True, 'reset to t = 0, initial state, 0 V'
+        response.success = True
+        response.message = f'reset to t = 0, initial state {self._initial_text}, 0 V'
         return response
 
     # -- parameters -----------------------------------------------------------------------
@@ -537,8 +605,14 @@ class SimNode(Node):
             elapsed = time.perf_counter() - self._wall0
             backlog = max(0, self._k0 + int(elapsed * self._rtf / self._dt) - self._sim.k - 1)
         status = DiagnosticStatus(name=f'{self.get_name()}: simulation', hardware_id='det_sim_ros')
+        distrust = self._sim.trust_issue()
+        if distrust and distrust != self._distrust_reported:
+            self.get_logger().warning(distrust)          # once per cause, until a reset
+        self._distrust_reported = distrust
         if self._sim.fault:
             status.level, status.message = DiagnosticStatus.ERROR, f'fault: {self._sim.fault}'
+        elif distrust:
+            status.level, status.message = DiagnosticStatus.WARN, distrust
         elif backlog > 0:
             status.level, status.message = DiagnosticStatus.WARN, f'behind by {backlog} steps'
         else:
@@ -594,23 +668,89 @@ class SimNode(Node):
             f'RTF={rate * self._dt:.2f} {state}')
 
 
-def main(args=None):
-    """Run the simulator node until Ctrl-C; exit 1 with one line for a malformed scene."""
-    rclpy.init(args=args)
-    node = None
+class _StopRequested(BaseException):
+    """SIGINT/SIGTERM during start-up: unwinds the preparation (nothing to finish yet)."""
+
+
+class _StopSignals:
+    """
+    SIGINT and SIGTERM end the node cleanly at any moment, exit code 0 and a finished log.
+
+    rclpy's own handlers shut the context down from inside the signal handler, while a
+    stepping-timer callback may be publishing: that callback then fails (``RCLError:
+    publisher's context is invalid``, ``failed to initialize wait set``) and the node exits with
+    a traceback. Here the handlers only take note: during start-up (scene, model, first compile)
+    they unwind it at once; once running, the spin loop stops between two callbacks (so no
+    callback and no log write is ever cut in half), then the log is finished and the context
+    shut down, in that order.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self):
+        self.requested = 0            # the signal number once a stop was asked for
+        self.preparing = True
+        self._previous = {}
+
+    def __enter__(self):
+        for sig in self.SIGNALS:
+            self._previous[sig] = signal.signal(sig, self._on_signal)
+        return self
+
+    def __exit__(self, *exc):
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+
+    def _on_signal(self, signum, frame):
+        self.requested = signum
+        if self.preparing:
+            self.preparing = False
+            raise _StopRequested()
+
+
+def _spin_until_stopped(node, stop) -> None:
+    """Run the node's callbacks until a stop signal (checked at least every 0.1 s)."""
+    from rclpy.executors import SingleThreadedExecutor
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
     try:
-        node = SimNode()
-        rclpy.spin(node)
-    except SceneError as exc:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {exc}')
-        return 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        while not stop.requested and node.context.ok():
+            executor.spin_once(timeout_sec=0.1)
     finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+        executor.remove_node(node)
+        executor.shutdown(timeout_sec=0.0)
+
+
+def main(args=None):
+    """
+    Run the simulator node until SIGINT or SIGTERM (exit 0, log finished); exit 1 with one
+    line for a start-up input that cannot be used (scene, parameter, initial state).
+    """
+    from rclpy.signals import SignalHandlerOptions
+    node = None
+    code = 0
+    with _StopSignals() as stop:
+        try:
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+            node = SimNode()
+            stop.preparing = False
+            if not stop.requested:
+                _spin_until_stopped(node, stop)
+        except _StopRequested:
+            pass
+        except (SceneError, ParameterException, ModelDomainError, RCLError) as exc:
+            stop.preparing = False       # one line, exit 1: an input that cannot be used
+            text = ' '.join(str(exc).split()) or type(exc).__name__
+            rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {text}')
+            code = 1
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        finally:
+            stop.preparing = False
+            if node is not None:
+                node.destroy_node()          # finishes and indexes the MCAP log
+            rclpy.try_shutdown()
+    return code
 
 
 if __name__ == '__main__':

@@ -36,15 +36,21 @@ import numpy as np
 from scipy.optimize import brentq
 
 from .model import build_model, ModelDomainError
-from .scene import Scene
+from .scene import Scene, SceneError
 
 __all__ = ['Equilibrium', 'BranchPoint', 'potential', 'potential_coords', 'equilibria',
            'critical_prestrain', 'normalized_potential', 'rest_shortening', 'branches',
-           'polymer_voltage', 'stiffness_at_straight']
+           'polymer_voltage', 'stiffness_at_straight', 'rest_coords', 'rest_state',
+           'RestStateError']
 
 _LAMBDA_MIN = 0.05      # equilibria are searched where the DET stretch stays above this
 _N_GRID = 400           # sign-change grid on each side of q = 0
 _CACHE_SIZE = 256
+_NEWTON_ITERS = 30
+
+
+class RestStateError(SceneError):
+    """The scene has no usable rest state (initial_state 'rest'); the message says why."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -435,3 +441,114 @@ def branches(scene: Scene, eps_grid: Sequence[float], v: float = 0.0, progress=N
         if progress is not None:
             progress(k + 1)
     return rows
+
+
+# -- the rest state as an initial state ---------------------------------------------------------
+_rest_cache: 'collections.OrderedDict[tuple, np.ndarray]' = collections.OrderedDict()
+
+
+def _static_residual(model, coords):
+    """The accelerations at (coords, q_dot = 0, eps_E = 0, q_p = 0), 0 V: zero at rest."""
+    nq = len(coords)
+    x = np.zeros(model.n_states)
+    x[:nq] = coords
+    return model.f(0.0, x, np.zeros(model.n_inputs))[nq:2 * nq]
+
+
+def _polish(model, coords, length):
+    """
+    Newton on the model's own static residual (Model.f at zero velocity, 0 V) from ``coords``
+    (a statics solution), to round-off: the Jacobian by central differences, the iterate with
+    the smallest residual kept. Equilibria of Model.f are exactly the stationary states of the
+    dynamic model (q_dot = 0 and eps_E = 0, q_p = 0 are the other states' equilibria at 0 V).
+    """
+    x = np.array(coords, dtype=float)
+    nq = len(x)
+    r = _static_residual(model, x)
+    best, best_norm = x.copy(), float(np.max(np.abs(r)))
+    h = 1e-7 * length
+    for _ in range(_NEWTON_ITERS):
+        J = np.empty((nq, nq))
+        for j in range(nq):
+            e = np.zeros(nq)
+            e[j] = h
+            J[:, j] = (_static_residual(model, x + e) - _static_residual(model, x - e)) / (2 * h)
+        step = np.linalg.solve(J, -r)
+        x = x + step
+        r = _static_residual(model, x)
+        norm = float(np.max(np.abs(r)))
+        if not math.isfinite(norm):
+            break
+        if norm < best_norm:
+            best, best_norm = x.copy(), norm
+        if np.max(np.abs(step)) <= 4.0 * np.finfo(float).eps * length:
+            break
+    return best
+
+
+def rest_coords(scene: Scene, branch: str = 'buckled+') -> np.ndarray:
+    """
+    Ritz coordinates of a single-cell scene's stable equilibrium at 0 V on ``branch``
+    ('buckled+': reference deflection q > 0, 'buckled-': q < 0; the straight beam q = 0 when it
+    is the stable state), solved to round-off in the scene's own dynamic model (its fidelity and
+    n_ritz). Cached per beam, pre-strain, fidelity, physics and model switches.
+
+    :raises RestStateError: no stable state on that branch, or one outside the model's domain.
+    """
+    key = (_key(scene), scene.creep, scene.source, scene.monitor_power, branch)
+    cached = _rest_cache.get(key)
+    if cached is not None:
+        _rest_cache.move_to_end(key)
+        return cached.copy()
+    st = _statics(scene)
+    where = (f'{scene.beam} beam, eps_b = {scene.eps_b:g}, fidelity {scene.fidelity!r}, '
+             f'n_ritz {scene.n_ritz}')
+    try:
+        rows = st.equilibria(0.0, 0.0)
+    except ModelDomainError as exc:
+        raise RestStateError(f'no rest state at 0 V ({where}): {exc}') from None
+    stable = [r for r in rows if r[2] > 0.0]
+    if any(kind == 'straight' for kind, *_ in stable):
+        guess = np.zeros(st.nq)                  # below the critical pre-strain: straight
+    else:
+        match = [c for kind, c, *_ in stable if kind == branch]
+        if not match:
+            raise RestStateError(f'no stable {branch} equilibrium at 0 V ({where}); use '
+                                 "scene.initial_state: released")
+        guess = np.asarray(match[0], dtype=float)
+    model = build_model(scene)
+    try:
+        coords = guess if not np.any(guess) else _polish(model, guess, scene.beam_length)
+        x = np.zeros(model.n_states)
+        x[:len(coords)] = coords
+        model.output_vector(x, np.zeros(model.n_inputs))   # inside the domain?
+        residual = np.max(np.abs(_static_residual(model, coords)))
+    except ModelDomainError as exc:
+        raise RestStateError(f'the {branch} rest state at 0 V ({where}) is outside the '
+                             f'model\'s domain: {exc}') from None
+    if not math.isfinite(residual):
+        raise RestStateError(f'the {branch} rest state at 0 V ({where}) is not finite')
+    _rest_cache[key] = coords.copy()
+    if len(_rest_cache) > _CACHE_SIZE:
+        _rest_cache.popitem(last=False)
+    return coords
+
+
+def rest_state(model) -> np.ndarray:
+    """
+    The state vector of ``model`` with every cell at its own rest state (:func:`rest_coords`
+    of the cell alone, on ``scene.rest_branch``), q_dot = 0, eps_E = 0, q_p = 0 and the energy
+    book at 0: stationary at 0 V. Cells with identical physics share one solve.
+    """
+    scene = model.scene
+    template = scene.cell_scene(0)
+    x = np.zeros(model.n_states)
+    solved = {}
+    offset = 0
+    for physics, basis in zip(scene.cell_physics(), model.bases):
+        if physics not in solved:
+            solved[physics] = rest_coords(dataclasses.replace(template, physics=physics),
+                                          scene.rest_branch)
+        x[offset:offset + basis.n_ritz] = solved[physics]
+        offset += basis.n_ritz
+    return x

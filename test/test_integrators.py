@@ -8,6 +8,9 @@ from det_sim_ros.model import build_model, ModelDomainError
 from det_sim_ros.scene import load_scene
 from det_sim_ros.simulator import simulate, Simulator
 
+# the paper's start (q = q0, released): these tests exercise the buckling transient
+RELEASED = {'scene.initial_state': 'released'}
+
 ORDERS = {'euler': 1, 'midpoint': 2, 'rk3': 3, 'rk4': 4, 'dp5': 5, 'lawson4': 4,
           'lawson5': 5, 'exp_euler': 1, 'etd2': 2, 'etdrk4': 4}
 
@@ -44,7 +47,7 @@ def test_dormand_prince_table_is_scipys():
 
 def _linear_charge_error(method, n_steps):
     """Small oscillation of the ideal-source model: compare with a much finer run."""
-    scene = load_scene('default', {'source': 'ideal', 'creep': False, 'monitor_power': False,
+    scene = load_scene('default', {**RELEASED, 'source': 'ideal', 'creep': False, 'monitor_power': False,
                                    'eps_b': 0.2, 'rate_hz': 100.0})
     model = build_model(scene)
     x0 = model.initial_state()
@@ -71,7 +74,7 @@ def test_convergence_order_on_the_non_stiff_model(name):
 @pytest.mark.parametrize('name', ['exp_euler', 'etd2', 'etdrk4', 'lawson4', 'lawson5'])
 def test_exponential_methods_solve_pure_charge_relaxation_exactly(name):
     """Frozen beam (huge mass): q_p follows the exact RC charging curve for any step size."""
-    scene = load_scene('default', {'m': 1e6, 'rho_b': 1e9, 'creep': False,
+    scene = load_scene('default', {**RELEASED, 'm': 1e6, 'rho_b': 1e9, 'creep': False,
                                    'monitor_power': False})
     model = build_model(scene)
     x = model.initial_state()
@@ -88,7 +91,7 @@ def test_exponential_methods_solve_pure_charge_relaxation_exactly(name):
 
 def test_explicit_rk4_diverges_where_the_exponential_core_is_stable():
     """The reason for the exponential core: the charge pole Rs C ~ 30 us."""
-    scene = load_scene('default')
+    scene = load_scene('default', RELEASED)
     with pytest.raises(ModelDomainError):
         simulate(scene, lambda t: 3000.0, 0.05, method='rk4', substeps=1)
     r = simulate(scene, lambda t: 3000.0, 0.05, method='lawson5', substeps=1)
@@ -96,13 +99,13 @@ def test_explicit_rk4_diverges_where_the_exponential_core_is_stable():
 
 
 def test_determinism_bit_identical():
-    a = simulate(load_scene('default'), lambda t: 3000.0 * (t >= 0.1), 0.3)
-    b = simulate(load_scene('default'), lambda t: 3000.0 * (t >= 0.1), 0.3)
+    a = simulate(load_scene('default', RELEASED), lambda t: 3000.0 * (t >= 0.1), 0.3)
+    b = simulate(load_scene('default', RELEASED), lambda t: 3000.0 * (t >= 0.1), 0.3)
     assert np.array_equal(a.x, b.x)
 
 
 def test_zero_order_hold_and_time_grid():
-    sim = Simulator(load_scene('default', {'rate_hz': 400.0}))
+    sim = Simulator(load_scene('default', {**RELEASED, 'rate_hz': 400.0}))
     sim.set_input([1500.0])
     for _ in range(1000):
         sim.step()
@@ -120,7 +123,7 @@ def test_zero_order_hold_and_time_grid():
 def test_auto_step_meets_its_tolerance_on_the_step_scenario():
     """The default (adaptive) stepper's error on a 0.5 s piece of the step scenario against a
     fixed run 4x finer than the tolerance's fixed count, in fewer steps than that count."""
-    scene = load_scene('default', {'integrator.tolerance': 1e-6})
+    scene = load_scene('default', {**RELEASED, 'integrator.tolerance': 1e-6})
     sim = Simulator(scene)
     assert sim.adaptive
     fixed = integrators.choose_substeps(sim.method, sim.dt, 1e-6, sim.model.fastest_beam_rate())
@@ -148,7 +151,7 @@ def _steps_per_period(sim, volts, n):
 
 def test_adaptive_step_count_follows_the_dynamics():
     """Many steps while the beam snaps after the 3 kV step, few once it has settled."""
-    sim = Simulator(load_scene('default'))
+    sim = Simulator(load_scene('default', RELEASED))
     counts = _steps_per_period(sim, lambda t: 3000.0 * (t >= 0.5), 1500)
     settled = counts[1300:].mean()
     snapping = counts[500:520].mean()
@@ -158,7 +161,7 @@ def test_adaptive_step_count_follows_the_dynamics():
 
 def test_adaptive_step_repeats_a_period_over_its_tolerance():
     """A period started with too few steps is repeated with more."""
-    scene = load_scene('default', {'integrator.tolerance': 1e-7})
+    scene = load_scene('default', {**RELEASED, 'integrator.tolerance': 1e-7})
     sim = Simulator(scene)
     sim.set_input([3000.0])
     for _ in range(30):
@@ -176,7 +179,7 @@ def test_adaptive_step_repeats_a_period_over_its_tolerance():
 def test_stepping_equals_one_call_bit_for_bit(source):
     """Simulator.set_input/step per period (the node's path, with set_input's fast path for
     one float) and simulate() in one compiled call give the same states, energy book included."""
-    scene = load_scene('default', {'integrator.tolerance': 1e-7, 'scene.source': source})
+    scene = load_scene('default', {**RELEASED, 'integrator.tolerance': 1e-7, 'scene.source': source})
     stepped = Simulator(scene)
     volts = lambda t: 3000.0 * (t >= 0.01) - 1500.0 * (t >= 0.05)  # noqa: E731
     _steps_per_period(stepped, volts, 100)
@@ -189,7 +192,7 @@ def test_stepping_equals_one_call_bit_for_bit(source):
 def test_embedded_error_estimate_has_the_order_of_its_pair(name):
     """The estimate h sum e_j N_j is the local error of the embedded solution: it scales as
     h^(p+1) with p the embedded order (RK4(3) FSAL pair: h^4; Dormand-Prince 5(4): h^5)."""
-    sim = Simulator(load_scene('default', {'scene.source': 'ideal'}), method=name)
+    sim = Simulator(load_scene('default', {**RELEASED, 'scene.source': 'ideal'}), method=name)
     method = sim.method
     x0 = sim.model.initial_state()
     x0[0], x0[1] = 4e-3, 0.3          # a buckled beam in motion
@@ -217,7 +220,7 @@ def _run_checked(scene, volts, t_end, **kw):
 @pytest.mark.parametrize('rate_hz', [100.0, 1000.0, 1e5])
 def test_stress_series_resistance_and_control_period(Rs, rate_hz):
     """Rs from 1 Ohm to 1 MOhm, dt from 10 ms to 10 us: finite, bounded power residual."""
-    scene = load_scene('default', {'Rs': Rs, 'rate_hz': rate_hz, 'integrator.tolerance': 1e-4})
+    scene = load_scene('default', {**RELEASED, 'Rs': Rs, 'rate_hz': rate_hz, 'integrator.tolerance': 1e-4})
     sim = Simulator(scene)
     n = int(round(0.06 / sim.dt))
     r = _run_checked(sim, lambda t: 3000.0 * (t >= 0.01), n * sim.dt)
@@ -231,7 +234,7 @@ def test_stress_series_resistance_and_control_period(Rs, rate_hz):
 @pytest.mark.parametrize('beam', ['simply_supported', 'fixed'])
 def test_stress_prestrain_sweep_square_wave_near_resonance(beam, eps_b):
     """A 0..v_max square wave at the beam's ~90 Hz resonance, across pre-strains."""
-    scene = load_scene('default', {'beam': beam, 'eps_b': eps_b, 'integrator.tolerance': 1e-5})
+    scene = load_scene('default', {**RELEASED, 'beam': beam, 'eps_b': eps_b, 'integrator.tolerance': 1e-5})
     sim = Simulator(scene)
     volts = lambda t: 3000.0 * (int(t * 180.0) % 2)  # noqa: E731 - 90 Hz square wave
     _run_checked(sim, volts, 0.3)
@@ -240,7 +243,7 @@ def test_stress_prestrain_sweep_square_wave_near_resonance(beam, eps_b):
 
 @pytest.mark.parametrize('v', [0.0, 750.0, 1500.0, 2250.0, 3000.0])
 def test_stress_voltage_steps(v):
-    scene = load_scene('default', {'integrator.tolerance': 1e-5})
+    scene = load_scene('default', {**RELEASED, 'integrator.tolerance': 1e-5})
     sim = Simulator(scene)
     _run_checked(sim, lambda t: v * (t >= 0.02), 0.2)
     assert abs(sim.power_residual()) < 1e-3   # dominated by the 30 us charging spikes
@@ -249,7 +252,7 @@ def test_stress_voltage_steps(v):
 def test_stress_long_run_million_steps():
     """10^6 internal steps (100 s at 1 kHz, 10 substeps, through the same compiled periods as
     Simulator.step) with a 0.1 Hz square wave: stays finite and the energy balance closes."""
-    scene = load_scene('default', {'integrator.substeps': 10, 'rate_hz': 1000.0})
+    scene = load_scene('default', {**RELEASED, 'integrator.substeps': 10, 'rate_hz': 1000.0})
     sim = Simulator(scene)
     r = simulate(sim, lambda t: 3000.0 * (int(t / 5.0) % 2), 100.0)
     assert sim.k == 100_000
@@ -262,10 +265,10 @@ def test_stress_long_run_million_steps():
 
 def test_leaving_the_domain_faults_cleanly_and_reset_recovers():
     # a huge initial deflection drives the beam ends together: lambda <= 0
-    scene = load_scene('default', {'q0': 0.08})
+    scene = load_scene('default', {**RELEASED, 'q0': 0.08})
     with pytest.raises(ModelDomainError, match='lambda'):
         Simulator(scene)
-    scene = load_scene('default', {'q0': 0.02, 'eta_b': 0.0, 'm': 0.5})
+    scene = load_scene('default', {**RELEASED, 'q0': 0.02, 'eta_b': 0.0, 'm': 0.5})
     sim = Simulator(scene, method='euler', substeps=1)
     with pytest.raises(ModelDomainError) as info:
         for _ in range(5000):

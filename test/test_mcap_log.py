@@ -255,8 +255,15 @@ def test_sigkill_loses_at_most_the_last_flush_period(tmp_path):
     assert not reader.complete
     assert len(values) >= flushed > 0
     assert values == [float(k) for k in range(len(values))]  # nothing before the cut is lost
-    with open(path, 'rb') as stream, pytest.raises(Exception):
-        list(make_reader(stream).iter_messages())  # the seeking reader cannot open it
+    # issue 17: the killed file is a valid MCAP up to its last flush (a provisional end after
+    # every flush): mcap's own reader and rosbags read it without a manual step
+    with open(path, 'rb') as stream:
+        standard = [m.data for _, _, m in make_reader(stream).iter_messages()]
+    assert len(standard) == len(values)
+    from pathlib import Path
+    from rosbags.highlevel import AnyReader
+    with AnyReader([Path(path)]) as bag:
+        assert sum(1 for _ in bag.messages()) == len(values)
     # recover() turns it into a finished, indexed file
     outcome = recover(path, str(tmp_path / 'recovered.mcap'))
     assert outcome == {'messages': len(values), 'complete': False}
@@ -304,3 +311,69 @@ def test_cdr_serializer_matches_rclpy_and_rosbags():
         assert deserialize_message(data, type(msg)) == msg
         store.deserialize_cdr(data, type_name_of(msg))  # strict: no trailing bytes
         assert serialize(msg) == data
+
+
+def test_flush_by_sim_time_bounds_the_loss_whatever_the_speed(tmp_path):
+    """A frozen wall clock (a free run far faster than real time): the writer still flushes
+    every flush_sim_s of log time, so at most that much sim time is only in memory."""
+    from std_msgs.msg import Float64MultiArray
+    recorder = Recorder(tmp_path / 'fast.mcap', None, clock=lambda: 0.0, flush_sim_s=0.05)
+    for k in range(1001):                                  # 1 s of sim time at 1 kHz
+        recorder.record('x', Float64MultiArray(data=[float(k)]), k * 1_000_000)
+    assert recorder.flushes == 20
+    on_disk = [m.log_time for m in LogReader(tmp_path / 'fast.mcap').messages()]
+    assert 1.0 - on_disk[-1] * 1e-9 <= 0.05                # readable up to the last flush
+    recorder.close()
+
+
+def test_torn_file_is_recovered_in_place(tmp_path):
+    """A file cut inside a write (power loss): recover_unfinished repairs it in place."""
+    from mcap.reader import make_reader
+    from std_msgs.msg import Float64MultiArray
+    from det_sim_ros.mcap_log import is_torn, recover_unfinished
+    path = tmp_path / 'det_sim_torn.mcap'
+    recorder = Recorder(path, None, flush_sim_s=0.01)
+    for k in range(100):
+        recorder.record('x', Float64MultiArray(data=[float(k)]), k * 1_000_000)
+    size = os.path.getsize(path)
+    recorder._stream.close()           # simulate the crash: no finish
+    with open(path, 'r+b') as stream:
+        stream.truncate(size - 20)     # the provisional end cut
+    assert is_torn(str(path))
+    good = tmp_path / 'det_sim_good.mcap'
+    with Recorder(good, None) as other:
+        other.record('x', Float64MultiArray(data=[1.0]), 0)
+    repaired = recover_unfinished(str(tmp_path))
+    assert [p for p, _ in repaired] == [str(path)] and not is_torn(str(path))
+    with open(path, 'rb') as stream:
+        values = [m.data for _, _, m in make_reader(stream).iter_messages()]
+    assert len(values) == repaired[0][1]['messages'] >= 90
+    assert recover_unfinished(str(tmp_path)) == []          # nothing left to repair
+
+
+def test_log_directory_is_bounded(tmp_path):
+    """max_files / max_total_mb: the oldest of the recorder's own files are deleted (never the
+    current one, never other files)."""
+    from std_msgs.msg import Float64MultiArray
+    folder = tmp_path / 'logs'
+    folder.mkdir()
+    (folder / 'notes.mcap.txt').write_text('not ours')
+    made = []
+    for run in range(5):
+        rec = Recorder(folder, None, max_files=3, prefix=f'det_sim')
+        for k in range(50):
+            rec.record('x', Float64MultiArray(data=[float(k)] * 100), k * 1_000_000)
+        rec.new_file()                    # as a reset does
+        rec.record('x', Float64MultiArray(data=[0.0]), 0)
+        rec.close()
+        made += rec.paths
+        os.utime(rec.paths[-1])
+    left = sorted(p for p in os.listdir(folder) if p.endswith('.mcap'))
+    assert len(left) == 3 and set(os.path.join(folder, p) for p in left) <= set(made[-3:])
+    assert (folder / 'notes.mcap.txt').exists()
+    big = Recorder(folder, None, max_total_mb=0.01, chunk_size=1024)   # 10 KiB in all
+    for k in range(2000):
+        big.record('x', Float64MultiArray(data=[float(k)] * 10), k * 1_000_000)
+    assert big.deleted and [p for p in os.listdir(folder) if p.endswith('.mcap')] == \
+        [os.path.basename(big.path)]
+    big.close()

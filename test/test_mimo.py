@@ -8,14 +8,17 @@ from det_sim_ros.model import build_model
 from det_sim_ros.scene import load_scene, SceneError
 from det_sim_ros.simulator import simulate, Simulator
 
+# the paper's start (q = q0, released): these tests exercise the buckling transient
+RELEASED = {'scene.initial_state': 'released'}
+
 
 def _step(t):
     return 3000.0 * (t >= 0.05)
 
 
 def test_plate_with_equal_inputs_reproduces_the_single_cell_to_round_off():
-    siso = simulate(load_scene('default'), _step, 0.4)
-    plate = simulate(load_scene('plate'), lambda t: [_step(t)] * 2, 0.4)
+    siso = simulate(load_scene('default', RELEASED), _step, 0.4)
+    plate = simulate(load_scene('plate', RELEASED), lambda t: [_step(t)] * 2, 0.4)
     for side in ('left', 'right'):
         for name in ('q', 'y', 'q_p', 'i_DE'):
             scale = np.max(np.abs(siso[name]))
@@ -30,7 +33,7 @@ def test_plate_with_equal_inputs_reproduces_the_single_cell_to_round_off():
 
 @pytest.mark.parametrize('active', ['left', 'right'])
 def test_plate_rotates_with_one_input_and_the_sign_follows_the_side(active):
-    scene = load_scene('plate')
+    scene = load_scene('plate', RELEASED)
     volts = (lambda t: [_step(t), 0.0]) if active == 'left' else (lambda t: [0.0, _step(t)])
     r = simulate(scene, volts, 0.4)
     w = scene.structure['plate_width']
@@ -44,7 +47,7 @@ def test_plate_rotates_with_one_input_and_the_sign_follows_the_side(active):
 
 
 def test_plate_power_balance_closes():
-    scene = load_scene('plate', {'Rs': 2e4})
+    scene = load_scene('plate', {**RELEASED, 'Rs': 2e4})
     model = build_model(scene)
     x = model.initial_state()
     H0 = model.outputs(x, [0.0, 0.0])['H']
@@ -65,7 +68,7 @@ def test_plate_power_balance_closes():
 
 
 def test_array_copies_are_independent_and_each_has_its_own_physics():
-    scene = load_scene('array', {'structure.copies': 3, 'structure.spread': 0.1,
+    scene = load_scene('array', {**RELEASED, 'structure.copies': 3, 'structure.spread': 0.1,
                                  'dets.det1.Rs': 5.0e3})
     physics = scene.cell_physics()
     assert physics[1].Rs == 5.0e3
@@ -83,7 +86,7 @@ def test_array_copies_are_independent_and_each_has_its_own_physics():
 
 def test_array_scene_scales_linearly_in_the_mass_matrix():
     """1000 copies: the mass matrix is solved per copy (block diagonal), not as 1000 x 1000."""
-    scene = load_scene('array', {'structure.copies': 1000, 'structure.spread': 0.0})
+    scene = load_scene('array', {**RELEASED, 'structure.copies': 1000, 'structure.spread': 0.0})
     model = build_model(scene)
     assert model.arrays.group_q.shape == (1001,)     # one group per copy
     assert model.kernel.mass_block == 1
@@ -115,11 +118,11 @@ def test_yaml_text_numbers_in_det_overrides_are_caught():
 
 def _default_dict():
     from det_sim_ros.scene import scene_to_dict
-    return scene_to_dict(load_scene('default'))
+    return scene_to_dict(load_scene('default', RELEASED))
 
 
 def test_multi_det_scene_round_trips_through_its_dict():
-    scene = load_scene('plate', {'dets.left.Rs': 1.0e3})
+    scene = load_scene('plate', {**RELEASED, 'dets.left.Rs': 1.0e3})
     again = load_scene(_default_dict() | {'structure': dict(scene.structure),
                                           'dets': {'left': {'Rs': 1.0e3}}})
     assert again.cell_physics() == scene.cell_physics()

@@ -268,3 +268,16 @@ def test_node_plate_log_resimulates_bit_for_bit(tmp_path, harness):
     assert result.complete and result.commands == 3 and result.steps > 0
     assert result.ok(tolerance=0.0), result.table()
     assert any(key.startswith('structure.') for key in result.compared)
+
+
+def test_command_decoding_refuses_repeated_and_empty_names():
+    """Resim reads joint commands as the node does: a repeated or empty name list is refused."""
+    from sensor_msgs.msg import JointState
+    from det_sim_ros.replay import command_volts
+    names = ['left', 'right']
+    held = [1.0, 2.0]
+    ok = JointState(name=['right'], position=[5.0])
+    assert command_volts('sensor_msgs/msg/JointState', ok, held, names) == [1.0, 5.0]
+    twice = JointState(name=['left', 'left'], position=[5.0, 6.0])
+    assert command_volts('sensor_msgs/msg/JointState', twice, held, names) is None
+    assert command_volts('sensor_msgs/msg/JointState', JointState(), held, names) is None

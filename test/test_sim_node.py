@@ -392,10 +392,38 @@ def test_plate_bad_inputs_per_channel(harness):
     assert h.node.refused_commands == 5
     h.joint_command(['right', 'left'], [10.0, 20.0])
     assert u() == [20.0, 10.0]
+    # issue 17: a DET named twice is refused (not the last one silently winning); an empty
+    # JointState says it is empty (not 'unknown DET name(s) []')
+    h.joint_command(['left', 'right', 'left'], [1.0, 2.0, 3.0])
+    assert u() == [20.0, 10.0] and h.node.refused_commands == 6
+    assert "['left'] given more than once" in h.node.last_refused
+    h.joint_command([], [])
+    assert u() == [20.0, 10.0] and h.node.refused_commands == 7
+    assert 'empty JointState' in h.node.last_refused and '[]' not in h.node.last_refused
+    h.joint_command(['right'], [30.0])
+    assert u() == [20.0, 30.0]
     assert h.call('pause', data=False).success
     h.spin_until_sim_time(0.05, 'structure')
     assert not h.non_finite
     h.spin_until(lambda: any(
-        {kv.key: kv.value for kv in s.values}.get('refused_commands') == '5'
-        and 'left' in {kv.key: kv.value for kv in s.values}.get('last_refused', '')
+        {kv.key: kv.value for kv in s.values}.get('refused_commands') == '7'
+        and 'empty' in {kv.key: kv.value for kv in s.values}.get('last_refused', '')
         for d in h.diagnostics for s in d.status), 'diagnostics with the refused count')
+
+
+def test_implausible_physics_is_flagged_on_diagnostics(harness):
+    """Issue 17: v_max = 1e5 V driven at 1e5 V: the power-balance residual leaves its bound,
+    /diagnostics says WARN with the cause (not OK); nothing non-finite is published."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+    from det_sim_ros.simulator import POWER_RESIDUAL_LIMIT
+    h = harness(diagnostics_period=0.05, **{'physics.v_max': 1.0e5,
+                                            'scene.initial_state': 'released'})
+    h.command([1.0e5])
+    h.spin_until(lambda: any(s.level == DiagnosticStatus.WARN and 'residual' in s.message
+                             for d in h.diagnostics for s in d.status), 'a WARN on the residual')
+    assert abs(h.node._sim.power_residual()) > POWER_RESIDUAL_LIMIT
+    assert not h.non_finite
+    h.call('reset')
+    h.diagnostics.clear()
+    h.spin_until(lambda: h.diagnostics, 'diagnostics after the reset')
+    assert h.diagnostics[-1].status[0].level == DiagnosticStatus.OK

@@ -1,0 +1,214 @@
+"""
+The initial state (issue 19): 'rest' (the stable buckled equilibrium at 0 V, the default) and
+'released' (the paper's start from q0, bit for bit as before).
+"""
+
+import numpy as np
+import pytest
+
+from det_sim_ros.scene import load_scene, SceneError
+from det_sim_ros.scenarios import step_scene
+from det_sim_ros.sim_node import rest_shortenings
+from det_sim_ros.simulator import simulate, Simulator
+from det_sim_ros.statics import equilibria, rest_coords, RestStateError
+
+TOL = 1e-9   # m: the issue's stationarity bound on Delta-y and q - q_B
+
+FIDELITIES = [('paper', 1), ('consistent', 3), ('exact', 3)]
+
+
+def _rest_run(scene, t_end=0.1):
+    r = simulate(scene, lambda t: [0.0] * scene.n_dets, t_end)
+    assert len(r.t) == int(round(t_end * scene.rate_hz)) + 1
+    return r
+
+
+@pytest.mark.parametrize('fidelity, n_ritz', FIDELITIES)
+@pytest.mark.parametrize('beam', ['fixed', 'simply_supported'])
+def test_rest_is_stationary_for_100_ms(beam, fidelity, n_ritz):
+    """At rest and 0 V every sample of the first 100 ms: |Delta-y| <= 1e-9 m and
+    |q - q_B| <= 1e-9 m (q_B: the statics' buckled+ equilibrium), q_dot ~ 0."""
+    scene = load_scene('default', {'scene.beam': beam, 'scene.fidelity': fidelity,
+                                   'scene.n_ritz': n_ritz})
+    assert scene.initial_state == 'rest' and scene.rest_branch == 'buckled+'
+    r = _rest_run(scene)
+    y0 = rest_shortenings(scene)[0]
+    q_b = [e.q for e in equilibria(scene, 0.0) if e.kind == 'buckled+'][0]
+    assert q_b > 0.0
+    assert np.max(np.abs(y0 - r['y'])) <= TOL
+    assert np.max(np.abs(r['q'] - q_b)) <= TOL
+    assert np.max(np.abs(r['q_dot'])) <= 1e-9
+    assert np.all(r['q_p'] == 0.0)
+
+
+def test_buckled_minus_branch_is_the_mirror_state():
+    plus = _rest_run(load_scene('default'), 0.05)
+    minus = _rest_run(load_scene('default', {'scene.rest_branch': 'buckled-'}), 0.05)
+    q_minus = [e.q for e in equilibria(load_scene('default'), 0.0) if e.kind == 'buckled-'][0]
+    assert q_minus < 0.0
+    assert np.max(np.abs(minus['q'] - q_minus)) <= TOL
+    assert np.allclose(minus['q'], -plus['q'], rtol=0.0, atol=TOL)
+    assert np.max(np.abs(minus['y'] - plus['y'])) <= TOL      # same end shortening
+
+
+def test_plate_cells_each_at_their_own_rest():
+    """Plate with different right-cell physics: both cells stationary, plate outputs at rest."""
+    scene = load_scene('plate', {'dets.right.E_b': 3.0e9})
+    r = _rest_run(scene)
+    y0 = rest_shortenings(scene)
+    assert y0[0] != y0[1]
+    for name, y_rest in zip(scene.det_names, y0):
+        assert np.max(np.abs(y_rest - r[f'y[{name}]'])) <= TOL
+        assert np.max(np.abs(r[f'q_dot[{name}]'])) <= 1e-9
+    assert np.ptp(r['plate_phi']) <= TOL and np.ptp(r['plate_y']) <= TOL
+
+
+def test_array_with_spread_every_copy_at_its_rest():
+    scene = load_scene('array', {'structure.copies': 4, 'structure.spread': 0.1})
+    r = _rest_run(scene, 0.05)
+    for name, y_rest in zip(scene.det_names, rest_shortenings(scene)):
+        assert np.max(np.abs(y_rest - r[f'y[{name}]'])) <= TOL
+
+
+def test_below_the_critical_prestrain_rest_is_straight():
+    scene = load_scene('default', {'scene.eps_b': 0.02})   # eps_b,min = 4.89 % (fixed, 0 V)
+    sim = Simulator(scene)
+    assert np.all(sim.x0 == 0.0)
+    assert np.all(_rest_run(scene, 0.02)['q'] == 0.0)
+
+
+# released: the paper's start, bit for bit as before issue 19 (values printed by main's kernel,
+# the C one of issue 14, at the commit before the initial_state key existed; 3 kV from t = 0.2 s)
+GOLDEN = {
+    ('default', ()): {'q': (0.015707308425827318, -0.009846252500990783),
+                      'y': (0.0100254288450668, 0.003939502255269273)},
+    ('default', (('scene.beam', 'simply_supported'), ('scene.fidelity', 'consistent'),
+                 ('scene.n_ritz', 3))): {'q': (0.015060695571680154, -0.012171394972097417),
+                                         'y': (0.012003153671200882, 0.0074735707763269555)},
+    ('plate', ()): {'q[left]': (0.01570730842582734, -0.009846252500990752),
+                    'y[right]': (0.010025428845066828, 0.003939502255269246)},
+}
+
+
+@pytest.mark.parametrize('name, overrides', list(GOLDEN))
+def test_released_gives_the_old_trajectories_bit_for_bit(name, overrides):
+    scene = load_scene(name, {**dict(overrides), 'scene.initial_state': 'released'})
+    r = simulate(scene, lambda t: [3000.0 * (t >= 0.2)] * scene.n_dets, 0.3)
+    for key, values in GOLDEN[name, overrides].items():
+        assert (r[key][100], r[key][300]) == values, key
+
+
+def test_paper_scenarios_set_released():
+    assert step_scene().initial_state == 'released'
+    scene = step_scene()
+    assert Simulator(scene).x0[0] == pytest.approx(scene.physics.q0)
+
+
+def test_reset_returns_to_the_configured_initial_state():
+    for state in ('rest', 'released'):
+        sim = Simulator(load_scene('default', {'scene.initial_state': state}))
+        x0 = sim.x0.copy()
+        sim.set_input([3000.0])
+        for _ in range(50):
+            sim.step()
+        sim.reset()
+        assert np.array_equal(sim.x, x0) and sim.k == 0
+
+
+def test_exact_simply_supported_025_rest_runs_without_fault():
+    """Issue 17: exact, simply supported, eps_b 0.25 faulted at t = 0.008 s at 0 V. Its rest
+    state is inside the exact level's range (max |w'| ~ 0.9 < 1): from rest there is no fault.
+    Released from q0, the dynamic buckling overshoots to w' = 1 (n_ritz 5): the documented
+    domain error, naming the slope."""
+    over = {'scene.beam': 'simply_supported', 'scene.eps_b': 0.25,
+            'scene.fidelity': 'exact', 'scene.n_ritz': 5}
+    scene = load_scene('default', over)
+    sim = Simulator(scene)
+    basis = sim.model.bases[0]
+    slope = basis.values(np.linspace(0.0, basis.length, 1001), 1) @ sim.x0[:basis.n_ritz]
+    assert 0.8 < np.max(np.abs(slope)) < 1.0
+    r = simulate(sim, lambda t: 0.0, 0.05)
+    assert not sim.fault and np.ptp(r['q']) <= TOL
+    with pytest.raises(ArithmeticError, match='slope'):
+        simulate(load_scene('default', {**over, 'scene.initial_state': 'released'}),
+                 lambda t: 0.0, 0.05)
+
+
+def test_bad_initial_state_keys_are_one_line_errors():
+    with pytest.raises(SceneError, match="scene.initial_state.*'rest', 'released'"):
+        load_scene('default', {'scene.initial_state': 'settled'})
+    with pytest.raises(SceneError, match='rest_branch'):
+        load_scene('default', {'scene.rest_branch': 'up'})
+
+
+def test_missing_rest_state_is_refused_with_a_reason(monkeypatch):
+    """No stable state on the branch: a one-line RestStateError (a SceneError)."""
+    import det_sim_ros.statics as statics
+    scene = load_scene('default', {'scene.eps_b': 0.21})
+    real = statics._Statics.equilibria
+
+    def no_buckled(self, vp, v):
+        return [row for row in real(self, vp, v) if row[0] == 'buckled-']
+    monkeypatch.setattr(statics._Statics, 'equilibria', no_buckled)
+    with pytest.raises(RestStateError, match='no stable buckled\\+ equilibrium') as info:
+        rest_coords(scene, 'buckled+')
+    assert isinstance(info.value, SceneError) and '\n' not in str(info.value)
+
+
+# -- the node: starts in, and resets to, the configured initial state; the log records it ------
+
+MS = 1_000_000  # ns
+
+
+@pytest.mark.parametrize('initial_state', ['rest', 'released'])
+def test_node_starts_and_resets_to_the_initial_state_and_logs_it(tmp_path, harness,
+                                                                 initial_state):
+    """What the node published (its MCAP log holds every sample): the first 100 ms at 0 V are
+    stationary at rest; ~/reset returns to the same initial state (the same samples again);
+    the log records it and re-simulates bit for bit."""
+    from det_sim_ros.mcap_log import LogReader
+    from det_sim_ros.replay import resimulate
+    h = harness(steps_per_tick=5, **{'log.path': str(tmp_path / 'logs'),
+                                     'scene.initial_state': initial_state})
+    h.spin_until(lambda: h.node._sim.k >= 110, 'sim time 0.11 s')
+    h.command([2000.0])
+    h.spin_until_sim_time(h.node._sim.t + 0.03)
+    assert initial_state in h.call('reset').message
+    h.spin_until(lambda: h.node._sim.k >= 110, 'sim time 0.11 s after the reset')
+    recorder, x0 = h.node._recorder, h.node._sim.x0.tolist()
+    h.close()
+    assert len(recorder.paths) == 2        # a reset starts a new file
+    runs = []
+    for path in recorder.paths:
+        reader = LogReader(path)
+        samples = {m.log_time: m.decode().position[0]
+                   for m in reader.messages(['displacement'])}
+        runs.append([samples[k * MS] for k in range(101)])
+        assert reader.info['initial_state'].startswith(initial_state)
+        assert eval(reader.info['x0']) == x0   # noqa: S307 - our own log
+        result = resimulate(path)
+        assert result.complete and result.steps > 0
+        assert all(v == 0.0 for v in result.max_deviation.values()), result.table()
+    if initial_state == 'rest':
+        assert max(abs(v) for v in runs[0]) <= TOL        # stationary from t = 0
+    else:
+        assert runs[0][0] == pytest.approx(h.node.y0[0], rel=1e-2)   # the buckling transient
+    assert runs[1] == runs[0]                                         # reset: the same start
+
+
+def test_log_without_the_key_replays_as_released(tmp_path):
+    """Logs written before scene.initial_state existed started released from q0."""
+    from det_sim_ros.mcap_log import Recorder
+    from det_sim_ros.replay import resimulate, simulate_to_log
+    from det_sim_ros.scene import scene_to_dict
+    scene = load_scene('default', {'scene.initial_state': 'released'})
+    old = scene_to_dict(scene, wrap=True)
+    for key in ('initial_state', 'rest_branch'):
+        del old['sim_node']['ros__parameters']['scene'][key]
+    sim = Simulator(scene)
+    recorder = Recorder(tmp_path / 'old.mcap', old, metadata={'method': sim.method.name,
+                                                              'substeps': 0})
+    simulate_to_log(recorder, sim, {0: [0.0], 50: [2500.0]}, 120)
+    recorder.close()
+    result = resimulate(str(tmp_path / 'old.mcap'))
+    assert result.steps == 120 and all(v == 0.0 for v in result.max_deviation.values())
