@@ -187,3 +187,20 @@ def test_consistent_three_term_model(beam):
     q = np.linspace(-1.4 * plus.q, 1.4 * plus.q, 29)
     u = statics.potential(scene, q, 0.0)
     assert abs(q[np.argmin(u)]) == pytest.approx(plus.q, rel=0.06)
+
+
+def test_brentq_finds_the_roots_scipy_finds():
+    """statics.brentq (written out to keep scipy.optimize out of a node's start) is Brent's
+    method with scipy's steps and stopping rule: the same roots, to the last bit."""
+    from scipy.optimize import brentq as scipy_brentq
+    from det_sim_ros.statics import brentq
+    cases = [(lambda x: x ** 3 - 2 * x - 5, 2.0, 3.0), (np.cos, 0.0, 3.0),
+             (lambda x: np.tanh(40 * (x - 0.3)) + 1e-3 * x, -1.0, 2.0),
+             (lambda x: np.exp(x) - 1e6, 0.0, 30.0)]
+    for f, a, b in cases:
+        for xtol, rtol in ((2e-12, 8.9e-16), (1e-15, 1e-13)):
+            ours = brentq(f, a, b, xtol=xtol, rtol=rtol)
+            theirs = scipy_brentq(f, a, b, xtol=xtol, rtol=rtol)
+            assert ours == theirs, (f, ours, theirs)
+    with pytest.raises(ValueError, match='opposite signs'):
+        brentq(np.cos, 0.0, 1.0)
