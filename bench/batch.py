@@ -30,9 +30,16 @@ from det_sim_ros.scene import load_scene
 from det_sim_ros.simulator import simulate, Simulator
 
 
-def _commands(n, periods, dt, v_max, synchronized=False):
-    phase = np.zeros(n) if synchronized else np.arange(n) / max(n, 1) * 0.2
+def _commands(n, periods, dt, v_max, synchronized=False, kind='square'):
+    """Per-period voltages (periods x n). 'square': a 0 / v_max square wave of period 0.2 s per
+    copy (a snap every 0.1 s: the hard case); 'step': the 'step' profile per copy, v_max for
+    0.3 s from a switch-on time (what a controller test does), spread over the first half of
+    the run. Staggered: phases / switch times spread over the copies; synchronized: all equal."""
     t = np.arange(periods)[:, None] * dt
+    if kind == 'step':
+        on = np.full(n, 0.1) if synchronized else 0.1 + 0.5 * periods * dt * np.arange(n) / n
+        return v_max * ((t >= on[None, :]) & (t < on[None, :] + 0.3))
+    phase = np.zeros(n) if synchronized else np.arange(n) / max(n, 1) * 0.2
     return v_max * (((t + phase[None, :]) % 0.2) < 0.1)
 
 
@@ -57,27 +64,36 @@ def _wall(fn, repeats):
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--sizes', default='1,10,100,1000')
-    parser.add_argument('--sim-time', type=float, default=0.5, help='simulated seconds per run')
+    parser.add_argument('--sim-time', type=float, default=1.0, help='simulated seconds per run')
+    parser.add_argument('--commands', default='square,step',
+                        help="workloads: 'square' (a snap every 0.1 s), 'step' (one step each)")
     parser.add_argument('--repeats', type=int, default=3)
     parser.add_argument('--max-separate', type=int, default=100)
     parser.add_argument('--tolerance', type=float, default=1e-6)
     parser.add_argument('--threads', default='1,2', help='thread counts for the array run')
     parser.add_argument('--substeps', type=int, default=0, help='fixed steps per period (0: adaptive)')
+    parser.add_argument('--initial-state', default='rest', choices=('rest', 'released'),
+                        help="the scene's start: 'rest' (config/array.yaml's) or 'released' "
+                             '(every copy buckles from q0 first)')
     args = parser.parse_args(argv)
     threads = [int(t) for t in args.threads.split(',')]
-    print('| N | commands | array step(): µs CPU per actuator and period | RTF | '
+    print('| N | commands | steps / period | array step(): µs CPU per actuator and period | RTF | '
           + ' | '.join(f'simulate() {t} thread(s): µs wall per actuator and period | RTF'
                        for t in threads)
           + ' | N × single-cell step(): µs per actuator and period |')
-    print('|---|---|---|---|' + '---|---|' * len(threads) + '---|')
+    print('|---|---|---|---|---|' + '---|---|' * len(threads) + '---|')
     for n in (int(s) for s in args.sizes.split(',')):
         scene = load_scene('array', {'structure.copies': n, 'integrator.tolerance': args.tolerance,
                                      'integrator.substeps': args.substeps,
-                                     'scene.initial_state': 'released'})
+                                     'scene.initial_state': args.initial_state})
         sim = Simulator(scene)
         periods = int(round(args.sim_time / sim.dt))
-        for synchronized in (False, True):
-            U = _commands(n, periods, sim.dt, scene.physics.v_max, synchronized)
+        for kind, synchronized in ((k, sync) for k in args.commands.split(',')
+                                   for sync in (False, True)):
+            U = _commands(n, periods, sim.dt, scene.physics.v_max, synchronized, kind)
+            counted = Simulator(sim.model)
+            simulate(counted, U, args.sim_time)
+            steps = counted.steps_taken / (n * periods)
 
             def stepping():
                 s = Simulator(sim.model)
@@ -101,8 +117,8 @@ def main(argv=None) -> int:
                             s.step()
                 cost_sep = _cpu(separate, args.repeats) * per
             rtf = lambda us: 1e3 / (us * n)  # noqa: E731 - 1 ms of sim time per period
-            print(f"| {n} | {'synchronized' if synchronized else 'staggered'} | "
-                  f'{cost_step:.3g} | {rtf(cost_step):.3g} | '
+            print(f"| {n} | {kind}, {'synchronized' if synchronized else 'staggered'} | "
+                  f'{steps:.1f} | {cost_step:.3g} | {rtf(cost_step):.3g} | '
                   + ' | '.join(f'{r:.3g} | {rtf(r):.3g}' for r in runs)
                   + f' | {cost_sep:.3g} |', flush=True)
     return 0
