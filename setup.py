@@ -79,8 +79,11 @@ setup(
         'ros-jazzy-rmw-fastrtps-cpp>=8.4,<9',
     ],
     extras_require={
-        'test': ['pytest>=7', 'hypothesis>=6', 'rosbags>=0.10', 'control>=0.10'],
+        # the tests draw the plots (det_sim plot, Bode) and check the python-control model
+        'test': ['pytest>=7', 'hypothesis>=6', 'rosbags>=0.10', 'control>=0.10',
+                 'matplotlib>=3.7'],
         'plots': ['matplotlib>=3.7'],
+        'control': ['control>=0.10'],   # LinearModel.to_statespace()
     },
     zip_safe=False,
     maintainer='det_sim_ros maintainers',
