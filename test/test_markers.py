@@ -129,3 +129,33 @@ def test_markers_off(harness):
     assert h.node._markers is None
     names = {n for n, _ in h.node.get_publisher_names_and_types_by_node('sim_node', '/')}
     assert '/markers' not in names
+
+
+def test_foxglove_layout_uses_the_nodes_topics():
+    """config/foxglove_layout.json: a 3D panel on /markers following det0's frame, and plots
+    of voltage, Delta-y, q, charge and current on topics and fields the node publishes."""
+    import json
+    import os
+    import re
+    from det_sim_ros.sim_node import OUTPUT_TOPICS
+    path = os.path.join(os.path.dirname(__file__), '..', 'config', 'foxglove_layout.json')
+    with open(path, encoding='utf-8') as stream:
+        layout = json.load(stream)
+    panels = layout['configById']
+    three_d = [c for k, c in panels.items() if k.startswith('3D!')]
+    assert len(three_d) == 1 and three_d[0]['topics']['/markers']['visible']
+    assert three_d[0]['followTf'] == 'det0'
+    fields = {'voltage_command': {'data'}, **{t: {'position', 'velocity'} for t in OUTPUT_TOPICS}}
+    plotted = set()
+    for key, config in panels.items():
+        if key.startswith('Plot!'):
+            for p in config['paths']:
+                topic, field = re.fullmatch(r'/(\w+)\.(\w+)\[\d+\]', p['value']).groups()
+                assert field in fields[topic], p['value']
+                plotted.add(topic)
+    assert plotted == {'voltage_command', 'displacement', 'deflection', 'charge', 'current'}
+
+    def leaves(node):
+        return [node] if isinstance(node, str) else leaves(node['first']) + leaves(
+            node['second'])
+    assert sorted(leaves(layout['layout'])) == sorted(panels)
