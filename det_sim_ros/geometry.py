@@ -85,22 +85,27 @@ class _CellSampler:
         # y(s_k) = sum over the segments below s_k of their quadrature: one matrix product
         segment = np.repeat(np.arange(len(s) - 1), _GAUSS_NODES)
         self.cumulative = (segment[None, :] < np.arange(len(s))[:, None]) * weights[None, :]
+        self.half_cumulative = 0.5 * self.cumulative
+        self.S_B1 = np.vstack([self.S, self.B1])
+        self.n_samples = len(s)
         self.kinematics = kinematics
         self.physics = physics
         self.det_width = physics.A0 / physics.l0
         self.length = length
 
     def profile(self, coords):
-        """(w, z) at the samples: deflection and height of beam A, m."""
-        wp = self.B1 @ coords
+        """(w, z) at the samples: deflection and height of beam A, m (few numpy calls: this
+        runs for every marker frame)."""
+        both = self.S_B1 @ coords
+        w, wp = both[:self.n_samples], both[self.n_samples:]
+        wp2 = wp * wp
         if self.kinematics == 'exact':
-            e = 1.0 - np.sqrt(np.maximum(1.0 - wp * wp, 0.0))
+            e = 1.0 - np.sqrt(np.maximum(1.0 - wp2, 0.0))
         elif self.kinematics == 'consistent':
-            wp2 = wp * wp
             e = wp2 * (0.5 + 0.125 * wp2)
         else:
-            e = 0.5 * wp * wp
-        return self.S @ coords, self.s - self.cumulative @ e
+            return w, self.s - self.half_cumulative @ wp2       # e = w'^2 / 2
+        return w, self.s - self.cumulative @ e
 
     def det_thickness(self, height: float) -> float:
         """Drawn DET thickness n d0 / lambda at the cell height l - y (m)."""

@@ -43,6 +43,16 @@ def test_shape_matches_model_outputs(overrides):
     assert cell.height == pytest.approx(scene.beam_length - y, rel=1e-12)
     np.testing.assert_allclose(cell.beam_b[:, 0], -cell.beam_a[:, 0])   # the mirror beam
     assert cell.beam_a[0, 2] == 0.0 and np.all(np.diff(cell.beam_a[:, 2]) > 0)
+    # the markers' fast path (linear maps of q and w'^2) draws the same shape
+    msg = deserialize(MARKER_TYPE, MarkerFrames(sim.model).frame(sim.x, sim.u, 0))
+    beam_a, beam_b, det, ref = msg.markers
+    np.testing.assert_allclose([[p.x, p.y, p.z] for p in beam_a.points], cell.beam_a,
+                               rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose([[p.x, p.y, p.z] for p in beam_b.points], cell.beam_b,
+                               rtol=1e-12, atol=1e-15)
+    assert ref.pose.position.x == pytest.approx(q, rel=1e-12)
+    assert det.scale.z == pytest.approx(cell.height, rel=1e-12)
+    assert det.scale.x == pytest.approx(cell.det_thickness, rel=1e-12)
 
 
 def test_marker_bytes_decode_to_the_shape():
