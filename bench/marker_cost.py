@@ -4,8 +4,11 @@ simulated second).
 
 Runs sim_node in free-run mode (no MCAP log) in this process for ``--sim-s`` simulated seconds
 with markers.rate_hz = 0 and = 30, alternately (``--repeats`` each; medians reported, since the
-host is shared), with a subscriber in another process (to /markers and, by default, to the four output topics
-as a controller would) so the messages are really delivered. CPU = this process's user + system time per simulated second.
+host is shared), with a subscriber in another process (to /markers and, by default, to the four
+output topics as a controller would) so the messages are really delivered. Node CPU = this
+process's user + system time per simulated second; the marker code's share is the executor
+thread's CPU time in building and publishing the frames (time.thread_time), measured directly
+because whole-run differences are smaller than the host's run-to-run noise.
 
     python bench/marker_cost.py [--scene default] [--sim-s 20] [--repeats 3]
 """
@@ -84,8 +87,9 @@ def run(scene, rate, sim_s, subscribe):
     executor.shutdown()
     node.destroy_node()
     rclpy.try_shutdown(context=context)
+    per_frame = 1e6 / max(frames, 1)
     print(f'  executor thread {thread / (steps * node._dt) * 1e3:.2f} ms per sim s; '
-          f'frame {spent[1] / max(frames, 1) * 1e6:.0f} us, publish {spent[2] / max(frames, 1) * 1e6:.0f} us per frame')
+          f'frame {spent[1] * per_frame:.0f} us, publish {spent[2] * per_frame:.0f} us per frame')
     return cpu / sim_time, frames / sim_time, (spent[1] + spent[2]) / sim_time
 
 

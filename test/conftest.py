@@ -2,8 +2,9 @@
 Fixtures for launch-free, in-process ROS 2 tests.
 
 rclpy runs in an isolated domain with localhost-only discovery, set before rclpy.init: the
-ROS_DOMAIN_ID the user has set (respected), else one picked from the pid. Each test gets its own context; a :class:`Harness` holds the node under test and a
-test node spun together in one SingleThreadedExecutor.
+ROS_DOMAIN_ID the user has set (respected), else one picked from the pid. Each test gets its
+own context; a :class:`Harness` holds the node under test and a test node spun together in one
+SingleThreadedExecutor.
 """
 
 import math
