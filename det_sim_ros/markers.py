@@ -204,21 +204,35 @@ class MarkerFrames:
         V0[k + 6:k + 9] = off[0], off[1], off[2] + sampler.s[ref]
         Kq[k + 6] = sampler.S[ref]
         Ke[k + 8] = -cum[ref]
-        return V0, Kq, Ke, sampler.B1, sampler.kinematics, k + 5, k + 3
+        poly = None
+        if r == 1 and sampler.kinematics in ('paper', 'consistent'):
+            # one coordinate: e is a polynomial in q, so V = V0 + q (K1 + q (K2 + q^2 K4))
+            b1 = sampler.B1[:, 0]
+            K2 = Ke @ (b1 * b1)
+            K4 = (0.125 * Ke @ b1 ** 4) if sampler.kinematics == 'consistent' else 0.0 * K2
+            if sampler.kinematics == 'consistent':
+                K2 = 0.5 * K2
+            poly = (Kq[:, 0].copy(), K2, K4)
+        return V0, Kq, Ke, sampler.B1, sampler.kinematics, k + 5, k + 3, poly
 
     def frame(self, x, u, stamp_ns: int) -> bytes:
         """CDR bytes of the MarkerArray at state x, voltages u, stamped ``stamp_ns`` (sim time)."""
         parts, heights = [], []
-        for (s, sampler, _), (V0, Kq, Ke, B1, kinematics, i_h, i_thick) in zip(
+        for (s, sampler, _), (V0, Kq, Ke, B1, kinematics, i_h, i_thick, poly) in zip(
                 self._samplers, self._cell_maps):
-            q = x[s]
-            wp = B1 @ q
-            e = wp * wp
-            if kinematics == 'consistent':
-                e = e * (0.5 + 0.125 * e)
-            elif kinematics == 'exact':
-                e = 1.0 - np.sqrt(np.maximum(1.0 - e, 0.0))
-            values = V0 + Kq @ q + Ke @ e
+            if poly is not None:
+                q = float(x[s.start])
+                K1, K2, K4 = poly
+                values = V0 + q * (K1 + q * (K2 + (q * q) * K4))
+            else:
+                q = x[s]
+                wp = B1 @ q
+                e = wp * wp
+                if kinematics == 'consistent':
+                    e = e * (0.5 + 0.125 * e)
+                elif kinematics == 'exact':
+                    e = 1.0 - np.sqrt(np.maximum(1.0 - e, 0.0))
+                values = V0 + Kq @ q + Ke @ e
             h = float(values[i_h])
             values[i_thick] = sampler.det_thickness(h)
             heights.append(h)
@@ -230,7 +244,7 @@ class MarkerFrames:
                                           + 0.5 * PLATE_THICKNESS)
             half = 0.5 * tilt              # rotation about x: quaternion (sin, 0, 0, cos)
             parts.append((*centre, math.sin(half), 0.0, 0.0, math.cos(half)))
-        self._f64[self._f64_index] = np.concatenate(parts)
+        self._f64[self._f64_index] = parts[0] if len(parts) == 1 else np.concatenate(parts)
         volts = list(u) if np.ndim(u) else [u] * len(self._samplers)
         if volts != self._colored_for:            # the DET colour changes with its voltage
             self._colored_for = volts

@@ -69,7 +69,8 @@ def test_marker_bytes_decode_to_the_shape():
     for name, cell, q in zip(('left', 'right'), cells, per_det(sim, 'q')):
         beam = by_key[name, 0]
         assert beam.header.frame_id == f'arm1/{name}'
-        np.testing.assert_array_equal([[p.x, p.y, p.z] for p in beam.points], cell.beam_a)
+        np.testing.assert_allclose([[p.x, p.y, p.z] for p in beam.points], cell.beam_a,
+                                   rtol=1e-12, atol=1e-15)
         assert by_key[name, 3].pose.position.x == pytest.approx(q, rel=1e-13)
         assert by_key[name, 2].scale.z == pytest.approx(cell.height)
     plate = by_key['plate', 0]
