@@ -12,7 +12,7 @@ Subcommands::
 
 Common options: ``--scene PATH_OR_NAME`` (default 'default'), ``--set key=value`` (repeatable,
 e.g. ``--set physics.Rs=1e3 --set scene.fidelity=consistent``), ``--out DIR`` (default
-./det_sim_out), ``--dpi N``. Plots need matplotlib (``pip install .[plots]``); without it the CSV
+./det_sim_out), ``--dpi N`` (``plot`` takes only ``--out`` and ``--dpi``). Plots need matplotlib (``pip install .[plots]``); without it the CSV
 files are still written. Bad arguments and invalid scenes give one line on stderr and exit code 2.
 """
 
@@ -162,7 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser = argparse.ArgumentParser(
         prog=PROG, description='Run the DET-buckled-beam model offline (no ROS): statics '
-        '(Fig. 5), step responses (Fig. 6), integration benchmark. Writes CSV and PNG files.')
+        '(Fig. 5), step responses (Fig. 6), integration benchmark, plots of sim_node logs, '
+        'linear models. Writes CSV, JSON and PNG files.')
     sub = parser.add_subparsers(dest='command',
                                 metavar='{statics,step,bench,plot,linearize}')
 
