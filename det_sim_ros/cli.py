@@ -12,8 +12,8 @@ Subcommands::
 
 Common options: ``--scene PATH_OR_NAME`` (default 'default'), ``--set key=value`` (repeatable,
 e.g. ``--set physics.Rs=1e3 --set scene.fidelity=consistent``), ``--out DIR`` (default
-./det_sim_out), ``--dpi N`` (``plot`` takes only ``--out`` and ``--dpi``). Plots need matplotlib (``pip install .[plots]``); without it the CSV
-files are still written. Bad arguments and invalid scenes give one line on stderr and exit code 2.
+./det_sim_out), ``--dpi N`` (``plot`` takes only ``--out`` and ``--dpi``). Plots need matplotlib
+(``pip install .[plots]``); without it the CSV files are still written. Bad arguments and invalid scenes give one line on stderr and exit code 2.
 """
 
 from __future__ import annotations
