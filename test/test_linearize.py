@@ -59,6 +59,8 @@ def fd_jacobians(lin):
 CASES = [('default', {}, 0.0), ('default', {}, 1500.0),
          ('default', {'scene.beam': 'simply_supported', 'scene.eps_b': 0.15}, 3000.0),
          ('default', {'scene.fidelity': 'consistent', 'scene.n_ritz': 3}, 1500.0),
+         ('default', {'scene.fidelity': 'exact', 'scene.n_ritz': 3}, 1500.0),
+         ('array', {'structure.copies': 3, 'structure.spread': 0.05}, 1000.0),
          ('default', {'scene.source': 'ideal', 'scene.creep': False}, 2000.0),
          ('plate', {}, [1500.0, 500.0])]
 
