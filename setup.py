@@ -62,7 +62,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         (os.path.join('share', package_name), ['package.xml']),
-        (os.path.join('share', package_name, 'config'), sorted(glob('config/*.yaml'))),
+        (os.path.join('share', package_name, 'config'),
+         sorted(glob('config/*.yaml')) + ['config/foxglove_layout.json']),
         # `ros2 run det_sim_ros sim_node` looks only in <prefix>/lib/det_sim_ros
         (os.path.join('lib', package_name), ['scripts/sim_node']),
     ],
@@ -79,8 +80,11 @@ setup(
         'ros-jazzy-rmw-fastrtps-cpp>=8.4,<9',
     ],
     extras_require={
-        'test': ['pytest>=7', 'hypothesis>=6', 'rosbags>=0.10', 'control>=0.10'],
+        # the tests draw the plots (det_sim plot, Bode) and check the python-control model
+        'test': ['pytest>=7', 'hypothesis>=6', 'rosbags>=0.10', 'control>=0.10',
+                 'matplotlib>=3.7'],
         'plots': ['matplotlib>=3.7'],
+        'control': ['control>=0.10'],   # LinearModel.to_statespace()
     },
     zip_safe=False,
     maintainer='det_sim_ros maintainers',

@@ -7,11 +7,13 @@ Subcommands::
                     [--eps-b 0.15,0.20,0.25]
     det_sim step    [--beams fixed,simply_supported] [--eps-b 0.15,0.20,0.25] [--t-end 4.5]
     det_sim bench   [...]            (the integration benchmark, det_sim_ros.benchmark)
+    det_sim plot LOG.mcap [--out DIR]                 (every channel of a sim_node log, PNG)
+    det_sim linearize [--voltage 1500] [--branch buckled+] [--json]   (A, B, C, D; Bode)
 
 Common options: ``--scene PATH_OR_NAME`` (default 'default'), ``--set key=value`` (repeatable,
 e.g. ``--set physics.Rs=1e3 --set scene.fidelity=consistent``), ``--out DIR`` (default
-./det_sim_out), ``--dpi N``. Plots need matplotlib (``pip install .[plots]``); without it the CSV
-files are still written. Bad arguments and invalid scenes give one line on stderr and exit code 2.
+./det_sim_out), ``--dpi N`` (``plot`` takes only ``--out`` and ``--dpi``). Plots need matplotlib
+(``pip install .[plots]``); without it the CSV files are still written. Bad arguments and invalid scenes give one line on stderr and exit code 2.
 """
 
 from __future__ import annotations
@@ -27,6 +29,8 @@ import numpy as np
 import yaml
 
 from . import statics
+from .linearize import LinearizationError
+from .logplot import LogPlotError
 from .model import ModelDomainError
 from .scene import BEAMS, load_scene, SceneError
 
@@ -158,8 +162,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser = argparse.ArgumentParser(
         prog=PROG, description='Run the DET-buckled-beam model offline (no ROS): statics '
-        '(Fig. 5), step responses (Fig. 6), integration benchmark. Writes CSV and PNG files.')
-    sub = parser.add_subparsers(dest='command', metavar='{statics,step,bench}')
+        '(Fig. 5), step responses (Fig. 6), integration benchmark, plots of sim_node logs, '
+        'linear models. Writes CSV, JSON and PNG files.')
+    sub = parser.add_subparsers(dest='command',
+                                metavar='{statics,step,bench,plot,linearize}')
 
     p = sub.add_parser('statics', parents=[common],
                        help='equilibrium branches vs pre-strain, potential (eq 82), delta-y')
@@ -181,6 +187,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--t-end', type=_positive, default=4.5, help='end time, s (default: 4.5)')
     p.set_defaults(func=cmd_step)
 
+    p = sub.add_parser('plot', help='PNG of every channel of a sim_node MCAP log against sim '
+                       'time, and a text summary')
+    p.add_argument('log', nargs='+', help='MCAP file(s) or a directory of split files')
+    p.add_argument('--out', default=None,
+                   help='output folder (default: the folder of the log)')
+    p.add_argument('--dpi', type=int, default=80, help='PNG resolution (default: 80)')
+    p.set_defaults(func=cmd_plot)
+
+    p = sub.add_parser('linearize', parents=[common],
+                       help='linear model (A, B, C, D) at an equilibrium: poles, damping, '
+                       'natural frequencies, DC gains, Bode plot')
+    p.add_argument('--voltage', type=_float_list, default=[0.0],
+                   help='DET voltage(s), V: one for all DETs or one per DET (default: 0)')
+    p.add_argument('--branch', default='buckled+',
+                   help='equilibrium branch: buckled+ (default), buckled- or straight')
+    p.add_argument('--json', action='store_true', help='print the result as JSON')
+    p.set_defaults(func=cmd_linearize)
+
     p = sub.add_parser('bench', add_help=False,
                        help='work-precision diagram of the integration benchmark')
     p.add_argument('bench_args', nargs=argparse.REMAINDER)
@@ -200,11 +224,12 @@ def main(argv=None) -> int:
         return int(exc.code or 0)
     if args.command is None:
         parser.print_usage(sys.stderr)
-        print(f'{PROG}: error: choose a subcommand: statics, step or bench', file=sys.stderr)
+        print(f'{PROG}: error: choose a subcommand: statics, step, bench, plot or linearize',
+              file=sys.stderr)
         return 2
     try:
         return int(args.func(args) or 0)
-    except (SceneError, CliError) as exc:
+    except (SceneError, CliError, LinearizationError, LogPlotError) as exc:
         print(f'{PROG}: error: {exc}', file=sys.stderr)
         return 2
     except ModelDomainError as exc:
@@ -503,6 +528,115 @@ def _plot_step(plt, runs, args, out):
     fig.suptitle("step scenario: 0 V, v_max from 1.5 s to 3 s (shaded), 0 V")
     fig.tight_layout()
     path = os.path.join(out, 'step.png')
+    fig.savefig(path, dpi=args.dpi)
+    plt.close(fig)
+    return path
+
+
+# -- plot -----------------------------------------------------------------------------------------
+def cmd_plot(args) -> int:
+    from . import logplot
+    data = logplot.read_log(args.log)
+    first = data.files[0]
+    out = args.out or os.path.dirname(os.path.abspath(first))
+    os.makedirs(out, exist_ok=True)
+    stem = os.path.splitext(os.path.basename(first))[0]
+    text = logplot.summary(data)
+    print(text, end='')
+    summary_path = os.path.join(out, f'{stem}_summary.txt')
+    with open(summary_path, 'w', encoding='utf-8') as stream:
+        stream.write(text)
+    files = [summary_path]
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        print(f'{PROG}: {PLOTS_HINT}', file=sys.stderr)
+    else:
+        files.append(logplot.plot_log(data, os.path.join(out, f'{stem}.png'), dpi=args.dpi))
+    for path in files:
+        print(f'wrote {path}')
+    return 0
+
+
+# -- linearize ------------------------------------------------------------------------------------
+def cmd_linearize(args) -> int:
+    import json
+    from .linearize import linearize
+    scene = _base_scene(args)
+    voltage = args.voltage[0] if len(args.voltage) == 1 else args.voltage
+    lin = linearize(scene, voltage, args.branch)
+    poles = lin.poles()
+    wn, zeta = lin.natural_frequency(poles), lin.damping(poles)
+    gain = lin.dc_gain()
+    n_in = len(lin.input_names)
+    out = _out_dir(args)
+    report = {
+        'scene': args.scene, 'branch': lin.branch, 'voltage_V': lin.u0.tolist(),
+        'inputs': list(lin.input_names), 'outputs': list(lin.output_names),
+        'states': list(lin.state_names),
+        'equilibrium': {'x': lin.x0.tolist(), 'outputs_m': lin.z0.tolist()},
+        'poles': [{'real': float(p.real), 'imag': float(p.imag), 'natural_frequency_rad_s':
+                   float(w), 'natural_frequency_Hz': float(w / (2 * math.pi)),
+                   'damping_ratio': float(z)} for p, w, z in zip(poles, wn, zeta)],
+        'dc_gain_m_per_V': {o: {i: float(gain[r, c]) for c, i in enumerate(lin.input_names)}
+                            for r, o in enumerate(lin.output_names)},
+        'A': lin.A.tolist(), 'B': lin.B.tolist(), 'C': lin.C.tolist(), 'D': lin.D.tolist(),
+    }
+    files = []
+    json_path = os.path.join(out, 'linearization.json')
+    with open(json_path, 'w', encoding='utf-8') as stream:
+        json.dump(report, stream, indent=1)
+    files.append(json_path)
+    plt = _pyplot(args)
+    if plt is not None:
+        files.append(_plot_bode(plt, lin, poles, args, out))
+    if args.json:
+        print(json.dumps(report, indent=1))
+        return 0
+    print(f"{args.scene}: {lin.branch} equilibrium at {', '.join(f'{v:g}' for v in lin.u0)} V: "
+          + ', '.join(f'{o} = {z * 1e3:.6g} mm' for o, z in zip(lin.output_names, lin.z0)))
+    print(f"{'pole (1/s)':>34}  {'f_n (Hz)':>10}  {'zeta':>8}")
+    for p, w, z in zip(poles, wn, zeta):
+        text = f'{p.real:.6g}' + (f' {"+" if p.imag >= 0 else "-"} {abs(p.imag):.6g}j'
+                                  if p.imag else '')
+        print(f'{text:>34}  {w / (2 * math.pi):>10.4g}  {z:>8.4f}')
+    print('DC gains (m/V):')
+    for r, o in enumerate(lin.output_names):
+        print(f'  {o:<16}' + '  '.join(f'{gain[r, c]:>12.5g}' for c in range(n_in))
+              + (f'   per V of [{", ".join(lin.input_names)}]' if n_in > 1 else ' per V'))
+    for path in files:
+        print(f'wrote {path}')
+    return 0
+
+
+def _plot_bode(plt, lin, poles, args, out):
+    """|G| and phase of dy_i/V_i and q_i/V_i (each DET's own input; at most 6 DETs)."""
+    rates = np.abs(poles[np.abs(poles) > 0])
+    lo = max(rates.min() / 10.0 if rates.size else 0.1, 1e-2)
+    hi = rates.max() * 10.0 if rates.size else 1e4
+    omega = np.logspace(np.log10(lo), np.log10(hi), 600)
+    G = lin.frequency_response(omega)
+    n = len(lin.input_names)
+    fig, (ax_m, ax_p) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    f = omega / (2 * math.pi)
+    for i in range(min(n, 6)):
+        for r, style in ((i, '-'), (n + i, '--')):
+            g = G[:, r, i]
+            if not np.any(np.abs(g) > 0):       # e.g. a DET at 0 V: force ~ V^2, no gain
+                continue
+            label = f'{lin.output_names[r]} / V[{lin.input_names[i]}]'
+            ax_m.loglog(f, np.abs(g), style, lw=1.2, label=label)
+            ax_p.semilogx(f, np.degrees(np.unwrap(np.angle(g))), style, lw=1.2)
+    ax_m.set_ylabel('|G| (m/V)')
+    ax_p.set_ylabel('phase (deg)')
+    ax_p.set_xlabel('frequency (Hz)')
+    for ax in (ax_m, ax_p):
+        ax.grid(alpha=0.3, which='both')
+    ax_m.legend(fontsize=8)
+    ax_m.set_title(f'{args.scene}: linearized at {", ".join(f"{v:g}" for v in lin.u0)} V, '
+                   f'{lin.branch}')
+    fig.tight_layout()
+    path = os.path.join(out, 'bode.png')
     fig.savefig(path, dpi=args.dpi)
     plt.close(fig)
     return path

@@ -8,6 +8,9 @@ one-term cells), the mass matrix assembled and solved whole (the kernel solves i
 block), and phi_k from an augmented matrix exponential (the kernel uses series and recurrences).
 
 State layout and units: see :class:`det_sim_ros.model.ModelArrays`.
+
+:func:`kinematics` and :func:`rhs` also take complex x and u (every operation is analytic), so
+complex-step differentiation gives their Jacobians to round-off (det_sim_ros.linearize).
 """
 
 from __future__ import annotations
@@ -38,8 +41,9 @@ def kinematics(a, x) -> Kinematics:
     """Kinematics of every cell at the state x (see model.py: y, curvature, eqs 51, 65)."""
     nq = a.n_q
     q, qd = x[:nq], x[nq:2 * nq]
-    y, h, U4 = (np.zeros(a.n_cells) for _ in range(3))
-    J, dU4 = np.zeros(nq), np.zeros(nq)
+    kind = np.result_type(x, float)            # complex for complex-step differentiation
+    y, h, U4 = (np.zeros(a.n_cells, kind) for _ in range(3))
+    J, dU4 = np.zeros(nq, kind), np.zeros(nq, kind)
     for c in range(a.n_cells):
         s = a.cell_slice(c)
         r = s.stop - s.start
@@ -95,6 +99,12 @@ def _index(a):
     return i_eps, i_qp, i_qp + a.n_cells * a.rc_source
 
 
+def _numbers(v):
+    """v as a float array, or complex if it is complex."""
+    v = np.asarray(v)
+    return v if np.iscomplexobj(v) else v.astype(float)
+
+
 def rhs(a, x, u, quasi_static: bool = False):
     """
     (dx/dt, P_in, P_diss) at (x, u): Lagrange's equations of model.py,
@@ -102,15 +112,15 @@ def rhs(a, x, u, quasi_static: bool = False):
     - V (E_M eps + eta_v dlz/dt) dlz/dq, with the creep and circuit equations.
     ``quasi_static``: the charge slots hold z = q_p - C(q) v_inf and receive dz/dt.
     """
-    x = np.asarray(x, dtype=float)
-    u = np.asarray(u, dtype=float)
+    x, u = _numbers(x), _numbers(u)
+    kind = np.result_type(x, u, float)
     nq, nc = a.n_q, a.n_cells
     i_eps, i_qp, i_w = _index(a)
     q, qd = x[:nq], x[nq:2 * nq]
     kin = kinematics(a, x)
     K, D, Mb = _blocks(a, a.K), _blocks(a, a.D), _blocks(a, a.Mb)
     MI = _interface_mass(a)
-    Jc = np.zeros((nc, nq))                  # row c: dy_c/dq
+    Jc = np.zeros((nc, nq), kind)            # row c: dy_c/dq
     for c in range(nc):
         s = a.cell_slice(c)
         Jc[c, s] = kin.J[s]
@@ -121,7 +131,7 @@ def rhs(a, x, u, quasi_static: bool = False):
     ydot = Jc @ qd
     lzd = ydot / (a.l0 * lam ** 2)           # d(1/lambda)/dt
     eps = x[i_eps:i_eps + nc] if a.creep else np.zeros(nc)
-    dx = np.zeros_like(x)
+    dx = np.zeros(x.shape, kind)
     if a.rc_source:
         qp = x[i_qp:i_qp + nc] + (_charge_offset(a, x, u) if quasi_static else 0.0)
         vp = qp / (a.C0 * lam ** 2)

@@ -32,6 +32,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
+from .markers import attach_markers
 from .model import ModelDomainError
 from .scene import load_scene, scene_to_dict, SceneError
 from .simulator import Simulator
@@ -83,6 +84,11 @@ NODE_PARAMS = {
                       'oldest deleted first (0 = no limit)', True, (0, 1000000)),
     'info_period': (5.0, 'seconds between INFO status lines (wall clock), 0 = off', True,
                     (0.0, 3600.0)),
+    # shape markers (det_sim_ros.markers, issue 18)
+    'markers.rate_hz': (30.0, 'shape markers (visualization_msgs/MarkerArray on markers) per '
+                        'simulated second, 0 = off', True, (0.0, 1.0e4)),
+    'markers.frame_id': ('', "'': one frame per DET (<namespace>/<DET name>); else all DETs "
+                         'in this one frame, side by side', True, None),
 }
 
 
@@ -142,6 +148,12 @@ def _name_list(names, limit=6) -> str:
     if len(names) <= limit:
         return ', '.join(names)
     return ', '.join(names[:limit]) + f', ... ({len(names)} channels)'
+
+
+def clamp_message(topic, det_names, volts, v_max) -> str:
+    """The clamp warning: 'det0: -5 V clamped to [0, 3000] V (voltage_command)'."""
+    named = [f'{name}: {v:g} V' for name, v in zip(det_names, volts) if not 0.0 <= v <= v_max]
+    return f'{_name_list(named)} clamped to [0, {v_max:g}] V ({topic})'
 
 
 def _flatten(data, prefix=''):
@@ -250,6 +262,8 @@ class SimNode(Node):
                            else self.create_publisher(ClockMsg, '/clock', QoSProfile(depth=10)))
         self._clock_msg = ClockMsg()
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._markers = attach_markers(self, model, self._p('markers.rate_hz'),
+                                       self._p('markers.frame_id'), out_qos)
         self.create_subscription(Float64MultiArray, 'voltage_command', self._on_command, 10)
         self.create_subscription(JointState, 'voltage_command_joint', self._on_joint_command, 10)
         self.create_service(SetBool, '~/pause', self._srv_pause)
@@ -468,6 +482,8 @@ class SimNode(Node):
         if self._clock_pub is not None:
             self._clock_msg.clock = stamp
             self._clock_pub.publish(self._clock_msg)
+        if self._markers is not None:
+            self._markers.on_sample(self._sim.k, self._sim.x, self._sim.u, t_ns, self._recorder)
         return True
 
     def _enter_fault(self, reason):
@@ -526,10 +542,8 @@ class SimNode(Node):
         elif check.clamped:
             self.clamped_commands += 1
             v_max = self.scene.physics.v_max
-            named = [f'{name} {v:g} V' for name, v in zip(self.det_names, volts)
-                     if not 0.0 <= v <= v_max]
-            self.get_logger().warning(f'{topic}: voltage clamped to [0, {v_max:g}] V on '
-                                      f'{_name_list(named)}', throttle_duration_sec=1.0)
+            self.get_logger().warning(clamp_message(topic, self.det_names, volts, v_max),
+                                      throttle_duration_sec=1.0)
 
     def _refuse(self, reason):
         self.refused_commands += 1
@@ -604,7 +618,9 @@ class SimNode(Node):
         if self._p('real_time') and not self.paused and not self._sim.fault:
             elapsed = time.perf_counter() - self._wall0
             backlog = max(0, self._k0 + int(elapsed * self._rtf / self._dt) - self._sim.k - 1)
-        status = DiagnosticStatus(name=f'{self.get_name()}: simulation', hardware_id='det_sim_ros')
+        # the fully qualified name tells namespaced nodes apart (/arm1/sim_node: simulation)
+        node_name = self.get_fully_qualified_name()
+        status = DiagnosticStatus(name=f'{node_name}: simulation', hardware_id=node_name)
         distrust = self._sim.trust_issue()
         if distrust and distrust != self._distrust_reported:
             self.get_logger().warning(distrust)          # once per cause, until a reset

@@ -1,9 +1,10 @@
 """
 Fixtures for launch-free, in-process ROS 2 tests.
 
-rclpy runs in an isolated domain (picked from the pid) with localhost-only discovery, set before
-rclpy.init. Each test gets its own context; a :class:`Harness` holds the node under test and a
-test node spun together in one SingleThreadedExecutor.
+rclpy runs in an isolated domain with localhost-only discovery, set before rclpy.init: the
+ROS_DOMAIN_ID the user has set (respected), else one picked from the pid. Each test gets its
+own context; a :class:`Harness` holds the node under test and a test node spun together in one
+SingleThreadedExecutor.
 """
 
 import math
@@ -13,7 +14,20 @@ import time
 import pytest
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-DOMAIN_ID = 1 + os.getpid() % 101  # 1..101: avoids the default domain 0
+
+
+def pick_domain_id(environ, pid) -> int:
+    """The user's ROS_DOMAIN_ID when set (a number in 0..232), else 1 + pid % 101 (avoids the
+    default domain 0, so a running ROS system is not disturbed)."""
+    text = environ.get('ROS_DOMAIN_ID', '').strip()
+    if text:
+        if not text.isdigit() or int(text) > 232:
+            raise pytest.UsageError(f'ROS_DOMAIN_ID={text!r}: expected a number in 0..232')
+        return int(text)
+    return 1 + pid % 101
+
+
+DOMAIN_ID = pick_domain_id(os.environ, os.getpid())
 os.environ['ROS_DOMAIN_ID'] = str(DOMAIN_ID)
 
 WALL_TIMEOUT = 120.0  # s; a safety net only: a wait that hits it fails the test

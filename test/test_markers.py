@@ -1,0 +1,172 @@
+"""
+The actuator's shape: geometry from the Ritz basis (no ROS), its MarkerArray bytes, and the
+node's marker topic (display rate, frames, q at the reference point, MCAP recording).
+"""
+
+import numpy as np
+import pytest
+
+from det_sim_ros.geometry import ActuatorGeometry
+from det_sim_ros.markers import MARKER_TYPE, MarkerFrames
+from det_sim_ros.mcap_log import deserialize
+from det_sim_ros.scene import load_scene
+from det_sim_ros.simulator import Simulator
+
+
+def driven(scene, volts, steps=60):
+    sim = Simulator(scene)
+    sim.set_input(volts)
+    for _ in range(steps):
+        sim.step()
+    return sim
+
+
+def per_det(sim, base):
+    out = sim.outputs()
+    return [out[base]] if sim.model.n_inputs == 1 else [
+        out[f'{base}[{d}]'] for d in sim.model.input_names]
+
+
+@pytest.mark.parametrize('overrides', [
+    {}, {'scene.beam': 'simply_supported'},
+    {'scene.fidelity': 'consistent', 'scene.n_ritz': 3},
+    {'scene.fidelity': 'exact', 'scene.n_ritz': 3, 'scene.beam': 'simply_supported'}])
+def test_shape_matches_model_outputs(overrides):
+    """The drawn centre line comes from the model's basis and kinematics: the reference point's
+    deflection is q and the moving end's height is l - y, for every fidelity."""
+    scene = load_scene('default', overrides)
+    sim = driven(scene, [3000.0])
+    cell, = ActuatorGeometry(sim.model).cells(sim.x)
+    q, y = per_det(sim, 'q')[0], per_det(sim, 'y')[0]
+    assert cell.reference[0] == pytest.approx(q, rel=1e-13, abs=1e-18)
+    assert abs(q) > 1e-3                       # buckled: a meaningful check
+    assert cell.height == pytest.approx(scene.beam_length - y, rel=1e-12)
+    np.testing.assert_allclose(cell.beam_b[:, 0], -cell.beam_a[:, 0])   # the mirror beam
+    assert cell.beam_a[0, 2] == 0.0 and np.all(np.diff(cell.beam_a[:, 2]) > 0)
+    # the markers' fast path (linear maps of q and w'^2) draws the same shape
+    msg = deserialize(MARKER_TYPE, MarkerFrames(sim.model).frame(sim.x, sim.u, 0))
+    beam_a, beam_b, det, ref = msg.markers
+    np.testing.assert_allclose([[p.x, p.y, p.z] for p in beam_a.points], cell.beam_a,
+                               rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose([[p.x, p.y, p.z] for p in beam_b.points], cell.beam_b,
+                               rtol=1e-12, atol=1e-15)
+    assert ref.pose.position.x == pytest.approx(q, rel=1e-12)
+    assert det.scale.z == pytest.approx(cell.height, rel=1e-12)
+    assert det.scale.x == pytest.approx(cell.det_thickness, rel=1e-12)
+
+
+def test_marker_bytes_decode_to_the_shape():
+    """The patched CDR bytes are a valid MarkerArray with the shape, stamp and frames."""
+    scene = load_scene('plate')
+    sim = driven(scene, [3000.0, 0.0], 120)
+    frames = MarkerFrames(sim.model, frame_prefix='arm1/')
+    msg = deserialize(MARKER_TYPE, frames.frame(sim.x, sim.u, 1_234_000_000))
+    cells = frames.geometry.cells(sim.x)
+    by_key = {(m.ns, m.id): m for m in msg.markers}
+    assert set(by_key) == {(d, i) for d in ('left', 'right') for i in range(4)} | {('plate', 0)}
+    for m in msg.markers:
+        assert (m.header.stamp.sec, m.header.stamp.nanosec) == (1, 234_000_000)
+    for name, cell, q in zip(('left', 'right'), cells, per_det(sim, 'q')):
+        beam = by_key[name, 0]
+        assert beam.header.frame_id == f'arm1/{name}'
+        np.testing.assert_allclose([[p.x, p.y, p.z] for p in beam.points], cell.beam_a,
+                                   rtol=1e-12, atol=1e-15)
+        assert by_key[name, 3].pose.position.x == pytest.approx(q, rel=1e-13)
+        assert by_key[name, 2].scale.z == pytest.approx(cell.height)
+    plate = by_key['plate', 0]
+    assert plate.header.frame_id == 'arm1/left'
+    assert plate.pose.position.y == pytest.approx(0.5 * scene.structure['plate_width'])
+    # the left DET at 3 kV rises more: the plate tilts towards the right (rotation about x < 0)
+    assert cells[0].height > cells[1].height and plate.pose.orientation.x < 0
+    # a second frame reuses the buffer: the bytes change only in the moving fields
+    other = deserialize(MARKER_TYPE, frames.frame(np.zeros_like(sim.x), [0.0, 0.0], 0))
+    assert other.markers[0].points[10].x == 0.0 and other.markers[0].header.stamp.sec == 0
+
+
+def test_common_frame_lays_out_the_cells():
+    scene = load_scene('array', {'structure.copies': 3})
+    sim = Simulator(scene)
+    msg = deserialize(MARKER_TYPE, MarkerFrames(sim.model, frame_id='world').frame(
+        sim.x, sim.u, 0))
+    assert {m.header.frame_id for m in msg.markers} == {'world'}
+    ys = sorted({m.pose.position.y for m in msg.markers if m.id == 0})
+    assert len(ys) == 3 and ys[0] == 0.0 and ys[1] > 0.0
+
+
+def test_node_publishes_markers_at_the_display_rate(harness, tmp_path):
+    """30 frames per simulated second, stamped on the sample grid; the reference point's
+    deflection equals the q published for the same sample; recorded in the MCAP log."""
+    from visualization_msgs.msg import MarkerArray
+    log = tmp_path / 'run.mcap'
+    h = harness(start_paused=True, **{'log.path': str(log)})
+    frames = []
+    h.subs.append(h.test.create_subscription(MarkerArray, 'markers', frames.append, 100))
+    h.spin_until(lambda: h.subs[-1].get_publisher_count() > 0, 'marker discovery')
+    h.command([3000.0])
+    assert h.call('pause', data=False).success
+    h.spin_until_sim_time(0.3)
+    h.spin_until(lambda: frames and frames[-1].markers[0].header.stamp.nanosec >= 299_000_000,
+                 'the marker frame at 0.3 s')
+    every = h.node._markers.every
+    assert every == round(1000 / 30)
+    # the node equals the offline model sample for sample (test_sim_node), so the published q
+    # at every frame's stamp is the offline q at that sample
+    sim = Simulator(h.node.scene)
+    sim.set_input([3000.0])
+    q = [sim.outputs()['q']] + [sim.step()[sim.output_names.index('q')] for _ in range(300)]
+    checked = 0
+    for frame in frames:
+        stamp = frame.markers[0].header.stamp
+        t_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        k = round(t_ns / 1e6)
+        assert k % every == 0 and t_ns == k * 1_000_000
+        ref = next(m for m in frame.markers if m.id == 3)
+        assert ref.header.frame_id == 'det0'
+        if k < len(q):
+            assert ref.pose.position.x == pytest.approx(q[k], rel=1e-12, abs=1e-18)
+            checked += 1
+        if t_ns in h.samples['deflection']:     # and what the node published for it
+            assert ref.pose.position.x == pytest.approx(h.samples['deflection'][t_ns][0],
+                                                       rel=1e-12, abs=1e-18)
+    assert checked >= 5
+    h.close()
+    from det_sim_ros.mcap_log import LogReader
+    logged = [m for m in LogReader(str(log)).messages() if m.topic == '/markers']
+    assert logged and logged[0].type_name == MARKER_TYPE
+
+
+def test_markers_off(harness):
+    h = harness(**{'markers.rate_hz': 0.0})
+    assert h.node._markers is None
+    names = {n for n, _ in h.node.get_publisher_names_and_types_by_node('sim_node', '/')}
+    assert '/markers' not in names
+
+
+def test_foxglove_layout_uses_the_nodes_topics():
+    """config/foxglove_layout.json: a 3D panel on /markers following det0's frame, and plots
+    of voltage, Delta-y, q, charge and current on topics and fields the node publishes."""
+    import json
+    import os
+    import re
+    from det_sim_ros.sim_node import OUTPUT_TOPICS
+    path = os.path.join(os.path.dirname(__file__), '..', 'config', 'foxglove_layout.json')
+    with open(path, encoding='utf-8') as stream:
+        layout = json.load(stream)
+    panels = layout['configById']
+    three_d = [c for k, c in panels.items() if k.startswith('3D!')]
+    assert len(three_d) == 1 and three_d[0]['topics']['/markers']['visible']
+    assert three_d[0]['followTf'] == 'det0'
+    fields = {'voltage_command': {'data'}, **{t: {'position', 'velocity'} for t in OUTPUT_TOPICS}}
+    plotted = set()
+    for key, config in panels.items():
+        if key.startswith('Plot!'):
+            for p in config['paths']:
+                topic, field = re.fullmatch(r'/(\w+)\.(\w+)\[\d+\]', p['value']).groups()
+                assert field in fields[topic], p['value']
+                plotted.add(topic)
+    assert plotted == {'voltage_command', 'displacement', 'deflection', 'charge', 'current'}
+
+    def leaves(node):
+        return [node] if isinstance(node, str) else leaves(node['first']) + leaves(
+            node['second'])
+    assert sorted(leaves(layout['layout'])) == sorted(panels)

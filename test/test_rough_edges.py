@@ -1,0 +1,41 @@
+"""Issue 18's rough edges: namespaced nodes on /diagnostics, the clamp warning's wording,
+the test suite's ROS_DOMAIN_ID."""
+
+import os
+
+import pytest
+from rclpy.parameter import Parameter
+
+from conftest import DOMAIN_ID, pick_domain_id
+from det_sim_ros.sim_node import clamp_message, SimNode
+
+
+def test_diagnostics_name_the_fully_qualified_node(ros_context):
+    node = SimNode(context=ros_context, namespace='arm1', parameter_overrides=[
+        Parameter('real_time', value=False), Parameter('start_paused', value=True),
+        Parameter('log.enabled', value=False)])
+    sent = []
+    node._diag_pub.publish = sent.append
+    try:
+        node._publish_diagnostics()
+    finally:
+        node.destroy_node()
+    status = sent[-1].status[0]
+    assert status.name == '/arm1/sim_node: simulation'
+    assert status.hardware_id == '/arm1/sim_node'
+
+
+def test_clamp_warning_names_channel_then_value():
+    assert clamp_message('voltage_command', ['det0'], [-5.0], 3000.0) == \
+        'det0: -5 V clamped to [0, 3000] V (voltage_command)'
+    assert clamp_message('voltage_command', ['left', 'right'], [3500.0, 10.0], 3000.0) == \
+        'left: 3500 V clamped to [0, 3000] V (voltage_command)'
+
+
+def test_domain_id_respects_the_users_setting():
+    assert pick_domain_id({'ROS_DOMAIN_ID': '42'}, 7) == 42
+    assert pick_domain_id({'ROS_DOMAIN_ID': ' 0 '}, 7) == 0
+    assert pick_domain_id({}, 7) == 8 and pick_domain_id({'ROS_DOMAIN_ID': ''}, 7) == 8
+    with pytest.raises(pytest.UsageError, match='ROS_DOMAIN_ID'):
+        pick_domain_id({'ROS_DOMAIN_ID': 'abc'}, 7)
+    assert os.environ['ROS_DOMAIN_ID'] == str(DOMAIN_ID)
