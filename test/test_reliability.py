@@ -385,3 +385,23 @@ def test_integer_for_a_double_parameter_is_accepted(capfd):
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
+
+
+def test_node_repairs_a_torn_log_in_its_directory_at_start(tmp_path, harness):
+    """A log cut inside a write (power loss): the next start in that directory repairs it."""
+    from std_msgs.msg import Float64MultiArray
+
+    from det_sim_ros.mcap_log import Recorder
+    folder = tmp_path / 'logs'
+    torn = folder / 'det_sim_20260101-000000_1.mcap'
+    recorder = Recorder(torn, None, flush_sim_s=0.01)
+    for k in range(100):
+        recorder.record('voltage_command', Float64MultiArray(data=[float(k)]), k * 1_000_000)
+    recorder._stream.close()                       # the crash: never finished
+    with open(torn, 'r+b') as stream:
+        stream.truncate(os.path.getsize(torn) - 10)
+    assert is_torn(str(torn))
+    h = harness(**{'log.path': str(folder)})
+    assert not is_torn(str(torn))
+    assert len(list(LogReader(str(torn)).messages())) >= 90
+    assert h.node._recorder.path != str(torn)
