@@ -278,7 +278,8 @@ def startup_keys():
                 rows.append((f'{section}.{key}', out, 'range'))
     rows += [('rate_hz', 'abc', 'type'), ('rate_hz', 0.0, 'range'),
              ('dets.det0.Rs', 'abc', 'type'), ('dets.det0.Rs', -1.0, 'range'),
-             ('dets.nobody.Rs', 1.0, 'range')]
+             ('dets.nobody.Rs', 1.0, 'range'), ('scene_file', 7, 'type'),
+             ('scene_file', 'no_such_scene', 'range')]
     for name, (default, _, _, bounds) in NODE_PARAMS.items():
         wrong = {bool: 'maybe', int: 2.5, float: 'abc', str: 7}[type(default)]
         rows.append((f'node:{name}', wrong, 'type'))
@@ -341,7 +342,8 @@ def test_every_bad_startup_input_is_one_line_in_process(capfd, tmp_path, route):
         out, err = capfd.readouterr()
         lines = [line for line in (out + err).splitlines() if line.strip()]
         parts = key.split(':')[-1].split('.')
-        named = bool(lines) and any(part in lines[0] for part in parts[1:] or parts)
+        named = bool(lines) and (any(part in lines[0] for part in parts[1:] or parts)
+                                 or key == 'scene_file' and 'scene file' in lines[0])
         if code != 1 or len(lines) != 1 or 'cannot start' not in lines[0] or not named:
             failures.append(f'{key} = {value!r} ({what}, {route}): exit {code}: {lines}')
     assert not failures, '\n'.join(failures)
