@@ -212,3 +212,14 @@ def test_log_without_the_key_replays_as_released(tmp_path):
     recorder.close()
     result = resimulate(str(tmp_path / 'old.mcap'))
     assert result.steps == 120 and all(v == 0.0 for v in result.max_deviation.values())
+
+
+def test_rest_state_outside_the_exact_range_is_refused_at_start():
+    """Simply supported, eps_b 0.4, 'exact': the rest state needs |w'| >= 1, outside that
+    level's range: refused with one line naming the slope limit (not a fault at t > 0)."""
+    scene = load_scene('default', {'scene.beam': 'simply_supported', 'scene.eps_b': 0.4,
+                                   'scene.fidelity': 'exact', 'scene.n_ritz': 3})
+    with pytest.raises(RestStateError, match="slope.*'exact'") as info:
+        Simulator(scene)
+    assert isinstance(info.value, SceneError) and '\n' not in str(info.value)
+    Simulator(scene.replace(**{'scene.fidelity': 'consistent'}))   # the advice works

@@ -47,7 +47,8 @@ def test_dormand_prince_table_is_scipys():
 
 def _linear_charge_error(method, n_steps):
     """Small oscillation of the ideal-source model: compare with a much finer run."""
-    scene = load_scene('default', {**RELEASED, 'source': 'ideal', 'creep': False, 'monitor_power': False,
+    scene = load_scene('default', {**RELEASED,
+                                   'source': 'ideal', 'creep': False, 'monitor_power': False,
                                    'eps_b': 0.2, 'rate_hz': 100.0})
     model = build_model(scene)
     x0 = model.initial_state()
@@ -179,7 +180,8 @@ def test_adaptive_step_repeats_a_period_over_its_tolerance():
 def test_stepping_equals_one_call_bit_for_bit(source):
     """Simulator.set_input/step per period (the node's path, with set_input's fast path for
     one float) and simulate() in one compiled call give the same states, energy book included."""
-    scene = load_scene('default', {**RELEASED, 'integrator.tolerance': 1e-7, 'scene.source': source})
+    scene = load_scene('default', {**RELEASED,
+                                   'integrator.tolerance': 1e-7, 'scene.source': source})
     stepped = Simulator(scene)
     volts = lambda t: 3000.0 * (t >= 0.01) - 1500.0 * (t >= 0.05)  # noqa: E731
     _steps_per_period(stepped, volts, 100)
@@ -220,7 +222,8 @@ def _run_checked(scene, volts, t_end, **kw):
 @pytest.mark.parametrize('rate_hz', [100.0, 1000.0, 1e5])
 def test_stress_series_resistance_and_control_period(Rs, rate_hz):
     """Rs from 1 Ohm to 1 MOhm, dt from 10 ms to 10 us: finite, bounded power residual."""
-    scene = load_scene('default', {**RELEASED, 'Rs': Rs, 'rate_hz': rate_hz, 'integrator.tolerance': 1e-4})
+    scene = load_scene('default', {**RELEASED,
+                                   'Rs': Rs, 'rate_hz': rate_hz, 'integrator.tolerance': 1e-4})
     sim = Simulator(scene)
     n = int(round(0.06 / sim.dt))
     r = _run_checked(sim, lambda t: 3000.0 * (t >= 0.01), n * sim.dt)
@@ -234,7 +237,8 @@ def test_stress_series_resistance_and_control_period(Rs, rate_hz):
 @pytest.mark.parametrize('beam', ['simply_supported', 'fixed'])
 def test_stress_prestrain_sweep_square_wave_near_resonance(beam, eps_b):
     """A 0..v_max square wave at the beam's ~90 Hz resonance, across pre-strains."""
-    scene = load_scene('default', {**RELEASED, 'beam': beam, 'eps_b': eps_b, 'integrator.tolerance': 1e-5})
+    scene = load_scene('default', {**RELEASED,
+                                   'beam': beam, 'eps_b': eps_b, 'integrator.tolerance': 1e-5})
     sim = Simulator(scene)
     volts = lambda t: 3000.0 * (int(t * 180.0) % 2)  # noqa: E731 - 90 Hz square wave
     _run_checked(sim, volts, 0.3)

@@ -98,7 +98,8 @@ def _tight(model, x0, v, t_end, rtol=1e-12):
 
 def test_lossless_constant_charge_conserves_energy():
     """Erratum 1: with the corrected inertia term H is conserved; the printed one drifts."""
-    scene = load_scene('default', {**RELEASED, 'eta_b': 0.0, 'eta_v': 0.0, 'E_M': 0.0, 'creep': False,
+    scene = load_scene('default', {**RELEASED,
+                                   'eta_b': 0.0, 'eta_v': 0.0, 'E_M': 0.0, 'creep': False,
                                    'Rs': 1e30, 'Rp': 1e30, 'monitor_power': False})
     model = build_model(scene)
     C0 = scene.physics.C0
@@ -123,7 +124,8 @@ def test_lossless_constant_charge_conserves_energy():
 
 @pytest.mark.parametrize('source', ['rc', 'ideal'])
 def test_power_balance_closes_with_losses(source):
-    scene = load_scene('default', {**RELEASED, 'source': source, 'Rs': 2e4 if source == 'rc' else 2e3})
+    scene = load_scene('default', {**RELEASED,
+                                   'source': source, 'Rs': 2e4 if source == 'rc' else 2e3})
     model = build_model(scene)
     x0 = model.initial_state()
     x0[0] = 0.013
@@ -143,7 +145,8 @@ def test_power_balance_closes_with_losses(source):
 
 
 def test_ideal_source_is_the_small_rs_limit():
-    ideal = build_model(load_scene('default', {**RELEASED, 'source': 'ideal', 'monitor_power': False}))
+    ideal = build_model(load_scene('default', {**RELEASED,
+                                               'source': 'ideal', 'monitor_power': False}))
     full = build_model(load_scene('default', {**RELEASED, 'Rs': 1e-3, 'monitor_power': False}))
     rng = np.random.default_rng(2)
     for _ in range(10):
@@ -157,12 +160,16 @@ def test_ideal_source_is_the_small_rs_limit():
 
 def test_no_creep_is_the_zero_maxwell_modulus_limit():
     from det_sim_ros.simulator import simulate
-    no_creep = simulate(load_scene('default', {**RELEASED, 'creep': False}), lambda t: 3000.0 * (t > 0.05),
+    no_creep = simulate(load_scene('default', {**RELEASED,
+                                               'creep': False}), lambda t: 3000.0 * (t > 0.05),
                         0.2)
-    soft = simulate(load_scene('default', {**RELEASED, 'E_M': 1e-9}), lambda t: 3000.0 * (t > 0.05), 0.2)
+    soft = simulate(load_scene('default', {**RELEASED,
+                                           'E_M': 1e-9}), lambda t: 3000.0 * (t > 0.05), 0.2)
     np.testing.assert_allclose(no_creep['y'], soft['y'], rtol=1e-9, atol=1e-13)
-    assert 'eps_E[0]' not in build_model(load_scene('default', {**RELEASED, 'creep': False})).state_names
-    assert 'q_p[0]' not in build_model(load_scene('default', {**RELEASED, 'source': 'ideal'})).state_names
+    assert 'eps_E[0]' not in build_model(load_scene('default', {**RELEASED,
+                                                                'creep': False})).state_names
+    assert 'q_p[0]' not in build_model(load_scene('default', {**RELEASED,
+                                                              'source': 'ideal'})).state_names
 
 
 def test_domain_error_names_the_stretch():
