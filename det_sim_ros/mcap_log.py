@@ -16,7 +16,8 @@ so a log opens in Foxglove, ``ros2 bag info|play`` and any rosbag2/MCAP reader:
   metadata record ``det_sim_ros.end`` with the counters when the file is closed.
 
 Crash safety: chunks are bounded (64 KiB) and the writer is flushed every ``flush_period_s`` of
-wall time (0.1 s), so a SIGKILL loses at most that much; :meth:`Recorder.close` (called from the
+wall time (0.1 s), so a SIGKILL loses at most that much (with ``background=True``, the writer
+thread's queue too: at most ``drain_period_s``, 10 ms, more); :meth:`Recorder.close` (called from the
 node's shutdown path on SIGINT/SIGTERM and from ``atexit``) finishes and indexes the file. A
 logging fault (disk full, unwritable path, ...) never raises into the caller: it stops recording,
 and :attr:`Recorder.fault` says why.
@@ -28,14 +29,16 @@ readable data, so a file cut by a crash gives every message of every complete ch
 from __future__ import annotations
 
 import atexit
+import collections
 import dataclasses
 import logging
 import os
 import re
 import sys
+import threading
 import time
 import weakref
-from typing import Callable, Iterable, Iterator, Mapping
+from typing import Callable, Iterable, Iterator, Mapping, Sequence
 
 __all__ = ['Recorder', 'LogReader', 'LogMessage', 'message_definition', 'qos_profiles_yaml',
            'type_name_of', 'serialize', 'deserialize', 'recover', 'log_files', 'LIBRARY', 'METADATA_NAME']
@@ -383,6 +386,10 @@ class Recorder:
     :param on_fault: called once with the fault text when recording stops on an error.
     :param clock: wall clock for the flush period (``time.monotonic``).
     :param namespace: the node namespace that relative topic names are resolved in.
+    :param background: write from a writer thread: :meth:`record` and :meth:`record_sample`
+        only queue the (already serialized) bytes, the thread writes, compresses and flushes
+        them in order every ``drain_period_s``. Counters and :attr:`fault` are updated by the
+        thread; :meth:`close` writes everything queued before it finishes the file.
     """
 
     def __init__(self, path, scene=None, *, qos_by_topic: Mapping | None = None,
@@ -391,7 +398,8 @@ class Recorder:
                  metadata: Mapping[str, object] | None = None,
                  on_fault: Callable[[str], None] | None = None,
                  clock: Callable[[], float] = time.monotonic, prefix: str = 'det_sim',
-                 namespace: str = '/'):
+                 namespace: str = '/', background: bool = False,
+                 drain_period_s: float = 0.01):
         self.fault = ''
         self.paths: list[str] = []
         self.messages = 0       # messages written
@@ -430,6 +438,15 @@ class Recorder:
             self._open(self._base)
         except Exception as exc:  # noqa: BLE001 - a logging fault must not stop the simulation
             self._set_fault(exc)
+        self._queue = None
+        self._thread = None
+        if background and self._writer is not None:
+            self._queue = collections.deque()   # append/popleft are atomic: no lock needed
+            self._drain_period_s = float(drain_period_s)
+            self._stop = threading.Event()
+            self._thread = threading.Thread(target=self._drain_loop, name='mcap-writer',
+                                            daemon=True)
+            self._thread.start()
         _open_recorders.add(self)
 
     def _resolve(self, topic: str) -> str:
@@ -517,8 +534,43 @@ class Recorder:
         Write one message at sim time ``log_time_ns`` (also its publish time).
 
         :param msg: an rclpy message, or its CDR bytes (then give ``type_name`` on first use).
-        :returns: True if written; False when recording has stopped on a fault.
+        :returns: True if written (queued, in background mode); False when recording has
+            stopped on a fault.
         """
+        if self._writer is None:
+            self.dropped += 1
+            return False
+        if self._queue is not None:
+            if isinstance(msg, (bytearray, memoryview)):
+                msg = bytes(msg)
+            elif not isinstance(msg, bytes):   # serialized here: the queue holds bytes only
+                type_name = type_name or self._type_of(msg, topic)
+                msg = serialize(msg)
+            self._queue.append((topic, msg, log_time_ns, type_name))
+            return True
+        return self._write(topic, msg, log_time_ns, type_name)
+
+    def record_sample(self, log_time_ns: int, topics: Sequence[str], data: Sequence[bytes],
+                      types: Mapping[str, str]) -> bool:
+        """
+        Write one CDR message per topic, all at ``log_time_ns`` (one sample of the node's
+        outputs); ``types`` maps each topic to its type name.
+        """
+        if self._writer is None:
+            self.dropped += len(data)
+            return False
+        if self._queue is not None:
+            self._queue.append((log_time_ns, topics, data, types))
+            return True
+        ok = True
+        for topic, payload in zip(topics, data):
+            ok = self._write(topic, payload, log_time_ns, types[topic]) and ok
+        return ok
+
+    def _type_of(self, msg, topic):
+        return self._types.get(topic) or type_name_of(msg)
+
+    def _write(self, topic: str, msg, log_time_ns: int, type_name: str | None) -> bool:
         if self._writer is None:
             self.dropped += 1
             return False
@@ -560,6 +612,34 @@ class Recorder:
         finally:
             self.record_time_s += self._clock() - start
 
+    # -- the writer thread (background=True) -------------------------------------------------
+    _NEW_FILE = object()
+
+    def _drain(self) -> None:
+        """Write everything queued, in order (the writer thread, or close())."""
+        queue = self._queue
+        while queue:
+            item = queue.popleft()
+            if item is self._NEW_FILE:
+                self._new_file_now()
+            elif isinstance(item[0], str):      # (topic, data, time, type): one message
+                self._write(*item)
+            else:
+                t, topics, data, types = item
+                for topic, payload in zip(topics, data):
+                    self._write(topic, payload, t, types[topic])
+            # let the node's thread take the GIL between samples: a waiting publisher is never
+            # held up for more than about one sample's write
+            time.sleep(0)
+
+    def _drain_loop(self) -> None:
+        try:
+            while not self._stop.wait(self._drain_period_s):
+                self._drain()
+                self.maybe_flush()
+        except Exception as exc:  # noqa: BLE001 - a logging fault stops logging, nothing else
+            self._set_fault(exc)
+
     def _flush(self, now: float) -> None:
         self._writer.flush()
         self.flushes += 1
@@ -567,6 +647,12 @@ class Recorder:
 
     def new_file(self) -> None:
         """Finish the current file and continue in a new one (e.g. when sim time restarts)."""
+        if self._queue is not None and self._writer is not None:
+            self._queue.append(self._NEW_FILE)   # in order with what is queued before it
+            return
+        self._new_file_now()
+
+    def _new_file_now(self) -> None:
         if self._writer is None:
             return
         try:
@@ -628,8 +714,14 @@ class Recorder:
         return {k: str(v) for k, v in values.items()} if strings else values
 
     def close(self) -> None:
-        """Finish and index the file (idempotent; never raises)."""
+        """Write what is queued, finish and index the file (idempotent; never raises)."""
         _open_recorders.discard(self)
+        if self._thread is not None:
+            self._stop.set()
+            if self._thread is not threading.current_thread():
+                self._thread.join()
+            self._thread = None
+            self._drain()
         if self._writer is None:
             return
         try:
