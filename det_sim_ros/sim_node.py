@@ -285,7 +285,8 @@ class SimNode(Node):
     # -- stepping -------------------------------------------------------------------------
     def _steps_due(self, now) -> int:
         """Control periods the wall clock is ahead of sim time (real-time mode)."""
-        return self._k0 + int((now - self._wall0) * self._rtf / self._dt) - self._sim.k
+        # + 1e-6: a period is due at its boundary despite round-off (0.003 / 0.001 < 3)
+        return self._k0 + int((now - self._wall0) * self._rtf / self._dt + 1e-6) - self._sim.k
 
     def _tick_real_time(self):
         """
@@ -352,10 +353,16 @@ class SimNode(Node):
         k = self._sim.k
         t_ns = stamp_ns(k, self._dt)
         samples = self._encoder.encode(out, t_ns)
-        for publisher, data in zip(self._publishers, samples):
-            publisher.publish(data)
-        if self._clock_pub is not None:
-            self._clock_pub.publish(encode_clock(t_ns))
+        try:
+            for publisher, data in zip(self._publishers, samples):
+                publisher.publish(data)
+            if self._clock_pub is not None:
+                self._clock_pub.publish(encode_clock(t_ns))
+        except RuntimeError:   # rclpy's RCLError: Ctrl-C shut the context down mid-tick
+            if self.context.ok():
+                raise
+            self._timer.cancel()
+            return False
         if self._recorder is not None:
             self._recorder.record_sample(t_ns, self._encoder.topics, samples, TOPIC_TYPES)
         if self.on_sample is not None:

@@ -3,7 +3,8 @@ Fixtures for launch-free, in-process ROS 2 tests.
 
 rclpy runs in an isolated domain (picked from the pid) with localhost-only discovery, set before
 rclpy.init. Each test gets its own context; a :class:`Harness` holds the node under test and a
-test node spun together in one SingleThreadedExecutor.
+test node spun together in one executor: the EventsExecutor that sim_node's main() uses, or
+(``executor='single'``) rclpy's SingleThreadedExecutor.
 """
 
 import math
@@ -48,7 +49,7 @@ class Harness:
     TOPICS = ('deflection', 'displacement', 'charge', 'current')
     STRUCTURE = 'structure'
 
-    def __init__(self, context, namespace='', **params):
+    def __init__(self, context, namespace='', executor='events', **params):
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.parameter import Parameter
         from rosgraph_msgs.msg import Clock
@@ -59,7 +60,7 @@ class Harness:
         import rclpy
         self.closed = False
 
-        from det_sim_ros.sim_node import SimNode
+        from det_sim_ros.sim_node import make_executor, SimNode
 
         params.setdefault('real_time', False)
         params.setdefault('info_period', 0.0)
@@ -68,7 +69,8 @@ class Harness:
         self.context = context
         self.node = SimNode(context=context, namespace=namespace, parameter_overrides=overrides)
         self.test = rclpy.create_node('tester', context=context, namespace=namespace)
-        self.executor = SingleThreadedExecutor(context=context)
+        self.executor = (make_executor(context) if executor == 'events'
+                         else SingleThreadedExecutor(context=context))
         self.executor.add_node(self.node)
         self.executor.add_node(self.test)
         self.samples = {topic: {} for topic in self.TOPICS + (self.STRUCTURE,)}
