@@ -34,6 +34,7 @@ import dataclasses
 import logging
 import os
 import re
+import struct
 import sys
 import threading
 import time
@@ -347,6 +348,63 @@ def qos_profiles_yaml(qos=None) -> str:
 
 # -- writing -------------------------------------------------------------------------------------
 
+_MESSAGE_HEAD = struct.Struct('<BQHIQQ')   # MCAP Message record: opcode, length, channel, seq, times
+
+
+class _FastMessages:
+    """
+    mcap.Writer.add_message for many messages at once: the same records, chunk message index
+    and statistics, written with one struct.pack per message instead of ~20 Python calls
+    (6.5 -> ~1.5 us per message). It uses the writer's internals (mcap 1.x); :meth:`attach`
+    returns None when they are not there, and the caller falls back to add_message.
+    """
+
+    def __init__(self, writer):
+        self.writer = writer
+        self.stats = writer._Writer__statistics
+        self.chunk = writer._Writer__chunk_builder
+        self.finalize = writer._Writer__maybe_finalize_chunk
+        from mcap.records import MessageIndex
+        self.index_type = MessageIndex
+
+    @classmethod
+    def attach(cls, writer):
+        try:
+            fast = cls(writer)
+            fast.chunk.record_writer._buffer.tell()
+            fast.stats.channel_message_counts
+        except AttributeError:
+            return None
+        return fast if fast.chunk is not None else None
+
+    def add(self, items, log_time: int) -> None:
+        """Write (channel id, sequence, data) items, all at ``log_time``, as add_message would
+        (a chunk ends after the message that makes it exceed the chunk size)."""
+        stats, chunk = self.stats, self.chunk
+        if stats.message_count == 0 or log_time < stats.message_start_time:
+            stats.message_start_time = log_time
+        if log_time > stats.message_end_time:
+            stats.message_end_time = log_time
+        counts, indices, pack = stats.channel_message_counts, chunk.message_indices, \
+            _MESSAGE_HEAD.pack
+        for channel_id, sequence, data in items:
+            if chunk.num_messages == 0 or log_time < chunk.message_start_time:
+                chunk.message_start_time = log_time
+            if log_time > chunk.message_end_time:
+                chunk.message_end_time = log_time
+            index = indices.get(channel_id)
+            if index is None:
+                index = indices[channel_id] = self.index_type(channel_id=channel_id, records=[])
+            buffer = chunk.record_writer._buffer    # replaced when a chunk ends
+            index.records.append((log_time, buffer.tell()))
+            buffer.write(pack(0x05, 22 + len(data), channel_id, sequence, log_time, log_time))
+            buffer.write(data)
+            counts[channel_id] += 1
+            stats.message_count += 1
+            chunk.num_messages += 1
+            self.finalize()
+
+
 def _scene_yaml(scene) -> str:
     if scene is None:
         return ''
@@ -407,6 +465,7 @@ class Recorder:
         self.clamped = 0        # log times raised to keep them non-decreasing
         self.dropped = 0        # messages not written because of a fault
         self.flushes = 0
+        self.flushed_messages = 0   # messages on disk at the last flush (a SIGKILL keeps them)
         self.record_time_s = 0.0  # wall time spent in record()
         self._ns = '/' + namespace.strip('/') + '/' if namespace.strip('/') else '/'
         self.qos_by_topic = {self._resolve(k): v for k, v in (qos_by_topic or {}).items()}
@@ -419,6 +478,7 @@ class Recorder:
         self._compression = compression
         self._metadata = {str(k): str(v) for k, v in (metadata or {}).items()}
         self._writer = None
+        self._fast = None
         self._stream = None
         self._last_t = 0
         self._file_start_t = None
@@ -492,6 +552,7 @@ class Recorder:
                                   data=self.scene_yaml.encode())
         writer.flush()
         self._writer = writer
+        self._fast = _FastMessages.attach(writer)
         self._channels.clear()
         self._schemas.clear()
         self._file_start_t = None
@@ -562,10 +623,54 @@ class Recorder:
         if self._queue is not None:
             self._queue.append((log_time_ns, topics, data, types))
             return True
-        ok = True
-        for topic, payload in zip(topics, data):
-            ok = self._write(topic, payload, log_time_ns, types[topic]) and ok
-        return ok
+        return self._write_sample(log_time_ns, topics, data, types)
+
+    def _write_sample(self, log_time_ns, topics, data, types) -> bool:
+        """Several messages at one log time: the checks once, then the fast path."""
+        fast = self._fast
+        channels = self._channels
+        if fast is None or self._writer is None or not all(
+                (t if t.startswith('/') else self._ns + t) in channels for t in topics):
+            ok = True   # the first sample registers its channels: message by message
+            for topic, payload in zip(topics, data):
+                ok = self._write(topic, payload, log_time_ns, types[topic]) and ok
+            return ok
+        start = self._clock()
+        try:
+            t = int(log_time_ns)
+            if t < self._last_t:
+                t = self._last_t
+                self.clamped += len(data)
+            self._last_t = t
+            if self._file_start_t is None:
+                self._file_start_t = t
+            elif ((self.split_ns and t - self._file_start_t >= self.split_ns)
+                  or (self.split_bytes and self._stream.tell() >= self.split_bytes)):
+                self._close_file()
+                self._open(self._split_path())
+                self._file_start_t = t
+                return self._write_sample(log_time_ns, topics, data, types)
+            items = []
+            for topic, payload in zip(topics, data):
+                name = topic if topic.startswith('/') else self._ns + topic
+                channel_id = self._channels.get(name)
+                if channel_id is None:
+                    channel_id = self._channel(name, payload, types[topic])
+                sequence = self._sequence.get(name, 0)
+                self._sequence[name] = sequence + 1
+                items.append((channel_id, sequence, payload))
+                self.bytes += len(payload)
+            fast.add(items, t)
+            self.messages += len(items)
+            if start - self._last_flush >= self.flush_period_s:
+                self._flush(start)
+            return True
+        except Exception as exc:  # noqa: BLE001 - never raise into the node
+            self.dropped += len(data)
+            self._set_fault(exc)
+            return False
+        finally:
+            self.record_time_s += self._clock() - start
 
     def _type_of(self, msg, topic):
         return self._types.get(topic) or type_name_of(msg)
@@ -625,9 +730,7 @@ class Recorder:
             elif isinstance(item[0], str):      # (topic, data, time, type): one message
                 self._write(*item)
             else:
-                t, topics, data, types = item
-                for topic, payload in zip(topics, data):
-                    self._write(topic, payload, t, types[topic])
+                self._write_sample(*item)
             # let the node's thread take the GIL between samples: a waiting publisher is never
             # held up for more than about one sample's write
             time.sleep(0)
@@ -642,6 +745,7 @@ class Recorder:
 
     def _flush(self, now: float) -> None:
         self._writer.flush()
+        self.flushed_messages = self.messages
         self.flushes += 1
         self._last_flush = now
 

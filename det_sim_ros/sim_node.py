@@ -34,7 +34,7 @@ from .scene import load_scene, scene_to_dict, SceneError
 from .simulator import Simulator
 
 __all__ = ['SimNode', 'main', 'OUTPUT_TOPICS', 'STRUCTURE_TOPIC', 'rest_shortenings',
-           'structure_channels', 'make_executor']
+           'structure_channels', 'make_executor', 'spin']
 
 NODE_NAME = 'sim_node'
 SCENE_SECTIONS = ('scene', 'physics', 'integrator', 'structure', 'dets')
@@ -157,10 +157,14 @@ class SimNode(Node):
         self._recorder = None
 
         out_qos = qos_profile_sensor_data if self._p('qos_sensor_data') else QoSProfile(depth=10)
-        self._publishers = [self.create_publisher(JointState, topic, out_qos)
-                            for topic in self._encoder.topics]
+        self._output_pubs = [self.create_publisher(JointState, topic, out_qos)
+                             for topic in self._encoder.topics]
+        # Publisher.publish(bytes) is handle.publish_raw(bytes) behind a type check and a
+        # destroy guard (~2.5 us per call); the node publishes through the handle directly
+        self._publish_raw = [pub.handle.publish_raw for pub in self._output_pubs]
         self._clock_pub = (None if self._p('real_time')
                            else self.create_publisher(ClockMsg, CLOCK_TOPIC, QoSProfile(depth=10)))
+        self._publish_clock = self._clock_pub.handle.publish_raw if self._clock_pub else None
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         # commands arrive as CDR bytes (raw): decoded and checked by the contract, logged as is
         self._command_subs = [
@@ -354,10 +358,10 @@ class SimNode(Node):
         t_ns = stamp_ns(k, self._dt)
         samples = self._encoder.encode(out, t_ns)
         try:
-            for publisher, data in zip(self._publishers, samples):
-                publisher.publish(data)
-            if self._clock_pub is not None:
-                self._clock_pub.publish(encode_clock(t_ns))
+            for publish, data in zip(self._publish_raw, samples):
+                publish(data)
+            if self._publish_clock is not None:
+                self._publish_clock(encode_clock(t_ns))
         except RuntimeError:   # rclpy's RCLError: Ctrl-C shut the context down mid-tick
             if self.context.ok():
                 raise
@@ -550,10 +554,22 @@ class SimNode(Node):
 def make_executor(context=None):
     """
     The executor sim_node spins in: rclpy's EventsExecutor (about 6 µs per timer callback here
-    against ~100 µs for the SingleThreadedExecutor; bench/node_rate.py measures both).
+    against ~100 µs for the SingleThreadedExecutor; bench/node_rate.py measures both). Spin it
+    with :func:`spin`.
     """
     from rclpy.experimental import EventsExecutor
     return EventsExecutor(context=context)
+
+
+def spin(executor, context=None):
+    """
+    Spin until the context shuts down. EventsExecutor.spin() (rclpy 7.1) does not return on
+    Ctrl-C while no event comes in (e.g. paused); spin_once with a timeout does (it raises
+    ExternalShutdownException).
+    """
+    context = context or rclpy.get_default_context()
+    while context.ok():
+        executor.spin_once(timeout_sec=0.1)
 
 
 def main(args=None):
@@ -564,7 +580,7 @@ def main(args=None):
         node = SimNode()
         executor = make_executor()
         executor.add_node(node)
-        executor.spin()
+        spin(executor)
     except SceneError as exc:
         rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {exc}')
         return 1
