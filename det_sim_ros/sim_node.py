@@ -41,9 +41,18 @@ SCENE_SECTIONS = ('scene', 'physics', 'integrator', 'structure', 'dets')
 # The topic contract (names, types, channels, y0, the bytes on the wire) is det_sim_ros.contract.
 OUTPUT_TOPICS = {topic: mapping['position'] for topic, mapping in OUTPUT_FIELDS.items()}
 # name: (default, description, read_only, range (lo, hi) or None)
+MODES = ('real_time', 'free_run', 'lockstep')
 NODE_PARAMS = {
-    'real_time': (True, 'true: sim time follows the wall clock; false: free-run as fast as '
-                  'possible and publish /clock', True, None),
+    'mode': ('', 'real_time: sim time follows the wall clock; free_run: as fast as possible, '
+             'publishes /clock; lockstep: publishes /clock and advances a period only when the '
+             "controller has answered the last sample ('' = from real_time)", True, None),
+    'real_time': (True, 'alias of mode: true = real_time, false = free_run (mode, when set, '
+                  'wins)', True, None),
+    'lockstep.sources': (1, 'lockstep: commands that answer a sample before the next period '
+                         'runs (one per controller)', False, (1, 10000)),
+    'lockstep.timeout': (0.0, 'lockstep: wall seconds to wait for the answers, then hold the '
+                         'voltages, count a missed deadline and go on (0 = wait forever)', False,
+                         (0.0, 3600.0)),
     'real_time_factor': (1.0, 'real-time mode: sim seconds per wall second', False,
                          (1.0e-3, 1.0e3)),
     'steps_per_tick': (10, 'free-run mode: control periods per timer tick', False, (1, 100000)),
@@ -126,6 +135,9 @@ class SimNode(Node):
         self.scene = load_scene(scene_file, overrides=scene_overrides)
         self._declare_scene_parameters()
         self._declare_node_parameters(overrides)
+        self.mode = self._p('mode') or ('real_time' if self._p('real_time') else 'free_run')
+        if self.mode not in MODES:
+            raise SceneError(f"parameter 'mode': one of {', '.join(MODES)} (got {self.mode!r})")
 
         self.get_logger().info(f'preparing scene {scene_file!r} (the first start after an install '
                                'compiles the model kernels: up to a minute)')
@@ -147,6 +159,15 @@ class SimNode(Node):
         self.steps_total = 0
         self.late_ticks = 0      # real-time ticks that found more than one period due
         self.slipped_s = 0.0     # wall time dropped because the lag exceeded max_lag, s
+        # lockstep: answers to the latest sample, deadlines missed, wall time spent waiting
+        self.answers = 0
+        self.stale_answers = 0   # JointState commands stamped with an older sample
+        self.missed_deadlines = 0
+        self.lockstep_wait_s = 0.0
+        self._published_wall = time.perf_counter()
+        self._stepping = False
+        self._last_sample = ()          # the bytes of the latest sample (lockstep re-send)
+        self._heard_by = 0              # subscriptions matched when sample 0 was published
         self._fault_reported = ''
         # test and benchmark seams: the wall clock of the real-time pacing, and a function
         # called with k after sample k has been published
@@ -162,7 +183,7 @@ class SimNode(Node):
         # Publisher.publish(bytes) is handle.publish_raw(bytes) behind a type check and a
         # destroy guard (~2.5 us per call); the node publishes through the handle directly
         self._publish_raw = [pub.handle.publish_raw for pub in self._output_pubs]
-        self._clock_pub = (None if self._p('real_time')
+        self._clock_pub = (None if self.mode == 'real_time'
                            else self.create_publisher(ClockMsg, CLOCK_TOPIC, QoSProfile(depth=10)))
         self._publish_clock = self._clock_pub.handle.publish_raw if self._clock_pub else None
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
@@ -192,8 +213,11 @@ class SimNode(Node):
         if self._p('info_period') > 0:
             self.create_timer(self._p('info_period'), self._log_info, clock=self._steady)
         self._start_recorder(out_qos)
+        if self.mode == 'lockstep':
+            self.create_timer(0.05, self._lockstep_resend, clock=self._steady)
         self._publish_sample(self._current_outputs())
-        mode = 'real-time x%g' % self._rtf if self._p('real_time') else 'free-run'
+        mode = ('real-time x%g' % self._rtf if self.mode == 'real_time' else
+                self.mode.replace('_', '-'))
         self.get_logger().info(
             f'scene {scene_file!r}: {self.scene.beam} beam, eps_b = {self.scene.eps_b:g}, '
             f'{self.scene.rate_hz:g} Hz, {self._sim.describe_stepper()}; '
@@ -258,6 +282,8 @@ class SimNode(Node):
         self._steps_per_tick = self._p('steps_per_tick')
         self._max_catchup = self._p('max_catchup_steps')
         self._max_lag = self._p('max_lag')
+        self._sources = self._p('lockstep.sources')
+        self._timeout = self._p('lockstep.timeout')
 
     def _p(self, name):
         return self.get_parameter(name).value
@@ -266,11 +292,14 @@ class SimNode(Node):
         if self._timer is not None:
             self.destroy_timer(self._timer)
         self._resync()
-        if self._p('real_time'):
-            period, callback = self._dt / self._rtf, self._tick_real_time
-        else:
-            period, callback = 1.0e-6, self._tick_free_run
         stopped = self.paused or bool(self._sim.fault)
+        if self.mode == 'real_time':
+            period, callback = self._dt / self._rtf, self._tick_real_time
+        elif self.mode == 'free_run':
+            period, callback = 1.0e-6, self._tick_free_run
+        else:   # lockstep: commands drive the stepping; the timer is only the deadline
+            period, callback = self._timeout or 3600.0, self._lockstep_deadline
+            stopped = stopped or not self._timeout
         self._timer = self.create_timer(period, callback, clock=self._steady,
                                         autostart=not stopped)
 
@@ -282,7 +311,10 @@ class SimNode(Node):
     def _run_timer(self, run):
         if run and not self._sim.fault:
             self._resync()
-            self._timer.reset()
+            if self.mode != 'lockstep' or self._timeout:
+                self._timer.reset()
+            if self.mode == 'lockstep':
+                self._lockstep_advance()   # the answers may have come while paused
         else:
             self._timer.cancel()
 
@@ -323,6 +355,44 @@ class SimNode(Node):
             if not self._advance():
                 return
 
+    def _lockstep_advance(self):
+        """Lockstep: run the next period once every expected source has answered."""
+        if self._stepping or self.paused or self._sim.fault or self.answers < self._sources:
+            return
+        self.lockstep_wait_s += time.perf_counter() - self._published_wall
+        self._advance()
+
+    def _lockstep_deadline(self):
+        """Lockstep timeout: the answers did not come; hold the voltages and go on."""
+        if self.paused or self._sim.fault:
+            return
+        self.missed_deadlines += 1
+        self.get_logger().warning(
+            f'lockstep: {self.answers} of {self._sources} answer(s) to t = {self._sim.t:.6g} s '
+            f'within {self._timeout:g} s; holding the voltages ({self.missed_deadlines} missed)',
+            throttle_duration_sec=1.0)
+        self.lockstep_wait_s += time.perf_counter() - self._published_wall
+        self._advance()
+
+    def _subscriptions_matched(self):
+        return sum(pub.get_subscription_count() for pub in self._output_pubs)
+
+    def _lockstep_resend(self):
+        """
+        Lockstep start (t = 0, also after ~/reset): a controller discovered after sample 0 was
+        published never saw it, and both would wait forever. Re-send sample 0 (not logged)
+        when new subscriptions have matched since, until it is answered.
+        """
+        if self._sim.k != 0 or self.answers >= self._sources or not self._last_sample:
+            return
+        matched = self._subscriptions_matched()
+        if matched > self._heard_by:
+            self._heard_by = matched
+            if self._publish_clock is not None:
+                self._publish_clock(encode_clock(0))
+            for publish, data in zip(self._publish_raw, self._last_sample):
+                publish(data)
+
     def _current_outputs(self):
         return np.array(list(self._sim.outputs().values()))
 
@@ -340,14 +410,18 @@ class SimNode(Node):
 
     def _advance(self) -> bool:
         """Run one control period and publish it; False (and fault) if the model diverged."""
-        self._take_commands()
+        self._stepping = True
         try:
-            out = self._sim.step()
-        except ModelDomainError as exc:
-            self._enter_fault(str(exc))
-            return False
-        self.steps_total += 1
-        return self._publish_sample(out)
+            self._take_commands()
+            try:
+                out = self._sim.step()
+            except ModelDomainError as exc:
+                self._enter_fault(str(exc))
+                return False
+            self.steps_total += 1
+            return self._publish_sample(out)
+        finally:
+            self._stepping = False
 
     def _publish_sample(self, out) -> bool:
         if not np.isfinite(out).all():
@@ -357,11 +431,19 @@ class SimNode(Node):
         k = self._sim.k
         t_ns = stamp_ns(k, self._dt)
         samples = self._encoder.encode(out, t_ns)
+        if self.mode == 'lockstep':   # a new sample: wait for its answers
+            self.answers = 0
+            self._published_wall = time.perf_counter()
+            if self._timeout and not self.paused:
+                self._timer.reset()
+            if k == 0:
+                self._last_sample = samples
+                self._heard_by = self._subscriptions_matched()
         try:
+            if self._publish_clock is not None:   # first: a use_sim_time reader is at t_k
+                self._publish_clock(encode_clock(t_ns))
             for publish, data in zip(self._publish_raw, samples):
                 publish(data)
-            if self._publish_clock is not None:
-                self._publish_clock(encode_clock(t_ns))
         except RuntimeError:   # rclpy's RCLError: Ctrl-C shut the context down mid-tick
             if self.context.ok():
                 raise
@@ -389,16 +471,35 @@ class SimNode(Node):
             self._recorder.record(topic, command.canonical, stamp_ns(self._sim.k, self._dt),
                                   TOPIC_TYPES[topic])
         if command.volts is None:
-            return self._refuse(command.reason + ('' if command.reason.startswith(
+            self._refuse(command.reason + ('' if command.reason.startswith(
                 JOINT_COMMAND_TOPIC + ':') else '; holding the previous voltages'))
-        check = self._sim.set_input(command.volts)
-        if not check.accepted:   # the contract's checks are the simulator's; never expected
-            return self._refuse(f'{topic}: {check.reason}; holding the previous voltages')
-        if command.clamped:
-            self.clamped_commands += 1
-            self.get_logger().warning(
-                f'{topic}: voltage clamped to [0, {self.scene.physics.v_max:g}] V on '
-                f'{_name_list(command.clamped)}', throttle_duration_sec=1.0)
+        if command.volts is not None:
+            check = self._sim.set_input(command.volts)
+            if not check.accepted:   # the contract's checks are the simulator's; not expected
+                self._refuse(f'{topic}: {check.reason}; holding the previous voltages')
+            elif command.clamped:
+                self.clamped_commands += 1
+                self.get_logger().warning(
+                    f'{topic}: voltage clamped to [0, {self.scene.physics.v_max:g}] V on '
+                    f'{_name_list(command.clamped)}', throttle_duration_sec=1.0)
+        if self.mode == 'lockstep':
+            self._count_answer(command)
+
+    def _count_answer(self, command):
+        """
+        Lockstep: a JointState command answers the sample its header stamp names (an unset
+        stamp, 0, the latest); a Float64MultiArray the latest sample. A refused command
+        answers too (the voltages are held). Answers to older samples are applied but do not
+        count.
+        """
+        k = self._sim.k
+        if command.stamp_ns:
+            answered = int(round(command.stamp_ns * 1e-9 / self._dt))
+            if answered < k:
+                self.stale_answers += 1
+                return
+        self.answers += 1
+        self._lockstep_advance()
 
     def _refuse(self, reason):
         self.refused_commands += 1
@@ -426,6 +527,7 @@ class SimNode(Node):
 
     def _srv_reset(self, request, response):
         self._sim.reset()
+        self.answers = 0   # answers to the old run's last sample do not start the new one
         if self._recorder is not None:
             self._recorder.new_file()  # sim time restarts: one file per continuous run
         self._fault_reported = ''
@@ -446,6 +548,13 @@ class SimNode(Node):
                     isinstance(value, int) and value >= 1):
                 return SetParametersResult(successful=False,
                                            reason=f'{param.name} must be >= 1 (got {value!r})')
+            if param.name == 'lockstep.timeout' and not (
+                    isinstance(value, float) and math.isfinite(value) and value >= 0.0):
+                return SetParametersResult(
+                    successful=False, reason=f'lockstep.timeout must be >= 0 s (got {value!r})')
+            if param.name == 'lockstep.sources' and not (isinstance(value, int) and value >= 1):
+                return SetParametersResult(
+                    successful=False, reason=f'lockstep.sources must be >= 1 (got {value!r})')
             if param.name == 'max_lag' and not (
                     isinstance(value, float) and math.isfinite(value) and value >= 0.0):
                 return SetParametersResult(successful=False,
@@ -456,6 +565,13 @@ class SimNode(Node):
         self._steps_per_tick = self._p('steps_per_tick')
         self._max_catchup = self._p('max_catchup_steps')
         self._max_lag = self._p('max_lag')
+        self._sources = self._p('lockstep.sources')
+        if any(p.name == 'lockstep.timeout' for p in params):
+            self._timeout = self._p('lockstep.timeout')
+            if self._timer is not None and self.mode == 'lockstep':
+                self._make_timer()
+        if self.mode == 'lockstep':
+            self._lockstep_advance()   # fewer sources may already have answered
         if any(p.name == 'real_time_factor' for p in params):
             self._rtf = self._p('real_time_factor')
             if self._timer is not None:
@@ -475,7 +591,7 @@ class SimNode(Node):
     def _publish_diagnostics(self):
         rate, late, slipped, wall, self._diag_window = self._window(self._diag_window)
         self.achieved_rtf = rate * self._dt
-        real_time = self._p('real_time')
+        real_time = self.mode == 'real_time'
         running = not self.paused and not self._sim.fault
         lag = 0
         if real_time and running:
@@ -499,7 +615,7 @@ class SimNode(Node):
         residual = self._sim.power_residual() if not self._sim.fault else math.nan
         values = {
             'sim_time_s': f'{self._sim.t:.6f}',
-            'mode': 'real_time' if real_time else 'free_run',
+            'mode': self.mode,
             'paused': str(self.paused).lower(),
             'step_rate_hz': f'{rate:.1f}',
             'real_time_factor': f'{self.achieved_rtf:.3f}',
@@ -517,6 +633,11 @@ class SimNode(Node):
             'voltage_V': str(self._sim.u.tolist()),
             'fault': self._sim.fault,
             'stepper': self._sim.describe_stepper(),      # adaptive: the current step count
+            **({'lockstep_answers': f'{self.answers} of {self._sources}',
+                'lockstep_missed_deadlines': str(self.missed_deadlines),
+                'lockstep_stale_answers': str(self.stale_answers),
+                'lockstep_wait_s': f'{self.lockstep_wait_s:.3f}'}
+               if self.mode == 'lockstep' else {}),
             'internal_steps': str(self._sim.steps_taken),
         }
         recorder = self._recorder
