@@ -170,7 +170,7 @@ class SimNode(Node):
         self._heard_by = 0              # subscriptions matched when sample 0 was published
         self._fault_reported = ''
         # test and benchmark seams: the wall clock of the real-time pacing, and a function
-        # called with k after sample k has been published
+        # called with (k, output vector) after sample k has been published
         self.wall_clock = time.perf_counter
         self.on_sample = None
 
@@ -452,7 +452,7 @@ class SimNode(Node):
         if self._recorder is not None:
             self._recorder.record_sample(t_ns, self._encoder.topics, samples, TOPIC_TYPES)
         if self.on_sample is not None:
-            self.on_sample(k)
+            self.on_sample(k, out)
         return True
 
     def _enter_fault(self, reason):

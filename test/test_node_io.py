@@ -94,7 +94,7 @@ def test_command_during_catch_up_applies_from_the_next_period(harness, tmp_path,
     node = h.node
     arrivals = []
 
-    def on_sample(k):
+    def on_sample(k, out):
         if k == 5:
             h.cmd.publish(Float64MultiArray(data=[2500.0]))
             _wait_readable(node)
