@@ -38,8 +38,7 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import QoSProfile  # noqa: E402
 
-from det_sim_ros.contract import (decode_joint_state, decode_float64_multi_array,  # noqa: E402
-                                  encode_clock)
+from det_sim_ros.contract import decode_float64_multi_array, encode_clock  # noqa: E402
 from det_sim_ros.mcap_log import LogReader  # noqa: E402
 from det_sim_ros.sim_node import make_executor, SimNode  # noqa: E402
 from det_sim_ros.simulator import Simulator  # noqa: E402
@@ -234,6 +233,35 @@ def command_latency(log_path, controller_file, dt):
             'cmd_to_effect_ms_max': float(lat.max()) if lat.size else None}
 
 
+def lockstep_in_process(scene_name, sim_seconds):
+    """Lockstep with an in-process P controller answering every sample (one executor):
+    sim seconds per wall second."""
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    from det_sim_ros.contract import decode_joint_state, encode_float64_multi_array
+    from det_sim_ros.testing import LockstepSim
+    sim = LockstepSim(scene_name, domain_id=1 + (os.getpid() + 7) % 101)
+    try:
+        node = rclpy.create_node('bench_p', context=sim.context)
+        pub = node.create_publisher(Float64MultiArray, 'voltage_command', 10)
+
+        def on_dy(data):
+            dy = decode_joint_state(data).position
+            volts = [min(3000.0, max(0.0, 1500.0 + 2.0e5 * (2.0e-3 - v))) for v in dy]
+            pub.publish(encode_float64_multi_array(volts))
+        node.create_subscription(JointState, 'displacement', on_dy, 10, raw=True)
+        sim.start([node])
+        k0, w0, c0 = sim.node._sim.k, time.perf_counter(), _cpu()
+        sim.run(until=sim_seconds, nodes=[node])
+        wall, cpu = time.perf_counter() - w0, _cpu() - c0
+        steps = sim.node._sim.k - k0
+        return {'steps': steps, 'rtf': steps * sim.node._dt / wall,
+                'cpu_us_per_period': cpu / steps * 1e6,
+                'missed_deadlines': sim.node.missed_deadlines}
+    finally:
+        sim.close()
+
+
 def bench_scene(scene_name, args, folder):
     from det_sim_ros.contract import OutputContract
     from det_sim_ros.scene import load_scene
@@ -265,6 +293,8 @@ def bench_scene(scene_name, args, folder):
     finally:
         _stop(listener)
 
+    report['lockstep_in_process_controller'] = lockstep_in_process(scene_name,
+                                                                   args.lockstep_seconds)
     if args.rt_seconds > 0:
         n_det = sim.model.n_inputs
         controller_file = os.path.join(folder, f'controller_{scene_name}.json')
@@ -289,6 +319,7 @@ def main():
     parser.add_argument('--rt-seconds', type=float, default=60.0)
     parser.add_argument('--free-seconds', type=float, default=10.0)
     parser.add_argument('--floor-periods', type=int, default=20000)
+    parser.add_argument('--lockstep-seconds', type=float, default=5.0, help='sim seconds')
     parser.add_argument('--json', help='write the numbers to this file')
     args = parser.parse_args()
     report = {'cpus': os.cpu_count(), 'load_avg_at_start': os.getloadavg()}

@@ -163,6 +163,7 @@ class SimNode(Node):
         self.answers = 0
         self.stale_answers = 0   # JointState commands stamped with an older sample
         self.missed_deadlines = 0
+        self._missed_seen = 0    # missed deadlines at the last /diagnostics
         self.lockstep_wait_s = 0.0
         self._published_wall = time.perf_counter()
         self._stepping = False
@@ -608,6 +609,11 @@ class SimNode(Node):
             status.message = (f'below real time: RTF {self.achieved_rtf:.3f} of '
                               f'{self._rtf:g} (slipped {slipped * 1e3:.0f} ms in the last '
                               f'{wall:.1f} s)')
+        elif self.mode == 'lockstep' and self.missed_deadlines > self._missed_seen:
+            status.level = DiagnosticStatus.WARN
+            status.message = (f'lockstep: {self.missed_deadlines - self._missed_seen} missed '
+                              f'deadline(s) in the last {wall:.1f} s (the controller did not '
+                              f'answer within {self._timeout:g} s)')
         elif real_time and running and max_lag * self._dt > 0.5 * self._max_lag > 0.0:
             status.level = DiagnosticStatus.WARN
             status.message = (f'lagging: up to {max_lag * self._dt * 1e3:.0f} ms behind the '
@@ -646,6 +652,7 @@ class SimNode(Node):
                            'log_fault': recorder.fault})
             if recorder.fault and status.level == DiagnosticStatus.OK:
                 status.level, status.message = DiagnosticStatus.WARN, recorder.fault
+        self._missed_seen = self.missed_deadlines
         status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()

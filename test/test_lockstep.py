@@ -17,7 +17,7 @@ from det_sim_ros.mcap_log import LogReader
 from det_sim_ros.replay import resimulate
 from det_sim_ros.scene import load_scene
 from det_sim_ros.simulator import Simulator
-from det_sim_ros.testing import det_sim, LockstepSim  # noqa: F401 - the fixture, as the plugin
+from det_sim_ros.testing import det_sim  # noqa: F401 - the fixture, as the plugin gives it
 
 KP, KI, T_STEP, TARGET = 2.0e4, 6.0e6, 0.6, 2.0e-3   # V/m, V/(m s), s, m
 
@@ -166,6 +166,19 @@ def test_timeout_holds_the_voltages_and_counts_missed_deadlines(det_sim):
     sim.spin_until(lambda: sim.node._sim.k >= 20, '20 periods')
     assert sim.node.missed_deadlines == sim.node._sim.k and sim.node._sim.u.tolist() == [0.0]
     assert sim.result().t.size == sim.node._sim.k + 1   # every period ran and was recorded
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    import rclpy
+    listener = rclpy.create_node('diag_listener', context=sim.context)
+    seen = []
+    listener.create_subscription(DiagnosticArray, '/diagnostics', seen.append, 10)
+    sim.start([listener], wait=False)
+    sim.spin_until(lambda: listener.count_publishers('/diagnostics') > 0, 'discovery')
+    sim.node._publish_diagnostics()
+    sim.spin_until(lambda: seen, '/diagnostics')
+    status = seen[-1].status[0]
+    values = {kv.key: kv.value for kv in status.values}
+    assert status.level == DiagnosticStatus.WARN and 'missed deadline' in status.message
+    assert int(values['lockstep_missed_deadlines']) >= 20 and values['mode'] == 'lockstep'
 
 
 def test_lockstep_pause_step_reset_and_clock(harness, ros_context):
