@@ -484,11 +484,17 @@ class CommandDecoder:
         if len(names) != len(values):
             return Command(None, f'{JOINT_COMMAND_TOPIC}: {len(names)} name(s) but '
                                  f'{len(values)} position value(s)', canonical=canonical)
+        if not names:
+            return Command(None, f'{JOINT_COMMAND_TOPIC}: names no DET (expected some of '
+                                 f'{self.det_names})', canonical=canonical)
         unknown = [name for name in names if name not in self.index]
-        if unknown or not names:
-            return Command(None, f'{JOINT_COMMAND_TOPIC}: unknown DET name(s) '
-                                 f'{unknown or names} (expected {self.det_names})',
-                           canonical=canonical)
+        if unknown:
+            return Command(None, f'{JOINT_COMMAND_TOPIC}: unknown DET name(s) {unknown} '
+                                 f'(expected {self.det_names})', canonical=canonical)
+        twice = sorted({name for name in names if names.count(name) > 1})
+        if twice:
+            return Command(None, f'{JOINT_COMMAND_TOPIC}: names {_name_list(twice)} more than '
+                                 'once', canonical=canonical)
         volts = [float(v) for v in held]
         for name, value in zip(names, values):
             volts[self.index[name]] = value

@@ -149,6 +149,11 @@ def test_command_rules_per_channel():
     assert counts.volts is None and '2 name(s) but 1 position value(s)' in counts.reason
     bad = decoder.decode('voltage_command_joint', encode_joint_state(['left'], [math.inf]), held)
     assert bad.volts is None and 'non-finite voltage on left' in bad.reason
+    twice = decoder.decode('voltage_command_joint',
+                           encode_joint_state(['left', 'left'], [1.0, 2.0]), held)
+    assert twice.volts is None and 'names left more than once' in twice.reason
+    empty = decoder.decode('voltage_command_joint', encode_joint_state([], []), held)
+    assert empty.volts is None and 'names no DET' in empty.reason
     torn = decoder.decode('voltage_command', b'\x00\x01\x00\x00\x05', held)
     assert torn.volts is None and 'malformed' in torn.reason and not torn.canonical
 
