@@ -167,7 +167,7 @@ class SimNode(Node):
         self.lockstep_wait_s = 0.0
         self._published_wall = time.perf_counter()
         self._stepping = False
-        self._last_sample = ()          # the bytes of the latest sample (lockstep re-send)
+        self._last_sample = ()          # the bytes of sample 0 (lockstep re-send)
         self._heard_by = 0              # subscriptions matched when sample 0 was published
         self._fault_reported = ''
         # test and benchmark seams: the wall clock of the real-time pacing, and a function
@@ -188,7 +188,8 @@ class SimNode(Node):
                            else self.create_publisher(ClockMsg, CLOCK_TOPIC, QoSProfile(depth=10)))
         self._publish_clock = self._clock_pub.handle.publish_raw if self._clock_pub else None
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
-        # commands arrive as CDR bytes (raw): decoded and checked by the contract, logged as is
+        # commands arrive as CDR bytes (raw): decoded and checked by the contract, and logged
+        # re-encoded with zero padding (equal commands give equal logs)
         self._command_subs = [
             (topic, self.create_subscription(
                 msg_type, topic, lambda data, topic=topic: self._on_command(topic, data), 10,
