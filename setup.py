@@ -98,5 +98,7 @@ setup(
             'det_sim = det_sim_ros.cli:main',
             'det_sim_replay = det_sim_ros.replay:main',
         ],
+        # the det_sim fixture (lockstep controller tests), available wherever this is installed
+        'pytest11': ['det_sim = det_sim_ros.testing'],
     },
 )

@@ -1,7 +1,8 @@
 """
-Cost of MCAP logging per simulation step (issue 5): the node's per-step work with and without
-the recorder, measured offline (no ROS graph): build the 4 output JointStates, record them (and a
-command every 10 steps). Prints microseconds per step.
+Cost of MCAP logging per simulation step (issue 5, reworked in issue 15): the node's per-step
+work offline (no ROS graph): encode the output bytes (det_sim_ros.contract), record them (and a
+command every 10 steps), synchronously or with the writer thread. Prints CPU microseconds per
+step (all threads); run on a shared host, compare the rows of one run.
 
 Run: PYTHONPATH=. python bench/log_cost.py [n_steps]
 """
@@ -11,8 +12,8 @@ import sys
 import tempfile
 import time
 
-from det_sim_ros.mcap_log import Recorder, serialize
-from det_sim_ros.replay import output_messages, rest_shortening
+from det_sim_ros.contract import encode_float64_multi_array, OutputContract, TOPIC_TYPES
+from det_sim_ros.mcap_log import Recorder
 from det_sim_ros.scene import load_scene
 from det_sim_ros.simulator import Simulator
 
@@ -20,45 +21,43 @@ from det_sim_ros.simulator import Simulator
 def main(n_steps=20000):
     scene = load_scene('default', {'scene.initial_state': 'released'})
     sim = Simulator(scene)
-    y0 = rest_shortening(scene)
-    names = sim.output_names
-    from std_msgs.msg import Float64MultiArray
-    command = Float64MultiArray(data=[1000.0])
-    msgs = output_messages(dict(zip(names, sim.step())), 0, y0)
-    for msg in msgs.values():  # warm up
-        serialize(msg)
+    encoder = OutputContract(sim.model).encoder()
+    topics = encoder.topics
     with tempfile.TemporaryDirectory() as folder:
         results = {}
-        for label in ('no log', 'log', 'no log ', 'log '):
-            recorder = Recorder(os.path.join(folder, f'{len(results)}.mcap'), scene) \
-                if label.startswith('log') else None
+        for label in ('no log', 'log', 'log thread', 'no log ', 'log ', 'log thread '):
+            recorder = None
+            if label.startswith('log'):
+                recorder = Recorder(os.path.join(folder, f'{len(results)}.mcap'), scene,
+                                    background='thread' in label)
             sim.reset()
-            start = time.perf_counter()
+            start = time.process_time()
             for k in range(n_steps):
                 t_ns = round(k * sim.dt * 1e9)
                 if k % 10 == 0:
+                    volts = [1000.0 + k % 500]
                     if recorder is not None:
-                        recorder.record('voltage_command', command, t_ns)
-                    sim.set_input([1000.0 + k % 500])
+                        recorder.record('voltage_command', encode_float64_multi_array(volts),
+                                        t_ns, TOPIC_TYPES['voltage_command'])
+                    sim.set_input(volts)
                 out = sim.step()
-                messages = output_messages(dict(zip(names, out)), t_ns, y0)
+                data = encoder.encode(out, t_ns)
                 if recorder is not None:
-                    for topic, msg in messages.items():
-                        recorder.record(topic, msg, t_ns)
-            elapsed = time.perf_counter() - start
+                    recorder.record_sample(t_ns, topics, data, TOPIC_TYPES)
             if recorder is not None:
                 recorder.close()
+            elapsed = time.process_time() - start
+            extra = ''
+            if recorder is not None:
                 size = os.path.getsize(recorder.path)
-                extra = (f'  in record(): {recorder.record_time_s / n_steps * 1e6:.1f} us/step, '
-                         f'{recorder.messages} msgs, {size / n_steps:.0f} B/step, '
-                         f'{recorder.flushes} flushes')
-            else:
-                extra = ''
+                extra = f'  {recorder.messages} msgs, {size / n_steps:.0f} B/step'
             results[label] = elapsed / n_steps * 1e6
-            print(f'{label.strip():7s}: {results[label]:7.1f} us/step{extra}')
-        cost = min(results['log'], results['log ']) - min(results['no log'], results['no log '])
-        print(f'logging cost: {cost:.1f} us/step ({cost / (sim.dt * 1e6) * 100:.1f} % of the '
-              f'{sim.dt * 1e6:.0f} us control period)')
+            print(f'{label.strip():10s}: {results[label]:7.1f} us/step{extra}')
+        base = min(results['no log'], results['no log '])
+        for kind in ('log', 'log thread'):
+            cost = min(results[kind], results[kind + ' ']) - base
+            print(f'{kind} cost: {cost:.1f} us/step ({cost / (sim.dt * 1e6) * 100:.1f} % of the '
+                  f'{sim.dt * 1e6:.0f} us control period)')
 
 
 if __name__ == '__main__':

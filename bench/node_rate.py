@@ -1,16 +1,23 @@
 #!/usr/bin/env python3
 """
-Benchmark the ROS 2 node (a script, not a test).
+Benchmark sim_node's I/O (issue 15; a script, not a test). Every figure of one scene is measured
+in the same run, side by side, so compare ratios; absolute times depend on the host.
 
-1. Real-time mode at the scene rate (1 kHz) for --rt-seconds: lost steps (gaps in the published
-   sample sequence; target 0), the backlog at the end (steps due by the wall clock but not yet
-   run), overrun ticks (ticks that had to catch up) and p50/p99/max step lateness (wall time
-   between when a step was due and when it ran).
-2. Free-run mode for --free-seconds with all four output topics published every step: the
-   real-time factor (sim seconds per wall second; target >= 3), with and without a subscriber
-   process on the four topics, and with MCAP logging on.
+1. Free-run CPU per control period, all outputs + /clock + /diagnostics + MCAP logging, one
+   subscriber process on every output topic. Measured next to:
+   - the floor: a plain node publishing the same pre-serialized bytes (one sample's CDR) on the
+     same topics to the same subscribers, per period (with and without /clock);
+   - the physics alone: Simulator.step() per period;
+   - the node under the SingleThreadedExecutor (the node uses the EventsExecutor).
+   CPU is the process's CPU time (all threads, so the MCAP writer thread too) per period.
+2. Real time at the scene rate for --rt-seconds, an outside controller process answering every
+   displacement sample with a command, another process keeping one core busy: samples lost at
+   the controller's reliable subscriber, command-to-effect latency (controller publishes the
+   command -> it receives the first sample that shows it: the log records the period each
+   command applied to), the lag behind the wall clock (end, max) and the slipped wall time.
 
-Usage: PYTHONPATH=. python bench/node_rate.py [--rt-seconds 60] [--free-seconds 10]
+Usage: PYTHONPATH=. python bench/node_rate.py [--scenes default,array] [--rt-seconds 60]
+       [--free-seconds 10] [--json out.json]
 """
 
 import argparse
@@ -29,123 +36,299 @@ os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 101))
 import rclpy  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import QoSProfile  # noqa: E402
 
-from det_sim_ros.sim_node import SimNode  # noqa: E402
+from det_sim_ros.contract import decode_float64_multi_array, encode_clock  # noqa: E402
+from det_sim_ros.mcap_log import LogReader  # noqa: E402
+from det_sim_ros.sim_node import make_executor, SimNode  # noqa: E402
+from det_sim_ros.simulator import Simulator  # noqa: E402
 
 SUBSCRIBER = '''
-import rclpy, sys
+import sys, rclpy
 from sensor_msgs.msg import JointState
 rclpy.init()
 node = rclpy.create_node('bench_listener')
 count = [0]
-for topic in ('deflection', 'displacement', 'charge', 'current'):
-    node.create_subscription(JointState, topic, lambda m: count.__setitem__(0, count[0] + 1), 10)
+for topic in sys.argv[1].split(','):
+    node.create_subscription(JointState, topic, lambda m: count.__setitem__(0, count[0] + 1),
+                             10, raw=True)
 try:
     rclpy.spin(node)
 except BaseException:
     pass
 '''
 
+# Answers every displacement sample with a voltage command; records when it published each
+# command and when each sample arrived (CLOCK_MONOTONIC is shared by all processes).
+CONTROLLER = '''
+import json, sys, time, rclpy
+from rclpy.experimental import EventsExecutor
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from det_sim_ros.contract import decode_joint_state, encode_float64_multi_array
+n_det, out_path = int(sys.argv[1]), sys.argv[2]
+rclpy.init()
+node = rclpy.create_node('bench_controller')
+cmd = node.create_publisher(Float64MultiArray, 'voltage_command', 10)
+sent, received = [], {}
+def on_sample(data):
+    now = time.monotonic()
+    received[decode_joint_state(data).stamp_ns] = now
+    volts = 500.0 + len(sent) % 2000          # a new voltage every sample, identifiable
+    cmd.publish(encode_float64_multi_array([volts] * n_det))
+    sent.append((time.monotonic(), volts))
+node.create_subscription(JointState, 'displacement', on_sample, 1000, raw=True)
+executor = EventsExecutor()
+executor.add_node(node)
+try:
+    while rclpy.ok():
+        executor.spin_once(timeout_sec=0.1)
+except BaseException:
+    pass
+finally:
+    with open(out_path, 'w') as stream:
+        json.dump({'sent': sent, 'received': received}, stream)
+'''
 
-class SequenceChecker:
-    """A stand-in recorder: checks that every step's sample is published once, in order."""
-
-    def __init__(self, dt, inner=None):
-        self.dt = dt
-        self.inner = inner  # the node's MCAP recorder, when logging is on
-        self.path, self.messages, self.fault = '', 0, ''  # as a Recorder reports on /diagnostics
-        self.last_k = {}
-        self.gaps = 0
-        self.published = 0
-
-    def record(self, topic, msg, sim_time_ns):
-        if self.inner is not None:
-            self.inner.record(topic, msg, sim_time_ns)
-            self.path, self.messages, self.fault = (self.inner.path, self.inner.messages,
-                                                    self.inner.fault)
-        k = int(round(sim_time_ns * 1e-9 / self.dt))
-        if topic in ('voltage_command', 'voltage_command_joint'):
-            return
-        self.published += 1
-        last = self.last_k.get(topic)
-        if last is not None and k != last + 1:
-            self.gaps += abs(k - last - 1)
-        self.last_k[topic] = k
+BUSY = 'while True: pass'
 
 
-def run(seconds, **params):
+def _spawn(code, *args):
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [os.path.dirname(os.path.dirname(os.path.abspath(__file__)))] + sys.path))
+    return subprocess.Popen([sys.executable, '-c', code, *args], env=env)
+
+
+def _stop(proc):
+    proc.send_signal(2)
+    try:
+        proc.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+def _cpu():
+    return time.process_time()
+
+
+def _wait_subscribers(publishers, what, timeout=60.0):
+    deadline = time.monotonic() + timeout
+    while not all(p.get_subscription_count() > 0 for p in publishers):
+        if time.monotonic() > deadline:
+            raise RuntimeError(f'{what}: subscribers not discovered')
+        time.sleep(0.05)
+
+
+def floor(scene_name, topics, samples, n, with_clock):
+    """CPU per period of publishing pre-serialized bytes on the node's topics (no executor)."""
+    from sensor_msgs.msg import JointState
+    from rosgraph_msgs.msg import Clock
     context = rclpy.context.Context()
     rclpy.init(context=context)
-    params.setdefault('scene.initial_state', 'released')   # the benchmarked (paper's) start
-    overrides = [Parameter(k, value=v) for k, v in params.items()]
-    node = SimNode(context=context, parameter_overrides=overrides)
-    checker = SequenceChecker(node._dt, node._recorder)
-    node._recorder = checker
-    node.lateness_log = []
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    executor.spin_once(timeout_sec=0)
-    node.set_parameters([Parameter('steps_per_tick', value=params.get('steps_per_tick', 10))])
-    node._resync()
-    k0, t0 = node._sim.k, time.perf_counter()
-    end = t0 + seconds
-    while time.perf_counter() < end:
-        executor.spin_once(timeout_sec=0.1)
-    wall = time.perf_counter() - t0
-    steps = node._sim.k - k0
-    due = int((time.perf_counter() - node._wall0) * node._rtf / node._dt) + node._k0 - node._sim.k
-    result = {
-        'wall_s': wall, 'steps': steps, 'sim_s': steps * node._dt,
-        'rtf': steps * node._dt / wall, 'overrun_ticks': node.overruns,
-        'sequence_gaps': checker.gaps, 'backlog_at_end': max(0, due - 1),
-        'lateness': np.array(node.lateness_log),
-    }
-    executor.shutdown()
-    node._recorder = checker.inner
+    node = rclpy.create_node('bench_floor', context=context)
+    pubs = [node.create_publisher(JointState, t, QoSProfile(depth=10)) for t in topics]
+    clock = node.create_publisher(Clock, '/clock', QoSProfile(depth=10)) if with_clock else None
+    _wait_subscribers(pubs, 'floor')
+    time.sleep(0.5)
+    # the node's own publish call (the handle's publish_raw) on the same bytes
+    pairs = [(pub.handle.publish_raw, data) for pub, data in zip(pubs, samples)]
+    clock_bytes = encode_clock(0)
+    publish_clock = clock.handle.publish_raw if clock is not None else None
+    for publish, data in pairs:   # warm-up
+        publish(data)
+    c0 = _cpu()
+    for _ in range(n):
+        for publish, data in pairs:
+            publish(data)
+        if publish_clock is not None:
+            publish_clock(clock_bytes)
+    cpu = (_cpu() - c0) / n
     node.destroy_node()
     rclpy.shutdown(context=context)
-    return result
+    return cpu
+
+
+def physics(scene, n):
+    sim = Simulator(scene)
+    sim.set_input([1500.0] * sim.model.n_inputs)
+    for _ in range(50):
+        sim.step()
+    c0 = _cpu()
+    for _ in range(n):
+        sim.step()
+    return (_cpu() - c0) / n
+
+
+def run_node(seconds, executor_kind, folder, wait_topics=None, **params):
+    """Run SimNode in this process; returns (node numbers, log path)."""
+    context = rclpy.context.Context()
+    rclpy.init(context=context)
+    params.setdefault('info_period', 0.0)
+    params.setdefault('log.path', folder)
+    params.setdefault('scene.initial_state', 'released')   # the benchmarked (paper's) start
+    node = SimNode(context=context,
+                   parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+    executor = (make_executor(context) if executor_kind == 'events'
+                else SingleThreadedExecutor(context=context))
+    executor.add_node(node)
+    _wait_subscribers([p for p, t in zip(node._output_pubs, node._encoder.topics)
+                       if wait_topics is None or t in wait_topics], 'node')
+    executor.spin_once(timeout_sec=0.1)
+    node._resync()
+    k0, c0, w0 = node._sim.k, _cpu(), time.perf_counter()
+    slipped0, late0 = node.slipped_s, node.late_ticks
+    max_lag = 0
+    end = w0 + seconds
+    while time.perf_counter() < end:
+        executor.spin_once(timeout_sec=0.05)
+        if node._p('real_time'):
+            max_lag = max(max_lag, node._max_lag_seen)
+    cpu, wall = _cpu() - c0, time.perf_counter() - w0
+    steps = node._sim.k - k0
+    result = {'steps': steps, 'wall_s': wall, 'rtf': steps * node._dt / wall,
+              'cpu_us_per_period': cpu / steps * 1e6}
+    if node._p('real_time'):
+        result.update({'lag_at_end_ms': max(0, node._steps_due(node.wall_clock()) - 1)
+                       * node._dt * 1e3, 'max_lag_ms': max_lag * node._dt * 1e3,
+                       'slipped_s': node.slipped_s - slipped0,
+                       'late_ticks': node.late_ticks - late0})
+    path = node._recorder.path if node._recorder is not None else ''
+    executor.shutdown()
+    node.destroy_node()
+    rclpy.shutdown(context=context)
+    return result, path
+
+
+def command_latency(log_path, controller_file, dt):
+    with open(controller_file) as stream:
+        data = json.load(stream)
+    sent = data['sent']
+    received = {int(k): v for k, v in data['received'].items()}
+    applied = [(m.log_time, decode_float64_multi_array(m.data)[0][0])
+               for m in LogReader(log_path).messages(['voltage_command'])]
+    # the log holds the commands the node received, in order, each at the period it applied
+    # to; a command can be missing (sent before discovery, or after the run): match by value
+    latencies, unmatched, j = [], 0, 0
+    for log_time, logged in applied:
+        start = j
+        while j < len(sent) and sent[j][1] != logged and j - start < 1000:
+            j += 1
+        if j >= len(sent) or sent[j][1] != logged:
+            unmatched += 1
+            j = start
+            continue
+        effect = log_time + round(dt * 1e9)   # the first sample that shows the command
+        if effect in received:
+            latencies.append(received[effect] - sent[j][0])
+        j += 1
+    stamps = sorted(received)
+    step = round(dt * 1e9)
+    lost = sum((b - a) // step - 1 for a, b in zip(stamps, stamps[1:]))
+    lat = np.array(latencies) * 1e3
+    return {'commands_sent': len(sent), 'commands_applied': len(applied),
+            'commands_unmatched': unmatched, 'samples_received': len(stamps),
+            'samples_lost': int(lost),
+            'cmd_to_effect_ms_p50': float(np.percentile(lat, 50)) if lat.size else None,
+            'cmd_to_effect_ms_p99': float(np.percentile(lat, 99)) if lat.size else None,
+            'cmd_to_effect_ms_max': float(lat.max()) if lat.size else None}
+
+
+def lockstep_in_process(scene_name, sim_seconds):
+    """Lockstep with an in-process P controller answering every sample (one executor):
+    sim seconds per wall second."""
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    from det_sim_ros.contract import decode_joint_state, encode_float64_multi_array
+    from det_sim_ros.testing import LockstepSim
+    sim = LockstepSim(scene_name, domain_id=1 + (os.getpid() + 7) % 101)
+    try:
+        node = rclpy.create_node('bench_p', context=sim.context)
+        pub = node.create_publisher(Float64MultiArray, 'voltage_command', 10)
+
+        def on_dy(data):
+            dy = decode_joint_state(data).position
+            volts = [min(3000.0, max(0.0, 1500.0 + 2.0e5 * (2.0e-3 - v))) for v in dy]
+            pub.publish(encode_float64_multi_array(volts))
+        node.create_subscription(JointState, 'displacement', on_dy, 10, raw=True)
+        sim.start([node])
+        k0, w0, c0 = sim.node._sim.k, time.perf_counter(), _cpu()
+        sim.run(until=sim_seconds, nodes=[node])
+        wall, cpu = time.perf_counter() - w0, _cpu() - c0
+        steps = sim.node._sim.k - k0
+        return {'steps': steps, 'rtf': steps * sim.node._dt / wall,
+                'cpu_us_per_period': cpu / steps * 1e6,
+                'missed_deadlines': sim.node.missed_deadlines}
+    finally:
+        sim.close()
+
+
+def bench_scene(scene_name, args, folder):
+    from det_sim_ros.contract import OutputContract
+    from det_sim_ros.scene import load_scene
+    report = {}
+    scene = load_scene(scene_name)
+    sim = Simulator(scene)
+    contract = OutputContract(sim.model)
+    encoder = contract.encoder()
+    out = sim.step().copy()
+    samples = encoder.encode(out, 1_000_000)
+    topics = encoder.topics
+    n = int(args.floor_periods)
+
+    listener = _spawn(SUBSCRIBER, ','.join(topics))
+    try:
+        report['floor_us_per_period'] = floor(scene_name, topics, samples, n, False) * 1e6
+        report['floor_with_clock_us_per_period'] = floor(scene_name, topics, samples, n,
+                                                         True) * 1e6
+        report['physics_us_per_period'] = physics(scene, n) * 1e6
+        for kind in ('events', 'single'):
+            result, _ = run_node(args.free_seconds, kind, folder, scene_file=scene_name,
+                                 real_time=False)
+            report[f'free_run_{kind}'] = result
+        node_cpu = report['free_run_events']['cpu_us_per_period']
+        report['node_over_floor'] = node_cpu / report['floor_us_per_period']
+        report['node_over_floor_with_clock'] = node_cpu / report['floor_with_clock_us_per_period']
+        report['node_over_floor_plus_physics'] = node_cpu / (
+            report['floor_with_clock_us_per_period'] + report['physics_us_per_period'])
+    finally:
+        _stop(listener)
+
+    report['lockstep_in_process_controller'] = lockstep_in_process(scene_name,
+                                                                   args.lockstep_seconds)
+    if args.rt_seconds > 0:
+        n_det = sim.model.n_inputs
+        controller_file = os.path.join(folder, f'controller_{scene_name}.json')
+        busy = _spawn(BUSY)
+        controller = _spawn(CONTROLLER, str(n_det), controller_file)
+        try:
+            time.sleep(2.0)
+            result, log_path = run_node(args.rt_seconds, 'events', folder, ['displacement'],
+                                        scene_file=scene_name, real_time=True)
+        finally:
+            _stop(controller)
+            busy.kill()
+            busy.wait()
+        result.update(command_latency(log_path, controller_file, sim.dt))
+        report['real_time_with_controller_and_busy_core'] = result
+    return report
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    parser.add_argument('--scenes', default='default,array')
     parser.add_argument('--rt-seconds', type=float, default=60.0)
     parser.add_argument('--free-seconds', type=float, default=10.0)
+    parser.add_argument('--floor-periods', type=int, default=20000)
+    parser.add_argument('--lockstep-seconds', type=float, default=5.0, help='sim seconds')
     parser.add_argument('--json', help='write the numbers to this file')
     args = parser.parse_args()
-    report = {}
-
-    listener = subprocess.Popen([sys.executable, '-c', SUBSCRIBER])
-    try:
-        time.sleep(2.0)
-        rt = run(args.rt_seconds, real_time=True, info_period=0.0, **{'log.enabled': False})
-        lat = rt.pop('lateness') * 1e6
-        rt.update({'lost_steps': rt['sequence_gaps'],
-                   'lateness_us_p50': float(np.percentile(lat, 50)),
-                   'lateness_us_p99': float(np.percentile(lat, 99)),
-                   'lateness_us_max': float(lat.max())})
-        report['real_time_1kHz_with_subscriber'] = rt
-        free = run(args.free_seconds, real_time=False, info_period=0.0,
-                   **{'log.enabled': False})
-        free.pop('lateness')
-        report['free_run_with_subscriber'] = free
-    finally:
-        listener.terminate()
-        listener.wait()
-    free = run(args.free_seconds, real_time=False, info_period=0.0, **{'log.enabled': False})
-    free.pop('lateness')
-    report['free_run_no_subscriber'] = free
+    report = {'cpus': os.cpu_count(), 'load_avg_at_start': os.getloadavg()}
     with tempfile.TemporaryDirectory() as folder:
-        free = run(args.free_seconds, real_time=False, info_period=0.0,
-                   **{'log.enabled': True, 'log.path': folder})
-    free.pop('lateness')
-    report['free_run_mcap_logging'] = free
-
-    for name, numbers in report.items():
-        print(name)
-        for key, value in numbers.items():
-            print(f'  {key:>18}: {value:.4g}' if isinstance(value, float)
-                  else f'  {key:>18}: {value}')
+        for scene_name in args.scenes.split(','):
+            report[scene_name] = bench_scene(scene_name, args, folder)
+            print(json.dumps({scene_name: report[scene_name]}, indent=2), flush=True)
+    report['load_avg_at_end'] = os.getloadavg()
     if args.json:
         with open(args.json, 'w') as stream:
             json.dump(report, stream, indent=2)

@@ -26,68 +26,21 @@ import sys
 import time
 from typing import Callable, Iterable, Mapping, Sequence
 
-from .mcap_log import LogReader, Recorder, deserialize, recover
+from .contract import (COMMAND_TOPIC, COMMAND_TOPICS, CdrError, CommandDecoder,
+                       decode_joint_state, encode_float64_multi_array, encode_joint_state,
+                       JOINT_COMMAND_TOPIC, OUTPUT_FIELDS, OutputContract, rest_shortening,
+                       rest_shortenings, stamp_ns, TOPIC_TYPES)
+from .mcap_log import LogReader, Recorder, recover
 
 __all__ = ['OUTPUT_FIELDS', 'COMMAND_TOPICS', 'ResimResult', 'resimulate', 'play', 'PlayStats',
-           'simulate_to_log', 'output_messages', 'OutputContract', 'main']
+           'simulate_to_log', 'OutputContract', 'rest_shortening', 'rest_shortenings', 'main']
 
-# Topic contract of sim_node: output topic -> JointState field -> per-DET model output (one value
-# per DET in the scene's structure.dets order, JointState names = those DET names; see
-# Model.channel). displacement is y0_i - y_i, with y0_i the rest shortening of cell i at 0 V
-# (logged as metadata 'y0': a float for one DET, a list for several; else from the statics).
-# A scene with structure outputs (the plate) also has the topic 'structure' (see
-# det_sim_ros.sim_node.structure_channels).
-OUTPUT_FIELDS: dict[str, dict[str, str]] = {
-    'deflection': {'position': 'q', 'velocity': 'q_dot'},
-    'displacement': {'position': 'y'},
-    'charge': {'position': 'q_p'},
-    'current': {'position': 'i_DE'},
-}
-RELATIVE_TO_Y0 = {('displacement', 'position')}
-COMMAND_TOPICS = ('voltage_command', 'voltage_command_joint')
+# The topic contract (topics, channels, y0, structure outputs, commands) is det_sim_ros.contract;
+# a log holds the per-DET y0 as metadata 'y0' (a float for one DET, a list for several).
 
 
 def _basename(topic: str) -> str:
     return topic.rstrip('/').rsplit('/', 1)[-1]
-
-
-def _stamp_ns(stamp) -> int:
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-
-
-def command_volts(type_name: str, msg, held: Sequence[float],
-                  det_names: Sequence[str] | None = None) -> list[float] | None:
-    """
-    The voltages a logged command sets, as the node reads it (None: the node refuses it).
-
-    Float64MultiArray: ``data``. JointState: ``position`` by ``name`` (the DET names
-    ``det_names``, default 'det0', 'det1', ...), DETs not named keep their ``held`` voltage.
-    """
-    if not type_name.endswith('/JointState'):
-        return list(msg.data)
-    names, values = list(msg.name), list(msg.position)
-    if det_names is None:
-        det_names = [f'det{i}' for i in range(len(held))]
-    index = {name: i for i, name in enumerate(det_names)}
-    if (len(names) != len(values) or not names or any(n not in index for n in names)
-            or len(set(names)) != len(names)):
-        return None      # refused by the node (see SimNode._on_joint_command)
-    volts = [float(v) for v in held]
-    for name, value in zip(names, values):
-        volts[index[name]] = value
-    return volts
-
-
-def rest_shortening(scene) -> float:
-    """y0 of a single-cell scene as the node computes it (see :func:`rest_shortenings`)."""
-    from .statics import rest_shortening as y0
-    return float(y0(scene))
-
-
-def rest_shortenings(scene) -> list[float]:
-    """y0_i of every cell, DET order, as the node computes them."""
-    from .sim_node import rest_shortenings as y0
-    return y0(scene)
 
 
 def _logged_y0(text: str | None, n: int) -> list[float] | None:
@@ -112,59 +65,6 @@ def _logged_x0(text: str | None, n: int):
     except (ValueError, SyntaxError, TypeError):
         return None
     return values if len(values) == n and all(math.isfinite(v) for v in values) else None
-
-
-class OutputContract:
-    """
-    What sim_node publishes for a model, as arrays: per-DET channels (names ``det_names``, rest
-    shortenings ``y0``) and the structure topic (``structure_names``, empty if none).
-
-    :param y0: per-DET rest shortenings (default: computed as the node does).
-    """
-
-    def __init__(self, model, y0: Sequence[float] | None = None,
-                 fields: Mapping[str, Mapping[str, str]] | None = None):
-        import numpy as np
-        from .sim_node import STRUCTURE_TOPIC, structure_channels
-        self.det_names = list(model.input_names)
-        self.y0 = np.array(rest_shortenings(model.scene) if y0 is None else y0, dtype=float)
-        self.fields = dict(fields or OUTPUT_FIELDS)
-        self.index = {(topic, field): np.array(model.channel(output))
-                      for topic, mapping in self.fields.items()
-                      for field, output in mapping.items()}
-        self.structure_topic = STRUCTURE_TOPIC
-        self.structure_outputs = tuple(model.structure_output_names)
-        idx, self.structure_names, signs, rest = structure_channels(model, self.y0)
-        self._s_idx, self._s_sign, self._s_rest = (np.array(idx, dtype=int), np.array(signs),
-                                                   np.array(rest))
-
-    def values(self, out, topic: str, field: str):
-        """The published array of one topic field from an output vector (output_names order)."""
-        values = out[self.index[(topic, field)]]
-        return self.y0 - values if (topic, field) in RELATIVE_TO_Y0 else values
-
-    def structure(self, out):
-        """The structure topic's positions from an output vector."""
-        return self._s_sign * (out[self._s_idx] - self._s_rest)
-
-    def messages(self, out, stamp_ns: int) -> dict:
-        """The node's output messages (topic -> JointState) for one output vector."""
-        from builtin_interfaces.msg import Time
-        from sensor_msgs.msg import JointState
-        stamp = Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)
-        messages = {}
-        for topic, mapping in self.fields.items():
-            msg = JointState(name=list(self.det_names))
-            msg.header.stamp = stamp
-            for field in mapping:
-                setattr(msg, field, self.values(out, topic, field).tolist())
-            messages[topic] = msg
-        if self.structure_names:
-            msg = JointState(name=list(self.structure_names))
-            msg.header.stamp = stamp
-            msg.position = self.structure(out).tolist()
-            messages[self.structure_topic] = msg
-        return messages
 
 
 # -- re-simulation -------------------------------------------------------------------------------
@@ -249,6 +149,7 @@ def resimulate(log, method: str | None = None, substeps: int | None = None,
         sim.reset()
     det_names = list(sim.model.input_names)
     contract = OutputContract(sim.model, _logged_y0(info.get('y0'), sim.model.n_inputs), fields)
+    decoder = CommandDecoder(det_names, scene.physics.v_max)
     structure_key = (f"{contract.structure_topic}.position "
                      f"({', '.join(contract.structure_outputs)})")
     dt_ns = sim.dt * 1e9
@@ -276,15 +177,18 @@ def resimulate(log, method: str | None = None, substeps: int | None = None,
                     break
                 result.skipped += 1
                 continue
-            volts = command_volts(message.type_name, message.decode(), sim.u.tolist(),
-                                  det_names)
-            if volts is not None:
-                sim.set_input(volts)
+            command = decoder.decode(name, message.data, sim.u.tolist())
+            if command.volts is not None:   # a command the node refused is logged, not applied
+                sim.set_input(command.volts)
             result.commands += 1
         elif name in fields or (name == contract.structure_topic
                                 and contract.structure_names):
-            msg = message.decode()
-            k = round(_stamp_ns(msg.header.stamp) / dt_ns)
+            try:
+                msg = decode_joint_state(message.data)
+            except CdrError:
+                result.skipped += 1
+                continue
+            k = round(msg.stamp_ns / dt_ns)
             if not advance_to(k):
                 if result.fault:
                     break
@@ -316,64 +220,41 @@ def resimulate(log, method: str | None = None, substeps: int | None = None,
 
 # -- offline recording (what the node does, without a ROS graph) ---------------------------------
 
-def output_messages(values: Mapping[str, float], stamp_ns: int, y0: float,
-                    joint: str = 'det0') -> dict:
-    """
-    The node's output messages (topic -> JointState) for one set of one-DET outputs (a mapping
-    output name -> value). For several DETs use :meth:`OutputContract.messages`.
-    """
-    from builtin_interfaces.msg import Time
-    from sensor_msgs.msg import JointState
-    stamp = Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)
-    messages = {}
-    for topic, mapping in OUTPUT_FIELDS.items():
-        msg = JointState()
-        msg.header.stamp = stamp
-        msg.name = [joint]
-        for field, output in mapping.items():
-            value = float(values[output])
-            setattr(msg, field, [y0 - value if (topic, field) in RELATIVE_TO_Y0 else value])
-        messages[topic] = msg
-    return messages
-
-
 def simulate_to_log(recorder: Recorder, sim, commands: Mapping[int, Sequence[float]] | Callable,
                     n_steps: int, joint_commands: bool = False) -> None:
     """
     Run ``sim`` (any number of DETs) for ``n_steps`` and record commands and outputs as the node
-    does (joint commands name every DET; the structure topic when the scene has one).
+    does, with the node's bytes (joint commands name every DET; the structure topic when the
+    scene has one). Needs no ROS.
 
     The initial state is recorded at t_0, then each step's outputs at its end time.
 
     :param commands: step index -> voltages, or a function k -> voltages or None, applied (and
         recorded at t_k) before the step from t_k to t_{k+1}.
     """
-    from sensor_msgs.msg import JointState
-    from std_msgs.msg import Float64MultiArray
     import numpy as np
     get = commands if callable(commands) else commands.get
     contract = OutputContract(sim.model)
-    t_ns = round(sim.k * sim.dt * 1e9)
+    encoder = contract.encoder()
+    t_ns = stamp_ns(sim.k, sim.dt)
     initial = np.array(list(sim.outputs().values()))
-    for topic, msg in contract.messages(initial, t_ns).items():
-        recorder.record(topic, msg, t_ns)
+    recorder.record_sample(t_ns, encoder.topics, encoder.encode(initial, t_ns), TOPIC_TYPES)
     for _ in range(n_steps):
         k = sim.k
         volts = get(k)
         if volts is not None:
-            t_ns = round(k * sim.dt * 1e9)
+            t_ns = stamp_ns(k, sim.dt)
+            volts = [float(v) for v in volts]
             if joint_commands:
-                msg = JointState(name=list(contract.det_names),
-                                 position=[float(v) for v in volts])
-                recorder.record('voltage_command_joint', msg, t_ns)
+                recorder.record(JOINT_COMMAND_TOPIC, encode_joint_state(contract.det_names, volts),
+                                t_ns, TOPIC_TYPES[JOINT_COMMAND_TOPIC])
             else:
-                msg = Float64MultiArray(data=[float(v) for v in volts])
-                recorder.record('voltage_command', msg, t_ns)
+                recorder.record(COMMAND_TOPIC, encode_float64_multi_array(volts), t_ns,
+                                TOPIC_TYPES[COMMAND_TOPIC])
             sim.set_input(volts)
         out = sim.step()
-        t_ns = round(sim.k * sim.dt * 1e9)
-        for topic, msg in contract.messages(out, t_ns).items():
-            recorder.record(topic, msg, t_ns)
+        t_ns = stamp_ns(sim.k, sim.dt)
+        recorder.record_sample(t_ns, encoder.topics, encoder.encode(out, t_ns), TOPIC_TYPES)
 
 
 # -- republishing --------------------------------------------------------------------------------

@@ -7,14 +7,12 @@ Topic, parameter and service contract: see README.md.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 import signal
 import sys
 import time
 
-from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -32,41 +30,43 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
+from .contract import (clamp_message, CLOCK_TOPIC, COMMAND_TOPIC, CommandDecoder, DIAGNOSTICS_TOPIC,
+                       encode_clock, JOINT_COMMAND_TOPIC, OUTPUT_FIELDS, OutputContract,
+                       rest_shortening, rest_shortenings, STRUCTURE_TOPIC, stamp_ns,
+                       structure_channels, TOPIC_TYPES)
 from .markers import attach_markers
 from .model import ModelDomainError
 from .scene import load_scene, scene_to_dict, SceneError
 from .simulator import Simulator
 
 __all__ = ['SimNode', 'main', 'OUTPUT_TOPICS', 'STRUCTURE_TOPIC', 'rest_shortenings',
-           'structure_channels']
+           'structure_channels', 'make_executor', 'spin']
 
 NODE_NAME = 'sim_node'
 SCENE_SECTIONS = ('scene', 'physics', 'integrator', 'structure', 'dets')
-# topic: (per-DET model output, unit); one value per DET in voltage-command order (the names in
-# scene structure.dets); displacement is y0_i - y_i, computed here
-OUTPUT_TOPICS = {
-    'deflection': ('q', 'm'),
-    'displacement': ('y', 'm'),
-    'charge': ('q_p', 'C'),
-    'current': ('i_DE', 'A'),
-}
-# Topic of the structure outputs (only for a structure that has them: the plate). Published
-# relative to rest (0 V) and in the displacement's sign: value = sign * (output - output at rest).
-# model structure output -> (published name, sign)
-STRUCTURE_TOPIC = 'structure'
-STRUCTURE_NAMES = {
-    'plate_y': ('plate_dy', -1.0),     # m: y0_plate - plate_y = mean of the two displacements
-    'plate_phi': ('plate_phi', 1.0),   # rad: phi - phi0 = (dy_right - dy_left) / w
-}
+# The topic contract (names, types, channels, y0, the bytes on the wire) is det_sim_ros.contract.
+OUTPUT_TOPICS = {topic: mapping['position'] for topic, mapping in OUTPUT_FIELDS.items()}
 # name: (default, description, read_only, range (lo, hi) or None)
+MODES = ('real_time', 'free_run', 'lockstep')
 NODE_PARAMS = {
-    'real_time': (True, 'true: sim time follows the wall clock; false: free-run as fast as '
-                  'possible and publish /clock', True, None),
+    'mode': ('', 'real_time: sim time follows the wall clock; free_run: as fast as possible, '
+             'publishes /clock; lockstep: publishes /clock and advances a period only when the '
+             "controller has answered the last sample ('' = from real_time)", True, None),
+    'real_time': (True, 'alias of mode: true = real_time, false = free_run (mode, when set, '
+                  'wins)', True, None),
+    'lockstep.sources': (1, 'lockstep: commands that answer a sample before the next period '
+                         'runs (one per controller)', False, (1, 10000)),
+    'lockstep.timeout': (0.0, 'lockstep: wall seconds to wait for the answers, then hold the '
+                         'voltages, count a missed deadline and go on (0 = wait forever)', False,
+                         (0.0, 3600.0)),
     'real_time_factor': (1.0, 'real-time mode: sim seconds per wall second', False,
                          (1.0e-3, 1.0e3)),
     'steps_per_tick': (10, 'free-run mode: control periods per timer tick', False, (1, 100000)),
     'max_catchup_steps': (1000, 'real-time mode: most steps run in one tick; the rest run in '
-                          'later ticks and count as overrun (never skipped)', False, (1, 1000000)),
+                          'later ticks (never skipped)', False, (1, 1000000)),
+    'max_lag': (0.05, 'real-time mode: largest lag behind the wall clock, s of sim time; beyond '
+                'it the node slips (drops the excess wall time, never a sim step)', False,
+                (0.0, 3600.0)),
     'qos_sensor_data': (False, 'outputs best-effort SensorDataQoS instead of reliable depth 10',
                         True, None),
     'start_paused': (False, 'start paused (resume with ~/pause false, or ~/step)', True, None),
@@ -92,55 +92,7 @@ NODE_PARAMS = {
 }
 
 
-def _rest_shortening(scene) -> float:
-    """
-    End shortening y0 (m) of the stable buckled equilibrium at 0 V (a single-cell scene).
-
-    Uses :func:`det_sim_ros.statics.rest_shortening` when available, otherwise settles the
-    simulator at 0 V for 1.5 s of sim time.
-    """
-    try:
-        from .statics import rest_shortening
-    except ImportError:
-        sim = Simulator(scene)
-        for _ in range(int(round(1.5 / sim.dt))):
-            sim.step()
-        return sim.outputs()['y']
-    return float(rest_shortening(scene))
-
-
-def rest_shortenings(scene) -> list:
-    """
-    Rest shortening y0_i (m) of each cell in DET order: cell i alone at 0 V
-    (``scene.cell_scene(i)``). Cells with identical physics share one statics solve, so an array
-    of identical copies costs one solve; an array with spread costs one per copy (about 20 ms).
-    """
-    cells = scene.cell_physics()
-    template = scene.cell_scene(0)
-    solved = {}
-    for physics in cells:
-        if physics not in solved:
-            solved[physics] = _rest_shortening(dataclasses.replace(template, physics=physics))
-    return [solved[physics] for physics in cells]
-
-
-def structure_channels(model, y0) -> tuple:
-    """
-    The structure topic's contract for a model: (output indices, published names, signs, rest
-    values). Empty for structures without outputs ('single', 'array').
-
-    The structure outputs are linear in the cells' end shortenings (Model.structure_map P), so
-    their rest values are P @ y0.
-    """
-    names = tuple(model.structure_output_names)
-    if not names:
-        return (), (), (), ()
-    P = np.asarray(model.structure_map, dtype=float)
-    rest = P @ np.asarray(y0, dtype=float)
-    indices = tuple(model.output_names.index(name) for name in names)
-    published = tuple(STRUCTURE_NAMES.get(name, (name, 1.0))[0] for name in names)
-    signs = tuple(STRUCTURE_NAMES.get(name, (name, 1.0))[1] for name in names)
-    return indices, published, signs, tuple(float(r) for r in rest)
+_rest_shortening = rest_shortening   # y0 of one cell (kept for callers of the old name)
 
 
 def _name_list(names, limit=6) -> str:
@@ -148,12 +100,6 @@ def _name_list(names, limit=6) -> str:
     if len(names) <= limit:
         return ', '.join(names)
     return ', '.join(names[:limit]) + f', ... ({len(names)} channels)'
-
-
-def clamp_message(topic, det_names, volts, v_max) -> str:
-    """The clamp warning: 'det0: -5 V clamped to [0, 3000] V (voltage_command)'."""
-    named = [f'{name}: {v:g} V' for name, v in zip(det_names, volts) if not 0.0 <= v <= v_max]
-    return f'{_name_list(named)} clamped to [0, {v_max:g}] V ({topic})'
 
 
 def _flatten(data, prefix=''):
@@ -191,6 +137,11 @@ class SimNode(Node):
     """
     The simulator as a ROS 2 node (see README.md for the topic contract).
 
+    Per control period the node takes the commands that have arrived, steps the simulator,
+    writes the CDR bytes of every output straight from the output vector
+    (:class:`~det_sim_ros.contract.SampleEncoder`), publishes those bytes and hands the same
+    bytes to the MCAP recorder. No message objects are built on that path.
+
     :param kwargs: forwarded to :class:`rclpy.node.Node` (``context``, ``namespace``,
         ``parameter_overrides``, ...).
     """
@@ -214,58 +165,75 @@ class SimNode(Node):
                 raise SceneError(f"scene key 'integrator.method': {exc}") from None
         self._declare_scene_parameters()
         self._declare_node_parameters(overrides)
+        self.mode = self._p('mode') or ('real_time' if self._p('real_time') else 'free_run')
+        if self.mode not in MODES:
+            raise SceneError(f"parameter 'mode': one of {', '.join(MODES)} (got {self.mode!r})")
 
         started = time.perf_counter()
         self._sim = Simulator(self.scene)
         self._dt = self._sim.dt
         model = self._sim.model
         self.det_names = list(model.input_names)   # voltage-command and output channel order
-        self._det_index = {name: i for i, name in enumerate(self.det_names)}
-        self._channels = {topic: model.channel(out) for topic, (out, _) in OUTPUT_TOPICS.items()}
-        self._qdot = model.channel('q_dot')
         self._initial_text = (f'rest ({self.scene.rest_branch}, 0 V)'
                               if self.scene.initial_state == 'rest' else 'released from q0')
         self.y0 = rest_shortenings(self.scene)     # per DET, m
-        self._y0 = np.array(self.y0)
         # nothing is compiled at run time (the kernel is built at install): this is the model's
         # Ritz integrals, its stepper and the rest state's statics solve
         self.get_logger().info(f'scene {scene_file!r} prepared in '
                                f'{time.perf_counter() - started:.2f} s (model, stepper, rest state)')
-        (self._struct_idx, self.structure_names, signs,
-         rest) = structure_channels(model, self.y0)
-        self._struct_sign, self._struct_rest = np.array(signs), np.array(rest)
+        self.contract = OutputContract(model, self.y0)
+        self.structure_names = self.contract.structure_names
+        self._encoder = self.contract.encoder()
+        self._decoder = CommandDecoder(self.det_names, self.scene.physics.v_max)
         self.last_refused = ''
 
         # counters (reported on /diagnostics)
         self.refused_commands = 0
         self.clamped_commands = 0
         self.commands_received = 0
-        self.overruns = 0
         self.steps_total = 0
-        self.lateness_log = None  # set to a list to record real-time tick lateness (bench)
+        self.late_ticks = 0      # real-time ticks that found more than one period due
+        self.slipped_s = 0.0     # wall time dropped because the lag exceeded max_lag, s
+        # lockstep: answers to the latest sample, deadlines missed, wall time spent waiting
+        self.answers = 0
+        self.stale_answers = 0   # JointState commands stamped with an older sample
+        self.missed_deadlines = 0
+        self._missed_seen = 0    # missed deadlines at the last /diagnostics
+        self.lockstep_wait_s = 0.0
+        self._published_wall = time.perf_counter()
+        self._stepping = False
+        self._last_sample = ()          # the bytes of sample 0 (lockstep re-send)
+        self._heard_by = 0              # subscriptions matched when sample 0 was published
         self._fault_reported = ''
         self._distrust_reported = ''
+        # test and benchmark seams: the wall clock of the real-time pacing, and a function
+        # called with (k, output vector) after sample k has been published
+        self.wall_clock = time.perf_counter
+        self.on_sample = None
 
-        # MCAP recording hook (issue 5): an object with record(topic, msg, sim_time_ns), or None.
-        # Called for every published output and every received command.
+        # MCAP recording (issue 5): a Recorder fed the published bytes, or None
         self._recorder = None
 
         out_qos = qos_profile_sensor_data if self._p('qos_sensor_data') else QoSProfile(depth=10)
-        self._pubs = {topic: self.create_publisher(JointState, topic, out_qos)
-                      for topic in OUTPUT_TOPICS}
-        self._msgs = {topic: JointState(name=list(self.det_names)) for topic in OUTPUT_TOPICS}
-        if self.structure_names:
-            self._pubs[STRUCTURE_TOPIC] = self.create_publisher(JointState, STRUCTURE_TOPIC,
-                                                                out_qos)
-            self._msgs[STRUCTURE_TOPIC] = JointState(name=list(self.structure_names))
-        self._clock_pub = (None if self._p('real_time')
-                           else self.create_publisher(ClockMsg, '/clock', QoSProfile(depth=10)))
-        self._clock_msg = ClockMsg()
-        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._output_pubs = [self.create_publisher(JointState, topic, out_qos)
+                             for topic in self._encoder.topics]
+        # Publisher.publish(bytes) is handle.publish_raw(bytes) behind a type check and a
+        # destroy guard (~2.5 us per call); the node publishes through the handle directly
+        self._publish_raw = [pub.handle.publish_raw for pub in self._output_pubs]
+        self._clock_pub = (None if self.mode == 'real_time'
+                           else self.create_publisher(ClockMsg, CLOCK_TOPIC, QoSProfile(depth=10)))
+        self._publish_clock = self._clock_pub.handle.publish_raw if self._clock_pub else None
+        self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         self._markers = attach_markers(self, model, self._p('markers.rate_hz'),
                                        self._p('markers.frame_id'), out_qos)
-        self.create_subscription(Float64MultiArray, 'voltage_command', self._on_command, 10)
-        self.create_subscription(JointState, 'voltage_command_joint', self._on_joint_command, 10)
+        # commands arrive as CDR bytes (raw): decoded and checked by the contract, and logged
+        # re-encoded with zero padding (equal commands give equal logs)
+        self._command_subs = [
+            (topic, self.create_subscription(
+                msg_type, topic, lambda data, topic=topic: self._on_command(topic, data), 10,
+                raw=True))
+            for topic, msg_type in ((COMMAND_TOPIC, Float64MultiArray),
+                                    (JOINT_COMMAND_TOPIC, JointState))]
         self.create_service(SetBool, '~/pause', self._srv_pause)
         self.create_service(Trigger, '~/step', self._srv_step)
         self.create_service(Trigger, '~/reset', self._srv_reset)
@@ -276,16 +244,20 @@ class SimNode(Node):
         self.paused = bool(self._p('start_paused'))
         self._timer = None
         self._make_timer()
-        self._diag_window = (time.perf_counter(), self.steps_total)
-        self._info_window = self._diag_window
+        self._diag_window = self._window_start()
+        self._info_window = self._window_start()
         self.achieved_rtf = 0.0
+        self._max_lag_seen = 0       # most steps behind since the last /diagnostics
         self.create_timer(self._p('diagnostics_period'), self._publish_diagnostics,
                           clock=self._steady)
         if self._p('info_period') > 0:
             self.create_timer(self._p('info_period'), self._log_info, clock=self._steady)
         self._start_recorder(out_qos)
+        if self.mode == 'lockstep':
+            self.create_timer(0.05, self._lockstep_resend, clock=self._steady)
         self._publish_sample(self._current_outputs())
-        mode = 'real-time x%g' % self._rtf if self._p('real_time') else 'free-run'
+        mode = ('real-time x%g' % self._rtf if self.mode == 'real_time' else
+                self.mode.replace('_', '-'))
         self.get_logger().info(
             f'scene {scene_file!r}: {self.scene.beam} beam, eps_b = {self.scene.eps_b:g}, '
             f'{self.scene.rate_hz:g} Hz, {self._sim.describe_stepper()}; '
@@ -307,13 +279,12 @@ class SimNode(Node):
             for repaired, outcome in recover_unfinished(path):
                 self.get_logger().warning(f'recovered unfinished log {repaired}: '
                                           f"{outcome['messages']} messages readable")
-        qos = {topic: out_qos for topic in self._pubs}
-        qos.update({'voltage_command': QoSProfile(depth=10),
-                    'voltage_command_joint': QoSProfile(depth=10)})
+        qos = {topic: out_qos for topic in self._encoder.topics}
+        qos.update({COMMAND_TOPIC: QoSProfile(depth=10), JOINT_COMMAND_TOPIC: QoSProfile(depth=10)})
         self._recorder = Recorder(
             path, self.scene, qos_by_topic=qos, split_mb=self._p('log.split_mb'),
             max_total_mb=self._p('log.max_mb'), max_files=self._p('log.max_files'),
-            namespace=self.get_namespace(),
+            namespace=self.get_namespace(), background=True,
             metadata={'method': self._sim.method.name, 'substeps': self._sim.substeps_setting,
                       'y0': repr(self.y0[0]) if len(self.y0) == 1 else repr(self.y0),
                       'initial_state': self._initial_text,
@@ -332,8 +303,7 @@ class SimNode(Node):
             if self._recorder.deleted:
                 self.get_logger().info(f'log limit: deleted {len(self._recorder.deleted)} '
                                        'old log file(s)')
-            self.create_timer(self._recorder.flush_period_s, self._recorder.maybe_flush,
-                              clock=self._steady)
+            # (no flush timer here: the recorder's writer thread owns the writer and flushes)
 
     def destroy_node(self):
         """Finish the MCAP log (indexed and complete), then destroy the node."""
@@ -383,6 +353,9 @@ class SimNode(Node):
         self._rtf = self._p('real_time_factor')
         self._steps_per_tick = self._p('steps_per_tick')
         self._max_catchup = self._p('max_catchup_steps')
+        self._max_lag = self._p('max_lag')
+        self._sources = self._p('lockstep.sources')
+        self._timeout = self._p('lockstep.timeout')
 
     def _p(self, name):
         return self.get_parameter(name).value
@@ -391,43 +364,59 @@ class SimNode(Node):
         if self._timer is not None:
             self.destroy_timer(self._timer)
         self._resync()
-        if self._p('real_time'):
-            period, callback = self._dt / self._rtf, self._tick_real_time
-        else:
-            period, callback = 1.0e-6, self._tick_free_run
         stopped = self.paused or bool(self._sim.fault)
+        if self.mode == 'real_time':
+            period, callback = self._dt / self._rtf, self._tick_real_time
+        elif self.mode == 'free_run':
+            period, callback = 1.0e-6, self._tick_free_run
+        else:   # lockstep: commands drive the stepping; the timer is only the deadline
+            period, callback = self._timeout or 3600.0, self._lockstep_deadline
+            stopped = stopped or not self._timeout
         self._timer = self.create_timer(period, callback, clock=self._steady,
                                         autostart=not stopped)
 
     def _resync(self):
         """Restart the wall-clock reference: no catch-up for time spent paused or reset."""
-        self._wall0 = time.perf_counter()
+        self._wall0 = self.wall_clock()
         self._k0 = self._sim.k
 
     def _run_timer(self, run):
         if run and not self._sim.fault:
             self._resync()
-            self._timer.reset()
+            if self.mode != 'lockstep' or self._timeout:
+                self._timer.reset()
+            if self.mode == 'lockstep':
+                self._lockstep_advance()   # the answers may have come while paused
         else:
             self._timer.cancel()
 
     # -- stepping -------------------------------------------------------------------------
+    def _steps_due(self, now) -> int:
+        """Control periods the wall clock is ahead of sim time (real-time mode)."""
+        # + 1e-6: a period is due at its boundary despite round-off (0.003 / 0.001 < 3)
+        return self._k0 + int((now - self._wall0) * self._rtf / self._dt + 1e-6) - self._sim.k
+
     def _tick_real_time(self):
+        """
+        Run the periods that are due by the wall clock. More than one due is a late tick; a
+        lag beyond max_lag is dropped from the wall clock (a slip: sim time then runs below
+        real time), never from the sim steps.
+        """
         if self.paused or self._sim.fault:
             return
-        now = time.perf_counter()
-        wall_step = self._dt / self._rtf
-        target = self._k0 + int((now - self._wall0) / wall_step)
-        due = target - self._sim.k
+        due = self._steps_due(self.wall_clock())
         if due <= 0:
             return
         if due > 1:
-            self.overruns += 1
-        log = self.lateness_log
+            self.late_ticks += 1
+        allowed = 1 + int(self._max_lag / self._dt + 1e-9)   # steps due at the largest lag
+        if due > allowed:
+            excess = due - allowed
+            self._k0 -= excess            # the wall-clock reference moves: sim time slips
+            self.slipped_s += excess * self._dt / self._rtf
+            due = allowed
+        self._max_lag_seen = max(self._max_lag_seen, due - 1)
         for _ in range(min(due, self._max_catchup)):
-            if log is not None:
-                log.append(time.perf_counter() - self._wall0
-                           - (self._sim.k + 1 - self._k0) * wall_step)
             if not self._advance():
                 return
 
@@ -438,52 +427,106 @@ class SimNode(Node):
             if not self._advance():
                 return
 
+    def _lockstep_advance(self):
+        """Lockstep: run the next period once every expected source has answered."""
+        if self._stepping or self.paused or self._sim.fault or self.answers < self._sources:
+            return
+        self.lockstep_wait_s += time.perf_counter() - self._published_wall
+        self._advance()
+
+    def _lockstep_deadline(self):
+        """Lockstep timeout: the answers did not come; hold the voltages and go on."""
+        if self.paused or self._sim.fault:
+            return
+        self.missed_deadlines += 1
+        self.get_logger().warning(
+            f'lockstep: {self.answers} of {self._sources} answer(s) to t = {self._sim.t:.6g} s '
+            f'within {self._timeout:g} s; holding the voltages ({self.missed_deadlines} missed)',
+            throttle_duration_sec=1.0)
+        self.lockstep_wait_s += time.perf_counter() - self._published_wall
+        self._advance()
+
+    def _subscriptions_matched(self):
+        return sum(pub.get_subscription_count() for pub in self._output_pubs)
+
+    def _lockstep_resend(self):
+        """
+        Lockstep start (t = 0, also after ~/reset): a controller discovered after sample 0 was
+        published never saw it, and both would wait forever. Re-send sample 0 (not logged)
+        when new subscriptions have matched since, until it is answered.
+        """
+        if self._sim.k != 0 or self.answers >= self._sources or not self._last_sample:
+            return
+        matched = self._subscriptions_matched()
+        if matched > self._heard_by:
+            self._heard_by = matched
+            if self._publish_clock is not None:
+                self._publish_clock(encode_clock(0))
+            for publish, data in zip(self._publish_raw, self._last_sample):
+                publish(data)
+
     def _current_outputs(self):
         return np.array(list(self._sim.outputs().values()))
 
+    def _take_commands(self):
+        """
+        Apply the commands that have arrived since the last period, also in a catch-up burst
+        or a free-run tick (the executor would deliver them only after the whole tick).
+        """
+        for topic, sub in self._command_subs:
+            while True:
+                taken = sub.handle.take_message(sub.msg_type, True)
+                if taken is None:
+                    break
+                self._on_command(topic, taken[0])
+
     def _advance(self) -> bool:
         """Run one control period and publish it; False (and fault) if the model diverged."""
+        self._stepping = True
         try:
-            out = self._sim.step()
-        except ModelDomainError as exc:
-            self._enter_fault(str(exc))
-            return False
-        self.steps_total += 1
-        return self._publish_sample(out)
+            self._take_commands()
+            try:
+                out = self._sim.step()
+            except ModelDomainError as exc:
+                self._enter_fault(str(exc))
+                return False
+            self.steps_total += 1
+            return self._publish_sample(out)
+        finally:
+            self._stepping = False
 
     def _publish_sample(self, out) -> bool:
-        if not np.all(np.isfinite(out)):
+        if not np.isfinite(out).all():
             self._sim.fault = self._sim.fault or f'non-finite output at t = {self._sim.t:.6g} s'
             self._enter_fault(self._sim.fault)
             return False
-        t_ns = int(round(self._sim.k * self._dt * 1e9))
-        stamp = Time(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)
-        for topic, indices in self._channels.items():
-            msg = self._msgs[topic]
-            msg.header.stamp = stamp
-            if topic == 'displacement':
-                values = (self._y0 - out[indices]).tolist()
-            else:
-                values = out[indices].tolist()
-                if topic == 'deflection':
-                    msg.velocity = out[self._qdot].tolist()
-            msg.position = values
-            self._pubs[topic].publish(msg)
-            if self._recorder is not None:
-                self._recorder.record(topic, msg, t_ns)
-        if self.structure_names:
-            msg = self._msgs[STRUCTURE_TOPIC]
-            msg.header.stamp = stamp
-            msg.position = (self._struct_sign * (out[list(self._struct_idx)]
-                                                 - self._struct_rest)).tolist()
-            self._pubs[STRUCTURE_TOPIC].publish(msg)
-            if self._recorder is not None:
-                self._recorder.record(STRUCTURE_TOPIC, msg, t_ns)
-        if self._clock_pub is not None:
-            self._clock_msg.clock = stamp
-            self._clock_pub.publish(self._clock_msg)
+        k = self._sim.k
+        t_ns = stamp_ns(k, self._dt)
+        samples = self._encoder.encode(out, t_ns)
+        if self.mode == 'lockstep':   # a new sample: wait for its answers
+            self.answers = 0
+            self._published_wall = time.perf_counter()
+            if self._timeout and not self.paused:
+                self._timer.reset()
+            if k == 0:
+                self._last_sample = samples
+                self._heard_by = self._subscriptions_matched()
+        try:
+            if self._publish_clock is not None:   # first: a use_sim_time reader is at t_k
+                self._publish_clock(encode_clock(t_ns))
+            for publish, data in zip(self._publish_raw, samples):
+                publish(data)
+        except RuntimeError:   # rclpy's RCLError: Ctrl-C shut the context down mid-tick
+            if self.context.ok():
+                raise
+            self._timer.cancel()
+            return False
+        if self._recorder is not None:
+            self._recorder.record_sample(t_ns, self._encoder.topics, samples, TOPIC_TYPES)
+        if self.on_sample is not None:
+            self.on_sample(k, out)
         if self._markers is not None:
-            self._markers.on_sample(self._sim.k, self._sim.x, self._sim.u, t_ns, self._recorder)
+            self._markers.on_sample(k, self._sim.x, self._sim.u, t_ns, self._recorder)
         return True
 
     def _enter_fault(self, reason):
@@ -494,56 +537,43 @@ class SimNode(Node):
             self._publish_diagnostics()
 
     # -- commands -------------------------------------------------------------------------
-    def _on_command(self, msg):
-        self._record_command('voltage_command', msg)
-        self._apply_command(list(msg.data), 'voltage_command')
-
-    def _on_joint_command(self, msg):
-        self._record_command('voltage_command_joint', msg)
-        names, values = list(msg.name), list(msg.position)
-        if len(names) != len(values):
-            return self._refuse(f'voltage_command_joint: {len(names)} name(s) but '
-                                f'{len(values)} position value(s)')
-        if not names:
-            return self._refuse('voltage_command_joint: empty JointState (no DET name); name '
-                                f'one or more of {self.det_names}')
-        unknown = [name for name in names if name not in self._det_index]
-        if unknown:
-            return self._refuse(f'voltage_command_joint: unknown DET name(s) {unknown} '
-                                f'(expected {self.det_names})')
-        repeated = sorted({name for name in names if names.count(name) > 1})
-        if repeated:
-            return self._refuse(f'voltage_command_joint: DET name(s) {repeated} given more '
-                                'than once; name each DET at most once')
-        volts = self._sim.u.tolist()
-        for name, value in zip(names, values):
-            volts[self._det_index[name]] = value
-        self._apply_command(volts, 'voltage_command_joint')
-
-    def _record_command(self, topic, msg):
+    def _on_command(self, topic, data):
+        """A command's CDR bytes: decode, check, log (at the period it applies to), hold."""
         self.commands_received += 1
-        if self._recorder is not None:
-            self._recorder.record(topic, msg, int(round(self._sim.k * self._dt * 1e9)))
+        command = self._decoder.decode(topic, data, self._sim.u.tolist())
+        if self._recorder is not None and command.canonical:
+            self._recorder.record(topic, command.canonical, stamp_ns(self._sim.k, self._dt),
+                                  TOPIC_TYPES[topic])
+        if command.volts is None:
+            self._refuse(command.reason + ('' if command.reason.startswith(
+                JOINT_COMMAND_TOPIC + ':') else '; holding the previous voltages'))
+        if command.volts is not None:
+            check = self._sim.set_input(command.volts)
+            if not check.accepted:   # the contract's checks are the simulator's; not expected
+                self._refuse(f'{topic}: {check.reason}; holding the previous voltages')
+            elif command.clamped:
+                self.clamped_commands += 1
+                self.get_logger().warning(
+                    clamp_message(topic, command.clamped, self.scene.physics.v_max),
+                    throttle_duration_sec=1.0)
+        if self.mode == 'lockstep':
+            self._count_answer(command)
 
-    def _apply_command(self, volts, topic):
-        """Hold a full voltage vector (DET order); the checks are the simulator's, named here."""
-        check = self._sim.set_input(volts)
-        if not check.accepted:
-            reason = check.reason
-            if len(volts) != len(self.det_names):
-                reason = (f'expected {len(self.det_names)} voltage(s) '
-                          f'[{_name_list(self.det_names)}], got {len(volts)}')
-            else:
-                bad = [name for name, v in zip(self.det_names, volts)
-                       if not (isinstance(v, (int, float)) and math.isfinite(v))]
-                if bad:
-                    reason = f'non-finite voltage on {_name_list(bad)}'
-            self._refuse(f'{topic}: {reason}; holding the previous voltages')
-        elif check.clamped:
-            self.clamped_commands += 1
-            v_max = self.scene.physics.v_max
-            self.get_logger().warning(clamp_message(topic, self.det_names, volts, v_max),
-                                      throttle_duration_sec=1.0)
+    def _count_answer(self, command):
+        """
+        Lockstep: a JointState command answers the sample its header stamp names (an unset
+        stamp, 0, the latest); a Float64MultiArray the latest sample. A refused command
+        answers too (the voltages are held). Answers to older samples are applied but do not
+        count.
+        """
+        k = self._sim.k
+        if command.stamp_ns:
+            answered = int(round(command.stamp_ns * 1e-9 / self._dt))
+            if answered < k:
+                self.stale_answers += 1
+                return
+        self.answers += 1
+        self._lockstep_advance()
 
     def _refuse(self, reason):
         self.refused_commands += 1
@@ -571,6 +601,7 @@ class SimNode(Node):
 
     def _srv_reset(self, request, response):
         self._sim.reset()
+        self.answers = 0   # answers to the old run's last sample do not start the new one
         if self._recorder is not None:
             self._recorder.new_file()  # sim time restarts: one file per continuous run
             if self._recorder.active:
@@ -594,30 +625,56 @@ class SimNode(Node):
                     isinstance(value, int) and value >= 1):
                 return SetParametersResult(successful=False,
                                            reason=f'{param.name} must be >= 1 (got {value!r})')
+            if param.name == 'lockstep.timeout' and not (
+                    isinstance(value, float) and math.isfinite(value) and value >= 0.0):
+                return SetParametersResult(
+                    successful=False, reason=f'lockstep.timeout must be >= 0 s (got {value!r})')
+            if param.name == 'lockstep.sources' and not (isinstance(value, int) and value >= 1):
+                return SetParametersResult(
+                    successful=False, reason=f'lockstep.sources must be >= 1 (got {value!r})')
+            if param.name == 'max_lag' and not (
+                    isinstance(value, float) and math.isfinite(value) and value >= 0.0):
+                return SetParametersResult(successful=False,
+                                           reason=f'max_lag must be >= 0 s (got {value!r})')
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, params):
         self._steps_per_tick = self._p('steps_per_tick')
         self._max_catchup = self._p('max_catchup_steps')
+        self._max_lag = self._p('max_lag')
+        self._sources = self._p('lockstep.sources')
+        if any(p.name == 'lockstep.timeout' for p in params):
+            self._timeout = self._p('lockstep.timeout')
+            if self._timer is not None and self.mode == 'lockstep':
+                self._make_timer()
+        if self.mode == 'lockstep':
+            self._lockstep_advance()   # fewer sources may already have answered
         if any(p.name == 'real_time_factor' for p in params):
             self._rtf = self._p('real_time_factor')
             if self._timer is not None:
                 self._make_timer()
 
     # -- reporting ------------------------------------------------------------------------
-    def _window_rate(self, window):
-        now = time.perf_counter()
-        wall, steps = now - window[0], self.steps_total - window[1]
-        rate = steps / wall if wall > 0 else 0.0
-        return rate, (now, self.steps_total)
+    def _window_start(self):
+        return (time.perf_counter(), self.steps_total, self.late_ticks, self.slipped_s)
+
+    def _window(self, window):
+        """Step rate, late ticks and slipped wall time since ``window``; the next window."""
+        now = self._window_start()
+        wall = now[0] - window[0]
+        rate = (now[1] - window[1]) / wall if wall > 0 else 0.0
+        return rate, now[2] - window[2], now[3] - window[3], wall, now
 
     def _publish_diagnostics(self):
-        rate, self._diag_window = self._window_rate(self._diag_window)
+        rate, late, slipped, wall, self._diag_window = self._window(self._diag_window)
         self.achieved_rtf = rate * self._dt
-        backlog = 0
-        if self._p('real_time') and not self.paused and not self._sim.fault:
-            elapsed = time.perf_counter() - self._wall0
-            backlog = max(0, self._k0 + int(elapsed * self._rtf / self._dt) - self._sim.k - 1)
+        real_time = self.mode == 'real_time'
+        running = not self.paused and not self._sim.fault
+        lag = 0
+        if real_time and running:
+            lag = max(0, self._steps_due(self.wall_clock()) - 1)
+        max_lag = max(lag, self._max_lag_seen)
+        self._max_lag_seen = 0
         # the fully qualified name tells namespaced nodes apart (/arm1/sim_node: simulation)
         node_name = self.get_fully_qualified_name()
         status = DiagnosticStatus(name=f'{node_name}: simulation', hardware_id=node_name)
@@ -625,31 +682,52 @@ class SimNode(Node):
         if distrust and distrust != self._distrust_reported:
             self.get_logger().warning(distrust)          # once per cause, until a reset
         self._distrust_reported = distrust
+        status.level, status.message = DiagnosticStatus.OK, 'paused' if self.paused else 'running'
         if self._sim.fault:
             status.level, status.message = DiagnosticStatus.ERROR, f'fault: {self._sim.fault}'
         elif distrust:
             status.level, status.message = DiagnosticStatus.WARN, distrust
-        elif backlog > 0:
-            status.level, status.message = DiagnosticStatus.WARN, f'behind by {backlog} steps'
-        else:
-            status.level = DiagnosticStatus.OK
-            status.message = 'paused' if self.paused else 'running'
+        elif real_time and running and wall > 0 and slipped > 0.01 * wall:
+            # a user-visible slowdown: more than 1 % of the window's wall time dropped
+            status.level = DiagnosticStatus.WARN
+            status.message = (f'below real time: RTF {self.achieved_rtf:.3f} of '
+                              f'{self._rtf:g} (slipped {slipped * 1e3:.0f} ms in the last '
+                              f'{wall:.1f} s)')
+        elif self.mode == 'lockstep' and self.missed_deadlines > self._missed_seen:
+            status.level = DiagnosticStatus.WARN
+            status.message = (f'lockstep: {self.missed_deadlines - self._missed_seen} missed '
+                              f'deadline(s) in the last {wall:.1f} s (the controller did not '
+                              f'answer within {self._timeout:g} s)')
+        elif real_time and running and max_lag * self._dt > 0.5 * self._max_lag > 0.0:
+            status.level = DiagnosticStatus.WARN
+            status.message = (f'lagging: up to {max_lag * self._dt * 1e3:.0f} ms behind the '
+                              f'wall clock (slips beyond {self._max_lag * 1e3:g} ms)')
         residual = self._sim.power_residual() if not self._sim.fault else math.nan
         values = {
             'sim_time_s': f'{self._sim.t:.6f}',
-            'mode': 'real_time' if self._p('real_time') else 'free_run',
+            'mode': self.mode,
             'paused': str(self.paused).lower(),
             'step_rate_hz': f'{rate:.1f}',
             'real_time_factor': f'{self.achieved_rtf:.3f}',
-            'overruns': str(self.overruns),
-            'backlog_steps': str(backlog),
+            'lag_ms': f'{lag * self._dt * 1e3:.1f}',
+            'max_lag_ms': f'{max_lag * self._dt * 1e3:.1f}',
+            'late_ticks': str(self.late_ticks),
+            'late_ticks_per_s': f'{late / wall:.1f}' if wall > 0 else '0.0',
+            'slipped_s': f'{self.slipped_s:.3f}',
+            'slipped_ms_per_s': f'{slipped / wall * 1e3:.1f}' if wall > 0 else '0.0',
             'refused_commands': str(self.refused_commands),
             'last_refused': self.last_refused,
             'clamped_commands': str(self.clamped_commands),
+            'commands_received': str(self.commands_received),
             'power_residual': f'{residual:.3e}',
             'voltage_V': str(self._sim.u.tolist()),
             'fault': self._sim.fault,
             'stepper': self._sim.describe_stepper(),      # adaptive: the current step count
+            **({'lockstep_answers': f'{self.answers} of {self._sources}',
+                'lockstep_missed_deadlines': str(self.missed_deadlines),
+                'lockstep_stale_answers': str(self.stale_answers),
+                'lockstep_wait_s': f'{self.lockstep_wait_s:.3f}'}
+               if self.mode == 'lockstep' else {}),
             'internal_steps': str(self._sim.steps_taken),
         }
         recorder = self._recorder
@@ -658,17 +736,18 @@ class SimNode(Node):
                            'log_fault': recorder.fault})
             if recorder.fault and status.level == DiagnosticStatus.OK:
                 status.level, status.message = DiagnosticStatus.WARN, recorder.fault
+        self._missed_seen = self.missed_deadlines
         status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(msg)
 
     def _log_info(self):
-        rate, self._info_window = self._window_rate(self._info_window)
+        rate, _, _, _, self._info_window = self._window(self._info_window)
         out = self._current_outputs()
         state = 'FAULT' if self._sim.fault else ('paused' if self.paused else 'running')
-        q = out[self._channels['deflection']] * 1e3
-        dy = (self._y0 - out[self._channels['displacement']]) * 1e3
+        q = self.contract.values(out, 'deflection', 'position') * 1e3
+        dy = self.contract.values(out, 'displacement', 'position') * 1e3
 
         def mm(values):
             if len(values) == 1:
@@ -682,6 +761,27 @@ class SimNode(Node):
         self.get_logger().info(
             f't={self._sim.t:.3f} s v={v} V q={mm(q)} mm dy={mm(dy)} mm '
             f'RTF={rate * self._dt:.2f} {state}')
+
+
+def make_executor(context=None):
+    """
+    The executor sim_node spins in: rclpy's EventsExecutor (about 6 µs per timer callback here
+    against ~100 µs for the SingleThreadedExecutor; bench/node_rate.py measures both). Spin it
+    with :func:`spin`.
+    """
+    from rclpy.experimental import EventsExecutor
+    return EventsExecutor(context=context)
+
+
+def spin(executor, context=None):
+    """
+    Spin until the context shuts down. EventsExecutor.spin() (rclpy 7.1) does not return on
+    Ctrl-C while no event comes in (e.g. paused); spin_once with a timeout does (it raises
+    ExternalShutdownException).
+    """
+    context = context or rclpy.get_default_context()
+    while context.ok():
+        executor.spin_once(timeout_sec=0.1)
 
 
 class _StopRequested(BaseException):
@@ -726,8 +826,7 @@ class _StopSignals:
 
 def _spin_until_stopped(node, stop) -> None:
     """Run the node's callbacks until a stop signal (checked at least every 0.1 s)."""
-    from rclpy.executors import SingleThreadedExecutor
-    executor = SingleThreadedExecutor(context=node.context)
+    executor = make_executor(node.context)
     executor.add_node(node)
     try:
         while not stop.requested and node.context.ok():

@@ -4,6 +4,7 @@ Fixtures for launch-free, in-process ROS 2 tests.
 rclpy runs in an isolated domain with localhost-only discovery, set before rclpy.init: the
 ROS_DOMAIN_ID the user has set (respected), else one picked from the pid. Each test gets its
 own context; a :class:`Harness` holds the node under test and a test node spun together in one
+executor: the EventsExecutor that sim_node's main() uses, or (``executor='single'``) rclpy's
 SingleThreadedExecutor.
 """
 
@@ -62,7 +63,7 @@ class Harness:
     TOPICS = ('deflection', 'displacement', 'charge', 'current')
     STRUCTURE = 'structure'
 
-    def __init__(self, context, namespace='', **params):
+    def __init__(self, context, namespace='', executor='events', **params):
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.parameter import Parameter
         from rosgraph_msgs.msg import Clock
@@ -73,7 +74,7 @@ class Harness:
         import rclpy
         self.closed = False
 
-        from det_sim_ros.sim_node import SimNode
+        from det_sim_ros.sim_node import make_executor, SimNode
 
         params.setdefault('real_time', False)
         params.setdefault('info_period', 0.0)
@@ -82,7 +83,8 @@ class Harness:
         self.context = context
         self.node = SimNode(context=context, namespace=namespace, parameter_overrides=overrides)
         self.test = rclpy.create_node('tester', context=context, namespace=namespace)
-        self.executor = SingleThreadedExecutor(context=context)
+        self.executor = (make_executor(context) if executor == 'events'
+                         else SingleThreadedExecutor(context=context))
         self.executor.add_node(self.node)
         self.executor.add_node(self.test)
         self.samples = {topic: {} for topic in self.TOPICS + (self.STRUCTURE,)}

@@ -209,7 +209,7 @@ CHILD = textwrap.dedent('''
     import sys, time
     from std_msgs.msg import Float64MultiArray
     from det_sim_ros.mcap_log import Recorder
-    recorder = Recorder(sys.argv[1], None, flush_period_s=0.02)
+    recorder = Recorder(sys.argv[1], None, flush_period_s=0.02, background=sys.argv[2] == 'bg')
     flushes = 0
     k = 0
     try:
@@ -218,17 +218,17 @@ CHILD = textwrap.dedent('''
             k += 1
             if recorder.flushes != flushes:
                 flushes = recorder.flushes
-                print(recorder.messages, flush=True)
+                print(recorder.flushed_messages, flush=True)
             time.sleep(0.0002)
     finally:
         print('closing', flush=True)
 ''')
 
 
-def _start_child(path):
+def _start_child(path, mode='sync'):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         [os.path.dirname(os.path.dirname(os.path.abspath(__file__)))] + sys.path))
-    return subprocess.Popen([sys.executable, '-c', CHILD, str(path)], stdout=subprocess.PIPE,
+    return subprocess.Popen([sys.executable, '-c', CHILD, str(path), mode], stdout=subprocess.PIPE,
                             text=True, env=env)
 
 
@@ -241,10 +241,12 @@ def _wait_flushes(child, count):
     return flushed
 
 
-def test_sigkill_loses_at_most_the_last_flush_period(tmp_path):
+@pytest.mark.parametrize('mode', ['sync', 'bg'])
+def test_sigkill_loses_at_most_the_last_flush_period(tmp_path, mode):
+    """A SIGKILL keeps everything written up to the last flush (with the writer thread too)."""
     from mcap.reader import make_reader
     path = tmp_path / 'killed.mcap'
-    child = _start_child(path)
+    child = _start_child(path, mode)
     try:
         flushed = _wait_flushes(child, 5)
     finally:
@@ -273,10 +275,11 @@ def test_sigkill_loses_at_most_the_last_flush_period(tmp_path):
         assert {m.name for m in reader.iter_metadata()} >= {'det_sim_ros'}
 
 
-def test_sigint_finishes_the_file(tmp_path):
+@pytest.mark.parametrize('mode', ['sync', 'bg'])
+def test_sigint_finishes_the_file(tmp_path, mode):
     from mcap.reader import make_reader
     path = tmp_path / 'interrupted.mcap'
-    child = _start_child(path)
+    child = _start_child(path, mode)
     try:
         flushed = _wait_flushes(child, 3)
         child.send_signal(signal.SIGINT)
@@ -377,3 +380,38 @@ def test_log_directory_is_bounded(tmp_path):
     assert big.deleted and [p for p in os.listdir(folder) if p.endswith('.mcap')] == \
         [os.path.basename(big.path)]
     big.close()
+def _write_samples(path, fast, background=False):
+    from det_sim_ros.contract import encode_float64_multi_array, encode_joint_state, TOPIC_TYPES
+    recorder = Recorder(path, load_scene('default'), chunk_size=2048, background=background,
+                        flush_period_s=1e9)   # no wall-clock flushes: comparable files
+    if not fast:
+        recorder._fast = None   # the plain mcap add_message path
+    topics = ['deflection', 'displacement', 'charge', 'current']
+    for k in range(500):
+        if k % 7 == 0:
+            recorder.record('voltage_command', encode_float64_multi_array([float(k)]),
+                            k * 1000, TOPIC_TYPES['voltage_command'])
+        data = [encode_joint_state(['det0'], [k + i / 10.0], stamp_ns=k * 1000)
+                for i in range(len(topics))]
+        recorder.record_sample(k * 1000, topics, data, TOPIC_TYPES)
+        if fast and not background:
+            assert recorder._fast is not None
+    recorder.close()
+    assert recorder.fault == '' and recorder.messages == 500 * 4 + 72
+    return path
+
+
+@pytest.mark.parametrize('background', [False, True])
+def test_fast_sample_path_writes_the_same_file_as_add_message(tmp_path, monkeypatch, background):
+    """record_sample's batched writer (and the writer thread) give the bytes mcap's own
+    add_message gives: records, chunk indexes and statistics."""
+    import time as time_module
+    monkeypatch.setattr(time_module, 'time_ns', lambda: 1234)   # the wall start in the metadata
+    slow = _write_samples(tmp_path / 'slow.mcap', fast=False)
+    fast = _write_samples(tmp_path / 'fast.mcap', fast=True, background=background)
+    assert open(slow, 'rb').read() == open(fast, 'rb').read()
+    from mcap.reader import make_reader
+    with open(fast, 'rb') as stream:
+        reader = make_reader(stream)
+        assert reader.get_summary().statistics.message_count == 500 * 4 + 72
+        assert len(list(reader.iter_messages(topics=['/charge']))) == 500

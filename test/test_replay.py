@@ -271,13 +271,15 @@ def test_node_plate_log_resimulates_bit_for_bit(tmp_path, harness):
 
 
 def test_command_decoding_refuses_repeated_and_empty_names():
-    """Resim reads joint commands as the node does: a repeated or empty name list is refused."""
-    from sensor_msgs.msg import JointState
-    from det_sim_ros.replay import command_volts
-    names = ['left', 'right']
+    """Resim reads joint commands as the node does (both decode with det_sim_ros.contract): a
+    repeated or empty name list is refused."""
+    from det_sim_ros.contract import CommandDecoder, encode_joint_state
+    decoder = CommandDecoder(['left', 'right'], 3000.0)
     held = [1.0, 2.0]
-    ok = JointState(name=['right'], position=[5.0])
-    assert command_volts('sensor_msgs/msg/JointState', ok, held, names) == [1.0, 5.0]
-    twice = JointState(name=['left', 'left'], position=[5.0, 6.0])
-    assert command_volts('sensor_msgs/msg/JointState', twice, held, names) is None
-    assert command_volts('sensor_msgs/msg/JointState', JointState(), held, names) is None
+
+    def volts(names, values):
+        data = encode_joint_state(names, values)
+        return decoder.decode('voltage_command_joint', data, held).volts
+    assert volts(['right'], [5.0]) == [1.0, 5.0]
+    assert volts(['left', 'left'], [5.0, 6.0]) is None
+    assert volts([], []) is None

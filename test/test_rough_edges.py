@@ -7,7 +7,8 @@ import pytest
 from rclpy.parameter import Parameter
 
 from conftest import DOMAIN_ID, pick_domain_id
-from det_sim_ros.sim_node import clamp_message, SimNode
+from det_sim_ros.contract import clamp_message
+from det_sim_ros.sim_node import SimNode
 
 
 def test_diagnostics_name_the_fully_qualified_node(ros_context):
@@ -26,10 +27,15 @@ def test_diagnostics_name_the_fully_qualified_node(ros_context):
 
 
 def test_clamp_warning_names_channel_then_value():
-    assert clamp_message('voltage_command', ['det0'], [-5.0], 3000.0) == \
-        'det0: -5 V clamped to [0, 3000] V (voltage_command)'
-    assert clamp_message('voltage_command', ['left', 'right'], [3500.0, 10.0], 3000.0) == \
-        'left: 3500 V clamped to [0, 3000] V (voltage_command)'
+    """The warning the node logs for a clamped command, from the contract's decoding."""
+    from det_sim_ros.contract import CommandDecoder, encode_float64_multi_array
+    for names, volts, expected in (
+            (['det0'], [-5.0], 'det0: -5 V clamped to [0, 3000] V (voltage_command)'),
+            (['left', 'right'], [3500.0, 10.0],
+             'left: 3500 V clamped to [0, 3000] V (voltage_command)')):
+        command = CommandDecoder(names, 3000.0).decode(
+            'voltage_command', encode_float64_multi_array(volts), [0.0] * len(names))
+        assert clamp_message('voltage_command', command.clamped, 3000.0) == expected
 
 
 def test_domain_id_respects_the_users_setting():

@@ -1,0 +1,185 @@
+"""The ROS-free topic contract: the bytes of every output equal the simulator's values (read by
+rclpy and by rosbags), command decoding and checks, and no rclpy import."""
+
+import math
+import os
+import struct
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from det_sim_ros.contract import (CdrError, CommandDecoder, decode_float64_multi_array,
+                                  decode_joint_state, encode_clock, encode_float64_multi_array,
+                                  encode_joint_state, JOINT_STATE, OUTPUT_FIELDS, OutputContract)
+from det_sim_ros.scene import load_scene
+from det_sim_ros.simulator import Simulator
+
+
+def _run(scene, volts, n):
+    sim = Simulator(scene)
+    sim.set_input(volts)
+    for _ in range(n):
+        out = sim.step()
+    return sim, out.copy()
+
+
+@pytest.mark.parametrize('scene_name, overrides', [
+    ('default', {}), ('plate', {}),
+    ('array', {'structure.copies': 3, 'structure.spread': 0.05})])
+def test_encoded_samples_decode_to_exactly_the_simulator_values(scene_name, overrides):
+    from rclpy.serialization import deserialize_message
+    from rosbags.typesys import get_typestore, Stores
+    from sensor_msgs.msg import JointState
+    store = get_typestore(Stores.ROS2_JAZZY)
+    scene = load_scene(scene_name, overrides)
+    n = len(scene.cell_physics())
+    sim, out = _run(scene, [2500.0] * n, 37)
+    contract = OutputContract(sim.model)
+    encoder = contract.encoder()
+    t_ns = 37_000_000
+    data = encoder.encode(out, t_ns)
+    assert len(data) == len(contract.topics)
+    y_index = sim.model.channel('y')
+    for topic, payload in zip(encoder.topics, data):
+        ours = deserialize_message(payload, JointState)
+        theirs = store.deserialize_cdr(payload, JOINT_STATE)   # strict: no trailing bytes
+        plain = decode_joint_state(payload)
+        for msg in (ours, theirs):
+            stamp = msg.header.stamp
+            assert stamp.sec * 10**9 + stamp.nanosec == t_ns
+            assert list(msg.name) == contract.names(topic)
+        assert plain.stamp_ns == t_ns and plain.name == contract.names(topic)
+        if topic == contract.structure_topic:
+            expected = {'position': contract.structure(out)}
+        else:
+            expected = {field: np.array([out[i] for i in sim.model.channel(output)])
+                        for field, output in OUTPUT_FIELDS[topic].items()}
+            if topic == 'displacement':   # y0_i - y_i, y0 from the statics of cell i
+                expected['position'] = contract.y0 - out[y_index]
+        for field in ('position', 'velocity', 'effort'):
+            want = expected.get(field, np.array([]))
+            for got in (np.array(getattr(ours, field)), np.array(getattr(theirs, field)),
+                        np.array(getattr(plain, field))):
+                assert got.tobytes() == want.tobytes(), (topic, field)   # bit for bit
+    # a second sample reuses the buffers: earlier bytes objects are not changed
+    first = list(data)
+    out2 = sim.step().copy()
+    second = encoder.encode(out2, t_ns + 1_000_000)
+    assert first == data and second != first
+    assert decode_joint_state(second[0]).stamp_ns == t_ns + 1_000_000
+
+
+def test_displacement_and_rest_state():
+    """Δy = y0 - y, y0 from the statics; the initial state of the default scene is at rest."""
+    scene = load_scene('default')
+    sim = Simulator(scene)
+    contract = OutputContract(sim.model)
+    from det_sim_ros.statics import rest_shortening
+    assert contract.y0.tolist() == [rest_shortening(scene)]
+    sim, out = _run(scene, [3000.0], 300)
+    dy = contract.values(out, 'displacement', 'position')
+    assert dy[0] == contract.y0[0] - out[sim.model.output_names.index('y')]
+    assert dy[0] > 1e-3   # 3 kV lengthens the DET: the beam deflects further, y0 - y > 0
+
+
+def test_cdr_round_trips_and_matches_rclpy():
+    from rclpy.serialization import deserialize_message, serialize_message
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+    joint = encode_joint_state(['a', 'bb', 'ccc'], [1.0, 2.0, 3.0], [], [0.5], 12_345_678_901,
+                               'frame')
+    msg = deserialize_message(joint, JointState)
+    assert msg.name == ['a', 'bb', 'ccc'] and list(msg.effort) == [0.5]
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (12, 345_678_901)
+    assert msg.header.frame_id == 'frame'
+    # rclpy's bytes (padding uninitialised, trailing bytes) decode to the same fields
+    decoded = decode_joint_state(serialize_message(msg))
+    assert decoded.name == ['a', 'bb', 'ccc'] and decoded.position == [1.0, 2.0, 3.0]
+    assert decoded.stamp_ns == 12_345_678_901 and decoded.effort == [0.5]
+    array = Float64MultiArray(data=[1.5, -2.0])
+    array.layout.dim = [MultiArrayDimension(label='x', size=2, stride=2)]
+    raw = serialize_message(array)
+    values, dims, offset = decode_float64_multi_array(raw)
+    assert values == [1.5, -2.0] and dims == [('x', 2, 2)] and offset == 0
+    assert deserialize_message(encode_float64_multi_array(values, dims), Float64MultiArray) \
+        == array
+    clock = deserialize_message(encode_clock(3_000_000_007), Clock)
+    assert (clock.clock.sec, clock.clock.nanosec) == (3, 7)
+
+
+def test_big_endian_cdr_is_read():
+    body = struct.pack('>I', 0) + struct.pack('>I', 0) + struct.pack('>I', 2) + bytes(4) \
+        + struct.pack('>2d', 7.0, 8.0)
+    assert decode_float64_multi_array(b'\x00\x00\x00\x00' + body)[0] == [7.0, 8.0]
+
+
+@pytest.mark.parametrize('data', [b'', b'\x01\x02\x00\x00', b'\x00\x01\x00\x00\x01',
+                                  b'\x00\x01\x00\x00' + struct.pack('<I', 10**6)])
+def test_malformed_bytes_raise_cdr_error(data):
+    with pytest.raises(CdrError):
+        decode_float64_multi_array(data)
+    with pytest.raises(CdrError):
+        decode_joint_state(data)
+
+
+def test_command_rules_per_channel():
+    decoder = CommandDecoder(['left', 'right'], v_max=3000.0)
+    held = [100.0, 200.0]
+    ok = decoder.decode('voltage_command', encode_float64_multi_array([1000.0, 2000.0]), held)
+    assert ok.volts == [1000.0, 2000.0] and not ok.reason and not ok.clamped
+    assert decode_float64_multi_array(ok.canonical)[0] == [1000.0, 2000.0]
+    nan = decoder.decode('voltage_command', encode_float64_multi_array([1.0, math.nan]), held)
+    assert nan.volts is None and 'non-finite voltage on right' in nan.reason
+    assert 'left' not in nan.reason
+    short = decoder.decode('voltage_command', encode_float64_multi_array([1.0]), held)
+    assert short.volts is None and 'expected 2 voltage(s) [left, right], got 1' in short.reason
+    clamped = decoder.decode('voltage_command', encode_float64_multi_array([-5.0, 4000.0]), held)
+    assert clamped.volts == [-5.0, 4000.0]   # the simulator clamps; the decoder names them
+    assert clamped.clamped == ('left: -5 V', 'right: 4000 V')
+    subset = decoder.decode('voltage_command_joint',
+                            encode_joint_state(['right'], [700.0], stamp_ns=5), held)
+    assert subset.volts == [100.0, 700.0] and subset.stamp_ns == 5
+    unknown = decoder.decode('voltage_command_joint', encode_joint_state(['det0'], [1.0]), held)
+    assert unknown.volts is None and 'unknown DET name' in unknown.reason
+    counts = decoder.decode('voltage_command_joint',
+                            encode_joint_state(['left', 'right'], [1.0]), held)
+    assert counts.volts is None and '2 name(s) but 1 position value(s)' in counts.reason
+    bad = decoder.decode('voltage_command_joint', encode_joint_state(['left'], [math.inf]), held)
+    assert bad.volts is None and 'non-finite voltage on left' in bad.reason
+    twice = decoder.decode('voltage_command_joint',
+                           encode_joint_state(['left', 'left'], [1.0, 2.0]), held)
+    assert twice.volts is None and "['left'] given more than once" in twice.reason
+    empty = decoder.decode('voltage_command_joint', encode_joint_state([], []), held)
+    assert empty.volts is None and 'empty JointState' in empty.reason
+    torn = decoder.decode('voltage_command', b'\x00\x01\x00\x00\x05', held)
+    assert torn.volts is None and 'malformed' in torn.reason and not torn.canonical
+
+
+def test_contract_and_replay_need_no_rclpy(tmp_path):
+    """The contract, the recorder and re-simulation run without importing rclpy."""
+    code = (
+        'import sys\n'
+        'from det_sim_ros import contract\n'
+        'from det_sim_ros.mcap_log import Recorder\n'
+        'from det_sim_ros.replay import resimulate, simulate_to_log\n'
+        'from det_sim_ros.scene import load_scene\n'
+        'from det_sim_ros.simulator import Simulator\n'
+        'scene = load_scene("plate")\n'
+        'sim = Simulator(scene)\n'
+        f'recorder = Recorder({str(tmp_path / "run.mcap")!r}, scene, metadata={{\n'
+        '    "method": sim.method.name, "substeps": sim.substeps_setting})\n'
+        'simulate_to_log(recorder, sim, lambda k: [1000.0 + k, 2000.0] if k % 7 == 0 else None,'
+        ' 50, joint_commands=True)\n'
+        'recorder.close()\n'
+        f'result = resimulate({str(tmp_path / "run.mcap")!r})\n'
+        'assert result.ok(0.0) and result.commands == 8, result.table()\n'
+        'assert not [m for m in sys.modules if m.startswith("rclpy")], "rclpy imported"\n'
+        'print("ok")\n')
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [os.path.dirname(os.path.dirname(os.path.abspath(__file__)))] + sys.path))
+    proc = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                          env=env, timeout=600)
+    assert proc.returncode == 0 and proc.stdout.strip() == 'ok', proc.stderr

@@ -1,0 +1,178 @@
+"""
+sim_node's I/O (issue 15): the published bytes are the simulator's values, commands that arrive
+during a catch-up burst apply from the next period, the lag behind the wall clock is bounded
+(the node slips instead), both executors work.
+
+Real-time pacing is driven by a fake wall clock (``node.wall_clock``): no wall-clock thresholds.
+"""
+
+import numpy as np
+import pytest
+
+from det_sim_ros.contract import decode_joint_state, OUTPUT_FIELDS
+from det_sim_ros.mcap_log import LogReader
+from det_sim_ros.replay import resimulate
+from det_sim_ros.simulator import Simulator
+
+from conftest import WALL_TIMEOUT
+
+
+class FakeWall:
+    """A wall clock that moves only when the test says so."""
+
+    def __init__(self):
+        self.now = 1000.0
+
+    def __call__(self):
+        return self.now
+
+
+def _wait_readable(node, topic='voltage_command'):
+    """Block until a command sits in the node's subscription (delivered, not yet taken)."""
+    from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+    sub = dict(node._command_subs)[topic]
+    with sub.handle, node.context.handle:
+        wait_set = _rclpy.WaitSet(1, 0, 0, 0, 0, 0, node.context.handle)
+        wait_set.clear_entities()
+        wait_set.add_subscription(sub.handle)
+        wait_set.wait(int(WALL_TIMEOUT * 1e9))
+        assert wait_set.get_ready_entities('subscription'), 'the command never arrived'
+
+
+def _real_time_node(harness, tmp_path, **params):
+    h = harness(real_time=True, start_paused=True, **{'log.path': str(tmp_path / 'logs')},
+                **params)
+    wall = FakeWall()
+    h.node.wall_clock = wall
+    assert h.call('pause', data=False).success   # the pacing reference: now, k = 0
+    for _ in range(5):
+        h.executor.spin_once(timeout_sec=0.005)
+    assert h.node._sim.k == 0                     # the fake clock has not moved
+    return h, wall
+
+
+def test_published_bytes_are_the_simulator_values(harness):
+    """What subscribers receive (raw CDR) decodes to the offline simulator's outputs bit for
+    bit; the same bytes are what the log holds."""
+    from sensor_msgs.msg import JointState
+    h = harness(start_paused=True)
+    raw = {topic: {} for topic in OUTPUT_FIELDS}
+    subs = [h.test.create_subscription(JointState, topic,
+                                       lambda data, topic=topic: raw[topic].__setitem__(
+                                           decode_joint_state(data).stamp_ns, data), 100,
+                                       raw=True)
+            for topic in OUTPUT_FIELDS]
+    h.spin_until(lambda: all(s.get_publisher_count() for s in subs), 'discovery')
+    h.command([2200.0])
+    for k in range(1, 31):
+        assert h.call('step').success
+    h.spin_until(lambda: all(30_000_000 in raw[t] for t in raw), 'the 30th sample')
+    sim = Simulator(h.node.scene)
+    sim.set_input([2200.0])
+    y0 = np.array(h.node.y0)
+    names = sim.output_names
+    for k in range(1, 31):
+        out = sim.step()
+        t_ns = k * 1_000_000
+        for topic, fields in OUTPUT_FIELDS.items():
+            msg = decode_joint_state(raw[topic][t_ns])
+            assert msg.name == ['det0']
+            for field, output in fields.items():
+                want = out[names.index(output)]
+                if topic == 'displacement':
+                    want = y0[0] - want
+                assert np.array(getattr(msg, field)).tobytes() == np.array([want]).tobytes()
+
+
+@pytest.mark.parametrize('executor', ['events', 'single'])
+def test_command_during_catch_up_applies_from_the_next_period(harness, tmp_path, executor):
+    """40 periods fall due at once (a burst); a command that arrives after the burst's 5th
+    sample is applied to the 6th period, not after the burst. The log says so, and it
+    re-simulates bit for bit."""
+    from std_msgs.msg import Float64MultiArray
+    h, wall = _real_time_node(harness, tmp_path, executor=executor)
+    node = h.node
+    arrivals = []
+
+    def on_sample(k, out):
+        if k == 5:
+            h.cmd.publish(Float64MultiArray(data=[2500.0]))
+            _wait_readable(node)
+        arrivals.append((k, node._sim.u.tolist()))
+    node.on_sample = on_sample
+    wall.now += 40 * node._dt   # 40 periods due: one tick runs them all
+    h.spin_until(lambda: node._sim.k >= 40, '40 periods')
+    assert node._sim.k == 40 and node.late_ticks >= 1
+    assert dict(arrivals)[5] == [0.0] and dict(arrivals)[6] == [2500.0]
+    recorder = node._recorder
+    h.close()
+    commands = [m.log_time for m in LogReader(recorder.path).messages(['voltage_command'])]
+    assert commands == [5_000_000]      # applied before the step from t_5 to t_6
+    result = resimulate(recorder.path)
+    assert result.ok(0.0) and result.commands == 1, result.table()
+
+
+def test_lag_is_bounded_by_slipping(harness, tmp_path):
+    """10 s of wall time at once: the node runs only max_lag worth of periods, drops the rest
+    of the wall time (counted as slipped), then keeps pace; /diagnostics says so."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+    h, wall = _real_time_node(harness, tmp_path, max_lag=0.02)
+    node = h.node
+    dt = node._dt
+    wall.now += 10.0
+    h.spin_until(lambda: node._sim.k > 0, 'the late tick')
+    for _ in range(5):
+        h.executor.spin_once(timeout_sec=0.005)
+    assert node._sim.k == 21          # the period due now plus 20 ms of lag, no more
+    assert node.slipped_s == pytest.approx(10.0 - 21 * dt, abs=1e-9)
+    assert node._steps_due(wall()) == 0
+    # after the slip the node keeps pace with the clock again: one period per period
+    for n in range(1, 4):
+        wall.now += dt
+        h.spin_until(lambda n=n: node._sim.k == 21 + n, 'the next period')
+    assert node.slipped_s == pytest.approx(10.0 - 21 * dt, abs=1e-9)
+    node._publish_diagnostics()
+    h.spin_until(lambda: h.diagnostics, '/diagnostics')
+    status = h.diagnostics[-1].status[0]
+    values = {kv.key: kv.value for kv in status.values}
+    assert status.level == DiagnosticStatus.WARN and 'below real time' in status.message
+    assert values['slipped_s'] == f'{10.0 - 21 * dt:.3f}' and values['lag_ms'] == '0.0'
+    assert float(values['max_lag_ms']) == pytest.approx(20.0)
+    # a quiet window afterwards: OK again
+    h.diagnostics.clear()
+    node._publish_diagnostics()
+    h.spin_until(lambda: h.diagnostics, '/diagnostics')
+    assert h.diagnostics[-1].status[0].level == DiagnosticStatus.OK
+    # every period was run (no sim step dropped) and published in order
+    recorder = node._recorder
+    h.close()
+    stamps = [decode_joint_state(m.data).stamp_ns
+              for m in LogReader(recorder.path).messages(['displacement'])]
+    assert stamps == [k * 1_000_000 for k in range(25)]
+
+
+def test_small_lag_catches_up_without_slipping(harness, tmp_path):
+    """A late tick within max_lag runs every due period and slips nothing."""
+    h, wall = _real_time_node(harness, tmp_path)   # default max_lag 50 ms
+    node = h.node
+    wall.now += 30 * node._dt
+    h.spin_until(lambda: node._sim.k == 30, '30 periods')
+    assert node.slipped_s == 0.0 and node.late_ticks == 1
+
+
+@pytest.mark.parametrize('executor', ['events', 'single'])
+def test_services_and_parameters_with_either_executor(harness, executor):
+    """~/pause, ~/step, ~/reset and parameter changes work in both executors."""
+    from rclpy.parameter import Parameter
+    h = harness(start_paused=True, executor=executor)
+    h.command([1000.0])
+    for k in (1, 2):
+        assert h.call('step').success
+        h.spin_until(lambda k=k: h.latest('deflection') == k * 1_000_000, f'sample {k}')
+    assert h.node.set_parameters([Parameter('max_lag', value=0.2)])[0].successful
+    assert not h.node.set_parameters([Parameter('max_lag', value=-1.0)])[0].successful
+    assert h.node._max_lag == 0.2
+    assert h.call('reset').success and h.node._sim.k == 0
+    assert h.call('pause', data=False).success
+    h.spin_until_sim_time(0.05)
+    assert not h.non_finite
