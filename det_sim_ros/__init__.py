@@ -19,7 +19,14 @@ def _quiet_stop_while_the_node_imports() -> None:
         return
 
     def stop(signum, frame):
-        raise SystemExit(0)
+        # not an exception: raised inside a C extension's initialisation (rclpy's pybind11
+        # module) it would come out as an ImportError traceback
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except Exception:  # noqa: BLE001
+                pass
+        os._exit(0)
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, stop)
 

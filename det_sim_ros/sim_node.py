@@ -860,6 +860,11 @@ def main(args=None):
             code = 1
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
+        except Exception:
+            if not stop.requested:
+                raise
+            # a stop during the preparation that a library turned into its own error (e.g. a
+            # C extension's initialisation): still a stop
         finally:
             stop.preparing = False
             if node is not None:
