@@ -15,6 +15,10 @@ import time
 import pytest
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+# Test the installed package (with its compiled kernel), never the source tree beside it: child
+# processes (`python -m det_sim_ros.sim_node`) inherit the working directory, and without this
+# their sys.path would start there (Python 3.11+: PYTHONSAFEPATH).
+os.environ.setdefault('PYTHONSAFEPATH', '1')
 
 
 def pick_domain_id(environ, pid) -> int:
