@@ -10,6 +10,7 @@ SingleThreadedExecutor.
 
 import math
 import os
+import sys
 import time
 
 import pytest
@@ -19,6 +20,12 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 # processes (`python -m det_sim_ros.sim_node`) inherit the working directory, and without this
 # their sys.path would start there (Python 3.11+: PYTHONSAFEPATH).
 os.environ.setdefault('PYTHONSAFEPATH', '1')
+
+
+def child_env(**extra):
+    """The environment for a Python child process of a test: it imports what this process
+    imports (its sys.path: the installed package, or whatever PYTHONPATH a developer gave)."""
+    return dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path), **extra)
 
 
 def pick_domain_id(environ, pid) -> int:

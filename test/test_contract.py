@@ -2,7 +2,6 @@
 rclpy and by rosbags), command decoding and checks, and no rclpy import."""
 
 import math
-import os
 import struct
 import subprocess
 import sys
@@ -15,6 +14,7 @@ from det_sim_ros.contract import (CdrError, CommandDecoder, decode_float64_multi
                                   encode_joint_state, JOINT_STATE, OUTPUT_FIELDS, OutputContract)
 from det_sim_ros.scene import load_scene
 from det_sim_ros.simulator import Simulator
+from conftest import child_env
 
 
 def _run(scene, volts, n):
@@ -178,8 +178,7 @@ def test_contract_and_replay_need_no_rclpy(tmp_path):
         'assert result.ok(0.0) and result.commands == 8, result.table()\n'
         'assert not [m for m in sys.modules if m.startswith("rclpy")], "rclpy imported"\n'
         'print("ok")\n')
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [os.path.dirname(os.path.dirname(os.path.abspath(__file__)))] + sys.path))
+    env = child_env()
     proc = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
                           env=env, timeout=600)
     assert proc.returncode == 0 and proc.stdout.strip() == 'ok', proc.stderr

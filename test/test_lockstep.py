@@ -18,6 +18,7 @@ from det_sim_ros.replay import resimulate
 from det_sim_ros.scene import load_scene
 from det_sim_ros.simulator import Simulator
 from det_sim_ros.testing import det_sim  # noqa: F401 - the fixture, as the plugin gives it
+from conftest import child_env
 
 KP, KI, T_STEP, TARGET = 2.0e4, 6.0e6, 0.6, 2.0e-3   # V/m, V/(m s), s, m
 
@@ -249,8 +250,7 @@ def test_readme_example_runs_as_a_plugin(tmp_path):
     assert README_EXAMPLE.strip() in readme   # the tested code is the documented code
     (tmp_path / 'test_example.py').write_text(README_EXAMPLE)
     installed = any(e.value == 'det_sim_ros.testing' for e in entry_points(group='pytest11'))
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [os.path.dirname(os.path.dirname(os.path.abspath(__file__)))] + sys.path))
+    env = child_env()
     proc = subprocess.run([sys.executable, '-m', 'pytest', '-q', '-p', 'no:cacheprovider']
                           + ([] if installed else ['-p', 'det_sim_ros.testing'])
                           + [str(tmp_path / 'test_example.py')],

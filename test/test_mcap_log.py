@@ -16,6 +16,7 @@ from det_sim_ros.mcap_log import (LogReader, message_definition, qos_profiles_ya
 from det_sim_ros.replay import OUTPUT_FIELDS, simulate_to_log
 from det_sim_ros.scene import load_scene, scene_to_dict
 from det_sim_ros.simulator import Simulator
+from conftest import child_env
 
 N_STEPS = 300
 OUTPUT_TOPICS = ['/' + t for t in OUTPUT_FIELDS]
@@ -226,8 +227,7 @@ CHILD = textwrap.dedent('''
 
 
 def _start_child(path, mode='sync'):
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [os.path.dirname(os.path.dirname(os.path.abspath(__file__)))] + sys.path))
+    env = child_env()
     return subprocess.Popen([sys.executable, '-c', CHILD, str(path), mode], stdout=subprocess.PIPE,
                             text=True, env=env)
 

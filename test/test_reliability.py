@@ -28,9 +28,9 @@ from det_sim_ros.mcap_log import is_torn, LogReader
 from det_sim_ros.scene import (INTEGRATOR_SPEC, load_scene, PHYSICS_SPEC, SCENE_SPEC,
                                scene_to_dict, STRUCTURE_SPEC)
 from det_sim_ros.sim_node import main, NODE_PARAMS
+from conftest import child_env
 
 FULL = os.environ.get('DET_SIM_RELIABILITY', '') == 'full'
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 READY = 'voltage command order'     # the node's last start-up line
 WALL_LIMIT = 120.0                  # s, a safety net only
 
@@ -41,8 +41,7 @@ def _interactive():
 
 
 def _env():
-    return dict(os.environ, PYTHONPATH=os.pathsep.join([ROOT] + sys.path),
-                PYTHONUNBUFFERED='1')
+    return child_env(PYTHONUNBUFFERED='1')
 
 
 @dataclasses.dataclass
