@@ -789,13 +789,7 @@ class Recorder:
                 t = self._last_t
                 self.clamped += len(data)
             self._last_t = t
-            if self._file_start_t is None:
-                self._file_start_t = t
-            elif ((self.split_ns and t - self._file_start_t >= self.split_ns)
-                  or (self.split_bytes and self._stream.tell() >= self.split_bytes)):
-                self._close_file()
-                self._open(self._split_path())
-                self._file_start_t = t
+            if self._split_if_due(t):      # (the new file registers its channels again)
                 return self._write_sample(log_time_ns, topics, data, types)
             items = []
             for topic, payload in zip(topics, data):
@@ -838,13 +832,7 @@ class Recorder:
                 data = bytes(msg)
             else:
                 data = serialize(msg)
-            if self._file_start_t is None:
-                self._file_start_t = t
-            elif ((self.split_ns and t - self._file_start_t >= self.split_ns)
-                  or (self.split_bytes and self._stream.tell() >= self.split_bytes)):
-                self._close_file()
-                self._open(self._split_path())
-                self._file_start_t = t
+            self._split_if_due(t)
             channel_id = self._channels.get(topic)
             if channel_id is None:
                 channel_id = self._channel(topic, msg, type_name)
@@ -864,6 +852,20 @@ class Recorder:
             return False
         finally:
             self.record_time_s += self._clock() - start
+
+    def _split_if_due(self, t: int) -> bool:
+        """Continue in a new file when this one has reached split_mb or its time span (t: the
+        log time being written); True if it did."""
+        if self._file_start_t is None:
+            self._file_start_t = t
+            return False
+        if ((self.split_ns and t - self._file_start_t >= self.split_ns)
+                or (self.split_bytes and self._stream.tell() >= self.split_bytes)):
+            self._close_file()
+            self._open(self._split_path())
+            self._file_start_t = t
+            return True
+        return False
 
     # -- the writer thread (background=True) -------------------------------------------------
     _NEW_FILE = object()
