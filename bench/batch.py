@@ -16,7 +16,8 @@ switch together). Every copy is its own coupled group with its own adaptive step
 copy snapping does not make the others take its steps. ``array run`` is also timed on
 ``--threads`` threads (groups spread over them; results are identical). Cost: process CPU
 seconds per simulated second, median of --repeats; RTF = wall-clock real-time factor (for
-threads > 1, wall time is what a user waits). Run: ``python bench/batch.py`` (about 2 min).
+threads > 1, wall time is what a user waits). The simulators are built outside the timing (reset() between runs): building a 1000-copy
+array takes ~12 s, mostly its copies' rest-state solves. Run: ``python bench/batch.py``.
 """
 
 import argparse
@@ -86,24 +87,31 @@ def main(argv=None) -> int:
         scene = load_scene('array', {'structure.copies': n, 'integrator.tolerance': args.tolerance,
                                      'integrator.substeps': args.substeps,
                                      'scene.initial_state': args.initial_state})
-        sim = Simulator(scene)
+        sim = Simulator(scene)   # built once: a 1000-copy array takes ~12 s (rest states)
         periods = int(round(args.sim_time / sim.dt))
         for kind, synchronized in ((k, sync) for k in args.commands.split(',')
                                    for sync in (False, True)):
             U = _commands(n, periods, sim.dt, scene.physics.v_max, synchronized, kind)
-            counted = Simulator(sim.model)
-            simulate(counted, U, args.sim_time)
-            steps = counted.steps_taken / (n * periods)
+            sim.stepper.threads = 1
+            steps0 = sim.steps_taken
+            sim.reset()
+            simulate(sim, U, args.sim_time)
+            steps = (sim.steps_taken - steps0) / (n * periods)
 
             def stepping():
-                s = Simulator(sim.model)
+                sim.reset()
                 for k in range(periods):
-                    s.set_input(U[k])
-                    s.step()
+                    sim.set_input(U[k])
+                    sim.step()
             per = 1e6 / (n * periods)     # seconds per run -> us per actuator and period
             cost_step = _cpu(stepping, args.repeats) * per
-            runs = [_wall(lambda: simulate(Simulator(sim.model, threads=t), U, args.sim_time),
-                          args.repeats) * per for t in threads]
+
+            def offline(threads):
+                sim.stepper.threads = threads
+                sim.reset()
+                simulate(sim, U, args.sim_time)
+            runs = [_wall(lambda: offline(t), args.repeats) * per for t in threads]
+            sim.stepper.threads = 1
             cost_sep = float('nan')
             if n <= args.max_separate:
                 singles = [Simulator(scene.cell_scene(i)) for i in range(n)]

@@ -67,9 +67,12 @@ typedef struct {
     double *Us4, *ydot;                /* outputs: bending energy beyond EI int w''^2, dy/dt */
     double *dx;                        /* outputs: a rate buffer */
     double p_in, p_diss;               /* supplied and dissipated power of the last rhs, W */
+    int owned;                         /* the buffer is this scratch's (ds_work_init) */
 } ds_work;
 
 int ds_work_init(ds_work *w, const ds_model *m);
+int64_t ds_work_size(const ds_model *m);
+void ds_work_attach(ds_work *w, const ds_model *m, double *buf);
 void ds_work_free(ds_work *w);
 
 /* physics.c */
@@ -128,7 +131,6 @@ typedef struct {
     int status;                         /* of the last period (batch) */
     /* stepping scratch (one allocation) */
     double *N, *X, *L, *e_c, *x_start, *pend, *x0, *x_keep, *phis, *coef, *inv_scale, *x_local;
-    double *mem;
     ds_cell *view_cells;
     int64_t *view_ints;
     double *view_mi;
@@ -143,6 +145,7 @@ typedef struct {
     double fine;                        /* first step after an input jump, units of tau */
     int64_t n_groups;
     ds_group *group;
+    double *arena;                      /* every group's scratch, in group order (locality) */
     int threads;
 } ds_stepper;
 

@@ -12,14 +12,18 @@
 
 #include "detsim.h"
 
-int ds_work_init(ds_work *w, const ds_model *m)
+int64_t ds_work_size(const ds_model *m)
 {
-    int64_t nc = m->n_cells, nq = m->n_q;
+    const int64_t nc = m->n_cells, nq = m->n_q;
+    return 2 * nc + 2 * nq + nq * m->mass_block + 2 * nc + m->n_state + 1;
+}
+
+/* Lay the scratch out in ``buf`` (ds_work_size doubles, owned by the caller). */
+void ds_work_attach(ds_work *w, const ds_model *m, double *buf)
+{
+    const int64_t nc = m->n_cells, nq = m->n_q;
     memset(w, 0, sizeof(*w));
-    w->y = calloc((size_t)(2 * nc + 2 * nq + nq * m->mass_block + 2 * nc + m->n_state + 1),
-                  sizeof(double));
-    if (!w->y)
-        return -1;
+    w->y = buf;
     w->h = w->y + nc;
     w->J = w->h + nc;
     w->F = w->J + nq;
@@ -27,13 +31,24 @@ int ds_work_init(ds_work *w, const ds_model *m)
     w->Us4 = w->Mt + nq * m->mass_block;
     w->ydot = w->Us4 + nc;
     w->dx = w->ydot + nc;
+}
+
+int ds_work_init(ds_work *w, const ds_model *m)
+{
+    double *buf = calloc((size_t)ds_work_size(m), sizeof(double));
+    if (!buf)
+        return -1;
+    ds_work_attach(w, m, buf);
+    w->owned = 1;
     return 0;
 }
 
 void ds_work_free(ds_work *w)
 {
-    free(w->y);
+    if (w->owned)
+        free(w->y);
     w->y = NULL;
+    w->owned = 0;
 }
 
 int64_t ds_n_outputs(const ds_model *m)

@@ -189,14 +189,20 @@ int ds_method_init(ds_method *me, const double *c, int64_t s, const double *term
     return 0;
 }
 
-static int group_alloc(ds_group *g, const ds_method *me)
+/* Doubles of a group's stepping scratch (without its rhs scratch). */
+static int64_t group_size(const ds_group *g, const ds_method *me)
 {
     const int64_t nx = g->m->n_state, s = me->n_stages, nt = me->n_terms;
     const int64_t n_phis = (me->n_args > 0 ? me->n_args : 1) * (me->k_max + 1);
-    g->mem = calloc((size_t)(s * nx + 8 * nx + (s + 1) * nx + n_phis + nt * nx), sizeof(double));
-    if (!g->mem || ds_work_init(&g->w, g->m) < 0)
-        return -1;
-    g->N = g->mem;
+    return s * nx + 8 * nx + (s + 1) * nx + n_phis + nt * nx;
+}
+
+/* Lay a group's scratch out in ``mem`` (group_size + ds_work_size doubles, zeroed). */
+static void group_attach(ds_group *g, const ds_method *me, double *mem)
+{
+    const int64_t nx = g->m->n_state, s = me->n_stages, nt = me->n_terms;
+    const int64_t n_phis = (me->n_args > 0 ? me->n_args : 1) * (me->k_max + 1);
+    g->N = mem;
     g->X = g->N + s * nx;
     g->L = g->X + nx;
     g->x_start = g->L + nx;
@@ -208,6 +214,7 @@ static int group_alloc(ds_group *g, const ds_method *me)
     g->e_c = g->x_local + nx;
     g->phis = g->e_c + (s + 1) * nx;
     g->coef = g->phis + n_phis;
+    ds_work_attach(&g->w, g->m, g->coef + nt * nx);
     for (int64_t k = 0; k < (s + 1) * nx; k++)
         g->e_c[k] = 1.0;
     for (int64_t t = 0; t < nt; t++)
@@ -217,7 +224,6 @@ static int group_alloc(ds_group *g, const ds_method *me)
     g->s0 = 2 * m->n_q + m->n_cells * m->creep;
     g->s1 = g->s0 + (me->exponential && m->rc_source ? m->n_cells : 0);
     g->quasi_static = me->exponential && m->rc_source;
-    return 0;
 }
 
 /* The model of group ``gi``: views into the whole model's arrays, indices made local. */
@@ -298,14 +304,14 @@ void ds_stepper_free(ds_stepper *st)
 {
     for (int64_t i = 0; st->group && i < st->n_groups; i++) {
         ds_group *g = &st->group[i];
-        free(g->mem);
-        ds_work_free(&g->w);
         free(g->view_cells);
         free(g->view_ints);
         free(g->view_mi);
     }
     free(st->group);
     st->group = NULL;
+    free(st->arena);
+    st->arena = NULL;
     ds_method_free(&st->method);
 }
 
@@ -349,6 +355,9 @@ int ds_stepper_init(ds_stepper *st, const ds_model *m, double dt, double z_tol, 
     st->group = calloc((size_t)m->n_groups, sizeof(ds_group));
     if (!st->group)
         return -1;
+    /* the groups' models first, then all their scratch in one arena, in group order: a batch
+     * period walks the groups in that order */
+    int64_t total = 0;
     for (int64_t gi = 0; gi < m->n_groups; gi++) {
         ds_group *g = &st->group[gi];
         if (m->n_groups == 1) {
@@ -356,8 +365,16 @@ int ds_stepper_init(ds_stepper *st, const ds_model *m, double dt, double z_tol, 
         } else if (make_view(g, m, gi) < 0) {
             return -1;
         }
-        if (group_alloc(g, &st->method) < 0)
-            return -1;
+        total += group_size(g, &st->method) + ds_work_size(g->m);
+    }
+    st->arena = calloc((size_t)total, sizeof(double));
+    if (!st->arena)
+        return -1;
+    double *next = st->arena;
+    for (int64_t gi = 0; gi < m->n_groups; gi++) {
+        ds_group *g = &st->group[gi];
+        group_attach(g, &st->method, next);
+        next += group_size(g, &st->method) + ds_work_size(g->m);
         g->ctl = g->ctl_initial = *ctl;
         /* the error norm's weights in the group's layout (only q, qdot are in the norm) */
         const int64_t nq = g->m->n_q;
