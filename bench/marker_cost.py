@@ -39,22 +39,21 @@ except BaseException:
 
 def run(scene, rate, sim_s, subscribe):
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
-    from det_sim_ros.sim_node import SimNode
+    from det_sim_ros.sim_node import make_executor, SimNode
     context = rclpy.context.Context()
     rclpy.init(context=context)
     node = SimNode(context=context, parameter_overrides=[
         Parameter('scene_file', value=scene), Parameter('real_time', value=False),
         Parameter('log.enabled', value=False), Parameter('info_period', value=0.0),
         Parameter('start_paused', value=True), Parameter('markers.rate_hz', value=rate)])
-    executor = SingleThreadedExecutor(context=context)
+    executor = make_executor(context)   # the node's own executor (EventsExecutor)
     executor.add_node(node)
     deadline = time.monotonic() + 10.0
     # wait for the subscriber, so every message it asks for is delivered
     waits = [node._markers.publisher] if rate else []
     if subscribe == 'all':
-        waits.append(node._pubs['deflection'])
+        waits.append(node._output_pubs[node._encoder.topics.index('deflection')])
     while not all(p.get_subscription_count() for p in waits) and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.05)
     spent = [0.0, 0.0, 0.0]
