@@ -745,10 +745,12 @@ class Recorder:
         :returns: True if written (queued, in background mode); False when recording has
             stopped on a fault.
         """
-        if self._writer is None:
-            self.dropped += 1
-            return False
         if self._queue is not None:
+            # (the writer thread owns _writer: between two files it is None for a moment,
+            # so queueing depends only on whether recording has stopped)
+            if self.fault or self._thread is None:
+                self.dropped += 1
+                return False
             if isinstance(msg, (bytearray, memoryview)):
                 msg = bytes(msg)
             elif not isinstance(msg, bytes):   # serialized here: the queue holds bytes only
@@ -756,6 +758,9 @@ class Recorder:
                 msg = serialize(msg)
             self._queue.append((topic, msg, log_time_ns, type_name))
             return True
+        if self._writer is None:
+            self.dropped += 1
+            return False
         return self._write(topic, msg, log_time_ns, type_name)
 
     def record_sample(self, log_time_ns: int, topics: Sequence[str], data: Sequence[bytes],
@@ -764,12 +769,15 @@ class Recorder:
         Write one CDR message per topic, all at ``log_time_ns`` (one sample of the node's
         outputs); ``types`` maps each topic to its type name.
         """
+        if self._queue is not None:
+            if self.fault or self._thread is None:   # stopped (see record)
+                self.dropped += len(data)
+                return False
+            self._queue.append((log_time_ns, topics, data, types))
+            return True
         if self._writer is None:
             self.dropped += len(data)
             return False
-        if self._queue is not None:
-            self._queue.append((log_time_ns, topics, data, types))
-            return True
         return self._write_sample(log_time_ns, topics, data, types)
 
     def _write_sample(self, log_time_ns, topics, data, types) -> bool:
@@ -803,8 +811,9 @@ class Recorder:
                 self.bytes += len(payload)
             fast.add(items, t)
             self.messages += len(items)
-            if start - self._last_flush >= self.flush_period_s:
-                self._flush(start)
+            if (start - self._last_flush >= self.flush_period_s
+                    or (self.flush_sim_ns and t - self._last_flush_t >= self.flush_sim_ns)):
+                self._flush(start)   # (the same rule as _write: sim time bounds a kill's loss)
             return True
         except Exception as exc:  # noqa: BLE001 - never raise into the node
             self.dropped += len(data)

@@ -605,7 +605,8 @@ class SimNode(Node):
         if self._recorder is not None:
             self._recorder.new_file()  # sim time restarts: one file per continuous run
             if self._recorder.active:
-                self.get_logger().info(f'reset: the log continues in {self._recorder.path}')
+                self.get_logger().info(f'reset: the log continues in a new file after '
+                                       f'{self._recorder.path}')
         self._fault_reported = ''
         self._run_timer(not self.paused)
         self._publish_sample(self._current_outputs())

@@ -415,3 +415,30 @@ def test_fast_sample_path_writes_the_same_file_as_add_message(tmp_path, monkeypa
         reader = make_reader(stream)
         assert reader.get_summary().statistics.message_count == 500 * 4 + 72
         assert len(list(reader.iter_messages(topics=['/charge']))) == 500
+
+
+def test_background_recording_drops_nothing_while_the_writer_switches_files(tmp_path):
+    """The writer thread owns the MCAP writer (None for a moment between two files): records
+    queued meanwhile by the node's thread must all land, none counted as dropped."""
+    import threading
+    import time as _time
+    from std_msgs.msg import Float64MultiArray
+    recorder = Recorder(tmp_path / 'bg.mcap', None, background=True)
+    switching = threading.Event()
+    inner_open = recorder._open
+
+    def slow_open(path):             # the gap between closing one file and opening the next
+        switching.set()
+        _time.sleep(0.2)
+        inner_open(path)
+    recorder._open = slow_open
+    recorder.record('x', Float64MultiArray(data=[0.0]), 0)
+    recorder.new_file()
+    assert switching.wait(5.0)
+    for k in range(1, 50):           # recorded while the writer has no file
+        recorder.record('x', Float64MultiArray(data=[float(k)]), k * 1_000_000)
+    recorder.close()
+    assert recorder.dropped == 0
+    values = [m.decode().data[0] for path in recorder.paths
+              for m in LogReader(path).messages()]
+    assert values == [float(k) for k in range(50)]
