@@ -95,13 +95,6 @@ NODE_PARAMS = {
 _rest_shortening = rest_shortening   # y0 of one cell (kept for callers of the old name)
 
 
-def _name_list(names, limit=6) -> str:
-    names = list(names)
-    if len(names) <= limit:
-        return ', '.join(names)
-    return ', '.join(names[:limit]) + f', ... ({len(names)} channels)'
-
-
 def _flatten(data, prefix=''):
     for key, value in data.items():
         if isinstance(value, dict):
