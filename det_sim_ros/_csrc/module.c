@@ -63,6 +63,34 @@ static int get_buffer(PyObject *obj, buf *b, char kind, Py_ssize_t n, int writab
     return 0;
 }
 
+/* What one argument must be: item kind ('d' float64, 'q' int64), count (< 0: any), writable. */
+typedef struct {
+    char kind;
+    Py_ssize_t n;
+    int writable;
+    const char *name;
+} spec;
+
+/* Acquire args[0..count-1] as ``specs`` say, into b; on failure none is held. */
+static int get_buffers(PyObject *const *args, const spec *specs, int count, buf *b)
+{
+    for (int i = 0; i < count; i++) {
+        if (get_buffer(args[i], &b[i], specs[i].kind, specs[i].n, specs[i].writable,
+                       specs[i].name) < 0) {
+            while (i--)
+                release(&b[i]);
+            return -1;
+        }
+    }
+    return 0;
+}
+
+static void release_buffers(buf *b, int count)
+{
+    for (int i = 0; i < count; i++)
+        release(&b[i]);
+}
+
 /* ---------------------------------------------------------------- Model */
 
 typedef struct {
@@ -259,17 +287,8 @@ static int Model_init(ModelObject *self, PyObject *args, PyObject *kwds)
     return 0;
 }
 
-/* Parse (x, u, out...) buffers for a model call: x of n_state, u of n_cells. */
-static int model_xu(ModelObject *self, PyObject *const *args, buf *bx, buf *bu, int x_writable)
-{
-    if (get_buffer(args[0], bx, 'd', self->m.n_state, x_writable, "x") < 0)
-        return -1;
-    if (get_buffer(args[1], bu, 'd', self->m.n_cells, 0, "u") < 0) {
-        release(bx);
-        return -1;
-    }
-    return 0;
-}
+#define X_SPEC(m, w) {'d', (m)->n_state, (w), "x"}
+#define U_SPEC(m, name) {'d', (m)->n_cells, 0, (name)}
 
 static PyObject *Model_rhs(ModelObject *self, PyObject *const *args, Py_ssize_t n)
 {
@@ -277,19 +296,14 @@ static PyObject *Model_rhs(ModelObject *self, PyObject *const *args, Py_ssize_t 
         PyErr_SetString(PyExc_TypeError, "rhs(x, u, dx[, quasi_static])");
         return NULL;
     }
-    buf bx, bu, bd;
-    if (model_xu(self, args, &bx, &bu, 0) < 0)
+    const ds_model *m = &self->m;
+    const spec specs[] = {X_SPEC(m, 0), U_SPEC(m, "u"), {'d', m->n_state, 1, "dx"}};
+    buf b[3];
+    if (get_buffers(args, specs, 3, b) < 0)
         return NULL;
-    if (get_buffer(args[2], &bd, 'd', self->m.n_state, 1, "dx") < 0) {
-        release(&bx);
-        release(&bu);
-        return NULL;
-    }
     int qs = n == 4 ? PyObject_IsTrue(args[3]) : 0;
-    int status = ds_rhs(&self->m, bx.view.buf, bu.view.buf, bd.view.buf, &self->w, qs > 0);
-    release(&bx);
-    release(&bu);
-    release(&bd);
+    int status = ds_rhs(m, b[0].view.buf, b[1].view.buf, b[2].view.buf, &self->w, qs > 0);
+    release_buffers(b, 3);
     return Py_BuildValue("(idd)", status, self->w.p_in, self->w.p_diss);
 }
 
@@ -299,18 +313,13 @@ static PyObject *Model_outputs(ModelObject *self, PyObject *const *args, Py_ssiz
         PyErr_SetString(PyExc_TypeError, "outputs(x, u, out)");
         return NULL;
     }
-    buf bx, bu, bo;
-    if (model_xu(self, args, &bx, &bu, 0) < 0)
+    const ds_model *m = &self->m;
+    const spec specs[] = {X_SPEC(m, 0), U_SPEC(m, "u"), {'d', ds_n_outputs(m), 1, "out"}};
+    buf b[3];
+    if (get_buffers(args, specs, 3, b) < 0)
         return NULL;
-    if (get_buffer(args[2], &bo, 'd', ds_n_outputs(&self->m), 1, "out") < 0) {
-        release(&bx);
-        release(&bu);
-        return NULL;
-    }
-    int status = ds_outputs(&self->m, bx.view.buf, bu.view.buf, bo.view.buf, &self->w);
-    release(&bx);
-    release(&bu);
-    release(&bo);
+    int status = ds_outputs(m, b[0].view.buf, b[1].view.buf, b[2].view.buf, &self->w);
+    release_buffers(b, 3);
     return PyLong_FromLong(status);
 }
 
@@ -320,16 +329,13 @@ static PyObject *Model_stiff_rates(ModelObject *self, PyObject *const *args, Py_
         PyErr_SetString(PyExc_TypeError, "stiff_rates(x, L)");
         return NULL;
     }
-    buf bx, bl;
-    if (get_buffer(args[0], &bx, 'd', self->m.n_state, 0, "x") < 0)
+    const ds_model *m = &self->m;
+    const spec specs[] = {X_SPEC(m, 0), {'d', m->n_state, 1, "L"}};
+    buf b[2];
+    if (get_buffers(args, specs, 2, b) < 0)
         return NULL;
-    if (get_buffer(args[1], &bl, 'd', self->m.n_state, 1, "L") < 0) {
-        release(&bx);
-        return NULL;
-    }
-    int status = ds_stiff_rates(&self->m, bx.view.buf, bl.view.buf, &self->w, 1);
-    release(&bx);
-    release(&bl);
+    int status = ds_stiff_rates(m, b[0].view.buf, b[1].view.buf, &self->w, 1);
+    release_buffers(b, 2);
     return PyLong_FromLong(status);
 }
 
@@ -339,18 +345,13 @@ static PyObject *Model_book_input_jump(ModelObject *self, PyObject *const *args,
         PyErr_SetString(PyExc_TypeError, "book_input_jump(x, u_old, u_new)");
         return NULL;
     }
-    buf bx, bu, bn;
-    if (model_xu(self, args, &bx, &bu, 1) < 0)
+    const ds_model *m = &self->m;
+    const spec specs[] = {X_SPEC(m, 1), U_SPEC(m, "u"), U_SPEC(m, "u_new")};
+    buf b[3];
+    if (get_buffers(args, specs, 3, b) < 0)
         return NULL;
-    if (get_buffer(args[2], &bn, 'd', self->m.n_cells, 0, "u_new") < 0) {
-        release(&bx);
-        release(&bu);
-        return NULL;
-    }
-    ds_book_input_jump(&self->m, bx.view.buf, bu.view.buf, bn.view.buf, &self->w);
-    release(&bx);
-    release(&bu);
-    release(&bn);
+    ds_book_input_jump(m, b[0].view.buf, b[1].view.buf, b[2].view.buf, &self->w);
+    release_buffers(b, 3);
     Py_RETURN_NONE;
 }
 
@@ -439,29 +440,18 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
         return -1;
     }
     ModelObject *mo = (ModelObject *)model;
-    buf bc, bt, be, bw;
-    if (get_buffer(c, &bc, 'd', -1, 0, "c") < 0)
+    PyObject *const tables[] = {c, terms, embedded, weights};
+    const spec specs[] = {{'d', -1, 0, "c"}, {'d', -1, 0, "terms"}, {'d', -1, 0, "embedded"},
+                          {'d', mo->m.n_state, 0, "error_weights"}};
+    buf b[4];
+    if (get_buffers(tables, specs, 4, b) < 0)
         return -1;
-    const Py_ssize_t s = bc.view.len / 8;
-    if (get_buffer(terms, &bt, 'd', -1, 0, "terms") < 0) {
-        release(&bc);
-        return -1;
-    }
-    if (get_buffer(embedded, &be, 'd', -1, 0, "embedded") < 0) {
-        release(&bc);
-        release(&bt);
-        return -1;
-    }
-    if (get_buffer(weights, &bw, 'd', mo->m.n_state, 0, "error_weights") < 0) {
-        release(&bc);
-        release(&bt);
-        release(&be);
-        return -1;
-    }
+    const Py_buffer bc = b[0].view, bt = b[1].view, be = b[2].view, bw = b[3].view;
+    const Py_ssize_t s = bc.len / 8;
     int rc = -1;
-    const Py_ssize_t nt = bt.view.len / 40;
-    const double *tv = bt.view.buf;
-    int valid = s >= 1 && bt.view.len % 40 == 0;
+    const Py_ssize_t nt = bt.len / 40;
+    const double *tv = bt.buf;
+    int valid = s >= 1 && bt.len % 40 == 0;
     for (Py_ssize_t t = 0; valid && t < nt; t++) {
         const double *row = tv + 5 * t;
         valid = row[0] >= 0 && row[0] <= s && row[1] >= 0 && row[1] < s && row[2] >= -1
@@ -470,12 +460,11 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
     if (!valid) {
         PyErr_SetString(PyExc_ValueError, "method table: terms must be rows (i, j, k, c, w) "
                                           "sorted by stage row i");
-    } else if (ds_method_init(&self->st.method, bc.view.buf, s, tv, nt, be.view.buf,
-                              be.view.len / 8) < 0) {
+    } else if (ds_method_init(&self->st.method, bc.buf, s, tv, nt, be.buf, be.len / 8) < 0) {
         PyErr_NoMemory();
     } else {
         ds_control ctl = {n0, n_min, n_max, tol, exponent};
-        if (ds_stepper_init(&self->st, &mo->m, dt, z_tol, fine, &ctl, bw.view.buf) < 0
+        if (ds_stepper_init(&self->st, &mo->m, dt, z_tol, fine, &ctl, bw.buf) < 0
             || ds_work_init(&self->out_work, &mo->m) < 0) {
             ds_stepper_free(&self->st);
             PyErr_NoMemory();
@@ -486,10 +475,7 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
             rc = 0;
         }
     }
-    release(&bc);
-    release(&bt);
-    release(&be);
-    release(&bw);
+    release_buffers(b, 4);
     return rc;
 }
 
@@ -516,13 +502,14 @@ static PyObject *Stepper_advance(StepperObject *self, PyObject *const *args, Py_
     double growth = n == 5 ? PyFloat_AsDouble(args[4]) : 1.0;
     if (PyErr_Occurred())
         return NULL;
-    buf bx, bu;
-    if (model_xu(self->model, args, &bx, &bu, 1) < 0)
+    const ds_model *m = &self->model->m;
+    const spec specs[] = {X_SPEC(m, 1), U_SPEC(m, "u")};
+    buf b[2];
+    if (get_buffers(args, specs, 2, b) < 0)
         return NULL;
-    int status = ds_advance(&self->st, &self->st.group[0], bx.view.buf, bu.view.buf, h,
+    int status = ds_advance(&self->st, &self->st.group[0], b[0].view.buf, b[1].view.buf, h,
                             steps, growth);
-    release(&bx);
-    release(&bu);
+    release_buffers(b, 2);
     return PyLong_FromLong(status);
 }
 
@@ -535,34 +522,24 @@ static PyObject *Stepper_period(StepperObject *self, PyObject *const *args, Py_s
         return NULL;
     }
     const ds_model *m = &self->model->m;
-    buf bx, bo, bu, bout;
-    if (model_xu(self->model, args, &bx, &bo, 1) < 0)
+    const spec specs[] = {X_SPEC(m, 1), U_SPEC(m, "u_old"), U_SPEC(m, "u"),
+                          {'d', ds_n_outputs(m), 1, "out"}};
+    buf b[4];
+    if (get_buffers(args, specs, 4, b) < 0)
         return NULL;
-    if (get_buffer(args[2], &bu, 'd', m->n_cells, 0, "u") < 0) {
-        release(&bx);
-        release(&bo);
-        return NULL;
-    }
-    if (get_buffer(args[3], &bout, 'd', ds_n_outputs(m), 1, "out") < 0) {
-        release(&bx);
-        release(&bo);
-        release(&bu);
-        return NULL;
-    }
+    double *x = b[0].view.buf, *u = b[2].view.buf;
+    const double *u_old = b[1].view.buf;
     int status;
     if (self->st.n_groups > 1) {   /* batches take long enough to let other threads run */
         Py_BEGIN_ALLOW_THREADS
-        status = ds_period(&self->st, bx.view.buf, bo.view.buf, bu.view.buf);
+        status = ds_period(&self->st, x, u_old, u);
         Py_END_ALLOW_THREADS
     } else {
-        status = ds_period(&self->st, bx.view.buf, bo.view.buf, bu.view.buf);
+        status = ds_period(&self->st, x, u_old, u);
     }
     if (status == DS_OK)
-        status = ds_outputs(m, bx.view.buf, bu.view.buf, bout.view.buf, &self->out_work);
-    release(&bx);
-    release(&bo);
-    release(&bu);
-    release(&bout);
+        status = ds_outputs(m, x, u, b[3].view.buf, &self->out_work);
+    release_buffers(b, 4);
     return PyLong_FromLong(status);
 }
 
@@ -582,45 +559,31 @@ static PyObject *Stepper_run(StepperObject *self, PyObject *const *args, Py_ssiz
     ModelObject *mo = self->model;
     const ds_model *m = &mo->m;
     const int64_t nx = m->n_state, nu = m->n_cells, ny = ds_n_outputs(m);
+    const spec inputs[] = {{'d', nx, 1, "x"}, {'d', nu, 0, "u_held"}, {'d', nu, 0, "u_last"},
+                           {'d', -1, 0, "U"}};
     buf b[6];
-    int held = 0;
-    if (get_buffer(args[0], &b[0], 'd', nx, 1, "x") < 0)
-        goto fail;
-    held = 1;
-    if (get_buffer(args[1], &b[1], 'd', nu, 0, "u_held") < 0)
-        goto fail;
-    held = 2;
-    if (get_buffer(args[2], &b[2], 'd', nu, 0, "u_last") < 0)
-        goto fail;
-    held = 3;
-    if (get_buffer(args[3], &b[3], 'd', -1, 0, "U") < 0)
-        goto fail;
-    held = 4;
+    if (get_buffers(args, inputs, 4, b) < 0)
+        return NULL;
     const Py_ssize_t n_periods = b[3].view.len / 8 / nu;
     if (n_periods * nu * 8 != b[3].view.len) {
         PyErr_SetString(PyExc_ValueError, "U: shape (n_periods, n_inputs)");
-        goto fail;
+        release_buffers(b, 4);
+        return NULL;
     }
-    if (get_buffer(args[4], &b[4], 'd', (n_periods + 1) * nx, 1, "X") < 0)
-        goto fail;
-    held = 5;
-    if (get_buffer(args[5], &b[5], 'd', (n_periods + 1) * ny, 1, "Y") < 0)
-        goto fail;
-    held = 6;
-    double *x = b[0].view.buf, *X = b[4].view.buf, *Y = b[5].view.buf;
+    const spec outputs[] = {{'d', (n_periods + 1) * nx, 1, "X"},
+                            {'d', (n_periods + 1) * ny, 1, "Y"}};
+    if (get_buffers(args + 4, outputs, 2, b + 4) < 0) {
+        release_buffers(b, 4);
+        return NULL;
+    }
     int status;
     int64_t k;
     Py_BEGIN_ALLOW_THREADS
-    status = ds_run(&self->st, &self->out_work, x, b[1].view.buf, b[2].view.buf,
-                    b[3].view.buf, n_periods, X, Y, &k);
+    status = ds_run(&self->st, &self->out_work, b[0].view.buf, b[1].view.buf, b[2].view.buf,
+                    b[3].view.buf, n_periods, b[4].view.buf, b[5].view.buf, &k);
     Py_END_ALLOW_THREADS
-    for (int i = 0; i < held; i++)
-        release(&b[i]);
+    release_buffers(b, 6);
     return Py_BuildValue("(iL)", status, (long long)k);
-fail:
-    for (int i = 0; i < held; i++)
-        release(&b[i]);
-    return NULL;
 }
 
 static PyObject *Stepper_reset_control(StepperObject *self, PyObject *unused)
