@@ -101,6 +101,8 @@ typedef struct {
     int64_t *ec_arg;                    /* exp(c_i z) = phi_0 of args[ec_arg[i]] (-1: none) */
     double *coef0;                      /* term weights at L = 0 */
     int64_t *merged_start, *merged_stage; /* the L = 0 table, equal (row, stage) merged */
+    int64_t n_exp_terms, *exp_term;     /* the terms with a phi weight (term_phi >= 0) */
+    int64_t *exp_phi_at;                /* their phi_k(c_arg z) in a step's phis */
     double *merged_weight;
     double *embedded;                   /* e_0..e_s of the error estimate (n_embedded) */
 } ds_method;

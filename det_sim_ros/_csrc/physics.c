@@ -64,6 +64,13 @@ int64_t ds_n_outputs(const ds_model *m)
  * bending beyond EI int w''^2 is EI int w''^2 w'^2 / (1 - w'^2) (curvature^2 = w''^2/(1 - w'^2));
  * |w'| >= 1 gives NaN, which the callers report as a slope domain error.
  */
+/* y = c2 q^2 + kappa c4 q^4 of a one-term cell (paper/consistent kinematics). */
+static inline double one_term_shortening(const ds_cell *cell, double q)
+{
+    const double c2 = cell->c2, c4 = cell->kappa * cell->c4, q2 = q * q;
+    return c2 * q2 + c4 * q2 * q2;
+}
+
 void ds_kinematics(const ds_model *m, const double *x, ds_work *w, int with_bending)
 {
     const int64_t nq = m->n_q, R = m->r_max;
@@ -75,7 +82,7 @@ void ds_kinematics(const ds_model *m, const double *x, ds_work *w, int with_bend
         if (r == 1 && !exact) {   /* one term: polynomials in q, ~5x cheaper than quadrature */
             const double c2 = cell->c2, c4 = cell->kappa * cell->c4;
             const double qc = x[o], q2 = qc * qc;
-            w->y[c] = c2 * q2 + c4 * q2 * q2;
+            w->y[c] = one_term_shortening(cell, qc);
             w->J[o] = 2.0 * c2 * qc + 4.0 * c4 * q2 * qc;
             w->h[c] = (2.0 * c2 + 12.0 * c4 * q2) * qd[o] * qd[o];
             if (with_bending)
@@ -202,7 +209,7 @@ static int rhs_one_term(const ds_model *m, const double *x, const double *u, dou
     const ds_det *d = &m->det[0];
     const double q = x[0], qd = x[1], q2 = q * q;
     const double c2 = cell->c2, c4 = cell->kappa * cell->c4;
-    const double y = c2 * q2 + c4 * q2 * q2;
+    const double y = one_term_shortening(cell, q);
     const double J = 2.0 * c2 * q + 4.0 * c4 * q2 * q;
     const double hq = (2.0 * c2 + 12.0 * c4 * q2) * qd * qd;
     const double dq = m->D[0] * qd;
@@ -264,19 +271,13 @@ static int rhs_one_term(const ds_model *m, const double *x, const double *u, dou
     return DS_OK;
 }
 
-/*
- * dx = f(x, u); returns a status code. Finiteness of x is checked once per step by the callers.
- *
- * With ``quasi_static`` the charge slots hold z = q_p - C(q) v_inf (v_inf = v Rp/(Rs+Rp), the
- * charge the circuit relaxes to for frozen q) and receive dz/dt (see stepping.c).
- * w->p_in, w->p_diss receive the supplied and dissipated power (W).
- */
-int ds_rhs(const ds_model *m, const double *x, const double *u, double *dx, ds_work *w,
-           int quasi_static)
+/* ds_rhs for any model: cells of any number of Ritz terms, coupled groups, the exact kinematics
+ * (kept out of line: its register saves and set-up would otherwise run on every one-term call). */
+static int __attribute__((noinline))
+rhs_general(const ds_model *m, const double *x, const double *u, double *dx, ds_work *w,
+            int quasi_static)
 {
     const int64_t nq = m->n_q, nc = m->n_cells, R = m->r_max, ld = m->mass_block;
-    if (m->one_term)
-        return rhs_one_term(m, x, u, dx, w, quasi_static);
     const double *qd = x + nq;
     double *F = w->F, *J = w->J, *Mt = w->Mt;
     ds_kinematics(m, x, w, 0);
@@ -384,6 +385,21 @@ int ds_rhs(const ds_model *m, const double *x, const double *u, double *dx, ds_w
     return status;
 }
 
+/*
+ * dx = f(x, u); returns a status code. Finiteness of x is checked once per step by the callers.
+ *
+ * With ``quasi_static`` the charge slots hold z = q_p - C(q) v_inf (v_inf = v Rp/(Rs+Rp), the
+ * charge the circuit relaxes to for frozen q) and receive dz/dt (see stepping.c).
+ * w->p_in, w->p_diss receive the supplied and dissipated power (W).
+ */
+int ds_rhs(const ds_model *m, const double *x, const double *u, double *dx, ds_work *w,
+           int quasi_static)
+{
+    if (m->one_term)
+        return rhs_one_term(m, x, u, dx, w, quasi_static);
+    return rhs_general(m, x, u, dx, w, quasi_static);
+}
+
 /* Diagonal linear part for exponential steppers: dq_p/dt = -q_p/(C Rs||Rp) + ...; all zero
  * unless ``enabled`` (an exponential method on an RC scene). Returns a status code. */
 int ds_stiff_rates(const ds_model *m, const double *x, double *L, ds_work *w, int enabled)
@@ -392,7 +408,10 @@ int ds_stiff_rates(const ds_model *m, const double *x, double *L, ds_work *w, in
         L[k] = 0.0;
     if (!enabled || !m->rc_source)
         return DS_OK;
-    ds_kinematics(m, x, w, 0);
+    if (m->one_term)   /* once per step: only y is needed, not the whole kinematics */
+        w->y[0] = one_term_shortening(&m->cell[0], x[0]);
+    else
+        ds_kinematics(m, x, w, 0);
     for (int64_t i = 0; i < m->n_cells; i++) {
         const ds_det *d = &m->det[i];
         const double lam = (m->cell[i].length - w->y[i]) / d->l0;

@@ -104,7 +104,7 @@ int ds_method_init(ds_method *me, const double *c, int64_t s, const double *term
     me->n_terms = nt;
     /* one allocation per type */
     me->c = calloc((size_t)(s + 3 * nt + 2 + (s + 1) * s + (s + 2) + 64), sizeof(double));
-    me->term_stage = calloc((size_t)(5 * nt + 3 * (s + 2) + 8), sizeof(int64_t));
+    me->term_stage = calloc((size_t)(7 * nt + 3 * (s + 2) + 8), sizeof(int64_t));
     if (!me->c || !me->term_stage) {
         ds_method_free(me);
         return -1;
@@ -120,6 +120,8 @@ int ds_method_init(ds_method *me, const double *c, int64_t s, const double *term
     me->ec_arg = me->row_start + (s + 2);
     me->merged_start = me->ec_arg + (s + 2);
     me->merged_stage = me->merged_start + (s + 2);
+    me->exp_term = me->merged_stage + 2 * nt + 8;
+    me->exp_phi_at = me->exp_term + nt;
     memcpy(me->c, c, (size_t)s * sizeof(double));
     int64_t n_args = 0, k_max = 0;
     for (int64_t t = 0; t < nt; t++) {
@@ -143,6 +145,15 @@ int ds_method_init(ds_method *me, const double *c, int64_t s, const double *term
     }
     me->n_args = n_args;
     me->k_max = k_max;
+    /* the terms whose weight follows the stiff rate, and where their phi_k(c_arg z) lies in the
+     * step's phis (args x (k_max + 1)) */
+    for (int64_t t = 0; t < nt; t++) {
+        if (me->term_phi[t] < 0)
+            continue;
+        me->exp_term[me->n_exp_terms] = t;
+        me->exp_phi_at[me->n_exp_terms] = me->term_arg[t] * (k_max + 1) + me->term_phi[t];
+        me->n_exp_terms++;
+    }
     /* terms are grouped by stage row: row i uses row_start[i] .. row_start[i + 1] */
     for (int64_t t = 0; t < nt; t++)
         me->row_start[(int64_t)terms[5 * t] + 1] = t + 1;
@@ -409,12 +420,13 @@ void ds_reset_control(ds_stepper *st)
  * the largest weighted error estimate of these steps is max'ed into g->est (one extra rhs at
  * the end for the last step's first-same-as-last term). On failure x holds the start state.
  */
-int ds_advance(const ds_stepper *st, ds_group *g, double *x, const double *u, double h,
-               int64_t n_steps, double growth)
+static inline __attribute__((always_inline)) int
+advance_core(const ds_stepper *st, ds_group *g, double *x, const double *u, double h,
+             int64_t n_steps, double growth, const int64_t nx, const int64_t s,
+             const int64_t s0, const int64_t s1)
 {
     const ds_method *me = &st->method;
     const ds_model *m = g->m;
-    const int64_t nx = m->n_state, s = me->n_stages, s0 = g->s0, s1 = g->s1;
     const int64_t nmech = 2 * m->n_q, n_emb = me->n_embedded, kp = me->k_max + 1;
     const double *emb = me->embedded;
     double *N = g->N, *X = g->X, *L = g->L, *e_c = g->e_c, *pend = g->pend;
@@ -436,10 +448,10 @@ int ds_advance(const ds_stepper *st, ds_group *g, double *x, const double *u, do
             const double z = h * L[k];
             for (int64_t a = 0; a < me->n_args; a++)
                 phi_all(me->args[a] * z, phis + a * kp, kp);
-            for (int64_t t = 0; t < me->n_terms; t++)
-                if (me->term_phi[t] >= 0)
-                    coef[t * nx + k] = me->term_weight[t]
-                                       * phis[me->term_arg[t] * kp + me->term_phi[t]];
+            for (int64_t e = 0; e < me->n_exp_terms; e++) {
+                const int64_t t = me->exp_term[e];
+                coef[t * nx + k] = me->term_weight[t] * phis[me->exp_phi_at[e]];
+            }
             for (int64_t i = 0; i < s + 1; i++) {
                 const int64_t a = me->ec_arg[i];
                 const double ci = i < s ? me->c[i] : 1.0;
@@ -514,6 +526,24 @@ int ds_advance(const ds_stepper *st, ds_group *g, double *x, const double *u, do
     if (qs)
         ds_shift_charge(m, x, u, 1.0, &g->w);
     return DS_OK;
+}
+
+/* The layouts that batch runs and the default scene step (a one-term cell with creep and an RC
+ * source, with or without the power monitor, under a four-stage table such as ETDRK4 or RK4)
+ * get their own copy of the core with the sizes as constants, so the compiler unrolls the
+ * per-state and per-stage loops and inlines the copies. The arithmetic and its order are the
+ * generic core's (no -ffast-math, no contraction): the results are bit-identical. */
+int ds_advance(const ds_stepper *st, ds_group *g, double *x, const double *u, double h,
+               int64_t n_steps, double growth)
+{
+    const int64_t nx = g->m->n_state, s = st->method.n_stages, s0 = g->s0, s1 = g->s1;
+    if (s == 4 && s0 == 3 && s1 == 4) {
+        if (nx == 6)
+            return advance_core(st, g, x, u, h, n_steps, growth, 6, 4, 3, 4);
+        if (nx == 4)
+            return advance_core(st, g, x, u, h, n_steps, growth, 4, 4, 3, 4);
+    }
+    return advance_core(st, g, x, u, h, n_steps, growth, nx, s, s0, s1);
 }
 
 /*
