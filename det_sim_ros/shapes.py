@@ -16,6 +16,7 @@ round-off; nothing here is typed in from the paper.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 from numpy.polynomial import polynomial as P
@@ -67,13 +68,23 @@ class RitzBasis:
         n_nodes = 2 * self.degree - 1   # exact up to degree 4 deg - 3 >= 4 deg - 4
         if nonpolynomial:
             n_nodes = 2 * n_nodes + 8
-        xi, w = np.polynomial.legendre.leggauss(n_nodes)
+        xi, w = _gauss_legendre(n_nodes)
         x = 0.5 * self.length * (xi + 1.0)
         return x, 0.5 * self.length * w
 
     def reference_row(self) -> np.ndarray:
         """S_j at the paper's reference point: q_ref = row @ q is the published deflection."""
         return self.values(np.array([REFERENCE_POINT[self.beam] * self.length]))[0]
+
+
+@functools.lru_cache(maxsize=None)
+def _gauss_legendre(n_nodes: int):
+    """numpy's Gauss-Legendre rule on [-1, 1], computed once per size (an array scene builds
+    one model per distinct copy; leggauss costs ~0.6 ms a call). Read-only: shared."""
+    xi, w = np.polynomial.legendre.leggauss(n_nodes)
+    xi.flags.writeable = False
+    w.flags.writeable = False
+    return xi, w
 
 
 def make_basis(beam: str, length: float, fidelity: str = 'paper', n_ritz: int = 1) -> RitzBasis:

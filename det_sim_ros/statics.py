@@ -34,7 +34,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .model import build_model, ModelDomainError
+from . import kernel
+from .model import build_model, check, ModelDomainError
 from .scene import Scene, SceneError
 
 
@@ -152,6 +153,8 @@ class _Statics:
         self._iq, self._iy, self._iC, self._iH = (names.index(k) for k in ('q', 'y', 'C', 'H'))
         self._out = np.empty(len(names))
         self._x = np.zeros(self.model.n_states)
+        self._dx = np.empty(self.model.n_states)
+        self._u1 = np.zeros(1)
         basis = self.model.bases[0]
         self.ref = basis.reference_row()
         xs = np.linspace(0.0, basis.length, 201)
@@ -174,10 +177,16 @@ class _Statics:
         return float(out[self._iH] - out[self._iC] * vp * vp)
 
     def acceleration(self, q: float, vp: float) -> float:
-        """One coordinate: q_ddot at q_dot = 0 (the sign of the generalized force -dU/dq)."""
+        """One coordinate: q_ddot at q_dot = 0 (the sign of the generalized force -dU/dq).
+        Model.f's compiled rhs, called directly: the root scans call this ~800 times per
+        distinct cell, and Model.f's argument checks were 90 % of an array's build time."""
+        if not math.isfinite(q):
+            check(kernel.NON_FINITE)
         self._x[0] = q
         self._x[1] = 0.0
-        return float(self.model.f(0.0, self._x, vp)[1])
+        self._u1[0] = vp
+        check(self.model.kernel.rhs(self._x, self._u1, self._dx)[0])
+        return float(self._dx[1])
 
     def y_of(self, coords, vp=0.0) -> float:
         return float(self._eval(coords, vp)[self._iy])
