@@ -77,8 +77,13 @@ def test_below_the_critical_prestrain_rest_is_straight():
     assert np.all(_rest_run(scene, 0.02)['q'] == 0.0)
 
 
-# released: the paper's start, bit for bit as before issue 19 (values printed by main's kernel,
-# the C one of issue 14, at the commit before the initial_state key existed; 3 kV from t = 0.2 s)
+# released: the paper's start as before issue 19 (values printed by main's kernel, the C one of
+# issue 14, at the commit before the initial_state key existed; 3 kV from t = 0.2 s). Bit for
+# bit on the machine that printed them; elsewhere the multi-term models differ in the last
+# digits (seen: 4e-14 relative after the snap-through, on an AMD EPYC against those values),
+# because the model's assembly runs through numpy/BLAS, whose kernels are chosen per CPU. A
+# change to the released path itself moves these values by far more than the tolerance.
+GOLDEN_RTOL = 1e-11
 GOLDEN = {
     ('default', ()): {'q': (0.015707308425827318, -0.009846252500990783),
                       'y': (0.0100254288450668, 0.003939502255269273)},
@@ -91,11 +96,12 @@ GOLDEN = {
 
 
 @pytest.mark.parametrize('name, overrides', list(GOLDEN))
-def test_released_gives_the_old_trajectories_bit_for_bit(name, overrides):
+def test_released_gives_the_old_trajectories(name, overrides):
     scene = load_scene(name, {**dict(overrides), 'scene.initial_state': 'released'})
     r = simulate(scene, lambda t: [3000.0 * (t >= 0.2)] * scene.n_dets, 0.3)
     for key, values in GOLDEN[name, overrides].items():
-        assert (r[key][100], r[key][300]) == values, key
+        np.testing.assert_allclose((r[key][100], r[key][300]), values, rtol=GOLDEN_RTOL,
+                                   atol=0.0, err_msg=key)
 
 
 def test_paper_scenarios_set_released():
