@@ -144,3 +144,120 @@ def test_shipped_fleet_example_loads():
     here = os.path.dirname(os.path.abspath(__file__))
     nodes = load_fleet(os.path.join(here, '..', 'config', 'fleet.yaml'))
     assert [n.mode for n in nodes] == ['real_time', 'real_time', 'lockstep']
+
+
+# -- across hosts: network namespaces ------------------------------------------------------------
+# The PI of test_lockstep, in a process of its own on a host: answers every displacement sample of
+# the node in its namespace until sim time UNTIL, then exits 0.
+PI_PROCESS = '''
+import sys
+import rclpy
+sys.path.insert(0, sys.argv[1])
+from test_lockstep import make_pi
+namespace, target, until = sys.argv[2], float(sys.argv[3]), float(sys.argv[4])
+rclpy.init()
+node = make_pi(None, joint=True, namespace=namespace, target=target, until=until,
+               after_match=True)
+while not node.done:
+    rclpy.spin_once(node, timeout_sec=0.1)
+'''
+TARGETS = (2.0e-3, 2.2e-3, 2.4e-3)    # m, Δy set point of loop i (from T_STEP = 0.6 s)
+UNTIL = 1.2                           # s of sim time: the lockstep runs end at this sample
+STEP_LIMIT = 120.0                    # s of wall time for any one step: bounds a hang only
+
+
+def _fleet_nodes(hosts):
+    """Loop i: sim_node /loop<i> in lockstep, started paused? no: lockstep waits anyway."""
+    return [{'namespace': f'/loop{i}', 'mode': 'lockstep', 'params': {'info_period': 0.0},
+             **({'host': f'h{host}'} if host is not None else {})}
+            for i, host in enumerate(hosts)]
+
+
+def _run_loops(net, tmp, node_hosts, controller_hosts, env):
+    """Start the fleet (``det_sim fleet`` once per host, the same file), one PI per loop on
+    its controller host; wait until every PI is done, stop the fleets; the nodes' log dirs."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    per_host = len(set(node_hosts)) > 1
+    fleet_file = write_fleet(tmp / 'fleet.yaml',
+                             _fleet_nodes(node_hosts if per_host else [None] * len(node_hosts)),
+                             log_dir='logs')
+    fleets = []
+    for host in sorted(set(node_hosts)):
+        with open(tmp / f'fleet_h{host}.out', 'w') as out:
+            fleets.append(net.popen(host, [sys.executable, '-m', 'det_sim_ros.cli', 'fleet',
+                                           fleet_file, '--host', f'h{host}'],
+                                    stdout=out, stderr=subprocess.STDOUT, env=env))
+    pis = []
+    for i, host in enumerate(controller_hosts):
+        with open(tmp / f'pi{i}.out', 'w') as out:
+            pis.append(net.popen(host, [sys.executable, '-c', PI_PROCESS, here, f'/loop{i}',
+                                        str(TARGETS[i]), str(UNTIL)],
+                                 stdout=out, stderr=subprocess.STDOUT, env=env))
+    for i, proc in enumerate(pis):
+        try:
+            code = proc.wait(timeout=STEP_LIMIT)
+        except subprocess.TimeoutExpired:
+            code = 'a hang'
+        assert code == 0, f'PI {i}: {code}\n' + text(tmp / f'pi{i}.out') + ''.join(
+            text(tmp / 'logs' / f'loop{j}.log') for j in range(len(pis)))
+    for proc in fleets:
+        proc.send_signal(signal.SIGINT)
+    for host, proc in zip(sorted(set(node_hosts)), fleets):
+        assert proc.wait(timeout=STEP_LIMIT) == 0, text(tmp / f'fleet_h{host}.out')
+    return [str(tmp / 'logs' / f'loop{i}') for i in range(len(node_hosts))]
+
+
+def _records(log_dir):
+    from det_sim_ros.mcap_log import LogReader
+    (path,) = [os.path.join(log_dir, f) for f in os.listdir(log_dir) if f.endswith('.mcap')]
+    return [(m.topic, m.log_time, m.sequence, m.data) for m in LogReader(path).messages()]
+
+
+def _dy(records, namespace):
+    from det_sim_ros.contract import decode_joint_state
+    return {log_time: decode_joint_state(data).position[0]
+            for topic, log_time, _, data in records if topic == f'{namespace}/displacement'}
+
+
+def _root_links():
+    return subprocess.run(['ip', '-o', 'link', 'show'], capture_output=True, text=True,
+                          timeout=STEP_LIMIT).stdout.split('\n')
+
+
+def _namespaces():
+    return subprocess.run(['ip', 'netns', 'list'], capture_output=True, text=True,
+                          timeout=STEP_LIMIT).stdout
+
+
+def test_fleet_across_three_namespace_hosts(tmp_path):
+    """
+    Three hosts (network namespaces on a bridge of their own, private subnet, unicast discovery
+    over UDP only): sim_node /loop<i> on host i, started by ``det_sim fleet`` with the same file
+    on every host, its PI controller on host i + 1. Every loop brings Δy to its target within
+    5 %, and the lockstep logs equal those of the same fleet and controllers on one host.
+    """
+    from det_sim_ros.netns import can_make_namespaces, NetnsHosts
+    why = can_make_namespaces()
+    if why:
+        pytest.skip(f'{why}: the hosts of this test are network namespaces')
+    root_links = _root_links()
+    with NetnsHosts(3) as net:
+        env = net.ros_env(child_env(PYTHONUNBUFFERED='1'))
+        (tmp_path / 'across').mkdir()
+        (tmp_path / 'one').mkdir()
+        before = [net.packets_received(h) for h in range(3)]
+        across = _run_loops(net, tmp_path / 'across', [0, 1, 2], [1, 2, 0], env)
+        crossed = [net.packets_received(h) - b for h, b in enumerate(before)]
+        one = _run_loops(net, tmp_path / 'one', [0, 0, 0], [0, 0, 0], env)
+        names = net.hosts + [net.bridge]
+    assert not set(names) & set(_namespaces()) and _root_links() == root_links
+    # every answer crossed the bridge: host i received loop i's 1200 commands at least
+    assert min(crossed) >= int(UNTIL * 1000), crossed
+    for i, target in enumerate(TARGETS):
+        records = _records(across[i])
+        dy = _dy(records, f'/loop{i}')
+        assert sorted(dy) == [k * 1_000_000 for k in range(int(UNTIL * 1000) + 1)]
+        settled = [v for t, v in dy.items() if t >= (UNTIL - 0.1) * 1e9]
+        assert max(abs(v - target) for v in settled) <= 0.05 * target, (i, settled[-1])
+        assert records == _records(one[i]), f'loop {i}: the logs differ'
+        assert len(finished_logs(across[i])) == 1
