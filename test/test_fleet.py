@@ -261,3 +261,29 @@ def test_fleet_across_three_namespace_hosts(tmp_path):
         assert max(abs(v - target) for v in settled) <= 0.05 * target, (i, settled[-1])
         assert records == _records(one[i]), f'loop {i}: the logs differ'
         assert len(finished_logs(across[i])) == 1
+
+
+def test_qos_keep_all_for_lossy_links(harness, tmp_path, ros_context):
+    """qos_keep_all: outputs, /clock and the command subscriptions are reliable KEEP_ALL (the
+    log records it); with qos_sensor_data it is refused with one line."""
+    from rclpy.parameter import Parameter
+    from rclpy.qos import HistoryPolicy, ReliabilityPolicy
+    from det_sim_ros.mcap_log import LogReader
+    from det_sim_ros.scene import SceneError
+    from det_sim_ros.sim_node import SimNode
+    h = harness(qos_keep_all=True, mode='free_run', start_paused=True,
+                **{'log.path': str(tmp_path / 'log')})
+    endpoints = ([p.qos_profile for p in h.node._output_pubs + [h.node._clock_pub]]
+                 + [s.qos_profile for _, s in h.node._command_subs])
+    assert {(q.history, q.reliability) for q in endpoints} == {
+        (HistoryPolicy.KEEP_ALL, ReliabilityPolicy.RELIABLE)}
+    h.command([1000.0])
+    path = h.node._recorder.path
+    h.close()
+    reader = LogReader(path)
+    list(reader.messages())
+    qos = reader.qos
+    assert 'keep_all' in qos['/displacement'] and 'keep_all' in qos['/voltage_command']
+    with pytest.raises(SceneError, match='qos_sensor_data and qos_keep_all: choose one'):
+        SimNode(context=ros_context, parameter_overrides=[
+            Parameter('qos_sensor_data', value=True), Parameter('qos_keep_all', value=True)])
