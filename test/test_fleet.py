@@ -287,3 +287,80 @@ def test_qos_keep_all_for_lossy_links(harness, tmp_path, ros_context):
     with pytest.raises(SceneError, match='qos_sensor_data and qos_keep_all: choose one'):
         SimNode(context=ros_context, parameter_overrides=[
             Parameter('qos_sensor_data', value=True), Parameter('qos_keep_all', value=True)])
+
+
+def _needs_namespaces():
+    from det_sim_ros.netns import can_make_namespaces
+    why = can_make_namespaces()
+    if why:
+        pytest.skip(f'{why}: the hosts of this test are network namespaces')
+
+
+def test_namespaces_left_by_a_killed_run_are_removed(tmp_path):
+    """A run SIGKILLed with its hosts up leaves namespaces behind; the next run removes them
+    (and only those of dead processes)."""
+    _needs_namespaces()
+    from det_sim_ros.netns import NetnsHosts
+    code = ('import sys, time\nfrom det_sim_ros.netns import NetnsHosts\n'
+            'net = NetnsHosts(2).create()\nprint(" ".join(net.hosts + [net.bridge]), flush=True)'
+            '\ntime.sleep(600)\n')
+    proc = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE, text=True,
+                            env=child_env())
+    try:
+        names = proc.stdout.readline().split()
+    finally:
+        proc.kill()
+        proc.wait()
+    assert len(names) == 3 and set(names) <= set(_namespaces().split())
+    with NetnsHosts(1) as net:
+        left = set(_namespaces().split())
+        assert not set(names) & left and net.hosts[0] in left
+
+
+ECHO = '''
+import socket, sys, time
+if sys.argv[1] == 'server':
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(('0.0.0.0', 9999))
+    print('bound', flush=True)
+    while True:
+        data, peer = s.recvfrom(2048)
+        s.sendto(data, peer)
+s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+sent, rtts = {}, {}
+for i in range(200):                    # 200 datagrams, 1 ms apart, then the answers
+    sent[i] = time.monotonic()
+    s.sendto(b'%d' % i, (sys.argv[2], 9999))
+    time.sleep(0.001)
+s.settimeout(1.0)                       # ends after 1 s without an answer
+try:
+    while True:
+        i = int(s.recvfrom(2048)[0])
+        rtts.setdefault(i, time.monotonic() - sent[i])
+except socket.timeout:
+    pass
+print(len(rtts), min(rtts.values()))
+'''
+
+
+def test_relay_link_delays_and_drops_frames():
+    """Host 1 behind the relay (5 ms each way, 20 % of the frames dropped each way): no round
+    trip takes less than 10 ms, and some of 200 datagrams are not answered (~36 %); the
+    direct host answers all."""
+    _needs_namespaces()
+    from det_sim_ros.netns import NetnsHosts
+    with NetnsHosts(3, lossy={1: (0.005, 0.2)}) as net:
+        results = {}
+        for host in (1, 2):
+            server = net.popen(host, [sys.executable, '-c', ECHO, 'server'],
+                               stdout=subprocess.PIPE, text=True)
+            assert server.stdout.readline().strip() == 'bound'
+            client = subprocess.run(net.command(0, [sys.executable, '-c', ECHO, 'client',
+                                                    net.addresses[host]]),
+                                    capture_output=True, text=True, timeout=STEP_LIMIT)
+            answered, fastest = client.stdout.split()
+            results[host] = (int(answered), float(fastest))
+            server.kill()
+            server.wait()
+    assert results[2][0] == 200, results
+    assert 100 < results[1][0] < 200 and results[1][1] >= 0.010, results
