@@ -32,7 +32,6 @@ import sys
 import tempfile
 import time
 
-import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -221,7 +220,7 @@ def hosts(case, seconds):
                 'params': {'info_period': 0.0, 'qos_keep_all': keep_all}}]}, stream)
         with open(os.path.join(folder, 'fleet.out'), 'w') as out:
             fleet = net.popen(0, [sys.executable, '-m', 'det_sim_ros.cli', 'fleet', fleet_file],
-                              env=env, stdout=out, stderr=subprocess.STDOUT)
+                              env=env, stdout=out, stderr=subprocess.STDOUT, cwd=folder)
         result_file = os.path.join(folder, 'controller.json')
         controller = spawn(CONTROLLER, '1', result_file,
                            *(['keep_all'] if keep_all else []), '--ros-args', '-r', '__ns:=/n0',

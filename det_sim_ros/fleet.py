@@ -5,14 +5,14 @@ A fleet file lists nodes; each node runs as its own ``python -m det_sim_ros.sim_
 process in its own namespace, with its stdout and stderr in ``<log_dir>/<name>.log`` and its
 MCAP log in ``<log_dir>/<name>/`` (unless ``log.path`` is given)::
 
-    log_dir: fleet_logs            # relative paths: relative to the fleet file's folder
+    log_dir: fleet_logs            # relative to the working directory
     defaults:                      # optional, merged into every node
       scene: default
       mode: real_time
       params: {info_period: 0.0}
     nodes:
       - namespace: /cell_a
-        scene: default             # a name in config/ or a path
+        scene: default             # a name in config/ or a path (relative to this file)
         overrides: {physics.Rs: 1.0e3}   # scene keys
         mode: lockstep             # real_time, free_run or lockstep
         params: {lockstep.sources: 1}    # other sim_node parameters
@@ -128,7 +128,7 @@ def load_fleet(path: str, host: str | None = None, log_dir: str | None = None,
     folder = log_dir or data.get('log_dir') or 'fleet_logs'
     if not isinstance(folder, str):
         raise FleetError(f'{path}: log_dir: must be a path')
-    folder = os.path.join(base, folder) if log_dir is None else os.path.abspath(folder)
+    folder = os.path.abspath(folder)     # like sim_node's log.path: relative to the cwd
     defaults = _mapping(data.get('defaults'), 'defaults')
     bad = sorted(set(defaults) - (NODE_KEYS - {'namespace', 'host'}))
     if bad:

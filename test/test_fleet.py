@@ -31,7 +31,8 @@ def start_fleet(fleet_file, *args, env=None):
     with open(out, 'w') as stream:
         proc = subprocess.Popen([sys.executable, '-m', 'det_sim_ros.cli', 'fleet', fleet_file,
                                  *args], stdout=stream, stderr=subprocess.STDOUT,
-                                env=env or child_env(PYTHONUNBUFFERED='1'))
+                                env=env or child_env(PYTHONUNBUFFERED='1'),
+                                cwd=os.path.dirname(fleet_file))
     proc.out = out
     return proc
 
@@ -121,9 +122,10 @@ def test_bad_fleet_file_is_one_line_and_starts_nothing(tmp_path, capsys, fleet, 
     assert not (tmp_path / 'fleet_logs').exists()
 
 
-def test_host_filter_and_relative_paths(tmp_path):
-    """The same file on every host: a node with host: starts only there; relative scene and
-    log paths are relative to the fleet file."""
+def test_host_filter_and_relative_paths(tmp_path, monkeypatch):
+    """The same file on every host: a node with host: starts only there; a relative scene
+    path is relative to the fleet file, log_dir to the working directory."""
+    monkeypatch.chdir(tmp_path / '..')
     (tmp_path / 'my_scene.yaml').write_text(yaml.safe_dump(scene_to_dict(load_scene('default'))))
     path = write_fleet(tmp_path / 'fleet.yaml', [
         {'namespace': '/everywhere'},
@@ -133,7 +135,7 @@ def test_host_filter_and_relative_paths(tmp_path):
     on_h1 = load_fleet(path, host='h1')
     assert [n.namespace for n in on_h1] == ['/everywhere', '/one']
     assert on_h1[1].scene == str(tmp_path / 'my_scene.yaml')
-    assert on_h1[1].log_file == str(tmp_path / 'out' / 'one.log')
+    assert on_h1[1].log_file == str(tmp_path.parent / 'out' / 'one.log')
     assert [n.namespace for n in load_fleet(path)] == ['/everywhere', '/one', '/two']
     with pytest.raises(FleetError, match='not valid YAML'):
         (tmp_path / 'broken.yaml').write_text('nodes: [')
@@ -186,7 +188,7 @@ def _run_loops(net, tmp, node_hosts, controller_hosts, env):
         with open(tmp / f'fleet_h{host}.out', 'w') as out:
             fleets.append(net.popen(host, [sys.executable, '-m', 'det_sim_ros.cli', 'fleet',
                                            fleet_file, '--host', f'h{host}'],
-                                    stdout=out, stderr=subprocess.STDOUT, env=env))
+                                    stdout=out, stderr=subprocess.STDOUT, env=env, cwd=tmp))
     pis = []
     for i, host in enumerate(controller_hosts):
         with open(tmp / f'pi{i}.out', 'w') as out:
