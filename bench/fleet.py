@@ -5,8 +5,9 @@ Benchmark fleets of sim_nodes (issue 20; a script, not a test). Run each part un
 capacity  N default-scene nodes in real time at 1 kHz on this host (det_sim_ros.fleet), one
           listener process subscribed (reliable, depth 1000) to every node's displacement:
           per node samples lost and sim seconds per wall second over the window; the nodes'
-          CPU (s per wall s, all N together). A host "holds" N when every node lost 0 samples
-          and kept real time (>= 0.995).
+          CPU (s per wall s, all N together); the nodes' own real-time factor (their INFO
+          lines, every 5 s). A host "holds" N when every node lost 0 samples and kept real
+          time (>= 0.995).
 lockstep  N lockstep nodes, each answered by its own controller process (bench/node_rate.py's
           CONTROLLER): aggregate simulated seconds per wall second (sum over nodes).
 hosts     One node at 1 kHz in real time on namespace host h0 (det_sim_ros.netns), its controller
@@ -107,7 +108,8 @@ def cpu_seconds(pids):
 
 
 def fleet_nodes(folder, n, mode, **params):
-    return [FleetNode(f'/n{i}', 'default', mode, {}, {'info_period': 0.0, **params}, None,
+    params = {'info_period': 0.0, **params}
+    return [FleetNode(f'/n{i}', 'default', mode, {}, params, None,
                       os.path.join(folder, f'n{i}.log'), os.path.join(folder, f'n{i}'))
             for i in range(n)]
 
@@ -132,9 +134,17 @@ def window_stats(samples, t0, t1):
     return {'received': len(inside), 'lost': int(lost), 'rtf': (s1 - s0) * 1e-9 / (r1 - r0)}
 
 
+def node_rtf(log_file):
+    """The real-time factors of a node's INFO lines (every 5 s), the start-up one left out."""
+    import re
+    with open(log_file, encoding='utf-8', errors='replace') as stream:
+        return [float(x) for x in re.findall(r'RTF=([0-9.]+)', stream.read())][1:]
+
+
 def capacity(n, seconds):
     with tempfile.TemporaryDirectory() as folder:
-        fleet = Fleet(fleet_nodes(folder, n, 'real_time'), env=child_env())
+        # the nodes' own view too: INFO lines with the real-time factor every 5 s
+        fleet = Fleet(fleet_nodes(folder, n, 'real_time', info_period=5.0), env=child_env())
         out = os.path.join(folder, 'listener.json')
         listener = spawn(LISTENER, str(n), out)
         try:
@@ -151,12 +161,14 @@ def capacity(n, seconds):
             codes = fleet.wait(30.0)
         with open(out) as stream:
             got = json.load(stream)
+        own_rtf = [min(node_rtf(node.log_file), default=None) for node in fleet.nodes]
         per_node = [window_stats(got[str(i)], t0, t1) for i in range(n)]
         lost = [s['lost'] for s in per_node]
         rtf = [s['rtf'] for s in per_node]
         return {'part': 'capacity', 'nodes': n, 'window_s': round(t1 - t0, 2),
                 'lost_per_node': lost, 'rtf_min': min(rtf), 'rtf_per_node': rtf,
                 'nodes_cpu_s_per_s': (c1 - c0) / (t1 - t0),
+                'node_info_rtf_min_per_node': own_rtf,
                 'holds': all(x == 0 for x in lost) and min(rtf) >= 0.995,
                 'exit_codes': codes, 'load_avg': os.getloadavg()}
 
