@@ -10,7 +10,8 @@ capacity  N default-scene nodes in real time at 1 kHz on this host (det_sim_ros.
           time (>= 0.995).
 lockstep  N lockstep nodes, each answered by its own controller process (bench/node_rate.py's
           CONTROLLER): aggregate simulated seconds per wall second (sum over nodes).
-hosts     One node at 1 kHz in real time on namespace host h0 (det_sim_ros.netns), its controller
+hosts     One node at 1 kHz in real time (lockstep_* cases: lockstep, sim s per wall s) on
+          namespace host h0 (det_sim_ros.netns), its controller
           (node_rate CONTROLLER: answers every displacement sample) on host h1, unicast discovery
           over UDP: command-to-effect latency p50/p99 (controller publishes a command -> it
           receives the first sample that shows it) and samples lost at the controller; the h1
@@ -204,22 +205,27 @@ def lockstep(n, seconds):
 
 
 # name: (h1 link: None = veth, else (delay s, loss), qos_keep_all, use config/dds_lossy.xml,
-#        controller on the node's host)
+#        controller on the node's host, the node's mode)
 CASES = {
-    'one_host': (None, False, False, True),
-    'direct': (None, False, False, False),
-    'relay': ((0.0, 0.0), False, False, False),
-    'delay_1ms': ((0.001, 0.0), False, False, False),
-    'lossy_depth10': ((0.001, 0.01), False, False, False),
-    'lossy_depth10_profile': ((0.001, 0.01), False, True, False),
-    'lossy_keep_all': ((0.001, 0.01), True, False, False),
-    'lossy_keep_all_profile': ((0.001, 0.01), True, True, False),
+    'one_host': (None, False, False, True, 'real_time'),
+    'direct': (None, False, False, False, 'real_time'),
+    'relay': ((0.0, 0.0), False, False, False, 'real_time'),
+    'delay_1ms': ((0.001, 0.0), False, False, False, 'real_time'),
+    'lossy_depth10': ((0.001, 0.01), False, False, False, 'real_time'),
+    'lossy_depth10_profile': ((0.001, 0.01), False, True, False, 'real_time'),
+    'lossy_keep_all': ((0.001, 0.01), True, False, False, 'real_time'),
+    'lossy_keep_all_profile': ((0.001, 0.01), True, True, False, 'real_time'),
+    # lockstep across hosts: sim seconds per wall second
+    'lockstep_one_host': (None, False, False, True, 'lockstep'),
+    'lockstep_direct': (None, False, False, False, 'lockstep'),
+    'lockstep_delay_1ms': ((0.001, 0.0), False, False, False, 'lockstep'),
+    'lockstep_lossy_keep_all_profile': ((0.001, 0.01), True, True, False, 'lockstep'),
 }
 
 
 def hosts(case, seconds):
     from det_sim_ros.netns import NetnsHosts
-    link, keep_all, profile, same_host = CASES[case]
+    link, keep_all, profile, same_host, mode = CASES[case]
     extra = ({'FASTRTPS_DEFAULT_PROFILES_FILE': os.path.join(ROOT, 'config', 'dds_lossy.xml')}
              if profile else {})
     with tempfile.TemporaryDirectory() as folder, \
@@ -228,8 +234,11 @@ def hosts(case, seconds):
         fleet_file = os.path.join(folder, 'fleet.yaml')
         with open(fleet_file, 'w') as stream:
             json.dump({'log_dir': 'logs', 'nodes': [{
-                'namespace': '/n0', 'mode': 'real_time',
-                'params': {'info_period': 0.0, 'qos_keep_all': keep_all}}]}, stream)
+                'namespace': '/n0', 'mode': mode,
+                'params': {'info_period': 0.0, 'qos_keep_all': keep_all,
+                           # lockstep: an answer lost before discovery ended costs 1 s once
+                           **({'lockstep.timeout': 1.0} if mode == 'lockstep' else {})}}]},
+                      stream)
         with open(os.path.join(folder, 'fleet.out'), 'w') as out:
             fleet = net.popen(0, [sys.executable, '-m', 'det_sim_ros.cli', 'fleet', fleet_file],
                               env=env, stdout=out, stderr=subprocess.STDOUT, cwd=folder)
@@ -251,7 +260,12 @@ def hosts(case, seconds):
         logs = os.path.join(folder, 'logs', 'n0')
         (log_path,) = [os.path.join(logs, f) for f in os.listdir(logs) if f.endswith('.mcap')]
         result = command_latency(log_path, result_file, DT_NS * 1e-9, '/n0/voltage_command')
-        return {'part': 'hosts', 'case': case, 'link_delay_s': link[0] if link else 0.0,
+        with open(result_file) as stream:
+            received = sorted((int(k), v) for k, v in json.load(stream)['received'].items())
+        end = received[-1][1]
+        result['sim_s_per_wall_s_last_10s'] = window_stats(received, end - 10.0, end)['rtf']
+        return {'part': 'hosts', 'case': case, 'mode': mode,
+                'link_delay_s': link[0] if link else 0.0,
                 'link_loss': link[1] if link else 0.0, 'relay': bool(link),
                 'qos_keep_all': keep_all, 'profile': profile, 'seconds': SETTLE + seconds,
                 **result, 'fleet_exit': fleet.returncode, 'load_avg': os.getloadavg()}
