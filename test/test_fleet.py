@@ -75,6 +75,10 @@ def test_fleet_starts_its_nodes_and_forwards_the_stop(tmp_path, stop):
         assert len(finished_logs(str(tmp_path / 'logs' / name))) == 1
     params = yaml.safe_load((tmp_path / 'logs' / 'a.params.yaml').read_text())
     assert params['/**']['ros__parameters']['physics']['Rs'] == 1e3
+    from det_sim_ros.mcap_log import LogReader
+    (log,) = os.listdir(tmp_path / 'logs' / 'a')
+    scene = yaml.safe_load(LogReader(str(tmp_path / 'logs' / 'a' / log)).info['scene_yaml'])
+    assert scene['sim_node']['ros__parameters']['physics']['Rs'] == 1e3   # applied
 
 
 def test_a_node_that_cannot_start_stops_the_fleet(tmp_path):
