@@ -49,6 +49,18 @@ def can_make_namespaces() -> str:
         subprocess.run(['ip', '-V'], capture_output=True, timeout=STEP_TIMEOUT, check=True)
     except (OSError, subprocess.SubprocessError):
         return "no 'ip' command (iproute2)"
+    probe = f'{PREFIX}{os.getpid()}_0_h0'     # (a name remove_stale knows)
+    try:                                       # root in a container may still lack the right
+        _ip('netns', 'add', probe)
+        _ip('-n', probe, 'link', 'add', 'br0', 'type', 'bridge')
+    except NetnsError as exc:
+        return f'cannot make a network namespace with a bridge: {exc}'
+    finally:
+        try:
+            if probe in _namespaces():
+                _ip('netns', 'del', probe)
+        except NetnsError:
+            pass
     return ''
 
 
