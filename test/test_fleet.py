@@ -81,6 +81,38 @@ def test_fleet_starts_its_nodes_and_forwards_the_stop(tmp_path, stop):
     assert scene['sim_node']['ros__parameters']['physics']['Rs'] == 1e3   # applied
 
 
+def _running(pid):
+    """Whether process pid exists and is not a zombie (exited, not yet reaped)."""
+    try:
+        with open(f'/proc/{pid}/stat') as stream:
+            return stream.read().rsplit(')', 1)[1].split()[0] != 'Z'
+    except OSError:
+        return False
+
+
+def test_nodes_stop_cleanly_when_the_fleet_process_is_killed(tmp_path):
+    """SIGKILL to the fleet process: its nodes get SIGTERM (parent-death signal) and stop with
+    a finished log; none is left running."""
+    import re
+    fleet_file = write_fleet(tmp_path / 'fleet.yaml', [{'namespace': '/orphan'}],
+                             defaults={'params': {'info_period': 0.0}}, log_dir='logs')
+    proc = start_fleet(fleet_file)
+    try:
+        wait_for_text(proc, ' running')
+        (pid,) = [int(p) for p in re.findall(r'pid (\d+)', text(proc.out))]
+        proc.kill()
+        proc.wait()
+        deadline = time.monotonic() + WALL_LIMIT
+        while _running(pid):
+            assert time.monotonic() < deadline, 'the node outlived its fleet'
+            time.sleep(0.05)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert len(finished_logs(str(tmp_path / 'logs' / 'orphan'))) == 1
+
+
 def test_a_node_that_cannot_start_stops_the_fleet(tmp_path):
     """A node refusing its parameters (one line, exit 1) stops the others: the fleet exits 1
     and names the node and its reason."""
