@@ -63,7 +63,8 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         (os.path.join('share', package_name), ['package.xml']),
         (os.path.join('share', package_name, 'config'),
-         sorted(glob('config/*.yaml')) + ['config/foxglove_layout.json']),
+         sorted(glob('config/*.yaml'))
+         + ['config/foxglove_layout.json', 'config/dds_lossy.xml']),
         # `ros2 run det_sim_ros sim_node` looks only in <prefix>/lib/det_sim_ros
         (os.path.join('lib', package_name), ['scripts/sim_node']),
     ],

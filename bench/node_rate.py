@@ -63,13 +63,16 @@ except BaseException:
 CONTROLLER = '''
 import json, sys, time, rclpy
 from rclpy.experimental import EventsExecutor
+from rclpy.qos import HistoryPolicy, QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from det_sim_ros.contract import decode_joint_state, encode_float64_multi_array
 n_det, out_path = int(sys.argv[1]), sys.argv[2]
+keep_all = sys.argv[3:4] == ['keep_all']     # reliable KEEP_ALL both ways (lossy links)
 rclpy.init()
 node = rclpy.create_node('bench_controller')
-cmd = node.create_publisher(Float64MultiArray, 'voltage_command', 10)
+qos = QoSProfile(history=HistoryPolicy.KEEP_ALL) if keep_all else None
+cmd = node.create_publisher(Float64MultiArray, 'voltage_command', qos or 10)
 sent, received = [], {}
 def on_sample(data):
     now = time.monotonic()
@@ -77,7 +80,7 @@ def on_sample(data):
     volts = 500.0 + len(sent) % 2000          # a new voltage every sample, identifiable
     cmd.publish(encode_float64_multi_array([volts] * n_det))
     sent.append((time.monotonic(), volts))
-node.create_subscription(JointState, 'displacement', on_sample, 1000, raw=True)
+node.create_subscription(JointState, 'displacement', on_sample, qos or 1000, raw=True)
 executor = EventsExecutor()
 executor.add_node(node)
 try:
@@ -200,13 +203,13 @@ def run_node(seconds, executor_kind, folder, wait_topics=None, **params):
     return result, path
 
 
-def command_latency(log_path, controller_file, dt):
+def command_latency(log_path, controller_file, dt, topic='voltage_command'):
     with open(controller_file) as stream:
         data = json.load(stream)
     sent = data['sent']
     received = {int(k): v for k, v in data['received'].items()}
     applied = [(m.log_time, decode_float64_multi_array(m.data)[0][0])
-               for m in LogReader(log_path).messages(['voltage_command'])]
+               for m in LogReader(log_path).messages([topic])]
     # the log holds the commands the node received, in order, each at the period it applied
     # to; a command can be missing (sent before discovery, or after the run): match by value
     latencies, unmatched, j = [], 0, 0

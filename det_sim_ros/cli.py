@@ -9,6 +9,8 @@ Subcommands::
     det_sim bench   [...]            (the integration benchmark, det_sim_ros.benchmark)
     det_sim plot LOG.mcap [--out DIR]                 (every channel of a sim_node log, PNG)
     det_sim linearize [--voltage 1500] [--branch buckled+] [--json]   (A, B, C, D; Bode)
+    det_sim fleet FLEET.yaml [--host NAME] [--log-dir DIR]   (sim_node processes, one per
+                    namespace; Ctrl-C stops them all; det_sim_ros.fleet describes the file)
 
 Common options: ``--scene PATH_OR_NAME`` (default 'default'), ``--set key=value`` (repeatable,
 e.g. ``--set physics.Rs=1e3 --set scene.fidelity=consistent``), ``--out DIR`` (default
@@ -29,6 +31,7 @@ import numpy as np
 import yaml
 
 from . import statics
+from .fleet import FleetError
 from .linearize import LinearizationError
 from .logplot import LogPlotError
 from .model import ModelDomainError
@@ -163,9 +166,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=PROG, description='Run the DET-buckled-beam model offline (no ROS): statics '
         '(Fig. 5), step responses (Fig. 6), integration benchmark, plots of sim_node logs, '
-        'linear models. Writes CSV, JSON and PNG files.')
+        'linear models. Writes CSV, JSON and PNG files. And with ROS: fleet starts several '
+        'sim_node processes from one YAML file.')
     sub = parser.add_subparsers(dest='command',
-                                metavar='{statics,step,bench,plot,linearize}')
+                                metavar='{statics,step,bench,plot,linearize,fleet}')
 
     p = sub.add_parser('statics', parents=[common],
                        help='equilibrium branches vs pre-strain, potential (eq 82), delta-y')
@@ -205,6 +209,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--json', action='store_true', help='print the result as JSON')
     p.set_defaults(func=cmd_linearize)
 
+    p = sub.add_parser('fleet', help='start the sim_nodes of a fleet file on this host (one '
+                       'process per namespace, logs per node); SIGINT/SIGTERM stop them all',
+                       description='Start the sim_node processes a fleet YAML file lists for '
+                       'this host, each in its namespace with its log file; forward SIGINT and '
+                       'SIGTERM to all; exit 0 once every node stopped cleanly. Across hosts, '
+                       'run the same file on every host (nodes with host: start on that host '
+                       'only). File format: README, section Fleets.')
+    p.add_argument('file', help='fleet YAML file')
+    p.add_argument('--host', default=None,
+                   help="start the nodes for this host name (default: this machine's)")
+    p.add_argument('--log-dir', default=None,
+                   help="node logs folder (default: the file's log_dir, else fleet_logs)")
+    p.add_argument('--stop-timeout', type=_positive, default=20.0,
+                   help='s to wait for the nodes to stop before killing them (default: 20)')
+    p.set_defaults(func=cmd_fleet)
+
     p = sub.add_parser('bench', add_help=False,
                        help='work-precision diagram of the integration benchmark')
     p.add_argument('bench_args', nargs=argparse.REMAINDER)
@@ -224,12 +244,13 @@ def main(argv=None) -> int:
         return int(exc.code or 0)
     if args.command is None:
         parser.print_usage(sys.stderr)
-        print(f'{PROG}: error: choose a subcommand: statics, step, bench, plot or linearize',
+        print(f'{PROG}: error: choose a subcommand: statics, step, bench, plot, linearize or '
+              'fleet',
               file=sys.stderr)
         return 2
     try:
         return int(args.func(args) or 0)
-    except (SceneError, CliError, LinearizationError, LogPlotError) as exc:
+    except (SceneError, CliError, LinearizationError, LogPlotError, FleetError) as exc:
         print(f'{PROG}: error: {exc}', file=sys.stderr)
         return 2
     except ModelDomainError as exc:
@@ -640,6 +661,13 @@ def _plot_bode(plt, lin, poles, args, out):
     fig.savefig(path, dpi=args.dpi)
     plt.close(fig)
     return path
+
+
+# -- fleet ----------------------------------------------------------------------------------------
+def cmd_fleet(args) -> int:
+    from .fleet import run_fleet
+    return run_fleet(args.file, host=args.host, log_dir=args.log_dir,
+                     stop_timeout=args.stop_timeout)
 
 
 # -- bench ----------------------------------------------------------------------------------------

@@ -24,7 +24,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from rclpy.qos import HistoryPolicy, qos_profile_sensor_data, QoSProfile
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -69,6 +69,9 @@ NODE_PARAMS = {
                 (0.0, 3600.0)),
     'qos_sensor_data': (False, 'outputs best-effort SensorDataQoS instead of reliable depth 10',
                         True, None),
+    'qos_keep_all': (False, 'outputs, /clock and command subscriptions reliable KEEP_ALL instead '
+                     'of depth 10: over a lossy link every lost sample is repaired, none '
+                     'overwritten (README: Fleets, QoS across hosts)', True, None),
     'start_paused': (False, 'start paused (resume with ~/pause false, or ~/step)', True, None),
     'diagnostics_period': (1.0, 'seconds between /diagnostics messages (wall clock)', True,
                            (0.01, 3600.0)),
@@ -207,14 +210,18 @@ class SimNode(Node):
         # MCAP recording (issue 5): a Recorder fed the published bytes, or None
         self._recorder = None
 
-        out_qos = qos_profile_sensor_data if self._p('qos_sensor_data') else QoSProfile(depth=10)
+        if self._p('qos_sensor_data') and self._p('qos_keep_all'):
+            raise SceneError('parameters qos_sensor_data and qos_keep_all: choose one')
+        keep_all = QoSProfile(history=HistoryPolicy.KEEP_ALL)
+        in_qos = keep_all if self._p('qos_keep_all') else QoSProfile(depth=10)
+        out_qos = qos_profile_sensor_data if self._p('qos_sensor_data') else in_qos
         self._output_pubs = [self.create_publisher(JointState, topic, out_qos)
                              for topic in self._encoder.topics]
         # Publisher.publish(bytes) is handle.publish_raw(bytes) behind a type check and a
         # destroy guard (~2.5 us per call); the node publishes through the handle directly
         self._publish_raw = [pub.handle.publish_raw for pub in self._output_pubs]
         self._clock_pub = (None if self.mode == 'real_time'
-                           else self.create_publisher(ClockMsg, CLOCK_TOPIC, QoSProfile(depth=10)))
+                           else self.create_publisher(ClockMsg, CLOCK_TOPIC, in_qos))
         self._publish_clock = self._clock_pub.handle.publish_raw if self._clock_pub else None
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         self._markers = attach_markers(self, model, self._p('markers.rate_hz'),
@@ -223,7 +230,7 @@ class SimNode(Node):
         # re-encoded with zero padding (equal commands give equal logs)
         self._command_subs = [
             (topic, self.create_subscription(
-                msg_type, topic, lambda data, topic=topic: self._on_command(topic, data), 10,
+                msg_type, topic, lambda data, topic=topic: self._on_command(topic, data), in_qos,
                 raw=True))
             for topic, msg_type in ((COMMAND_TOPIC, Float64MultiArray),
                                     (JOINT_COMMAND_TOPIC, JointState))]
@@ -245,7 +252,7 @@ class SimNode(Node):
                           clock=self._steady)
         if self._p('info_period') > 0:
             self.create_timer(self._p('info_period'), self._log_info, clock=self._steady)
-        self._start_recorder(out_qos)
+        self._start_recorder(out_qos, in_qos)
         if self.mode == 'lockstep':
             self.create_timer(0.05, self._lockstep_resend, clock=self._steady)
         self._publish_sample(self._current_outputs())
@@ -261,7 +268,7 @@ class SimNode(Node):
                if self.structure_names else ''))
 
     # -- set-up ---------------------------------------------------------------------------
-    def _start_recorder(self, out_qos):
+    def _start_recorder(self, out_qos, in_qos):
         """MCAP logging (det_sim_ros.mcap_log): on unless log.enabled is false."""
         if not self._p('log.enabled'):
             return
@@ -273,7 +280,7 @@ class SimNode(Node):
                 self.get_logger().warning(f'recovered unfinished log {repaired}: '
                                           f"{outcome['messages']} messages readable")
         qos = {topic: out_qos for topic in self._encoder.topics}
-        qos.update({COMMAND_TOPIC: QoSProfile(depth=10), JOINT_COMMAND_TOPIC: QoSProfile(depth=10)})
+        qos.update({COMMAND_TOPIC: in_qos, JOINT_COMMAND_TOPIC: in_qos})
         self._recorder = Recorder(
             path, self.scene, qos_by_topic=qos, split_mb=self._p('log.split_mb'),
             max_total_mb=self._p('log.max_mb'), max_files=self._p('log.max_files'),

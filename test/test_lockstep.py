@@ -23,29 +23,51 @@ from conftest import child_env
 KP, KI, T_STEP, TARGET = 2.0e4, 6.0e6, 0.6, 2.0e-3   # V/m, V/(m s), s, m
 
 
-def pi_volts(state, dy, t, dt):
+def pi_volts(state, dy, t, dt, target=TARGET):
     """The PI law of these tests: 0 V until T_STEP, then PI on the displacement error."""
     if t < T_STEP - 1e-12:
         return 0.0
-    error = TARGET - dy
+    error = target - dy
     state['i'] += error * dt
     return min(3000.0, max(0.0, KP * error + KI * state['i']))
 
 
-def make_pi(context, name='pi', joint=False, stamp=True):
-    """A PI controller node answering every displacement sample."""
+def make_pi(context, name='pi', joint=False, stamp=True, namespace='', target=TARGET,
+            until=None, after_match=False):
+    """
+    A PI controller node answering every displacement sample (``until``: none after that sim
+    time, s; ``node.done`` is then set, so a lockstep run ends at exactly that sample).
+
+    ``after_match``: a controller in another process answers only once its command publisher
+    has matched the node's subscription (an answer sent before would be lost and the lockstep
+    would wait for it forever); the sample that came before is answered on the match event.
+    """
     import rclpy
+    from rclpy.event_handler import PublisherEventCallbacks
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
-    node = rclpy.create_node(name, context=context)
+    node = rclpy.create_node(name, context=context, namespace=namespace)
+    node.done = False
     state = {'i': 0.0}
+    waiting = []          # the sample that arrived before the publisher matched
     topic, kind = (('voltage_command_joint', JointState) if joint
                    else ('voltage_command', Float64MultiArray))
-    pub = node.create_publisher(kind, topic, 10)
+
+    def on_match(status):
+        if status.current_count > 0 and waiting:
+            on_dy(waiting.pop())
+    pub = node.create_publisher(kind, topic, 10, event_callbacks=PublisherEventCallbacks(
+        matched=on_match) if after_match else None)
 
     def on_dy(msg):
+        if after_match and pub.get_subscription_count() == 0:
+            waiting[:] = [msg]
+            return
         t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        volts = pi_volts(state, msg.position[0], t, 1e-3)
+        if until is not None and t >= until - 1e-9:
+            node.done = True
+            return
+        volts = pi_volts(state, msg.position[0], t, 1e-3, target)
         if joint:
             cmd = JointState(name=['det0'], position=[volts])
             if stamp:
