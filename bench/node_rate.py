@@ -235,16 +235,17 @@ def run_node(seconds, executor_kind, folder, wait_topics=None, **params):
     slipped0, late0 = node.slipped_s, node.late_ticks
     max_lag = 0
     end = w0 + seconds
+    real_time = node.mode == 'real_time'
     while time.perf_counter() < end:
         executor.spin_once(timeout_sec=0.05)
-        if node._p('real_time'):
+        if real_time:
             max_lag = max(max_lag, node._max_lag_seen)
     cpu, wall, main = _cpu() - c0, time.perf_counter() - w0, time.thread_time() - m0
     steps = node._sim.k - k0
     result = {'steps': steps, 'wall_s': wall, 'rtf': steps * node._dt / wall,
               'cpu_us_per_period': cpu / steps * 1e6,
               'main_thread_us_per_period': main / steps * 1e6}
-    if node._p('real_time'):
+    if real_time:
         result.update({'lag_at_end_ms': max(0, node._steps_due(node.wall_clock()) - 1)
                        * node._dt * 1e3, 'max_lag_ms': max_lag * node._dt * 1e3,
                        'slipped_s': node.slipped_s - slipped0,
@@ -319,6 +320,10 @@ def lockstep_in_process(scene_name, sim_seconds):
         sim.close()
 
 
+class _Skip(Exception):
+    """--rounds 0: no free-run figures."""
+
+
 def bench_scene(scene_name, args, folder):
     from det_sim_ros.contract import OutputContract
     from det_sim_ros.scene import load_scene
@@ -332,8 +337,11 @@ def bench_scene(scene_name, args, folder):
     topics = encoder.topics
     n = int(args.floor_periods)
 
-    listener = _spawn(SUBSCRIBER, ','.join(topics))
+    listener = _spawn(SUBSCRIBER, ','.join(topics)) if args.rounds > 0 else None
     try:
+        report['physics_us_per_period'] = physics(scene, n) * 1e6
+        if listener is None:
+            raise _Skip()
         report['physics_us_per_period'] = physics(scene, n) * 1e6
         rounds = {'publish_loop': [], 'floor': [], 'node': [], 'node_with_markers': [],
                   'floor_main_thread': [], 'node_main_thread': []}
@@ -357,25 +365,35 @@ def bench_scene(scene_name, args, folder):
         result, _ = run_node(args.free_seconds, 'single', folder, scene_file=scene_name,
                              real_time=False, **{'markers.rate_hz': 0.0})
         report['free_run_single_threaded_executor'] = result
+    except _Skip:
+        pass
     finally:
-        _stop(listener)
+        if listener is not None:
+            _stop(listener)
 
-    report['lockstep_in_process_controller'] = lockstep_in_process(scene_name,
-                                                                   args.lockstep_seconds)
+    if args.lockstep_seconds > 0:
+        report['lockstep_in_process_controller'] = lockstep_in_process(scene_name,
+                                                                       args.lockstep_seconds)
     if args.rt_seconds > 0:
         n_det = sim.model.n_inputs
         controller_file = os.path.join(folder, f'controller_{scene_name}.json')
         busy = _spawn(BUSY)
         controller = _spawn(CONTROLLER, str(n_det), controller_file)
+        if args.controller_priority:   # the user's controller at SCHED_FIFO too (chrt -f)
+            os.sched_setscheduler(controller.pid, os.SCHED_FIFO,
+                                  os.sched_param(args.controller_priority))
         try:
             time.sleep(2.0)
             result, log_path = run_node(args.rt_seconds, 'events', folder, ['displacement'],
-                                        scene_file=scene_name, real_time=True)
+                                        scene_file=scene_name, real_time=True,
+                                        realtime_priority=args.realtime_priority,
+                                        **({'log.enabled': False} if args.rt_no_log else {}))
         finally:
             _stop(controller)
             busy.kill()
             busy.wait()
-        result.update(command_latency(log_path, controller_file, sim.dt))
+        if not args.rt_no_log:
+            result.update(command_latency(log_path, controller_file, sim.dt))
         report['real_time_with_controller_and_busy_core'] = result
     return report
 
@@ -388,6 +406,13 @@ def main():
     parser.add_argument('--rounds', type=int, default=7, help='interleaved free-run rounds')
     parser.add_argument('--floor-periods', type=int, default=20000)
     parser.add_argument('--lockstep-seconds', type=float, default=5.0, help='sim seconds')
+    parser.add_argument('--realtime-priority', type=int, default=0,
+                        help="real-time run: the node's realtime_priority (SCHED_FIFO; 0 = off)")
+    parser.add_argument('--controller-priority', type=int, default=0,
+                        help="real-time run: the controller process's SCHED_FIFO priority "
+                        "(set right after it starts: its threads inherit it)")
+    parser.add_argument('--rt-no-log', action='store_true', help='real-time run without the '
+                        'MCAP log (then no command-to-effect figures)')
     parser.add_argument('--json', help='write the numbers to this file')
     args = parser.parse_args()
     report = {'cpus': os.cpu_count(), 'load_avg_at_start': os.getloadavg()}

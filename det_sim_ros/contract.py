@@ -507,9 +507,23 @@ class CommandDecoder:
         self.det_names = list(det_names)
         self.index = {name: i for i, name in enumerate(self.det_names)}
         self.v_max = float(v_max)
+        # the common command, a little-endian Float64MultiArray without dims holding one
+        # voltage per DET, read by one unpack: its canonical bytes are these 20 (the header,
+        # no dims, data_offset 0, the count, zero padding) and its doubles as they came
+        n = len(self.det_names)
+        self._vector_head = encode_float64_multi_array([0.0] * n)[:20]
+        self._vector_size = 20 + 8 * n
+        self._unpack_vector = struct.Struct(f'<{n}d').unpack_from
 
     def decode(self, topic: str, data, held: Sequence[float]) -> Command:
-        """Decode CDR ``data`` received on ``topic`` (a name of :data:`COMMAND_TOPICS`)."""
+        """Decode CDR ``data`` received on ``topic`` (a name of :data:`COMMAND_TOPICS`);
+        ``held``: the voltages now (a JointState may name a subset)."""
+        if topic == COMMAND_TOPIC and len(data) >= self._vector_size \
+                and data[4:16] == self._vector_head[4:16] and data[:2] == b'\x00\x01':
+            volts = list(self._unpack_vector(data, 20))
+            v_max = self.v_max
+            if all(0.0 <= v <= v_max for v in volts):   # (False for NaN: the checks below)
+                return Command(volts, '', (), self._vector_head + data[20:self._vector_size])
         try:
             if topic == JOINT_COMMAND_TOPIC:
                 msg = decode_joint_state(data)

@@ -67,6 +67,9 @@ NODE_PARAMS = {
     'max_lag': (0.05, 'real-time mode: largest lag behind the wall clock, s of sim time; beyond '
                 'it the node slips (drops the excess wall time, never a sim step)', False,
                 (0.0, 3600.0)),
+    'realtime_priority': (0, 'real-time mode: run the node\'s threads under SCHED_FIFO at this '
+                          'priority (1-98; needs CAP_SYS_NICE or an rtprio limit, otherwise one '
+                          'warning and normal scheduling); 0 = off', True, (0, 98)),
     'qos_sensor_data': (False, 'outputs best-effort SensorDataQoS instead of reliable depth 10',
                         True, None),
     'start_paused': (False, 'start paused (resume with ~/pause false, or ~/step)', True, None),
@@ -235,6 +238,7 @@ class SimNode(Node):
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
 
+        self.realtime_scheduling = False   # SCHED_FIFO in force (realtime_priority)
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.paused = bool(self._p('start_paused'))
         self._timer = None
@@ -248,6 +252,8 @@ class SimNode(Node):
         if self._p('info_period') > 0:
             self.create_timer(self._p('info_period'), self._log_info, clock=self._steady)
         self._start_recorder(out_qos)
+        if self._p('realtime_priority'):   # last: every thread of the node exists by now
+            self._apply_realtime_priority(self._p('realtime_priority'))
         if self.mode == 'lockstep':
             self.create_timer(0.05, self._lockstep_resend, clock=self._steady)
         self._publish_sample(self._current_outputs())
@@ -299,6 +305,38 @@ class SimNode(Node):
                 self.get_logger().info(f'log limit: deleted {len(self._recorder.deleted)} '
                                        'old log file(s)')
             # (no flush timer here: the recorder's writer thread owns the writer and flushes)
+
+    def _apply_realtime_priority(self, priority):
+        """SCHED_FIFO for every thread of this process (the executor's, DDS's, the log
+        writer's; threads started later inherit it). Real-time mode only: a free-running or
+        lockstep node at FIFO would hold a core. Without permission: one warning, no change."""
+        if self.mode != 'real_time':
+            self.get_logger().warning(f'realtime_priority: only in real_time mode (mode is '
+                                      f'{self.mode}); scheduling unchanged')
+            return
+        changed, refused = 0, ''
+        for tid in sorted(int(t) for t in os.listdir('/proc/self/task')):
+            try:
+                os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
+                changed += 1
+            except ProcessLookupError:   # a thread that has just ended
+                continue
+            except (PermissionError, OSError) as exc:
+                refused = exc.strerror or str(exc)
+                break
+        if refused:
+            for tid in (int(t) for t in os.listdir('/proc/self/task')):   # all or nothing
+                try:
+                    os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+                except OSError:
+                    pass
+            self.get_logger().warning(
+                f'realtime_priority {priority}: SCHED_FIFO refused ({refused}); running with '
+                'normal scheduling (grant CAP_SYS_NICE, or an rtprio limit in '
+                '/etc/security/limits.conf)')
+        else:
+            self.get_logger().info(f'SCHED_FIFO priority {priority} for {changed} thread(s)')
+        self.realtime_scheduling = not refused
 
     def destroy_node(self):
         """Finish the MCAP log (indexed and complete), then destroy the node."""
@@ -556,7 +594,7 @@ class SimNode(Node):
     def _on_command(self, topic, data):
         """A command's CDR bytes: decode, check, log (at the period it applies to), hold."""
         self.commands_received += 1
-        command = self._decoder.decode(topic, data, self._sim.u.tolist())
+        command = self._decoder.decode(topic, data, self._sim.u)
         if self._recorder is not None and command.canonical:
             self._recorder.record(topic, command.canonical, stamp_ns(self._sim.k, self._dt),
                                   TOPIC_TYPES[topic])
