@@ -272,17 +272,28 @@ class NodeMarkers:
         self.frames = MarkerFrames(model, frame_prefix=f'{namespace}/' if namespace else '',
                                    frame_id=frame_id)
         self.publisher = node.create_publisher(MarkerArray, MARKER_TOPIC, qos)
+        self._publish_raw = self.publisher.handle.publish_raw
         self.published = 0
 
     def on_sample(self, k: int, x, u, stamp_ns: int, recorder=None) -> None:
         """Publish (and record) a frame if sample k is on the display grid."""
+        data = self.frame_for(k, x, u, stamp_ns, recorder)
+        if data is not None:
+            self.publish(data)
+
+    def frame_for(self, k: int, x, u, stamp_ns: int, recorder=None) -> bytes | None:
+        """The frame of sample k (recorded) if it is on the display grid, else None; the
+        caller publishes it (:meth:`publish`), e.g. with the other messages of a burst."""
         if k % self.every:
-            return
+            return None
         data = self.frames.frame(x, u, stamp_ns)
-        self.publisher.publish(data)
-        self.published += 1
         if recorder is not None:
             recorder.record(MARKER_TOPIC, data, stamp_ns, type_name=MARKER_TYPE)
+        return data
+
+    def publish(self, data: bytes) -> None:
+        self._publish_raw(data)   # (Publisher.publish's type check and guard skipped)
+        self.published += 1
 
 
 def attach_markers(node, model, display_hz: float, frame_id: str, qos):

@@ -541,14 +541,17 @@ class SimNode(Node):
             self._stepping = False
 
     def _send(self, batch) -> bool:
-        """Publish (t_ns, samples) pairs in order, /clock before each sample's outputs."""
+        """Publish (t_ns, samples, marker frame or None) in order, /clock before each sample's
+        outputs."""
         try:
             publish_clock, publishers = self._publish_clock, self._publish_raw
-            for t_ns, samples in batch:
+            for t_ns, samples, frame in batch:
                 if publish_clock is not None:   # first: a use_sim_time reader is at t_k
                     publish_clock(encode_clock(t_ns))
                 for publish, data in zip(publishers, samples):
                     publish(data)
+                if frame is not None:
+                    self._markers.publish(frame)
         except RuntimeError:   # rclpy's RCLError: Ctrl-C shut the context down mid-tick
             if self.context.ok():
                 raise
@@ -571,16 +574,18 @@ class SimNode(Node):
             if k == 0:
                 self._last_sample = samples
                 self._heard_by = self._subscriptions_matched()
+        recorder = self._recorder
+        if recorder is not None:   # (the log's order: the sample, then its marker frame)
+            recorder.record_sample(t_ns, self._topics, samples, TOPIC_TYPES)
+        frame = None
+        if self._markers is not None and not k % self._markers.every:
+            frame = self._markers.frame_for(k, self._sim.x, self._sim.u, t_ns, recorder)
         if batch is not None:
-            batch.append((t_ns, samples))
-        elif not self._send(((t_ns, samples),)):
+            batch.append((t_ns, samples, frame))
+        elif not self._send(((t_ns, samples, frame),)):
             return False
-        if self._recorder is not None:
-            self._recorder.record_sample(t_ns, self._topics, samples, TOPIC_TYPES)
         if self.on_sample is not None:
             self.on_sample(k, out)
-        if self._markers is not None and not k % self._markers.every:
-            self._markers.on_sample(k, self._sim.x, self._sim.u, t_ns, self._recorder)
         return True
 
     def _enter_fault(self, reason):
