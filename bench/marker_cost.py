@@ -3,8 +3,9 @@ CPU cost of the shape markers (issue 18 target: 30 Hz markers add <= 5 % to the 
 simulated second).
 
 One sim_node runs free (the node's cheapest mode per simulated second, so the markers' largest
-share; no MCAP log) in this process, with a subscriber in another process on /markers and, by
-default, on the four output topics (a viewer and a controller), so every message is delivered.
+share; no MCAP log unless --log, which also logs every frame) in this process, with a
+subscriber in another process on /markers and, by default, on the four output topics (a viewer
+and a controller), so every message is delivered.
 The markers are switched on and off in alternating blocks of ``--block-s`` wall seconds
 (``--blocks`` pairs, the first block of each pair chosen at random) in that one node: the
 host's drift hits both states alike, which separate runs of a few seconds could not resolve
@@ -12,9 +13,12 @@ host's drift hits both states alike, which separate runs of a few seconds could 
 (the DDS threads that send the reliable 2.9 kB frames too), per simulated second in each
 state; reported: the ratio of the totals, and the median and quartiles of the per-pair ratios.
 The marker code's own share (building and publishing frames, executor thread's CPU time) is
-measured directly as well.
+measured directly as well. The voltage is a square wave (``--drive-hz``, 2 Hz: the actuator
+snaps and creeps most of the time, so most frames change and are sent; a settled actuator
+sends one frame per simulated second).
 
-    python bench/marker_cost.py [--scene default] [--blocks 30] [--block-s 0.5]
+    python bench/marker_cost.py [--scene default] [--blocks 30] [--block-s 0.5] [--log]
+                                [--drive-hz 2]
 """
 
 import argparse
@@ -41,7 +45,7 @@ except BaseException:
 '''
 
 
-def run(scene, blocks, block_s, subscribe, seed=1):
+def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1):
     import random
     import rclpy
     from rclpy.parameter import Parameter
@@ -50,7 +54,8 @@ def run(scene, blocks, block_s, subscribe, seed=1):
     rclpy.init(context=context)
     node = SimNode(context=context, parameter_overrides=[
         Parameter('scene_file', value=scene), Parameter('real_time', value=False),
-        Parameter('log.enabled', value=False), Parameter('info_period', value=0.0),
+        Parameter('log.enabled', value=bool(log_dir)), Parameter('log.path', value=log_dir or '.'),
+        Parameter('info_period', value=0.0),
         Parameter('start_paused', value=True), Parameter('markers.rate_hz', value=30.0)])
     executor = make_executor(context)   # the node's own executor (EventsExecutor)
     executor.add_node(node)
@@ -64,15 +69,28 @@ def run(scene, blocks, block_s, subscribe, seed=1):
         executor.spin_once(timeout_sec=0.05)
     spent = [0.0]
 
-    def timed(inner):   # the marker code's own CPU time (the executor thread's)
+    def timed(inner):   # the marker code's own CPU time (the executor thread's): frame_for
+        # runs for every frame on the display grid (sent or not), publish for those sent
         def call(*a, **k):
             t0 = time.thread_time()
             result = inner(*a, **k)
             spent[0] += time.thread_time() - t0
             return result
         return call
-    markers.frames.frame = timed(markers.frames.frame)
+    markers.frame_for = timed(markers.frame_for)   # building (and logging) a frame
     markers.publish = timed(markers.publish)
+    if drive_hz > 0:   # a square wave 0 V <-> 2.5 kV: the actuator snaps and creeps, so frames
+        # change (a settled actuator sends one frame per simulated second)
+        half = max(1, int(round(0.5 / drive_hz / node._dt)))
+        simulator, step = node._sim, node._sim.step
+
+        def driven_step():
+            k = simulator.k
+            if k % half == 0:
+                simulator.set_input([2500.0 if (k // half) % 2 == 0 else 0.0]
+                                    * len(simulator.u))
+            return step()
+        simulator.step = driven_step
     node.paused = False
     node._run_timer(True)
     warm = time.perf_counter() + 1.0
@@ -109,6 +127,11 @@ def main():
     parser.add_argument('--scene', default='default')
     parser.add_argument('--blocks', type=int, default=30, help='on/off pairs')
     parser.add_argument('--block-s', type=float, default=0.5, help='wall seconds per block')
+    parser.add_argument('--drive-hz', type=float, default=2.0,
+                        help='square-wave voltage 0 <-> 2.5 kV at this frequency (sim time); '
+                        '0 = none (the actuator stays at rest)')
+    parser.add_argument('--log', action='store_true',
+                        help='with the MCAP log (the node default; frames are logged too)')
     parser.add_argument('--subscribe', choices=('markers', 'all'), default='all',
                         help="the other process subscribes to /markers only, or to the outputs "
                         "too (a controller and a viewer; default)")
@@ -117,8 +140,11 @@ def main():
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     sink = subprocess.Popen([sys.executable, '-c', SUBSCRIBER]
                             + (['all'] if args.subscribe == 'all' else []))
+    import tempfile
     try:
-        pairs, totals, fps, own = run(args.scene, args.blocks, args.block_s, args.subscribe)
+        with tempfile.TemporaryDirectory() as folder:
+            pairs, totals, fps, own = run(args.scene, args.blocks, args.block_s, args.subscribe,
+                                          folder if args.log else '', args.drive_hz)
     finally:
         sink.terminate()
         sink.wait()
@@ -126,7 +152,8 @@ def main():
     on = totals[True][0] / totals[True][1]
     ratios = sorted(b / a - 1 for a, b in pairs)
     q = [ratios[int(round(f * (len(ratios) - 1)))] for f in (0.25, 0.5, 0.75)]
-    print(f'{args.scene}: {len(pairs)} on/off pairs of {args.block_s:g} s; node CPU per '
+    print(f'{args.scene}{" with the MCAP log" if args.log else ""}, square wave '
+          f'{args.drive_hz:g} Hz: {len(pairs)} on/off pairs of {args.block_s:g} s; node CPU per '
           f'simulated s: {off * 1e3:.2f} ms (markers off) vs {on * 1e3:.2f} ms (30 Hz, '
           f'{fps:.1f} frames per sim s): {(on / off - 1) * 100:+.1f} % (totals); per pair: '
           f'median {q[1] * 100:+.1f} %, quartiles {q[0] * 100:+.1f} .. {q[2] * 100:+.1f} %; '

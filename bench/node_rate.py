@@ -4,14 +4,18 @@ Benchmark sim_node's I/O (issue 15; a script, not a test). Every figure of one s
 in the same run, side by side, so compare ratios; absolute times depend on the host.
 
 1. Free-run CPU per control period, all outputs + /clock + /diagnostics + MCAP logging, one
-   subscriber process on every output topic (markers off: the issue-15 target; a second run
-   with the default 30 Hz markers gives their share, issue 18). Measured next to:
+   subscriber process on every output topic (markers off: the issue-15 target; a run with the
+   default 30 Hz markers per round too, a rough figure: bench/marker_cost.py measures their
+   share, issue 18). Measured next to:
    - the floor: a plain node publishing the same pre-serialized bytes (one sample's CDR) and
      /clock on the same topics to the same subscribers, per period. It runs as the node runs:
      an EventsExecutor timer callback publishing steps_per_tick (10) periods' messages per call,
      so it pays the one executor callback per burst any ROS node pays, and nothing else
-     (``floor``). A tight publish loop without an executor is reported too (``publish_loop``,
-     the lowest possible figure; the old floor);
+     (``floor``). Why bursts: DDS's CPU per message depends on the pace (its threads and the
+     subscriber's wake per message when messages come apart), and the node in free run
+     publishes each tick's samples as one burst; a floor publishing one period per callback
+     would be higher, and the node's own figure no better. A tight publish loop without an
+     executor is reported too (``publish_loop``, the lowest possible figure; the old floor);
    - the physics alone: Simulator.step() per period;
    - the node under the SingleThreadedExecutor (the node uses the EventsExecutor; once).
    CPU is the process's CPU time (all threads: the DDS threads and the MCAP writer thread too)
@@ -22,9 +26,12 @@ in the same run, side by side, so compare ratios; absolute times depend on the h
    the controller's reliable subscriber, command-to-effect latency (controller publishes the
    command -> it receives the first sample that shows it: the log records the period each
    command applied to), the lag behind the wall clock (end, max) and the slipped wall time.
+   --realtime-priority N gives the node realtime_priority N (SCHED_FIFO), --controller-priority
+   M the controller process SCHED_FIFO M (both need CAP_SYS_NICE or an rtprio limit).
 
 Usage: python bench/node_rate.py [--scenes default,array] [--rt-seconds 60]
-       [--free-seconds 3] [--rounds 7] [--json out.json]
+       [--free-seconds 3] [--rounds 7] [--realtime-priority 0] [--controller-priority 0]
+       [--json out.json]
 """
 
 import argparse
@@ -250,10 +257,13 @@ def run_node(seconds, executor_kind, folder, wait_topics=None, **params):
                        * node._dt * 1e3, 'max_lag_ms': max_lag * node._dt * 1e3,
                        'slipped_s': node.slipped_s - slipped0,
                        'late_ticks': node.late_ticks - late0})
-    path = node._recorder.path if node._recorder is not None else ''
+    recorder = node._recorder
     executor.shutdown()
     node.destroy_node()
     rclpy.shutdown(context=context)
+    # every file (after close: the writer thread may still switch files while it drains): a
+    # long run splits the log (the array's marker frames are ~0.3 MB each)
+    path = list(recorder.paths) if recorder is not None else []
     return result, path
 
 
