@@ -2,15 +2,23 @@
 CPU cost of the shape markers (issue 18 target: 30 Hz markers add <= 5 % to the node's CPU per
 simulated second).
 
-Runs sim_node in free-run mode (no MCAP log) in this process for ``--sim-s`` simulated seconds
-with markers.rate_hz = 0 and = 30, alternately (``--repeats`` each; medians reported, since the
-host is shared), with a subscriber in another process (to /markers and, by default, to the four
-output topics as a controller would) so the messages are really delivered. Node CPU = this
-process's user + system time per simulated second; the marker code's share is the executor
-thread's CPU time in building and publishing the frames (time.thread_time), measured directly
-because whole-run differences are smaller than the host's run-to-run noise.
+One sim_node runs free (the node's cheapest mode per simulated second, so the markers' largest
+share; no MCAP log unless --log, which also logs every frame) in this process, with a
+subscriber in another process on /markers and, by default, on the four output topics (a viewer
+and a controller), so every message is delivered.
+The markers are switched on and off in alternating blocks of ``--block-s`` wall seconds
+(``--blocks`` pairs, the first block of each pair chosen at random) in that one node: the
+host's drift hits both states alike, which separate runs of a few seconds could not resolve
+(their spread was larger than the effect). Node CPU = this process's CPU time, all threads
+(the DDS threads that send the reliable 2.9 kB frames too), per simulated second in each
+state; reported: the ratio of the totals, and the median and quartiles of the per-pair ratios.
+The marker code's own share (building and publishing frames, executor thread's CPU time) is
+measured directly as well. The voltage is a square wave (``--drive-hz``, 2 Hz: the actuator
+snaps and creeps most of the time, so most frames change and are sent; a settled actuator
+sends one frame per simulated second).
 
-    python bench/marker_cost.py [--scene default] [--sim-s 20] [--repeats 3]
+    python bench/marker_cost.py [--scene default] [--blocks 30] [--block-s 0.5] [--log]
+                                [--drive-hz 2]
 """
 
 import argparse
@@ -37,7 +45,8 @@ except BaseException:
 '''
 
 
-def run(scene, rate, sim_s, subscribe):
+def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1):
+    import random
     import rclpy
     from rclpy.parameter import Parameter
     from det_sim_ros.sim_node import make_executor, SimNode
@@ -45,58 +54,84 @@ def run(scene, rate, sim_s, subscribe):
     rclpy.init(context=context)
     node = SimNode(context=context, parameter_overrides=[
         Parameter('scene_file', value=scene), Parameter('real_time', value=False),
-        Parameter('log.enabled', value=False), Parameter('info_period', value=0.0),
-        Parameter('start_paused', value=True), Parameter('markers.rate_hz', value=rate)])
+        Parameter('log.enabled', value=bool(log_dir)), Parameter('log.path', value=log_dir or '.'),
+        Parameter('info_period', value=0.0),
+        Parameter('start_paused', value=True), Parameter('markers.rate_hz', value=30.0)])
     executor = make_executor(context)   # the node's own executor (EventsExecutor)
     executor.add_node(node)
-    deadline = time.monotonic() + 10.0
+    markers = node._markers
+    deadline = time.monotonic() + 20.0
     # wait for the subscriber, so every message it asks for is delivered
-    waits = [node._markers.publisher] if rate else []
+    waits = [markers.publisher]
     if subscribe == 'all':
         waits.append(node._output_pubs[node._encoder.topics.index('deflection')])
     while not all(p.get_subscription_count() for p in waits) and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.05)
-    spent = [0.0, 0.0, 0.0]
-    if rate:    # the markers' own share, measured directly (the difference of runs is noisy):
-        # building and publishing a frame (timing every on_sample call would cost more than
-        # its k % every test)
-        markers = node._markers
+    spent = [0.0]
 
-        def timed(inner, slot):
-            def call(*a, **k):
-                t0 = time.thread_time()        # this thread: the executor's
-                result = inner(*a, **k)
-                spent[slot] += time.thread_time() - t0
-                return result
-            return call
-        markers.frames.frame = timed(markers.frames.frame, 1)
-        markers.publisher = type('P', (), {'publish': staticmethod(
-            timed(markers.publisher.publish, 2))})()
+    def timed(inner):   # the marker code's own CPU time (the executor thread's): frame_for
+        # runs for every frame on the display grid (sent or not), publish for those sent
+        def call(*a, **k):
+            t0 = time.thread_time()
+            result = inner(*a, **k)
+            spent[0] += time.thread_time() - t0
+            return result
+        return call
+    markers.frame_for = timed(markers.frame_for)   # building (and logging) a frame
+    markers.publish = timed(markers.publish)
+    if drive_hz > 0:   # a square wave 0 V <-> 2.5 kV: the actuator snaps and creeps, so frames
+        # change (a settled actuator sends one frame per simulated second)
+        half = max(1, int(round(0.5 / drive_hz / node._dt)))
+        simulator, step = node._sim, node._sim.step
+
+        def driven_step():
+            k = simulator.k
+            if k % half == 0:
+                simulator.set_input([2500.0 if (k // half) % 2 == 0 else 0.0]
+                                    * len(simulator.u))
+            return step()
+        simulator.step = driven_step
     node.paused = False
     node._run_timer(True)
-    steps = int(round(sim_s / node._dt))
-    start_k = node._sim.k
-    cpu0, thread0 = time.process_time(), time.thread_time()
-    while node._sim.k - start_k < steps:
+    warm = time.perf_counter() + 1.0
+    while time.perf_counter() < warm:
         executor.spin_once(timeout_sec=0.1)
-    cpu = time.process_time() - cpu0
-    thread = time.thread_time() - thread0
-    sim_time = (node._sim.k - start_k) * node._dt
-    frames = node._markers.published if node._markers else 0
+    rng = random.Random(seed)
+    pairs = []   # (CPU s per sim s off, on)
+    totals = {False: [0.0, 0.0], True: [0.0, 0.0]}   # CPU s, sim s
+    frames0, spent0, on_sim = markers.published, spent[0], 0.0
+    for _ in range(blocks):
+        pair = {}
+        for on in ((False, True) if rng.random() < 0.5 else (True, False)):
+            node._markers = markers if on else None
+            k0, c0 = node._sim.k, time.process_time()
+            end = time.perf_counter() + block_s
+            while time.perf_counter() < end:
+                executor.spin_once(timeout_sec=0.1)
+            cpu, sim = time.process_time() - c0, (node._sim.k - k0) * node._dt
+            totals[on][0] += cpu
+            totals[on][1] += sim
+            pair[on] = cpu / sim
+            on_sim += sim if on else 0.0
+        pairs.append((pair[False], pair[True]))
+    frames = markers.published - frames0
+    own = spent[0] - spent0
     executor.shutdown()
     node.destroy_node()
     rclpy.try_shutdown(context=context)
-    per_frame = 1e6 / max(frames, 1)
-    print(f'  executor thread {thread / (steps * node._dt) * 1e3:.2f} ms per sim s; '
-          f'frame {spent[1] * per_frame:.0f} us, publish {spent[2] * per_frame:.0f} us per frame')
-    return cpu / sim_time, frames / sim_time, (spent[1] + spent[2]) / sim_time
+    return pairs, totals, frames / on_sim, own / on_sim
 
 
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument('--scene', default='default')
-    parser.add_argument('--sim-s', type=float, default=20.0)
-    parser.add_argument('--repeats', type=int, default=3)
+    parser.add_argument('--blocks', type=int, default=30, help='on/off pairs')
+    parser.add_argument('--block-s', type=float, default=0.5, help='wall seconds per block')
+    parser.add_argument('--drive-hz', type=float, default=2.0,
+                        help='square-wave voltage 0 <-> 2.5 kV at this frequency (sim time); '
+                        '0 = none (the actuator stays at rest)')
+    parser.add_argument('--log', action='store_true',
+                        help='with the MCAP log (the node default; frames are logged too)')
     parser.add_argument('--subscribe', choices=('markers', 'all'), default='all',
                         help="the other process subscribes to /markers only, or to the outputs "
                         "too (a controller and a viewer; default)")
@@ -105,28 +140,25 @@ def main():
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     sink = subprocess.Popen([sys.executable, '-c', SUBSCRIBER]
                             + (['all'] if args.subscribe == 'all' else []))
+    import tempfile
     try:
-        results = {0.0: [], 30.0: []}
-        share = []
-        for _ in range(args.repeats):
-            for rate in (0.0, 30.0):
-                cost, fps, own = run(args.scene, rate, args.sim_s, args.subscribe)
-                results[rate].append(cost)
-                if rate:
-                    share.append(own / cost)
-                print(f'markers {rate:>4g} Hz: {cost * 1e3:7.2f} ms CPU per sim s '
-                      f'({fps:.1f} frames per sim s'
-                      + (f'; in the marker code {own * 1e3:.2f} ms = {own / cost * 100:.1f} %'
-                         f', {own / fps * 1e6:.0f} us per frame' if rate else '') + ')',
-                      flush=True)
+        with tempfile.TemporaryDirectory() as folder:
+            pairs, totals, fps, own = run(args.scene, args.blocks, args.block_s, args.subscribe,
+                                          folder if args.log else '', args.drive_hz)
     finally:
         sink.terminate()
         sink.wait()
-    off = sorted(results[0.0])[len(results[0.0]) // 2]
-    on = sorted(results[30.0])[len(results[30.0]) // 2]
-    print(f'{args.scene}: median {off * 1e3:.2f} ms (off) vs {on * 1e3:.2f} ms (30 Hz) CPU per '
-          f'simulated s: {(on / off - 1) * 100:+.1f} %; marker code alone: median '
-          f'{sorted(share)[len(share) // 2] * 100:.1f} % of the node CPU')
+    off = totals[False][0] / totals[False][1]
+    on = totals[True][0] / totals[True][1]
+    ratios = sorted(b / a - 1 for a, b in pairs)
+    q = [ratios[int(round(f * (len(ratios) - 1)))] for f in (0.25, 0.5, 0.75)]
+    print(f'{args.scene}{" with the MCAP log" if args.log else ""}, square wave '
+          f'{args.drive_hz:g} Hz: {len(pairs)} on/off pairs of {args.block_s:g} s; node CPU per '
+          f'simulated s: {off * 1e3:.2f} ms (markers off) vs {on * 1e3:.2f} ms (30 Hz, '
+          f'{fps:.1f} frames per sim s): {(on / off - 1) * 100:+.1f} % (totals); per pair: '
+          f'median {q[1] * 100:+.1f} %, quartiles {q[0] * 100:+.1f} .. {q[2] * 100:+.1f} %; '
+          f'marker code alone {own * 1e3:.2f} ms per sim s = {own / on * 100:.1f} % of the '
+          f'node, {own / fps * 1e6:.0f} us per frame')
 
 
 if __name__ == '__main__':

@@ -4,20 +4,34 @@ Benchmark sim_node's I/O (issue 15; a script, not a test). Every figure of one s
 in the same run, side by side, so compare ratios; absolute times depend on the host.
 
 1. Free-run CPU per control period, all outputs + /clock + /diagnostics + MCAP logging, one
-   subscriber process on every output topic. Measured next to:
-   - the floor: a plain node publishing the same pre-serialized bytes (one sample's CDR) on the
-     same topics to the same subscribers, per period (with and without /clock);
+   subscriber process on every output topic (markers off: the issue-15 target; a run with the
+   default 30 Hz markers per round too, a rough figure: bench/marker_cost.py measures their
+   share, issue 18). Measured next to:
+   - the floor: a plain node publishing the same pre-serialized bytes (one sample's CDR) and
+     /clock on the same topics to the same subscribers, per period. It runs as the node runs:
+     an EventsExecutor timer callback publishing steps_per_tick (10) periods' messages per call,
+     so it pays the one executor callback per burst any ROS node pays, and nothing else
+     (``floor``). Why bursts: DDS's CPU per message depends on the pace (its threads and the
+     subscriber's wake per message when messages come apart), and the node in free run
+     publishes each tick's samples as one burst; a floor publishing one period per callback
+     would be higher, and the node's own figure no better. A tight publish loop without an
+     executor is reported too (``publish_loop``, the lowest possible figure; the old floor);
    - the physics alone: Simulator.step() per period;
-   - the node under the SingleThreadedExecutor (the node uses the EventsExecutor).
-   CPU is the process's CPU time (all threads, so the MCAP writer thread too) per period.
+   - the node under the SingleThreadedExecutor (the node uses the EventsExecutor; once).
+   CPU is the process's CPU time (all threads: the DDS threads and the MCAP writer thread too)
+   per period. The host is shared, so --rounds repeats floor, node and node with markers
+   interleaved; medians of each and of the per-round ratios are reported, with min..max.
 2. Real time at the scene rate for --rt-seconds, an outside controller process answering every
    displacement sample with a command, another process keeping one core busy: samples lost at
    the controller's reliable subscriber, command-to-effect latency (controller publishes the
    command -> it receives the first sample that shows it: the log records the period each
    command applied to), the lag behind the wall clock (end, max) and the slipped wall time.
+   --realtime-priority N gives the node realtime_priority N (SCHED_FIFO), --controller-priority
+   M the controller process SCHED_FIFO M (both need CAP_SYS_NICE or an rtprio limit).
 
-Usage: PYTHONPATH=. python bench/node_rate.py [--scenes default,array] [--rt-seconds 60]
-       [--free-seconds 10] [--json out.json]
+Usage: python bench/node_rate.py [--scenes default,array] [--rt-seconds 60]
+       [--free-seconds 3] [--rounds 7] [--realtime-priority 0] [--controller-priority 0]
+       [--json out.json]
 """
 
 import argparse
@@ -152,6 +166,54 @@ def floor(scene_name, topics, samples, n, with_clock):
     return cpu
 
 
+def floor_node(topics, samples, n, burst):
+    """CPU per period of a plain node publishing pre-serialized bytes (one sample's outputs and
+    /clock per period) from an EventsExecutor timer, ``burst`` periods per callback."""
+    from sensor_msgs.msg import JointState
+    from rosgraph_msgs.msg import Clock
+    context = rclpy.context.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('bench_floor_node', context=context)
+    pubs = [node.create_publisher(JointState, t, QoSProfile(depth=10)) for t in topics]
+    clock = node.create_publisher(Clock, '/clock', QoSProfile(depth=10))
+    _wait_subscribers(pubs, 'floor node')
+    pairs = [(pub.handle.publish_raw, data) for pub, data in zip(pubs, samples)]
+    publish_clock, clock_bytes = clock.handle.publish_raw, encode_clock(0)
+    done = [0]
+
+    def tick():
+        for _ in range(burst):
+            publish_clock(clock_bytes)
+            for publish, data in pairs:
+                publish(data)
+        done[0] += burst
+    executor = make_executor(context)
+    executor.add_node(node)
+    timer = node.create_timer(1.0e-6, tick)
+    executor.spin_once(timeout_sec=0.1)
+    k0, c0, m0 = done[0], _cpu(), time.thread_time()
+    while done[0] - k0 < n:
+        executor.spin_once(timeout_sec=0.1)
+    cpu = (_cpu() - c0) / (done[0] - k0)
+    floor_node.main_thread = (time.thread_time() - m0) / (done[0] - k0)
+    timer.cancel()
+    executor.shutdown()
+    node.destroy_node()
+    rclpy.shutdown(context=context)
+    return cpu
+
+
+def _median(values):
+    values = sorted(values)
+    return values[len(values) // 2] if len(values) % 2 else 0.5 * (
+        values[len(values) // 2 - 1] + values[len(values) // 2])
+
+
+def _spread(values):
+    return {'median': _median(values), 'min': min(values), 'max': max(values),
+            'runs': [round(v, 2) for v in values]}
+
+
 def physics(scene, n):
     sim = Simulator(scene)
     sim.set_input([1500.0] * sim.model.n_inputs)
@@ -179,27 +241,32 @@ def run_node(seconds, executor_kind, folder, wait_topics=None, **params):
                        if wait_topics is None or t in wait_topics], 'node')
     executor.spin_once(timeout_sec=0.1)
     node._resync()
-    k0, c0, w0 = node._sim.k, _cpu(), time.perf_counter()
+    k0, c0, w0, m0 = node._sim.k, _cpu(), time.perf_counter(), time.thread_time()
     slipped0, late0 = node.slipped_s, node.late_ticks
     max_lag = 0
     end = w0 + seconds
+    real_time = node.mode == 'real_time'
     while time.perf_counter() < end:
         executor.spin_once(timeout_sec=0.05)
-        if node._p('real_time'):
+        if real_time:
             max_lag = max(max_lag, node._max_lag_seen)
-    cpu, wall = _cpu() - c0, time.perf_counter() - w0
+    cpu, wall, main = _cpu() - c0, time.perf_counter() - w0, time.thread_time() - m0
     steps = node._sim.k - k0
     result = {'steps': steps, 'wall_s': wall, 'rtf': steps * node._dt / wall,
-              'cpu_us_per_period': cpu / steps * 1e6}
-    if node._p('real_time'):
+              'cpu_us_per_period': cpu / steps * 1e6,
+              'main_thread_us_per_period': main / steps * 1e6}
+    if real_time:
         result.update({'lag_at_end_ms': max(0, node._steps_due(node.wall_clock()) - 1)
                        * node._dt * 1e3, 'max_lag_ms': max_lag * node._dt * 1e3,
                        'slipped_s': node.slipped_s - slipped0,
                        'late_ticks': node.late_ticks - late0})
-    path = node._recorder.path if node._recorder is not None else ''
+    recorder = node._recorder
     executor.shutdown()
     node.destroy_node()
     rclpy.shutdown(context=context)
+    # every file (after close: the writer thread may still switch files while it drains): a
+    # long run splits the log (the array's marker frames are ~0.3 MB each)
+    path = list(recorder.paths) if recorder is not None else []
     return result, path
 
 
@@ -266,6 +333,10 @@ def lockstep_in_process(scene_name, sim_seconds):
         sim.close()
 
 
+class _Skip(Exception):
+    """--rounds 0: no free-run figures."""
+
+
 def bench_scene(scene_name, args, folder):
     from det_sim_ros.contract import OutputContract
     from det_sim_ros.scene import load_scene
@@ -279,40 +350,63 @@ def bench_scene(scene_name, args, folder):
     topics = encoder.topics
     n = int(args.floor_periods)
 
-    listener = _spawn(SUBSCRIBER, ','.join(topics))
+    listener = _spawn(SUBSCRIBER, ','.join(topics)) if args.rounds > 0 else None
     try:
-        report['floor_us_per_period'] = floor(scene_name, topics, samples, n, False) * 1e6
-        report['floor_with_clock_us_per_period'] = floor(scene_name, topics, samples, n,
-                                                         True) * 1e6
         report['physics_us_per_period'] = physics(scene, n) * 1e6
-        for kind in ('events', 'single'):
-            result, _ = run_node(args.free_seconds, kind, folder, scene_file=scene_name,
-                                 real_time=False)
-            report[f'free_run_{kind}'] = result
-        node_cpu = report['free_run_events']['cpu_us_per_period']
-        report['node_over_floor'] = node_cpu / report['floor_us_per_period']
-        report['node_over_floor_with_clock'] = node_cpu / report['floor_with_clock_us_per_period']
-        report['node_over_floor_plus_physics'] = node_cpu / (
-            report['floor_with_clock_us_per_period'] + report['physics_us_per_period'])
+        if listener is None:
+            raise _Skip()
+        report['physics_us_per_period'] = physics(scene, n) * 1e6
+        rounds = {'publish_loop': [], 'floor': [], 'node': [], 'node_with_markers': [],
+                  'floor_main_thread': [], 'node_main_thread': []}
+        for _ in range(args.rounds):   # interleaved: the host's drift hits all alike
+            rounds['publish_loop'].append(floor(scene_name, topics, samples, n, True) * 1e6)
+            rounds['floor'].append(floor_node(topics, samples, n, 10) * 1e6)
+            rounds['floor_main_thread'].append(floor_node.main_thread * 1e6)
+            for key, rate in (('node', 0.0), ('node_with_markers', 30.0)):
+                result, _ = run_node(args.free_seconds, 'events', folder, scene_file=scene_name,
+                                     real_time=False, **{'markers.rate_hz': rate})
+                rounds[key].append(result['cpu_us_per_period'])
+                if key == 'node':
+                    rounds['node_main_thread'].append(result['main_thread_us_per_period'])
+        report['free_run_us_per_period'] = {key: _spread(v) for key, v in rounds.items()}
+        ratios = [a / b for a, b in zip(rounds['node'], rounds['floor'])]
+        report['node_over_floor'] = _spread(ratios)
+        report['node_over_publish_loop'] = _spread(
+            [a / b for a, b in zip(rounds['node'], rounds['publish_loop'])])
+        report['markers_30hz_added'] = _spread(
+            [b / a - 1 for a, b in zip(rounds['node'], rounds['node_with_markers'])])
+        result, _ = run_node(args.free_seconds, 'single', folder, scene_file=scene_name,
+                             real_time=False, **{'markers.rate_hz': 0.0})
+        report['free_run_single_threaded_executor'] = result
+    except _Skip:
+        pass
     finally:
-        _stop(listener)
+        if listener is not None:
+            _stop(listener)
 
-    report['lockstep_in_process_controller'] = lockstep_in_process(scene_name,
-                                                                   args.lockstep_seconds)
+    if args.lockstep_seconds > 0:
+        report['lockstep_in_process_controller'] = lockstep_in_process(scene_name,
+                                                                       args.lockstep_seconds)
     if args.rt_seconds > 0:
         n_det = sim.model.n_inputs
         controller_file = os.path.join(folder, f'controller_{scene_name}.json')
         busy = _spawn(BUSY)
         controller = _spawn(CONTROLLER, str(n_det), controller_file)
+        if args.controller_priority:   # the user's controller at SCHED_FIFO too (chrt -f)
+            os.sched_setscheduler(controller.pid, os.SCHED_FIFO,
+                                  os.sched_param(args.controller_priority))
         try:
             time.sleep(2.0)
             result, log_path = run_node(args.rt_seconds, 'events', folder, ['displacement'],
-                                        scene_file=scene_name, real_time=True)
+                                        scene_file=scene_name, real_time=True,
+                                        realtime_priority=args.realtime_priority,
+                                        **({'log.enabled': False} if args.rt_no_log else {}))
         finally:
             _stop(controller)
             busy.kill()
             busy.wait()
-        result.update(command_latency(log_path, controller_file, sim.dt))
+        if not args.rt_no_log:
+            result.update(command_latency(log_path, controller_file, sim.dt))
         report['real_time_with_controller_and_busy_core'] = result
     return report
 
@@ -321,9 +415,17 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--scenes', default='default,array')
     parser.add_argument('--rt-seconds', type=float, default=60.0)
-    parser.add_argument('--free-seconds', type=float, default=10.0)
+    parser.add_argument('--free-seconds', type=float, default=3.0, help='per free run')
+    parser.add_argument('--rounds', type=int, default=7, help='interleaved free-run rounds')
     parser.add_argument('--floor-periods', type=int, default=20000)
     parser.add_argument('--lockstep-seconds', type=float, default=5.0, help='sim seconds')
+    parser.add_argument('--realtime-priority', type=int, default=0,
+                        help="real-time run: the node's realtime_priority (SCHED_FIFO; 0 = off)")
+    parser.add_argument('--controller-priority', type=int, default=0,
+                        help="real-time run: the controller process's SCHED_FIFO priority "
+                        "(set right after it starts: its threads inherit it)")
+    parser.add_argument('--rt-no-log', action='store_true', help='real-time run without the '
+                        'MCAP log (then no command-to-effect figures)')
     parser.add_argument('--json', help='write the numbers to this file')
     args = parser.parse_args()
     report = {'cpus': os.cpu_count(), 'load_avg_at_start': os.getloadavg()}

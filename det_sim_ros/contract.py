@@ -331,31 +331,41 @@ def decode_float64_multi_array(data) -> tuple[list[float], list[tuple], int]:
     return r.doubles(), dims, offset
 
 
+_CLOCK = struct.Struct('<4siI')
+
+
 def encode_clock(t_ns: int) -> bytes:
     """CDR bytes of a rosgraph_msgs/Clock at sim time ``t_ns``."""
     sec, nanosec = divmod(int(t_ns), NS)
-    return _HEADER_LE + struct.pack('<iI', sec, nanosec)
+    return _CLOCK.pack(_HEADER_LE, sec, nanosec)
 
 
 class SampleEncoder:
     """
-    The CDR bytes of every output topic for one sample, written in place into preallocated
-    buffers straight from the simulator's output vector: per sample, one gather per field and a
-    copy of each buffer into ``bytes`` (what rclpy publishes and the recorder stores).
+    The CDR bytes of every output topic for one sample, straight from the simulator's output
+    vector: per topic one precompiled ``struct.Struct`` whose format is the whole message (the
+    constant parts, names and counts with their padding, as ``s`` fields; the stamp; the
+    doubles), so a sample costs one ``tolist``, one gather and one ``pack`` per topic, and
+    ``pack`` returns the ``bytes`` rclpy publishes and the recorder stores (4-7 µs per sample
+    for one DET against 11 µs for numpy gathers into preallocated buffers). Beyond
+    :attr:`PACK_LIMIT` published doubles (arrays of many DETs) Python floats cost more than
+    numpy calls, so the doubles are gathered by numpy and copied into per-topic buffers (an
+    array of 100 DETs: ~10 µs against ~50 µs packed).
 
-    The doubles are the simulator's values bit for bit (the displacement is y0 - y computed
-    once, as :meth:`OutputContract.values` does).
+    The doubles are the simulator's values bit for bit: the displacement is y0 - y and the
+    structure outputs sign * (output - rest), the same IEEE operations
+    :meth:`OutputContract.values` and :meth:`OutputContract.structure` do in numpy.
     """
 
-    _STAMP = struct.Struct('<iI')
+    PACK_LIMIT = 64
 
     def __init__(self, contract: OutputContract):
         self.contract = contract
         self.topics = contract.topics
-        self._buffers = []
-        # every published double is gathered into one scratch vector (one numpy call), then
-        # copied into its message buffer as bytes: cheaper than a numpy call per field
-        gather, copies, y0_slots = [], [], []
+        gather, y0_slots = [], []
+        structure_slot = None
+        layouts = []   # per topic: (pack, parts), parts: bytes (constant) or a gather slice
+        buffers = []   # per topic: (message bytes, [(offset, scratch byte range)]) (numpy path)
         for topic in self.topics:
             w = _Writer()
             w.stamp(0)
@@ -363,6 +373,7 @@ class SampleEncoder:
             w.strings(contract.names(topic))
             structure = topic == contract.structure_topic
             mapping = {'position': None} if structure else contract.fields[topic]
+            blocks = []   # (offset in the message, gather slice)
             for field in ('position', 'velocity', 'effort'):
                 n = len(contract.names(topic)) if field in mapping else 0
                 offset = w.doubles(np.zeros(n))
@@ -374,40 +385,83 @@ class SampleEncoder:
                 if (topic, field) in RELATIVE_TO_Y0:
                     y0_slots.append(slice(start, start + n))
                 if structure:
-                    self._structure = slice(start, start + n)
-                copies.append((len(self._buffers), offset, 8 * start, 8 * (start + n)))
-            self._buffers.append(w.buf)
-        self._gather = np.array(gather, dtype=np.intp)
+                    structure_slot = slice(start, start + n)
+                blocks.append((offset, slice(start, start + n)))
+            raw = bytes(w.buf)
+            fmt, parts, at = ['<4siI'], [], 12       # header, stamp (sec, nanosec)
+            for offset, block in blocks:
+                fmt.append(f'{offset - at}s{block.stop - block.start}d')
+                parts += [raw[at:offset], block]
+                at = offset + 8 * (block.stop - block.start)
+            if at < len(raw):
+                fmt.append(f'{len(raw) - at}s')
+                parts.append(raw[at:])
+            layouts.append((struct.Struct(''.join(fmt)).pack, tuple(parts)))
+            buffers.append((bytearray(raw), [(offset, 8 * block.start, 8 * block.stop)
+                                             for offset, block in blocks]))
+        self._layouts = layouts
+        self._gather = tuple(gather)
+        self._y0 = [(slot, [float(v) for v in contract.y0]) for slot in y0_slots]
+        self._structure = (structure_slot, [float(v) for v in contract._s_sign],
+                           [float(v) for v in contract._s_rest]) if structure_slot else None
+        self.packed = len(gather) <= self.PACK_LIMIT
+        # the numpy path (many DETs): one gather into a scratch vector, copied into buffers
+        self._buffers = buffers
+        self._gather_array = np.array(gather, dtype=np.intp)
         self._scratch = np.zeros(len(gather))
-        self._bytes = memoryview(self._scratch).cast('B')
-        self._copies = [(self._buffers[b], offset, offset + (end - start), start, end)
-                        for b, offset, start, end in copies]
-        self._y0 = [(self._scratch[s], contract.y0) for s in y0_slots]
-        self._structure_view = (self._scratch[self._structure]
-                                if contract.structure_names else None)
-        self._s_sign, self._s_rest = contract._s_sign, contract._s_rest
+        self._scratch_bytes = memoryview(self._scratch).cast('B')
+        self._y0_views = [(self._scratch[slot], contract.y0) for slot in y0_slots]
+        self._structure_view = (self._scratch[structure_slot], contract._s_rest,
+                                contract._s_sign) if structure_slot else None
         if not _LITTLE:  # pragma: no cover - the scratch is native, the wire little endian
             raise NotImplementedError('SampleEncoder needs a little-endian host')
 
+    def values(self, out) -> list[float]:
+        """The published doubles of a sample, all topics, in message order (y0 - y and the
+        structure outputs computed)."""
+        values = out.tolist() if hasattr(out, 'tolist') else list(out)
+        published = [values[i] for i in self._gather]
+        for slot, y0 in self._y0:
+            published[slot] = [a - b for a, b in zip(y0, published[slot])]
+        if self._structure is not None:
+            slot, signs, rest = self._structure
+            published[slot] = [s * (v - r) for s, v, r in zip(signs, published[slot], rest)]
+        return published
+
     def encode(self, out, t_ns: int) -> list[bytes]:
         """The bytes of each topic of :attr:`topics` (same order) for output vector ``out``."""
+        if self.packed:
+            return self.encode_values(self.values(out), t_ns)
         scratch = self._scratch
-        np.take(out, self._gather, out=scratch)
-        for view, y0 in self._y0:
+        np.take(out, self._gather_array, out=scratch, mode='clip')
+        for view, y0 in self._y0_views:
             np.subtract(y0, view, out=view)
-        view = self._structure_view
-        if view is not None:
-            np.subtract(view, self._s_rest, out=view)
-            np.multiply(self._s_sign, view, out=view)
-        raw = self._bytes
-        for buf, lo, hi, start, end in self._copies:
-            buf[lo:hi] = raw[start:end]
-        sec, nanosec = divmod(t_ns, NS)
-        pack = self._STAMP.pack_into
+        if self._structure_view is not None:
+            view, rest, signs = self._structure_view
+            np.subtract(view, rest, out=view)
+            np.multiply(signs, view, out=view)
+        raw = self._scratch_bytes
+        stamp = _CLOCK.pack(_HEADER_LE, *divmod(t_ns, NS))
         result = []
-        for buf in self._buffers:
-            pack(buf, 4, sec, nanosec)
+        for buf, copies in self._buffers:
+            buf[:12] = stamp
+            for offset, start, end in copies:
+                buf[offset:offset + end - start] = raw[start:end]
             result.append(bytes(buf))
+        return result
+
+    def encode_values(self, published: list, t_ns: int) -> list[bytes]:
+        """The bytes of each topic from :meth:`values`."""
+        sec, nanosec = divmod(t_ns, NS)
+        result = []
+        for pack, parts in self._layouts:
+            args = [_HEADER_LE, sec, nanosec]
+            for part in parts:
+                if type(part) is bytes:
+                    args.append(part)
+                else:
+                    args += published[part]
+            result.append(pack(*args))
         return result
 
 
@@ -453,9 +507,23 @@ class CommandDecoder:
         self.det_names = list(det_names)
         self.index = {name: i for i, name in enumerate(self.det_names)}
         self.v_max = float(v_max)
+        # the common command, a little-endian Float64MultiArray without dims holding one
+        # voltage per DET, read by one unpack: its canonical bytes are these 20 (the header,
+        # no dims, data_offset 0, the count, zero padding) and its doubles as they came
+        n = len(self.det_names)
+        self._vector_head = encode_float64_multi_array([0.0] * n)[:20]
+        self._vector_size = 20 + 8 * n
+        self._unpack_vector = struct.Struct(f'<{n}d').unpack_from
 
     def decode(self, topic: str, data, held: Sequence[float]) -> Command:
-        """Decode CDR ``data`` received on ``topic`` (a name of :data:`COMMAND_TOPICS`)."""
+        """Decode CDR ``data`` received on ``topic`` (a name of :data:`COMMAND_TOPICS`);
+        ``held``: the voltages now (a JointState may name a subset)."""
+        if topic == COMMAND_TOPIC and len(data) >= self._vector_size \
+                and data[4:16] == self._vector_head[4:16] and data[:2] == b'\x00\x01':
+            volts = list(self._unpack_vector(data, 20))
+            v_max = self.v_max
+            if all(0.0 <= v <= v_max for v in volts):   # (False for NaN: the checks below)
+                return Command(volts, '', (), self._vector_head + data[20:self._vector_size])
         try:
             if topic == JOINT_COMMAND_TOPIC:
                 msg = decode_joint_state(data)

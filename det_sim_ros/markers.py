@@ -19,7 +19,10 @@ objects cost about 20x more).
 
 :class:`NodeMarkers` is the node's side: the publisher on ``markers`` and the display-rate
 throttle (every N-th control sample, N = rate_hz / display rate, so the cost per simulated
-second is fixed and the frames are stamped on the sample grid).
+second is bounded and the frames are stamped on the sample grid). A frame that would show
+nothing new (no coordinate moved by more than 0.1 µm, the same voltages) is not sent, except
+once per simulated second: markers persist in RViz and Foxglove until replaced, so a settled
+actuator costs about one frame per simulated second.
 """
 
 from __future__ import annotations
@@ -41,6 +44,11 @@ PLATE_THICKNESS = 2.0e-3     # m
 BEAM_COLOR = (0.85, 0.85, 0.85, 1.0)
 REFERENCE_COLOR = (1.0, 0.8, 0.0, 1.0)
 PLATE_COLOR = (0.4, 0.6, 0.4, 0.8)
+# the node sends a frame only if something moved by more than this (m; far below what a
+# display of mm deflections shows) or the voltage changed, and at least every KEEPALIVE_S
+MOVE_TOLERANCE = 1.0e-7
+KEEPALIVE_S = 1.0
+KEEPALIVE_NS = int(KEEPALIVE_S * 1e9)
 
 
 def _sentinel(k: int) -> float:
@@ -177,6 +185,8 @@ class MarkerFrames:
         self._cell_maps = [self._cell_map(sampler, off) for sampler, off in
                            zip(geo.samplers, self._offsets)]
         self._colored_for = None
+        self._last_sent = None    # (values, volts, stamp) of frame_if_moved's last frame
+        self.skipped = 0
 
     @staticmethod
     def _cell_map(sampler, off):
@@ -217,6 +227,27 @@ class MarkerFrames:
 
     def frame(self, x, u, stamp_ns: int) -> bytes:
         """CDR bytes of the MarkerArray at state x, voltages u, stamped ``stamp_ns`` (sim time)."""
+        return self.pack(self.values(x), u, stamp_ns)
+
+    def frame_if_moved(self, x, u, stamp_ns: int) -> bytes | None:
+        """The frame, or None when it would show what the last frame returned here showed: no
+        drawn coordinate moved by more than :data:`MOVE_TOLERANCE`, the voltages are the
+        same, and less than :data:`KEEPALIVE_S` of sim time has passed (markers persist in
+        RViz and Foxglove until replaced, so a settled actuator needs no new frames; the
+        keep-alive serves viewers that join later)."""
+        values = self.values(x)
+        volts = list(u) if np.ndim(u) else [u]
+        last = self._last_sent
+        if (last is not None and volts == last[1] and stamp_ns - last[2] < KEEPALIVE_NS
+                and float(np.max(np.abs(values - last[0]))) <= MOVE_TOLERANCE):
+            self.skipped += 1
+            return None
+        self._last_sent = (values.copy(), volts, stamp_ns)
+        return self.pack(values, u, stamp_ns)
+
+    def values(self, x) -> np.ndarray:
+        """Every drawn coordinate that moves (m; the plate's orientation as a quaternion), in
+        the order of the frame's fields."""
         parts, heights = [], []
         for (s, sampler, _), (V0, Kq, Ke, B1, kinematics, i_h, i_thick, poly) in zip(
                 self._samplers, self._cell_maps):
@@ -244,7 +275,11 @@ class MarkerFrames:
                                           + 0.5 * PLATE_THICKNESS)
             half = 0.5 * tilt              # rotation about x: quaternion (sin, 0, 0, cos)
             parts.append((*centre, math.sin(half), 0.0, 0.0, math.cos(half)))
-        self._f64[self._f64_index] = parts[0] if len(parts) == 1 else np.concatenate(parts)
+        return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+    def pack(self, values, u, stamp_ns: int) -> bytes:
+        """The frame's bytes from :meth:`values`, the voltages and the stamp."""
+        self._f64[self._f64_index] = values
         volts = list(u) if np.ndim(u) else [u] * len(self._samplers)
         if volts != self._colored_for:            # the DET colour changes with its voltage
             self._colored_for = volts
@@ -272,17 +307,31 @@ class NodeMarkers:
         self.frames = MarkerFrames(model, frame_prefix=f'{namespace}/' if namespace else '',
                                    frame_id=frame_id)
         self.publisher = node.create_publisher(MarkerArray, MARKER_TOPIC, qos)
+        self._publish_raw = self.publisher.handle.publish_raw
         self.published = 0
 
     def on_sample(self, k: int, x, u, stamp_ns: int, recorder=None) -> None:
         """Publish (and record) a frame if sample k is on the display grid."""
+        data = self.frame_for(k, x, u, stamp_ns, recorder)
+        if data is not None:
+            self.publish(data)
+
+    def frame_for(self, k: int, x, u, stamp_ns: int, recorder=None) -> bytes | None:
+        """The frame of sample k (recorded) if it is on the display grid and shows a change
+        (:meth:`MarkerFrames.frame_if_moved`), else None; the caller publishes it
+        (:meth:`publish`), e.g. with the other messages of a burst."""
         if k % self.every:
-            return
-        data = self.frames.frame(x, u, stamp_ns)
-        self.publisher.publish(data)
-        self.published += 1
+            return None
+        data = self.frames.frame_if_moved(x, u, stamp_ns)
+        if data is None:
+            return None
         if recorder is not None:
             recorder.record(MARKER_TOPIC, data, stamp_ns, type_name=MARKER_TYPE)
+        return data
+
+    def publish(self, data: bytes) -> None:
+        self._publish_raw(data)   # (Publisher.publish's type check and guard skipped)
+        self.published += 1
 
 
 def attach_markers(node, model, display_hz: float, frame_id: str, qos):

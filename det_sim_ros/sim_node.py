@@ -67,6 +67,9 @@ NODE_PARAMS = {
     'max_lag': (0.05, 'real-time mode: largest lag behind the wall clock, s of sim time; beyond '
                 'it the node slips (drops the excess wall time, never a sim step)', False,
                 (0.0, 3600.0)),
+    'realtime_priority': (0, 'real-time mode: run the node\'s threads under SCHED_FIFO at this '
+                          'priority (1-98; needs CAP_SYS_NICE or an rtprio limit, otherwise one '
+                          'warning and normal scheduling); 0 = off', True, (0, 98)),
     'qos_sensor_data': (False, 'outputs best-effort SensorDataQoS instead of reliable depth 10',
                         True, None),
     'qos_keep_all': (False, 'outputs, /clock and command subscriptions reliable KEEP_ALL instead '
@@ -180,6 +183,7 @@ class SimNode(Node):
         self.contract = OutputContract(model, self.y0)
         self.structure_names = self.contract.structure_names
         self._encoder = self.contract.encoder()
+        self._topics = tuple(self._encoder.topics)
         self._decoder = CommandDecoder(self.det_names, self.scene.physics.v_max)
         self.last_refused = ''
 
@@ -203,7 +207,8 @@ class SimNode(Node):
         self._fault_reported = ''
         self._distrust_reported = ''
         # test and benchmark seams: the wall clock of the real-time pacing, and a function
-        # called with (k, output vector) after sample k has been published
+        # called with (k, output vector) after sample k has been published (free run: once it
+        # is computed; the tick's samples are published together at the tick's end)
         self.wall_clock = time.perf_counter
         self.on_sample = None
 
@@ -240,6 +245,7 @@ class SimNode(Node):
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
 
+        self.realtime_scheduling = False   # SCHED_FIFO in force (realtime_priority)
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.paused = bool(self._p('start_paused'))
         self._timer = None
@@ -253,6 +259,8 @@ class SimNode(Node):
         if self._p('info_period') > 0:
             self.create_timer(self._p('info_period'), self._log_info, clock=self._steady)
         self._start_recorder(out_qos, in_qos)
+        if self._p('realtime_priority'):   # last: every thread of the node exists by now
+            self._apply_realtime_priority(self._p('realtime_priority'))
         if self.mode == 'lockstep':
             self.create_timer(0.05, self._lockstep_resend, clock=self._steady)
         self._publish_sample(self._current_outputs())
@@ -304,6 +312,38 @@ class SimNode(Node):
                 self.get_logger().info(f'log limit: deleted {len(self._recorder.deleted)} '
                                        'old log file(s)')
             # (no flush timer here: the recorder's writer thread owns the writer and flushes)
+
+    def _apply_realtime_priority(self, priority):
+        """SCHED_FIFO for every thread of this process (the executor's, DDS's, the log
+        writer's; threads started later inherit it). Real-time mode only: a free-running or
+        lockstep node at FIFO would hold a core. Without permission: one warning, no change."""
+        if self.mode != 'real_time':
+            self.get_logger().warning(f'realtime_priority: only in real_time mode (mode is '
+                                      f'{self.mode}); scheduling unchanged')
+            return
+        changed, refused = 0, ''
+        for tid in sorted(int(t) for t in os.listdir('/proc/self/task')):
+            try:
+                os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
+                changed += 1
+            except ProcessLookupError:   # a thread that has just ended
+                continue
+            except (PermissionError, OSError) as exc:
+                refused = exc.strerror or str(exc)
+                break
+        if refused:
+            for tid in (int(t) for t in os.listdir('/proc/self/task')):   # all or nothing
+                try:
+                    os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+                except OSError:
+                    pass
+            self.get_logger().warning(
+                f'realtime_priority {priority}: SCHED_FIFO refused ({refused}); running with '
+                'normal scheduling (grant CAP_SYS_NICE, or an rtprio limit in '
+                '/etc/security/limits.conf)')
+        else:
+            self.get_logger().info(f'SCHED_FIFO priority {priority} for {changed} thread(s)')
+        self.realtime_scheduling = not refused
 
     def destroy_node(self):
         """Finish the MCAP log (indexed and complete), then destroy the node."""
@@ -421,11 +461,22 @@ class SimNode(Node):
                 return
 
     def _tick_free_run(self):
+        """
+        Run steps_per_tick periods, then publish their samples back to back. DDS spends about
+        half the CPU per message on a burst that it spends on the same messages ~0.1 ms apart
+        (it wakes its own and the subscribers' threads per message then; measured on the
+        2-core test host), and free run has no wall-clock deadline to keep. Commands are still
+        taken before every period.
+        """
         if self.paused or self._sim.fault:
             return
-        for _ in range(self._steps_per_tick):
-            if not self._advance():
-                return
+        batch = []
+        try:
+            for _ in range(self._steps_per_tick):
+                if not self._advance(batch):
+                    return
+        finally:
+            self._send(batch)
 
     def _lockstep_advance(self):
         """Lockstep: run the next period once every expected source has answered."""
@@ -480,8 +531,9 @@ class SimNode(Node):
                     break
                 self._on_command(topic, taken[0])
 
-    def _advance(self) -> bool:
-        """Run one control period and publish it; False (and fault) if the model diverged."""
+    def _advance(self, batch=None) -> bool:
+        """Run one control period and publish it (or add its messages to ``batch``, see
+        :meth:`_send`); False (and fault) if the model diverged."""
         self._stepping = True
         try:
             self._take_commands()
@@ -491,15 +543,33 @@ class SimNode(Node):
                 self._enter_fault(str(exc))
                 return False
             self.steps_total += 1
-            return self._publish_sample(out)
+            return self._publish_sample(out, batch)
         finally:
             self._stepping = False
 
-    def _publish_sample(self, out) -> bool:
-        if not np.isfinite(out).all():
-            self._sim.fault = self._sim.fault or f'non-finite output at t = {self._sim.t:.6g} s'
-            self._enter_fault(self._sim.fault)
+    def _send(self, batch) -> bool:
+        """Publish (t_ns, samples, marker frame or None) in order, /clock before each sample's
+        outputs."""
+        try:
+            publish_clock, publishers = self._publish_clock, self._publish_raw
+            for t_ns, samples, frame in batch:
+                if publish_clock is not None:   # first: a use_sim_time reader is at t_k
+                    publish_clock(encode_clock(t_ns))
+                for publish, data in zip(publishers, samples):
+                    publish(data)
+                if frame is not None:
+                    self._markers.publish(frame)
+        except RuntimeError:   # rclpy's RCLError: Ctrl-C shut the context down mid-tick
+            if self.context.ok():
+                raise
+            self._timer.cancel()
             return False
+        return True
+
+    def _publish_sample(self, out, batch=None) -> bool:
+        """Publish sample k (or add it to ``batch``), log it, then the hooks and markers."""
+        # (every output is finite here: the kernel refuses a period or an outputs() call with
+        # a non-finite output, so Simulator.step and .outputs raise before anything is sent)
         k = self._sim.k
         t_ns = stamp_ns(k, self._dt)
         samples = self._encoder.encode(out, t_ns)
@@ -511,22 +581,18 @@ class SimNode(Node):
             if k == 0:
                 self._last_sample = samples
                 self._heard_by = self._subscriptions_matched()
-        try:
-            if self._publish_clock is not None:   # first: a use_sim_time reader is at t_k
-                self._publish_clock(encode_clock(t_ns))
-            for publish, data in zip(self._publish_raw, samples):
-                publish(data)
-        except RuntimeError:   # rclpy's RCLError: Ctrl-C shut the context down mid-tick
-            if self.context.ok():
-                raise
-            self._timer.cancel()
+        recorder = self._recorder
+        if recorder is not None:   # (the log's order: the sample, then its marker frame)
+            recorder.record_sample(t_ns, self._topics, samples, TOPIC_TYPES)
+        frame = None
+        if self._markers is not None and not k % self._markers.every:
+            frame = self._markers.frame_for(k, self._sim.x, self._sim.u, t_ns, recorder)
+        if batch is not None:
+            batch.append((t_ns, samples, frame))
+        elif not self._send(((t_ns, samples, frame),)):
             return False
-        if self._recorder is not None:
-            self._recorder.record_sample(t_ns, self._encoder.topics, samples, TOPIC_TYPES)
         if self.on_sample is not None:
             self.on_sample(k, out)
-        if self._markers is not None:
-            self._markers.on_sample(k, self._sim.x, self._sim.u, t_ns, self._recorder)
         return True
 
     def _enter_fault(self, reason):
@@ -540,7 +606,7 @@ class SimNode(Node):
     def _on_command(self, topic, data):
         """A command's CDR bytes: decode, check, log (at the period it applies to), hold."""
         self.commands_received += 1
-        command = self._decoder.decode(topic, data, self._sim.u.tolist())
+        command = self._decoder.decode(topic, data, self._sim.u)
         if self._recorder is not None and command.canonical:
             self._recorder.record(topic, command.canonical, stamp_ns(self._sim.k, self._dt),
                                   TOPIC_TYPES[topic])

@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from det_sim_ros.contract import (CdrError, CommandDecoder, decode_float64_multi_array,
+from det_sim_ros.contract import (CdrError, Command, CommandDecoder, decode_float64_multi_array,
                                   decode_joint_state, encode_clock, encode_float64_multi_array,
                                   encode_joint_state, JOINT_STATE, OUTPUT_FIELDS, OutputContract)
 from det_sim_ros.scene import load_scene
@@ -27,7 +27,8 @@ def _run(scene, volts, n):
 
 @pytest.mark.parametrize('scene_name, overrides', [
     ('default', {}), ('plate', {}),
-    ('array', {'structure.copies': 3, 'structure.spread': 0.05})])
+    ('array', {'structure.copies': 3, 'structure.spread': 0.05}),
+    ('array', {'structure.copies': 20, 'structure.spread': 0.05})])   # the numpy path
 def test_encoded_samples_decode_to_exactly_the_simulator_values(scene_name, overrides):
     from rclpy.serialization import deserialize_message
     from rosbags.typesys import get_typestore, Stores
@@ -69,6 +70,23 @@ def test_encoded_samples_decode_to_exactly_the_simulator_values(scene_name, over
     second = encoder.encode(out2, t_ns + 1_000_000)
     assert first == data and second != first
     assert decode_joint_state(second[0]).stamp_ns == t_ns + 1_000_000
+
+
+@pytest.mark.parametrize('scene_name, overrides', [
+    ('default', {}), ('plate', {}), ('array', {'structure.copies': 20})])
+def test_packed_and_numpy_encoding_give_the_same_bytes(scene_name, overrides):
+    """The two ways SampleEncoder writes a sample (one struct pack per topic for a few DETs,
+    numpy gathers into buffers for many) give the same bytes, stamps up to 2^31 s."""
+    scene = load_scene(scene_name, overrides)
+    sim, out = _run(scene, [1800.0] * len(scene.cell_physics()), 11)
+    encoder = OutputContract(sim.model).encoder()
+    assert encoder.packed == (len(encoder._gather) <= encoder.PACK_LIMIT)
+    for t_ns in (0, 11_000_000, 2**31 * 10**9 - 1):
+        encoder.packed = True
+        packed = encoder.encode(out, t_ns)
+        encoder.packed = False
+        assert encoder.encode(out, t_ns) == packed
+        assert decode_joint_state(packed[0]).stamp_ns == t_ns
 
 
 def test_displacement_and_rest_state():
@@ -156,6 +174,40 @@ def test_command_rules_per_channel():
     assert empty.volts is None and 'empty JointState' in empty.reason
     torn = decoder.decode('voltage_command', b'\x00\x01\x00\x00\x05', held)
     assert torn.volts is None and 'malformed' in torn.reason and not torn.canonical
+
+
+@pytest.mark.parametrize('n', [1, 2, 100])
+def test_vector_command_fast_path_gives_what_the_general_path_gives(n):
+    """A plain Float64MultiArray command is read by one unpack: same voltages and canonical
+    bytes as the general reader, whatever its padding held (rclpy leaves it uninitialised);
+    anything else (dims, an offset, a wrong count, NaN, out of range, big endian, too short)
+    takes the general path and its reasons."""
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import Float64MultiArray
+    names = [f'd{i}' for i in range(n)]
+    decoder = CommandDecoder(names, v_max=3000.0)
+    held = [0.0] * n
+    volts = [1000.0 + i for i in range(n)]
+
+    def general(data):   # the reader without the fast path
+        values, dims, offset = decode_float64_multi_array(data)
+        return decoder.from_vector(values, encode_float64_multi_array(values, dims, offset))
+    plain = encode_float64_multi_array(volts)
+    dirty = plain[:16] + b'\xab\xcd\xef\x01' + plain[20:]      # garbage in the padding
+    for data in (plain, dirty, serialize_message(Float64MultiArray(data=volts)), plain + b'\0'):
+        fast = decoder.decode('voltage_command', data, held)
+        assert fast == general(data) and fast.canonical == plain
+    others = [encode_float64_multi_array(volts, dims=[('x', n, n)]),
+              encode_float64_multi_array(volts, data_offset=1),
+              encode_float64_multi_array(volts + [1.0]), encode_float64_multi_array([-1.0] * n),
+              encode_float64_multi_array([math.nan] * n), plain[:-1]]
+    for data in others:
+        assert decoder.decode('voltage_command', data, held) == (
+            general(data) if len(data) != len(plain) - 1 else
+            Command(None, 'voltage_command: malformed message (truncated CDR message '
+                          f'({len(data)} bytes))'))
+    big = b'\x00\x00\x00\x00' + struct.pack(f'>III4x{n}d', 0, 0, n, *volts)
+    assert decoder.decode('voltage_command', big, held).volts == volts
 
 
 def test_contract_and_replay_need_no_rclpy(tmp_path):

@@ -176,3 +176,37 @@ def test_services_and_parameters_with_either_executor(harness, executor):
     assert h.call('pause', data=False).success
     h.spin_until_sim_time(0.05)
     assert not h.non_finite
+
+
+@pytest.mark.parametrize('outcome', ['granted', 'refused'])
+def test_realtime_priority_is_applied_to_every_thread_or_degrades(harness, monkeypatch, outcome):
+    """realtime_priority puts every thread of the process under SCHED_FIFO (real-time mode),
+    or, without permission, logs a warning and leaves scheduling as it was; the node runs
+    either way. (os.sched_setscheduler is recorded, not called: the test process stays as it
+    is.)"""
+    import os
+    calls = []
+
+    def fake(tid, policy, param):
+        if outcome == 'refused' and policy == os.SCHED_FIFO:
+            raise PermissionError(1, 'Operation not permitted')
+        calls.append((tid, policy, param.sched_priority))
+    monkeypatch.setattr(os, 'sched_setscheduler', fake)
+    h = harness(real_time=True, realtime_priority=20)
+    if outcome == 'granted':
+        assert h.node.realtime_scheduling
+        fifo = {tid for tid, policy, prio in calls if policy == os.SCHED_FIFO and prio == 20}
+        # the main thread and the threads rclpy and DDS started (one call per thread)
+        assert os.getpid() in fifo and len(fifo) > 1 and len(fifo) == len(calls)
+    else:
+        assert not h.node.realtime_scheduling
+        assert all(policy == os.SCHED_OTHER for _, policy, _ in calls)   # all or nothing
+    h.spin_until(lambda: h.node._sim.k > 3, 'periods')   # running either way
+
+
+def test_realtime_priority_is_ignored_outside_real_time(harness, monkeypatch):
+    import os
+    calls = []
+    monkeypatch.setattr(os, 'sched_setscheduler', lambda *a: calls.append(a))
+    h = harness(real_time=False, realtime_priority=20)
+    assert not h.node.realtime_scheduling and not calls
