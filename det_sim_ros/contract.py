@@ -33,7 +33,7 @@ __all__ = [
     'rest_shortening', 'rest_shortenings', 'structure_channels', 'OutputContract',
     'SampleEncoder', 'Command', 'CommandDecoder', 'CdrError', 'JointStateData',
     'encode_joint_state', 'decode_joint_state', 'encode_float64_multi_array',
-    'decode_float64_multi_array', 'encode_clock', 'stamp_ns',
+    'decode_float64_multi_array', 'encode_clock', 'stamp_ns', 'MODES',
 ]
 
 JOINT_STATE = 'sensor_msgs/msg/JointState'
@@ -62,6 +62,8 @@ COMMAND_TOPIC = 'voltage_command'              # Float64MultiArray: all voltages
 JOINT_COMMAND_TOPIC = 'voltage_command_joint'  # JointState: position[i] = voltage of name[i]
 COMMAND_TOPICS = (COMMAND_TOPIC, JOINT_COMMAND_TOPIC)
 CLOCK_TOPIC = '/clock'
+# sim_node's modes: /clock is published in free_run and lockstep; lockstep waits for commands
+MODES = ('real_time', 'free_run', 'lockstep')
 DIAGNOSTICS_TOPIC = '/diagnostics'
 TOPIC_TYPES = {**{topic: JOINT_STATE for topic in OUTPUT_FIELDS}, STRUCTURE_TOPIC: JOINT_STATE,
                COMMAND_TOPIC: FLOAT64_MULTI_ARRAY, JOINT_COMMAND_TOPIC: JOINT_STATE,

@@ -38,11 +38,11 @@ import time
 
 import yaml
 
+from .contract import MODES
 from .scene import load_scene, SceneError
 
 __all__ = ['FleetError', 'FleetNode', 'load_fleet', 'Fleet', 'run_fleet']
 
-MODES = ('real_time', 'free_run', 'lockstep')   # sim_node's modes (sim_node.MODES)
 READY = 'voltage command order'                  # the last line of a node's start-up
 NODE_KEYS = {'namespace', 'scene', 'overrides', 'mode', 'params', 'host'}
 TOP_KEYS = {'log_dir', 'defaults', 'nodes'}

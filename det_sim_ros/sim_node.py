@@ -31,7 +31,7 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from .contract import (clamp_message, CLOCK_TOPIC, COMMAND_TOPIC, CommandDecoder, DIAGNOSTICS_TOPIC,
-                       encode_clock, JOINT_COMMAND_TOPIC, OUTPUT_FIELDS, OutputContract,
+                       encode_clock, JOINT_COMMAND_TOPIC, MODES, OUTPUT_FIELDS, OutputContract,
                        rest_shortening, rest_shortenings, STRUCTURE_TOPIC, stamp_ns,
                        structure_channels, TOPIC_TYPES)
 from .markers import attach_markers
@@ -47,7 +47,6 @@ SCENE_SECTIONS = ('scene', 'physics', 'integrator', 'structure', 'dets')
 # The topic contract (names, types, channels, y0, the bytes on the wire) is det_sim_ros.contract.
 OUTPUT_TOPICS = {topic: mapping['position'] for topic, mapping in OUTPUT_FIELDS.items()}
 # name: (default, description, read_only, range (lo, hi) or None)
-MODES = ('real_time', 'free_run', 'lockstep')
 NODE_PARAMS = {
     'mode': ('', 'real_time: sim time follows the wall clock; free_run: as fast as possible, '
              'publishes /clock; lockstep: publishes /clock and advances a period only when the '
