@@ -17,7 +17,7 @@ copy snapping does not make the others take its steps. ``array run`` is also tim
 ``--threads`` threads (groups spread over them; results are identical). Cost: process CPU
 seconds per simulated second, median of --repeats; RTF = wall-clock real-time factor (for
 threads > 1, wall time is what a user waits). The simulators are built outside the timing (reset() between runs): building a 1000-copy
-array takes ~12 s, mostly its copies' rest-state solves. Run: ``python bench/batch.py``.
+array takes ~5 s, mostly its copies' rest-state solves. Run: ``python bench/batch.py``.
 """
 
 import argparse
@@ -87,7 +87,7 @@ def main(argv=None) -> int:
         scene = load_scene('array', {'structure.copies': n, 'integrator.tolerance': args.tolerance,
                                      'integrator.substeps': args.substeps,
                                      'scene.initial_state': args.initial_state})
-        sim = Simulator(scene)   # built once: a 1000-copy array takes ~12 s (rest states)
+        sim = Simulator(scene)   # built once: a 1000-copy array takes ~5 s (rest states)
         periods = int(round(args.sim_time / sim.dt))
         for kind, synchronized in ((k, sync) for k in args.commands.split(',')
                                    for sync in (False, True)):
