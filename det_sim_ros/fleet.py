@@ -99,6 +99,14 @@ def _mapping(value, where):
     return result
 
 
+def _known_keys(mapping: dict, allowed: set, where: str) -> None:
+    """One line naming the first key of ``mapping`` that is not ``allowed``."""
+    bad = sorted(set(mapping) - allowed)
+    if bad:
+        raise FleetError(f'{where}: unknown key {bad[0]!r} (allowed: '
+                         + ', '.join(sorted(allowed)) + ')')
+
+
 def load_fleet(path: str, host: str | None = None, log_dir: str | None = None,
                check_scenes: bool = True) -> list:
     """
@@ -117,10 +125,7 @@ def load_fleet(path: str, host: str | None = None, log_dir: str | None = None,
                          + (f' (line {where.line + 1})' if where else '')) from None
     if not isinstance(data, dict):
         raise FleetError(f'{path}: expected a mapping with a nodes: list')
-    unknown = sorted(set(data) - TOP_KEYS)
-    if unknown:
-        raise FleetError(f'{path}: unknown key {unknown[0]!r} (allowed: '
-                         + ', '.join(sorted(TOP_KEYS)) + ')')
+    _known_keys(data, TOP_KEYS, path)
     nodes = data.get('nodes')
     if not isinstance(nodes, list) or not nodes:
         raise FleetError(f'{path}: nodes: must be a non-empty list')
@@ -130,10 +135,7 @@ def load_fleet(path: str, host: str | None = None, log_dir: str | None = None,
         raise FleetError(f'{path}: log_dir: must be a path')
     folder = os.path.abspath(folder)     # like sim_node's log.path: relative to the cwd
     defaults = _mapping(data.get('defaults'), 'defaults')
-    bad = sorted(set(defaults) - (NODE_KEYS - {'namespace', 'host'}))
-    if bad:
-        raise FleetError(f"defaults: unknown key {bad[0]!r} (allowed: scene, overrides, mode, "
-                         'params)')
+    _known_keys(defaults, NODE_KEYS - {'namespace', 'host'}, 'defaults')
 
     from .sim_node import NODE_PARAMS
     result, seen = [], set()
@@ -141,10 +143,7 @@ def load_fleet(path: str, host: str | None = None, log_dir: str | None = None,
         where = f'nodes[{i}]'
         if not isinstance(entry, dict):
             raise FleetError(f'{where}: expected a mapping with a namespace:')
-        bad = sorted(set(entry) - NODE_KEYS)
-        if bad:
-            raise FleetError(f'{where}: unknown key {bad[0]!r} (allowed: '
-                             + ', '.join(sorted(NODE_KEYS)) + ')')
+        _known_keys(entry, NODE_KEYS, where)
         namespace = entry.get('namespace')
         if not isinstance(namespace, str) or not _NAMESPACE.match(namespace):
             raise FleetError(f'{where}: namespace: expected /name or /a/b (letters, digits, _), '
