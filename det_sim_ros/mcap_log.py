@@ -394,21 +394,24 @@ class _FastMessages:
             return None
         return fast if fast.chunk is not None else None
 
+    @staticmethod
+    def _cover(record, empty: bool, log_time: int) -> None:
+        """Widen ``record``'s message_start_time..message_end_time (the file's statistics or
+        the chunk's) to ``log_time``; ``empty``: it has no message yet."""
+        if empty or log_time < record.message_start_time:
+            record.message_start_time = log_time
+        if log_time > record.message_end_time:
+            record.message_end_time = log_time
+
     def add(self, items, log_time: int) -> None:
         """Write (channel id, sequence, data) items, all at ``log_time``, as add_message would
         (a chunk ends after the message that makes it exceed the chunk size)."""
         stats, chunk = self.stats, self.chunk
-        if stats.message_count == 0 or log_time < stats.message_start_time:
-            stats.message_start_time = log_time
-        if log_time > stats.message_end_time:
-            stats.message_end_time = log_time
+        self._cover(stats, stats.message_count == 0, log_time)
         counts, indices, pack = stats.channel_message_counts, chunk.message_indices, \
             _MESSAGE_HEAD.pack
         for channel_id, sequence, data in items:
-            if chunk.num_messages == 0 or log_time < chunk.message_start_time:
-                chunk.message_start_time = log_time
-            if log_time > chunk.message_end_time:
-                chunk.message_end_time = log_time
+            self._cover(chunk, chunk.num_messages == 0, log_time)
             index = indices.get(channel_id)
             if index is None:
                 index = indices[channel_id] = self.index_type(channel_id=channel_id, records=[])
@@ -433,14 +436,8 @@ class _FastMessages:
                 > self.chunk_size:
             self.add(list(zip(channel_ids, sequences, payloads)), log_time)
             return
-        if stats.message_count == 0 or log_time < stats.message_start_time:
-            stats.message_start_time = log_time
-        if log_time > stats.message_end_time:
-            stats.message_end_time = log_time
-        if chunk.num_messages == 0 or log_time < chunk.message_start_time:
-            chunk.message_start_time = log_time
-        if log_time > chunk.message_end_time:
-            chunk.message_end_time = log_time
+        self._cover(stats, stats.message_count == 0, log_time)
+        self._cover(chunk, chunk.num_messages == 0, log_time)
         sizes = tuple(map(len, payloads))
         layout = self._sample_layouts.get((channel_ids, sizes))
         if layout is None:
@@ -449,7 +446,8 @@ class _FastMessages:
                 offsets.append(at)
                 at += _MESSAGE_HEAD.size + size
             layout = self._sample_layouts[(channel_ids, sizes)] = (
-                struct.Struct('<' + ''.join(f'BQHIQQ{size}s' for size in sizes)).pack,
+                struct.Struct('<' + ''.join(f'{_MESSAGE_HEAD.format[1:]}{size}s'
+                                            for size in sizes)).pack,
                 tuple(zip(channel_ids, offsets)))
         pack, offsets = layout
         args = []

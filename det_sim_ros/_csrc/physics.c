@@ -56,6 +56,13 @@ int64_t ds_n_outputs(const ds_model *m)
     return m->n_cells * DS_CELL_OUTPUTS + m->n_structure + 3;
 }
 
+/* y = c2 q^2 + kappa c4 q^4 of a one-term cell (paper/consistent kinematics). */
+static inline double one_term_shortening(const ds_cell *cell, double q)
+{
+    const double c2 = cell->c2, c4 = cell->kappa * cell->c4, q2 = q * q;
+    return c2 * q2 + c4 * q2 * q2;
+}
+
 /*
  * End shortening y_c, its gradient J = dy/dq, qd' H_y qd per cell and, with ``with_bending``,
  * the bending energy beyond EI int w''^2 (Us4), from q = x[:n_q], qd = x[n_q:2 n_q].
@@ -64,13 +71,6 @@ int64_t ds_n_outputs(const ds_model *m)
  * bending beyond EI int w''^2 is EI int w''^2 w'^2 / (1 - w'^2) (curvature^2 = w''^2/(1 - w'^2));
  * |w'| >= 1 gives NaN, which the callers report as a slope domain error.
  */
-/* y = c2 q^2 + kappa c4 q^4 of a one-term cell (paper/consistent kinematics). */
-static inline double one_term_shortening(const ds_cell *cell, double q)
-{
-    const double c2 = cell->c2, c4 = cell->kappa * cell->c4, q2 = q * q;
-    return c2 * q2 + c4 * q2 * q2;
-}
-
 void ds_kinematics(const ds_model *m, const double *x, ds_work *w, int with_bending)
 {
     const int64_t nq = m->n_q, R = m->r_max;
