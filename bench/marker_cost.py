@@ -33,7 +33,8 @@ from visualization_msgs.msg import MarkerArray
 rclpy.init()
 node = rclpy.create_node('marker_sink')
 count = [0]
-node.create_subscription(MarkerArray, 'markers', lambda m: count.__setitem__(0, count[0] + 1), 10)
+node.create_subscription(MarkerArray, 'markers', lambda m: count.__setitem__(0, count[0] + 1), 10,
+                         raw='raw' in sys.argv)
 if 'all' in sys.argv:    # a controller's view too: every output topic is delivered
     from sensor_msgs.msg import JointState
     for topic in ('deflection', 'displacement', 'charge', 'current'):
@@ -45,7 +46,7 @@ except BaseException:
 '''
 
 
-def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1):
+def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1, real_time=False):
     import random
     import rclpy
     from rclpy.parameter import Parameter
@@ -53,7 +54,7 @@ def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1):
     context = rclpy.context.Context()
     rclpy.init(context=context)
     node = SimNode(context=context, parameter_overrides=[
-        Parameter('scene_file', value=scene), Parameter('real_time', value=False),
+        Parameter('scene_file', value=scene), Parameter('real_time', value=real_time),
         Parameter('log.enabled', value=bool(log_dir)), Parameter('log.path', value=log_dir or '.'),
         Parameter('info_period', value=0.0),
         Parameter('start_paused', value=True), Parameter('markers.rate_hz', value=30.0)])
@@ -98,19 +99,20 @@ def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1):
         executor.spin_once(timeout_sec=0.1)
     rng = random.Random(seed)
     pairs = []   # (CPU s per sim s off, on)
-    totals = {False: [0.0, 0.0], True: [0.0, 0.0]}   # CPU s, sim s
+    totals = {False: [0.0, 0.0, 0.0], True: [0.0, 0.0, 0.0]}   # CPU s, sim s, executor CPU s
     frames0, spent0, on_sim = markers.published, spent[0], 0.0
     for _ in range(blocks):
         pair = {}
         for on in ((False, True) if rng.random() < 0.5 else (True, False)):
             node._markers = markers if on else None
-            k0, c0 = node._sim.k, time.process_time()
+            k0, c0, m0 = node._sim.k, time.process_time(), time.thread_time()
             end = time.perf_counter() + block_s
             while time.perf_counter() < end:
                 executor.spin_once(timeout_sec=0.1)
             cpu, sim = time.process_time() - c0, (node._sim.k - k0) * node._dt
             totals[on][0] += cpu
             totals[on][1] += sim
+            totals[on][2] += time.thread_time() - m0   # the executor's (this) thread
             pair[on] = cpu / sim
             on_sim += sim if on else 0.0
         pairs.append((pair[False], pair[True]))
@@ -132,6 +134,12 @@ def main():
                         '0 = none (the actuator stays at rest)')
     parser.add_argument('--log', action='store_true',
                         help='with the MCAP log (the node default; frames are logged too)')
+    parser.add_argument('--real-time', action='store_true',
+                        help='the node in real time at 1 kHz (as a user watching the markers '
+                        'runs it) instead of free run')
+    parser.add_argument('--raw-viewer', action='store_true',
+                        help='the viewer takes the frames as bytes (as RViz and the Foxglove '
+                        'bridge, both C++, do) instead of building Python MarkerArray objects')
     parser.add_argument('--subscribe', choices=('markers', 'all'), default='all',
                         help="the other process subscribes to /markers only, or to the outputs "
                         "too (a controller and a viewer; default)")
@@ -139,26 +147,33 @@ def main():
     os.environ.setdefault('ROS_DOMAIN_ID', str(150 + os.getpid() % 50))
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     sink = subprocess.Popen([sys.executable, '-c', SUBSCRIBER]
-                            + (['all'] if args.subscribe == 'all' else []))
+                            + (['all'] if args.subscribe == 'all' else [])
+                            + (['raw'] if args.raw_viewer else []))
     import tempfile
     try:
         with tempfile.TemporaryDirectory() as folder:
             pairs, totals, fps, own = run(args.scene, args.blocks, args.block_s, args.subscribe,
-                                          folder if args.log else '', args.drive_hz)
+                                          folder if args.log else '', args.drive_hz,
+                                          real_time=args.real_time)
     finally:
         sink.terminate()
         sink.wait()
     off = totals[False][0] / totals[False][1]
     on = totals[True][0] / totals[True][1]
+    main_off, main_on = (totals[state][2] / totals[state][1] for state in (False, True))
     ratios = sorted(b / a - 1 for a, b in pairs)
     q = [ratios[int(round(f * (len(ratios) - 1)))] for f in (0.25, 0.5, 0.75)]
-    print(f'{args.scene}{" with the MCAP log" if args.log else ""}, square wave '
+    print(f'{args.scene}{" with the MCAP log" if args.log else ""}, '
+          f'{"real time" if args.real_time else "free run"}, '
+          f'{"raw" if args.raw_viewer else "Python"} viewer, square wave '
           f'{args.drive_hz:g} Hz: {len(pairs)} on/off pairs of {args.block_s:g} s; node CPU per '
           f'simulated s: {off * 1e3:.2f} ms (markers off) vs {on * 1e3:.2f} ms (30 Hz, '
           f'{fps:.1f} frames per sim s): {(on / off - 1) * 100:+.1f} % (totals); per pair: '
           f'median {q[1] * 100:+.1f} %, quartiles {q[0] * 100:+.1f} .. {q[2] * 100:+.1f} %; '
           f'marker code alone {own * 1e3:.2f} ms per sim s = {own / on * 100:.1f} % of the '
-          f'node, {own / fps * 1e6:.0f} us per frame')
+          f'node, {own / fps * 1e6:.0f} us per frame; added per sim s: executor thread '
+          f'{(main_on - main_off) * 1e3:+.2f} ms, other threads (DDS, log writer) '
+          f'{(on - main_on - off + main_off) * 1e3:+.2f} ms')
 
 
 if __name__ == '__main__':

@@ -157,6 +157,58 @@ def test_frames_that_show_nothing_new_are_not_sent():
         assert sent is None or sent == frames.frame(moved, u + 1.0, KEEPALIVE_NS + 2)
 
 
+@pytest.mark.parametrize('name, overrides, volts', [
+    ('default', {}, [2500.0]),
+    ('default', {'scene.fidelity': 'consistent'}, [2500.0]),
+    ('plate', {}, [3000.0, 0.0]),
+    ('array', {'structure.copies': 3}, [2500.0, 1000.0, 0.0])])
+def test_stacked_cells_give_the_general_paths_frame(name, overrides, volts):
+    """One-coordinate cells take the stacked polynomial map (one matrix product for all
+    cells); it draws what the general basis-and-kinematics path draws, for one cell, a plate
+    and an array, and its quick 'moved' test agrees with comparing every value."""
+    from det_sim_ros.markers import MOVE_TOLERANCE
+    sim = driven(load_scene(name, overrides=overrides), volts, 40)
+
+    def pair():
+        stacked, general = MarkerFrames(sim.model), MarkerFrames(sim.model)
+        general._stacked = None
+        return stacked, general
+
+    stacked, general = pair()
+    assert stacked._stacked is not None and len(stacked._stacked.maps) == len(volts)
+    np.testing.assert_allclose(stacked.values(sim.x), general.values(sim.x),
+                               rtol=1e-12, atol=1e-16)
+    drawn = [[(p.x, p.y, p.z) for m in deserialize(MARKER_TYPE, f.frame(sim.x, sim.u, 7)).markers
+              for p in m.points] for f in (stacked, general)]
+    np.testing.assert_allclose(drawn[0], drawn[1], rtol=1e-12, atol=1e-16)
+    for shift in (0.0, 1e-13, 1e-9, 1e-6):   # still, below, near and above the tolerance
+        moved = sim.x.copy()
+        moved[stacked._stacked.coordinate] += shift
+        frames = pair()
+        for f in frames:
+            f.frame_if_moved(sim.x, sim.u, 0)
+        sent = [f.frame_if_moved(moved, sim.u, 1) is not None for f in frames]
+        shown = np.max(np.abs(general.values(moved) - general.values(sim.x)))
+        assert sent == [shown > MOVE_TOLERANCE] * 2
+
+
+def test_no_frames_without_a_viewer_or_a_log(harness):
+    """Nobody subscribed to markers and no log: the node builds no frames (the work would be
+    lost); they start when a viewer subscribes."""
+    from visualization_msgs.msg import MarkerArray
+    h = harness(start_paused=True, **{'log.enabled': False})
+    markers = h.node._markers
+    h.command([3000.0])
+    assert h.call('pause', data=False).success
+    h.spin_until_sim_time(0.2)
+    assert markers.published == 0 and markers.frames.skipped == 0
+    frames = []
+    h.subs.append(h.test.create_subscription(MarkerArray, 'markers', frames.append, 100))
+    h.spin_until(lambda: len(frames) >= 2, 'marker frames once a viewer subscribed')
+    assert markers.published >= 2
+    h.close()
+
+
 def test_markers_off(harness):
     h = harness(**{'markers.rate_hz': 0.0})
     assert h.node._markers is None
