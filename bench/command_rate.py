@@ -1,0 +1,85 @@
+"""
+What a controller's command rate costs the physics (found while measuring issue 15's
+100-actuator real-time run, where Stepper.period was 703 of the main thread's 1029 us per
+period). The node holds each command for a whole control period, so a controller that sends a
+new voltage every period makes every period start with an input jump; on RC scenes the
+exponential steppers then resolve the charge transient with graded fine steps
+(fixed_period in _csrc/stepping.c, calibrated on the 'step' scenes' kV jumps), even when the
+jump is 1 V.
+
+For the default scene and the 100-copy array at integrator.tolerance 1e-6, after the start has
+settled: the voltage held (the benchmarks' usual case), a new voltage every 10 periods, and a
+new voltage every period (a 1 V/ms ramp, and a 5 Hz sine of 500 V); CPU us per period and
+internal steps per period and DET (Simulator.step(), as the node runs it). The error column
+(default scene only) is the largest |q - reference| over the run (q: the deflection), relative
+to the largest |q|, against the same drive at tolerance 1e-10; the row with the transient
+resolution switched off shows its share of the cost and of the accuracy.
+
+Run: python bench/command_rate.py [--periods 1000]
+"""
+
+import argparse
+import math
+import time
+
+import numpy as np
+
+import det_sim_ros.simulator as simulator_module
+from det_sim_ros.scene import load_scene
+from det_sim_ros.simulator import Simulator
+
+DRIVES = {
+    'held': lambda k: 1500.0,
+    'new every 10 periods': lambda k: 1500.0 + (k // 10) * 10.0 % 500.0,
+    'new every period (1 V/ms ramp)': lambda k: 1500.0 + k % 500,
+    'new every period (5 Hz sine)': lambda k: 1500.0 + 500.0 * math.sin(2 * math.pi * 5e-3 * k),
+}
+
+
+def run(scene_name, overrides, drive, periods, transient=True):
+    """(CPU us per period, steps per period and DET, deflection q of the first DET)."""
+    original = simulator_module.transient_settings
+    if not transient:
+        simulator_module.transient_settings = lambda method, scene: (0.0, 1.0)
+    try:
+        sim = Simulator(load_scene(scene_name, overrides))
+    finally:
+        simulator_module.transient_settings = original
+    n = sim.model.n_inputs
+    column = [name.split('[')[0] for name in sim.output_names].index('q')   # the first DET's
+    sim.set_input([1500.0] * n)
+    for _ in range(300):           # past the start's transient
+        sim.step()
+    steps0, out = sim.steps_taken, np.empty(periods)
+    start = time.process_time()
+    for k in range(periods):
+        sim.set_input([drive(k)] * n)
+        out[k] = sim.step()[column]
+    cpu = time.process_time() - start
+    return cpu / periods * 1e6, (sim.steps_taken - steps0) / periods / n, out
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
+    parser.add_argument('--periods', type=int, default=1000)
+    args = parser.parse_args(argv)
+    print('| scene | drive | transient resolution | CPU us / period | steps / period / DET '
+          '| error (rel.) |')
+    print('|---|---|---|---|---|---|')
+    for scene_name, overrides in (('default', {}), ('array', {})):
+        for label, drive in DRIVES.items():
+            reference = None
+            if scene_name == 'default':
+                reference = run(scene_name, {'integrator.tolerance': 1e-10}, drive,
+                                args.periods)[2]
+            for transient in ((True, False) if label != 'held' else (True,)):
+                cost, steps, out = run(scene_name, overrides, drive, args.periods, transient)
+                error = ('' if reference is None else
+                         f'{np.max(np.abs(out - reference)) / np.max(np.abs(reference)):.1e}')
+                print(f'| {scene_name} | {label} | {"on" if transient else "off"} | '
+                      f'{cost:.1f} | {steps:.2f} | {error} |')
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
