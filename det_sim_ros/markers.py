@@ -243,9 +243,10 @@ class MarkerFrames:
         The cells as one stacked map when each has one coordinate and paper or consistent
         kinematics (every drawn value a polynomial in q): V = P @ (1, q, q^2, q^4) for all
         cells in one matrix product; else None (the general path of :meth:`values`). A frame
-        then costs a handful of numpy calls. That is what counts: the node builds a frame
-        once per 33 samples, with cold caches, where a numpy call costs about 3x what it
-        costs in a loop (measured in the node: 147 us per frame with ~20 calls).
+        then takes a handful of numpy calls instead of ~20: 77 -> 22 us per frame in a loop
+        that steps 33 periods between frames (cold caches, as in the node). Inside the node a
+        frame still costs 150-240 us of the executor thread, most of it the first touch of
+        each numpy and DDS path after the samples' work (README, "Watching it").
         """
         maps = self._cell_maps
         if (any(poly is None for *_, poly in maps) or len({len(m[0]) for m in maps}) != 1
