@@ -94,8 +94,9 @@ def test_common_frame_lays_out_the_cells():
 
 
 def test_node_publishes_markers_at_the_display_rate(harness, tmp_path):
-    """30 frames per simulated second, stamped on the sample grid; the reference point's
-    deflection equals the q published for the same sample; recorded in the MCAP log."""
+    """30 frames per simulated second, stamped on the sample grid, all in the MCAP log; the
+    reference point's deflection equals the q published for the same sample. (What reaches a
+    viewer in free run is capped in wall time: test_viewers_get_frames_at_most_...)"""
     from visualization_msgs.msg import MarkerArray
     log = tmp_path / 'run.mcap'
     h = harness(start_paused=True, **{'log.path': str(log)})
@@ -105,33 +106,77 @@ def test_node_publishes_markers_at_the_display_rate(harness, tmp_path):
     h.command([3000.0])
     assert h.call('pause', data=False).success
     h.spin_until_sim_time(0.3)
-    h.spin_until(lambda: len(frames) >= 6, 'marker frames of the snap-through')
+    h.spin_until(lambda: len(frames) >= 3, 'marker frames of the snap-through')
+    assert h.call('pause', data=True).success
     every = h.node._markers.every
     assert every == round(1000 / 30)
-    # the node equals the offline model sample for sample (test_sim_node), so the published q
-    # at every frame's stamp is the offline q at that sample
-    sim = Simulator(h.node.scene)
-    sim.set_input([3000.0])
-    q = [sim.outputs()['q']] + [sim.step()[sim.output_names.index('q')] for _ in range(300)]
-    checked = 0
-    for frame in frames:
+
+    def stamp_k(frame):
         stamp = frame.markers[0].header.stamp
         t_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
         k = round(t_ns / 1e6)
         assert k % every == 0 and t_ns == k * 1_000_000
+        return k, t_ns
+
+    # the node equals the offline model sample for sample (test_sim_node), so the published q
+    # at every frame's stamp is the offline q at that sample
+    last = max(stamp_k(frame)[0] for frame in frames)
+    sim = Simulator(h.node.scene)
+    sim.set_input([3000.0])
+    q = [sim.outputs()['q']] + [sim.step()[sim.output_names.index('q')] for _ in range(last)]
+    for frame in frames:
+        k, t_ns = stamp_k(frame)
         ref = next(m for m in frame.markers if m.id == 3)
         assert ref.header.frame_id == 'det0'
-        if k < len(q):
-            assert ref.pose.position.x == pytest.approx(q[k], rel=1e-12, abs=1e-18)
-            checked += 1
+        assert ref.pose.position.x == pytest.approx(q[k], rel=1e-12, abs=1e-18)
         if t_ns in h.samples['deflection']:     # and what the node published for it
             assert ref.pose.position.x == pytest.approx(h.samples['deflection'][t_ns][0],
                                                        rel=1e-12, abs=1e-18)
-    assert checked >= 5
     h.close()
     from det_sim_ros.mcap_log import LogReader
     logged = [m for m in LogReader(str(log)).messages() if m.topic == '/markers']
     assert logged and logged[0].type_name == MARKER_TYPE
+    # the snap-through moves the beam: every frame of the display grid is in the log
+    assert [m.log_time for m in logged if m.log_time <= 300_000_000] == [
+        k * 1_000_000 for k in range(0, 301, every)]
+
+
+def test_viewers_get_frames_at_most_twice_per_display_period_of_wall_time():
+    """Free run at ~6.6x real time (a display-grid sample every 5 ms of wall time): the log
+    gets every frame, viewers one per 16.7 ms of wall time (half the 30 Hz display period);
+    at real-time pace viewers get every frame; a frame held back while the beam moved is sent
+    once it settles, so a viewer ends with the last shape."""
+    import types
+    from det_sim_ros.markers import NodeMarkers
+    sent, logged, now = [], [], [0.0]
+    publisher = types.SimpleNamespace(handle=types.SimpleNamespace(publish_raw=sent.append),
+                                      get_subscription_count=lambda: 1)
+    node = types.SimpleNamespace(get_namespace=lambda: '/',
+                                 create_publisher=lambda *args: publisher)
+    recorder = types.SimpleNamespace(record=lambda topic, data, t, type_name: logged.append(t))
+    sim = Simulator(load_scene('default'))
+    markers = NodeMarkers(node, sim.model, 30.0, '', 10, clock=lambda: now[0])
+    sim.set_input([3000.0])
+
+    def run(periods, wall_per_period):
+        for _ in range(periods):
+            sim.step()
+            k = sim.k
+            frame = markers.frame_for(k, sim.x, sim.u, k * 1_000_000, recorder)
+            if frame is not None:
+                markers.publish(frame)
+            now[0] += wall_per_period
+
+    run(330, 0.005 / 33)                       # 10 grid samples, 5 ms of wall time apart
+    assert logged == [k * 1_000_000 for k in range(33, 331, 33)]   # (the snap: all moved)
+    assert len(sent) == 3 and markers.held_back == 7    # at 5, 25 and 45 ms of wall time
+    run(330, 0.001)                            # real-time pace: nothing is held back
+    assert markers.held_back == 7 and len(sent) - 3 >= len(logged) - 10 > 0
+    sim.set_input([0.0])
+    run(3000, 0.005 / 33)    # released at free-run pace: it snaps back and settles
+    assert markers.held_back > 7
+    ref = next(m for m in deserialize(MARKER_TYPE, sent[-1]).markers if m.id == 3)
+    assert ref.pose.position.x == pytest.approx(sim.outputs()['q'], abs=1e-6)   # not stale
 
 
 def test_frames_that_show_nothing_new_are_not_sent():
@@ -163,33 +208,53 @@ def test_frames_that_show_nothing_new_are_not_sent():
     ('plate', {}, [3000.0, 0.0]),
     ('array', {'structure.copies': 3}, [2500.0, 1000.0, 0.0])])
 def test_stacked_cells_give_the_general_paths_frame(name, overrides, volts):
-    """One-coordinate cells take the stacked polynomial map (one matrix product for all
-    cells); it draws what the general basis-and-kinematics path draws, for one cell, a plate
-    and an array, and its quick 'moved' test agrees with comparing every value."""
+    """One-coordinate cells take the stacked polynomial map (all cells at once), and without a
+    plate the compiled FrameMap (frames.c) builds the node's frames from it. The stacked map
+    draws what the general basis-and-kinematics path draws; the compiled frames are the
+    numpy frames' bytes exactly; all three agree on whether a frame moved enough to send."""
     from det_sim_ros.markers import MOVE_TOLERANCE
     sim = driven(load_scene(name, overrides=overrides), volts, 40)
 
-    def pair():
-        stacked, general = MarkerFrames(sim.model), MarkerFrames(sim.model)
+    def paths():
+        compiled, stacked, general = (MarkerFrames(sim.model) for _ in range(3))
+        stacked._compiled = general._compiled = None
         general._stacked = None
-        return stacked, general
+        return compiled, stacked, general
 
-    stacked, general = pair()
+    compiled, stacked, general = paths()
     assert stacked._stacked is not None and len(stacked._stacked.maps) == len(volts)
+    assert (compiled._compiled is None) == (name == 'plate')
     np.testing.assert_allclose(stacked.values(sim.x), general.values(sim.x),
                                rtol=1e-12, atol=1e-16)
     drawn = [[(p.x, p.y, p.z) for m in deserialize(MARKER_TYPE, f.frame(sim.x, sim.u, 7)).markers
               for p in m.points] for f in (stacked, general)]
     np.testing.assert_allclose(drawn[0], drawn[1], rtol=1e-12, atol=1e-16)
+    sent = compiled.frame_if_moved(sim.x, sim.u, 5_000_000_007)
+    assert sent == stacked.frame(sim.x, sim.u, 5_000_000_007)
     for shift in (0.0, 1e-13, 1e-9, 1e-6):   # still, below, near and above the tolerance
         moved = sim.x.copy()
         moved[stacked._stacked.coordinate] += shift
-        frames = pair()
+        frames = paths()
         for f in frames:
             f.frame_if_moved(sim.x, sim.u, 0)
-        sent = [f.frame_if_moved(moved, sim.u, 1) is not None for f in frames]
+        sent = [f.frame_if_moved(moved, sim.u, 1) for f in frames]
         shown = np.max(np.abs(general.values(moved) - general.values(sim.x)))
-        assert sent == [shown > MOVE_TOLERANCE] * 2
+        assert [s is not None for s in sent] == [shown > MOVE_TOLERANCE] * 3
+        assert sent[0] == sent[1]
+
+
+def test_compiled_frames_refuse_wrong_buffers():
+    """FrameMap.update checks what it writes into: the frame's size and the state's length."""
+    sim = Simulator(load_scene('default'))
+    frames = MarkerFrames(sim.model)
+    update = frames._compiled.update
+    with pytest.raises(ValueError, match='frame: expected'):
+        update(sim.x, bytearray(10), True, 0)
+    with pytest.raises(ValueError, match='shorter than'):
+        update(sim.x[:0].copy(), frames._raw, True, 0)
+    with pytest.raises(BufferError):
+        update(sim.x, bytes(frames.size), True, 0)      # read-only bytes
+    assert update(sim.x, frames._raw, True, 0) is True
 
 
 def test_no_frames_without_a_viewer_or_a_log(harness):

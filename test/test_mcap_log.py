@@ -403,8 +403,8 @@ def _write_samples(path, fast, background=False):
 
 @pytest.mark.parametrize('background', [False, True])
 def test_fast_sample_path_writes_the_same_file_as_add_message(tmp_path, monkeypatch, background):
-    """record_sample's batched writer (and the writer thread) give the bytes mcap's own
-    add_message gives: records, chunk indexes and statistics."""
+    """record_sample's batched writer, record's single messages (and the writer thread) give
+    the bytes mcap's own add_message gives: records, chunk indexes and statistics."""
     import time as time_module
     monkeypatch.setattr(time_module, 'time_ns', lambda: 1234)   # the wall start in the metadata
     slow = _write_samples(tmp_path / 'slow.mcap', fast=False)

@@ -6,6 +6,7 @@
  *            same physics in readable numpy, and the tests hold this code to it)
  * stepping.c method tables, the exponential Runge-Kutta core, charge transients, the per-period
  *            step-count controller and the per-group batch stepping
+ * frames.c   marker frames of one-coordinate cells (the node's display path, not physics)
  * module.c   the Python binding (buffer protocol only: no numpy C API, no ABI coupling)
  *
  * Units: SI throughout (m, kg, s, V, C, A, W, J).
@@ -161,5 +162,22 @@ int ds_period(ds_stepper *st, double *x, const double *u_old, const double *u);
 void ds_reset_control(ds_stepper *st);
 int ds_run(ds_stepper *st, ds_work *ow, double *x, const double *u_held, const double *u_last,
            const double *U, int64_t n, double *X, double *Y, int64_t *done);
+
+/* Marker frames (frames.c): the stacked polynomial map of one-coordinate cells. */
+typedef struct {
+    int64_t n_cells, n_values;             /* cells; drawn values per cell */
+    const double *maps;                    /* (cells, values, 4): the 4 coefficients of V */
+    const double *thickness_times_height;  /* n d0 l0 per cell (m^2) */
+    const int64_t *coordinate;             /* each cell's q in the state vector */
+    const int64_t *position;               /* byte offset of each value in the frame */
+    const int64_t *stamp_position;         /* byte offset of each header stamp (sec, nanosec) */
+    int64_t n_stamps;
+    int64_t height, thickness;             /* indices in a cell's values */
+    double min_thickness, tolerance;       /* m */
+    double *values, *last;                 /* scratch: this frame's and the last written */
+} ds_frame_map;
+
+int ds_frame_update(ds_frame_map *f, const double *x, unsigned char *frame, int force,
+                    int64_t stamp_ns);
 
 #endif

@@ -4,6 +4,7 @@
  * Model(arrays)   reads the named fields of det_sim_ros.model.ModelArrays (attribute by
  *                 attribute: never positional) and keeps its own copy in C structs.
  * Stepper(...)    a method table, transient settings and step-count control for a Model.
+ * FrameMap(fields) marker frames of one-coordinate cells (frames.c), from named fields.
  *
  * Arrays cross by the buffer protocol (C-contiguous float64 / int64): no numpy C API, so the
  * module builds with only a C compiler and Python's headers and works with any numpy.
@@ -91,25 +92,30 @@ static void release_buffers(buf *b, int count)
         release(&b[i]);
 }
 
-/* ---------------------------------------------------------------- Model */
+/* ---------------------------------------------------------------- owned copies */
 
+/* The memory an object owns (its copies of the named fields), freed with it. */
 typedef struct {
-    PyObject_HEAD
-    ds_model m;
-    ds_work w;
-    void *arena[48];
-    int n_arena;
-} ModelObject;
+    void *p[48];
+    int n;
+} arena;
 
-static void *keep(ModelObject *self, void *p)
+static void *keep(arena *a, void *p)
 {
     if (p)
-        self->arena[self->n_arena++] = p;
+        a->p[a->n++] = p;
     return p;
 }
 
+static void free_arena(arena *a)
+{
+    for (int i = 0; i < a->n; i++)
+        free(a->p[i]);
+    a->n = 0;
+}
+
 /* Copy the named array field ``name`` of ``src`` (n items, n < 0: any) into owned memory. */
-static void *copy_field(ModelObject *self, PyObject *src, const char *name, char kind,
+static void *copy_field(arena *mem, PyObject *src, const char *name, char kind,
                         Py_ssize_t n, Py_ssize_t *got)
 {
     PyObject *obj = PyObject_GetAttrString(src, name);
@@ -121,7 +127,7 @@ static void *copy_field(ModelObject *self, PyObject *src, const char *name, char
         return NULL;
     }
     Py_ssize_t len = b.view.len;
-    void *p = keep(self, malloc(len > 0 ? (size_t)len : 8));
+    void *p = keep(mem, malloc(len > 0 ? (size_t)len : 8));
     if (!p) {
         PyErr_NoMemory();
     } else {
@@ -147,11 +153,32 @@ static int int_field(PyObject *src, const char *name, int64_t *out)
     return 0;
 }
 
+static int float_field(PyObject *src, const char *name, double *out)
+{
+    PyObject *obj = PyObject_GetAttrString(src, name);
+    if (!obj)
+        return -1;
+    double v = PyFloat_AsDouble(obj);
+    Py_DECREF(obj);
+    if (v == -1.0 && PyErr_Occurred())
+        return -1;
+    *out = v;
+    return 0;
+}
+
+/* ---------------------------------------------------------------- Model */
+
+typedef struct {
+    PyObject_HEAD
+    ds_model m;
+    ds_work w;
+    arena mem;
+} ModelObject;
+
 static void Model_dealloc(ModelObject *self)
 {
     ds_work_free(&self->w);
-    for (int i = 0; i < self->n_arena; i++)
-        free(self->arena[i]);
+    free_arena(&self->mem);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
@@ -161,8 +188,9 @@ static int Model_init(ModelObject *self, PyObject *args, PyObject *kwds)
     PyObject *src;
     if (!PyArg_ParseTupleAndKeywords(args, kwds, "O", kwlist, &src))
         return -1;
-    if (self->n_arena)
+    if (self->mem.n)
         return 0;   /* already built */
+    arena *mem = &self->mem;
     ds_model *m = &self->m;
     memset(m, 0, sizeof(*m));
     int64_t creep, rc, power;
@@ -187,25 +215,25 @@ static int Model_init(ModelObject *self, PyObject *args, PyObject *kwds)
         return -1;
     }
     Py_ssize_t n_nodes, n_mi, n_groups1, n_p;
-    int64_t *cell_q = copy_field(self, src, "cell_q", 'q', nc + 1, NULL);
-    int64_t *cell_g = cell_q ? copy_field(self, src, "cell_g", 'q', nc + 1, NULL) : NULL;
-    int64_t *cell_group = cell_g ? copy_field(self, src, "cell_group", 'q', nc, NULL) : NULL;
-    int64_t *kin = cell_group ? copy_field(self, src, "kinematics", 'q', nc, NULL) : NULL;
+    int64_t *cell_q = copy_field(mem, src, "cell_q", 'q', nc + 1, NULL);
+    int64_t *cell_g = cell_q ? copy_field(mem, src, "cell_g", 'q', nc + 1, NULL) : NULL;
+    int64_t *cell_group = cell_g ? copy_field(mem, src, "cell_group", 'q', nc, NULL) : NULL;
+    int64_t *kin = cell_group ? copy_field(mem, src, "kinematics", 'q', nc, NULL) : NULL;
     if (!kin)
         return -1;
     n_nodes = cell_g[nc];
-    if (!(m->W = copy_field(self, src, "W", 'd', n_nodes, NULL))
-        || !(m->B1 = copy_field(self, src, "B1", 'd', n_nodes * R, NULL))
-        || !(m->B2 = copy_field(self, src, "B2", 'd', n_nodes * R, NULL))
-        || !(m->Mb = copy_field(self, src, "Mb", 'd', nq * R, NULL))
-        || !(m->K = copy_field(self, src, "K", 'd', nq * R, NULL))
-        || !(m->D = copy_field(self, src, "D", 'd', nq * R, NULL))
-        || !(m->ref = copy_field(self, src, "ref", 'd', nq, NULL))
-        || !(m->mi_val = copy_field(self, src, "mi_val", 'd', -1, &n_mi))
-        || !(m->mi_row = copy_field(self, src, "mi_row", 'q', n_mi, NULL))
-        || !(m->mi_col = copy_field(self, src, "mi_col", 'q', n_mi, NULL))
-        || !(m->group_q = copy_field(self, src, "group_q", 'q', -1, &n_groups1))
-        || !(m->P = copy_field(self, src, "P", 'd', -1, &n_p)))
+    if (!(m->W = copy_field(mem, src, "W", 'd', n_nodes, NULL))
+        || !(m->B1 = copy_field(mem, src, "B1", 'd', n_nodes * R, NULL))
+        || !(m->B2 = copy_field(mem, src, "B2", 'd', n_nodes * R, NULL))
+        || !(m->Mb = copy_field(mem, src, "Mb", 'd', nq * R, NULL))
+        || !(m->K = copy_field(mem, src, "K", 'd', nq * R, NULL))
+        || !(m->D = copy_field(mem, src, "D", 'd', nq * R, NULL))
+        || !(m->ref = copy_field(mem, src, "ref", 'd', nq, NULL))
+        || !(m->mi_val = copy_field(mem, src, "mi_val", 'd', -1, &n_mi))
+        || !(m->mi_row = copy_field(mem, src, "mi_row", 'q', n_mi, NULL))
+        || !(m->mi_col = copy_field(mem, src, "mi_col", 'q', n_mi, NULL))
+        || !(m->group_q = copy_field(mem, src, "group_q", 'q', -1, &n_groups1))
+        || !(m->P = copy_field(mem, src, "P", 'd', -1, &n_p)))
         return -1;
     m->n_nodes = n_nodes;
     m->n_mi = n_mi;
@@ -220,13 +248,13 @@ static int Model_init(ModelObject *self, PyObject *args, PyObject *kwds)
                                       "Rs", "Rp"};
     double *cell_f[5], *det_f[9];
     for (int i = 0; i < 5; i++)
-        if (!(cell_f[i] = copy_field(self, src, cell_names[i], 'd', nc, NULL)))
+        if (!(cell_f[i] = copy_field(mem, src, cell_names[i], 'd', nc, NULL)))
             return -1;
     for (int i = 0; i < 9; i++)
-        if (!(det_f[i] = copy_field(self, src, det_names[i], 'd', nc, NULL)))
+        if (!(det_f[i] = copy_field(mem, src, det_names[i], 'd', nc, NULL)))
             return -1;
-    m->cell = keep(self, calloc((size_t)nc, sizeof(ds_cell)));
-    m->det = keep(self, calloc((size_t)nc, sizeof(ds_det)));
+    m->cell = keep(mem, calloc((size_t)nc, sizeof(ds_cell)));
+    m->det = keep(mem, calloc((size_t)nc, sizeof(ds_det)));
     if (!m->cell || !m->det) {
         PyErr_NoMemory();
         return -1;
@@ -717,6 +745,137 @@ static PyTypeObject StepperType = {
     .tp_getset = Stepper_getset,
 };
 
+/* ---------------------------------------------------------------- FrameMap */
+
+typedef struct {
+    PyObject_HEAD
+    ds_frame_map f;
+    Py_ssize_t frame_size;
+    arena mem;
+} FrameMapObject;
+
+static void FrameMap_dealloc(FrameMapObject *self)
+{
+    free_arena(&self->mem);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static int FrameMap_init(FrameMapObject *self, PyObject *args, PyObject *kwds)
+{
+    static char *kwlist[] = {"fields", NULL};
+    PyObject *src;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O", kwlist, &src))
+        return -1;
+    if (self->mem.n) {
+        PyErr_SetString(PyExc_RuntimeError, "FrameMap is already built");
+        return -1;
+    }
+    ds_frame_map *f = &self->f;
+    arena *mem = &self->mem;
+    int64_t frame_size;
+    Py_ssize_t n_cells, n_stamps;
+    if (int_field(src, "n_values", &f->n_values) < 0 || int_field(src, "height", &f->height) < 0
+        || int_field(src, "thickness", &f->thickness) < 0
+        || int_field(src, "frame_size", &frame_size) < 0
+        || float_field(src, "min_thickness", &f->min_thickness) < 0
+        || float_field(src, "tolerance", &f->tolerance) < 0
+        || !(f->thickness_times_height = copy_field(mem, src, "thickness_times_height", 'd',
+                                                    -1, &n_cells))
+        || !(f->coordinate = copy_field(mem, src, "coordinate", 'q', n_cells, NULL))
+        || !(f->stamp_position = copy_field(mem, src, "stamp_position", 'q', -1, &n_stamps)))
+        return -1;
+    const int64_t nv = f->n_values, n = n_cells * nv;
+    f->n_cells = n_cells;
+    f->n_stamps = n_stamps;
+    self->frame_size = (Py_ssize_t)frame_size;
+    if (n_cells < 1 || nv < 1 || f->height < 0 || f->height >= nv || f->thickness < 0
+        || f->thickness >= nv) {
+        PyErr_SetString(PyExc_ValueError, "FrameMap: inconsistent sizes or indices");
+        return -1;
+    }
+    if (!(f->maps = copy_field(mem, src, "maps", 'd', n * 4, NULL))
+        || !(f->position = copy_field(mem, src, "position", 'q', n, NULL)))
+        return -1;
+    for (int64_t i = 0; i < n; i++)
+        if (f->position[i] < 0 || f->position[i] + 8 > frame_size) {
+            PyErr_SetString(PyExc_ValueError, "FrameMap: a value lies outside the frame");
+            return -1;
+        }
+    for (int64_t k = 0; k < n_stamps; k++)
+        if (f->stamp_position[k] < 0 || f->stamp_position[k] + 8 > frame_size) {
+            PyErr_SetString(PyExc_ValueError, "FrameMap: a stamp lies outside the frame");
+            return -1;
+        }
+    f->values = keep(mem, calloc((size_t)(2 * n), sizeof(double)));
+    if (!f->values) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    f->last = f->values + n;
+    return 0;
+}
+
+static PyObject *FrameMap_update(FrameMapObject *self, PyObject *const *args, Py_ssize_t n)
+{
+    if (n != 4) {
+        PyErr_SetString(PyExc_TypeError, "update(x, frame, force, stamp_ns)");
+        return NULL;
+    }
+    if (!self->mem.n) {
+        PyErr_SetString(PyExc_RuntimeError, "FrameMap was not built");
+        return NULL;
+    }
+    int force = PyObject_IsTrue(args[2]);
+    long long stamp = PyLong_AsLongLong(args[3]);
+    if (force < 0 || (stamp == -1 && PyErr_Occurred()))
+        return NULL;
+    buf x;
+    if (get_buffer(args[0], &x, 'd', -1, 0, "x") < 0)
+        return NULL;
+    const ds_frame_map *f = &self->f;
+    for (int64_t c = 0; c < f->n_cells; c++)
+        if (f->coordinate[c] < 0 || f->coordinate[c] >= x.view.len / 8) {
+            release(&x);
+            PyErr_SetString(PyExc_ValueError, "x: shorter than the model's state");
+            return NULL;
+        }
+    Py_buffer frame;
+    if (PyObject_GetBuffer(args[1], &frame, PyBUF_SIMPLE | PyBUF_WRITABLE) < 0) {
+        release(&x);
+        return NULL;
+    }
+    int written = 0;
+    if (frame.len != self->frame_size)
+        PyErr_Format(PyExc_ValueError, "frame: expected %zd bytes, got %zd", self->frame_size,
+                     frame.len);
+    else
+        written = ds_frame_update(&self->f, x.view.buf, frame.buf, force, (int64_t)stamp);
+    PyBuffer_Release(&frame);
+    release(&x);
+    if (PyErr_Occurred())
+        return NULL;
+    return PyBool_FromLong(written);
+}
+
+static PyMethodDef FrameMap_methods[] = {
+    {"update", (PyCFunction)(void (*)(void))FrameMap_update, METH_FASTCALL,
+     "update(x, frame, force, stamp_ns) -> written: the frame's values at state x; written "
+     "into the frame bytes (with the stamp) when force or one moved by more than tolerance"},
+    {NULL}
+};
+
+static PyTypeObject FrameMapType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "det_sim_ros._ckernel.FrameMap",
+    .tp_doc = "FrameMap(fields): marker frames of one-coordinate cells, from named fields",
+    .tp_basicsize = sizeof(FrameMapObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)FrameMap_init,
+    .tp_dealloc = (destructor)FrameMap_dealloc,
+    .tp_methods = FrameMap_methods,
+};
+
 /* ---------------------------------------------------------------- module */
 
 static struct PyModuleDef module = {
@@ -727,15 +886,18 @@ static struct PyModuleDef module = {
 
 PyMODINIT_FUNC PyInit__ckernel(void)
 {
-    if (PyType_Ready(&ModelType) < 0 || PyType_Ready(&StepperType) < 0)
+    if (PyType_Ready(&ModelType) < 0 || PyType_Ready(&StepperType) < 0
+        || PyType_Ready(&FrameMapType) < 0)
         return NULL;
     PyObject *mod = PyModule_Create(&module);
     if (!mod)
         return NULL;
     Py_INCREF(&ModelType);
     Py_INCREF(&StepperType);
+    Py_INCREF(&FrameMapType);
     if (PyModule_AddObject(mod, "Model", (PyObject *)&ModelType) < 0
         || PyModule_AddObject(mod, "Stepper", (PyObject *)&StepperType) < 0
+        || PyModule_AddObject(mod, "FrameMap", (PyObject *)&FrameMapType) < 0
         || PyModule_AddIntConstant(mod, "OK", DS_OK) < 0
         || PyModule_AddIntConstant(mod, "BAD_STRETCH", DS_BAD_STRETCH) < 0
         || PyModule_AddIntConstant(mod, "NON_FINITE", DS_NON_FINITE) < 0

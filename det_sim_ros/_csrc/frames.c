@@ -1,0 +1,71 @@
+/*
+ * Marker frames of one-coordinate cells (det_sim_ros/markers.py, MarkerFrames): every drawn
+ * value of a cell is a polynomial in its coordinate q, V = P0 + P1 q + P2 q^2 + P3 q^4, and
+ * the DET's drawn thickness is n d0 l0 / height. The node builds a frame every ~33 control
+ * samples, with caches the samples' DDS work has cooled: in Python that cost 150-240 us per
+ * frame, most of it the first touch of numpy's code paths; here it is one call. The numpy
+ * version (MarkerFrames.values) stays the reference the tests hold this code to.
+ */
+#include <math.h>
+#include <string.h>
+
+#include "detsim.h"
+
+/* A float64 into CDR (little-endian) bytes at ``at``. */
+static void put_f64(unsigned char *at, double v)
+{
+    uint64_t bits;
+    memcpy(&bits, &v, 8);
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
+    bits = __builtin_bswap64(bits);
+#endif
+    memcpy(at, &bits, 8);
+}
+
+static void put_u32(unsigned char *at, uint32_t v)
+{
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
+    v = __builtin_bswap32(v);
+#endif
+    memcpy(at, &v, 4);
+}
+
+/*
+ * The frame's values at state x into f->values; unless ``force``, 0 when no value moved by
+ * more than f->tolerance since the last frame written here. Otherwise the values and the stamp
+ * are written into ``frame`` (the serialized MarkerArray) and remembered, and 1 is returned.
+ */
+int ds_frame_update(ds_frame_map *f, const double *x, unsigned char *frame, int force,
+                    int64_t stamp_ns)
+{
+    const int64_t nv = f->n_values, n = f->n_cells * nv;
+    for (int64_t c = 0; c < f->n_cells; c++) {
+        const double q = x[f->coordinate[c]], q2 = q * q, q4 = q2 * q2;
+        const double *P = f->maps + c * nv * 4;
+        double *v = f->values + c * nv;
+        for (int64_t i = 0; i < nv; i++)
+            v[i] = P[4 * i] + P[4 * i + 1] * q + P[4 * i + 2] * q2 + P[4 * i + 3] * q4;
+        const double thick = f->thickness_times_height[c] / v[f->height];
+        v[f->thickness] = thick > f->min_thickness ? thick : f->min_thickness;
+    }
+    if (!force) {
+        double shift = 0.0;
+        for (int64_t i = 0; i < n; i++) {
+            const double d = fabs(f->values[i] - f->last[i]);
+            if (d > shift)
+                shift = d;
+        }
+        if (!(shift > f->tolerance))
+            return 0;
+    }
+    for (int64_t i = 0; i < n; i++)
+        put_f64(frame + f->position[i], f->values[i]);
+    memcpy(f->last, f->values, (size_t)n * sizeof(double));
+    const uint32_t sec = (uint32_t)(int32_t)(stamp_ns / 1000000000);
+    const uint32_t nanosec = (uint32_t)(stamp_ns % 1000000000);
+    for (int64_t k = 0; k < f->n_stamps; k++) {
+        put_u32(frame + f->stamp_position[k], sec);
+        put_u32(frame + f->stamp_position[k] + 4, nanosec);
+    }
+    return 1;
+}
