@@ -2,27 +2,33 @@
 CPU cost of the shape markers (issue 18 target: 30 Hz markers add <= 5 % to the node's CPU per
 simulated second).
 
-One sim_node runs free (the node's cheapest mode per simulated second, so the markers' largest
-share; no MCAP log unless --log, which also logs every frame) in this process, with a
-subscriber in another process on /markers and, by default, on the four output topics (a viewer
-and a controller), so every message is delivered.
+One sim_node runs in this process (free run by default, the node's cheapest mode per simulated
+second, so the markers' largest share; --real-time: the node's default mode, the one a user
+watches the markers in; no MCAP log unless --log, which also logs every frame), with a
+subscriber in another process on /markers (a viewer: Python MarkerArray objects, or bytes with
+--raw-viewer as RViz and the Foxglove bridge take them) and, by default, on the four output
+topics (a controller), so every message is delivered.
 The markers are switched on and off in alternating blocks of ``--block-s`` wall seconds
 (``--blocks`` pairs, the first block of each pair chosen at random) in that one node: the
-host's drift hits both states alike, which separate runs of a few seconds could not resolve
-(their spread was larger than the effect). Node CPU = this process's CPU time, all threads
-(the DDS threads that send the reliable 2.9 kB frames too), per simulated second in each
-state; reported: the ratio of the totals, and the median and quartiles of the per-pair ratios.
-The marker code's own share (building and publishing frames, executor thread's CPU time) is
-measured directly as well. The voltage is a square wave (``--drive-hz``, 2 Hz: the actuator
-snaps and creeps most of the time, so most frames change and are sent; a settled actuator
-sends one frame per simulated second).
+host's drift hits both states alike, which separate runs of a few seconds could not resolve.
+Node CPU = this process's CPU time, all threads (the DDS threads and the log writer too), per
+simulated second in each state; reported: the ratio of the totals, the median, quartiles and
+mean (with its standard error) of the per-pair ratios, and the split between the executor
+thread and the others. The marker code's own share (building, logging and publishing frames:
+the executor thread's CPU time in them) is measured directly as well. --control runs the same
+switching with 'on' blocks that make no frames (an A/A test): what it reports is the method's
+own noise on this host, the floor under which an effect cannot be told. The voltage is a square
+wave (``--drive-hz``, 2 Hz: the actuator snaps and creeps most of the time, so most frames
+change; a settled actuator sends one frame per simulated second).
 
     python bench/marker_cost.py [--scene default] [--blocks 30] [--block-s 0.5] [--log]
-                                [--drive-hz 2]
+                                [--real-time] [--raw-viewer] [--control] [--drive-hz 2]
 """
 
 import argparse
+import math
 import os
+import statistics
 import subprocess
 import sys
 import time
@@ -46,7 +52,8 @@ except BaseException:
 '''
 
 
-def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1, real_time=False):
+def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1, real_time=False,
+        control=False):
     import random
     import rclpy
     from rclpy.parameter import Parameter
@@ -78,6 +85,8 @@ def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1, rea
             spent[0] += time.thread_time() - t0
             return result
         return call
+    if control:   # the A/A control: 'on' blocks run the same switch, but no frame is made
+        markers.frame_for = lambda *args, **kwargs: None
     markers.frame_for = timed(markers.frame_for)   # building (and logging) a frame
     markers.publish = timed(markers.publish)
     if drive_hz > 0:   # a square wave 0 V <-> 2.5 kV: the actuator snaps and creeps, so frames
@@ -134,6 +143,9 @@ def main():
                         '0 = none (the actuator stays at rest)')
     parser.add_argument('--log', action='store_true',
                         help='with the MCAP log (the node default; frames are logged too)')
+    parser.add_argument('--control', action='store_true',
+                        help="A/A control: the 'on' blocks make no frames, so what they add "
+                        "is the method's own noise on this host")
     parser.add_argument('--real-time', action='store_true',
                         help='the node in real time at 1 kHz (as a user watching the markers '
                         'runs it) instead of free run')
@@ -154,7 +166,7 @@ def main():
         with tempfile.TemporaryDirectory() as folder:
             pairs, totals, fps, own = run(args.scene, args.blocks, args.block_s, args.subscribe,
                                           folder if args.log else '', args.drive_hz,
-                                          real_time=args.real_time)
+                                          real_time=args.real_time, control=args.control)
     finally:
         sink.terminate()
         sink.wait()
@@ -163,15 +175,20 @@ def main():
     main_off, main_on = (totals[state][2] / totals[state][1] for state in (False, True))
     ratios = sorted(b / a - 1 for a, b in pairs)
     q = [ratios[int(round(f * (len(ratios) - 1)))] for f in (0.25, 0.5, 0.75)]
-    print(f'{args.scene}{" with the MCAP log" if args.log else ""}, '
+    mean = statistics.fmean(ratios)
+    error = statistics.stdev(ratios) / math.sqrt(len(ratios)) if len(ratios) > 1 else math.nan
+    print(f'{"A/A CONTROL (no frames made), " if args.control else ""}'
+          f'{args.scene}{" with the MCAP log" if args.log else ""}, '
           f'{"real time" if args.real_time else "free run"}, '
           f'{"raw" if args.raw_viewer else "Python"} viewer, square wave '
           f'{args.drive_hz:g} Hz: {len(pairs)} on/off pairs of {args.block_s:g} s; node CPU per '
           f'simulated s: {off * 1e3:.2f} ms (markers off) vs {on * 1e3:.2f} ms (30 Hz, '
           f'{fps:.1f} frames per sim s): {(on / off - 1) * 100:+.1f} % (totals); per pair: '
-          f'median {q[1] * 100:+.1f} %, quartiles {q[0] * 100:+.1f} .. {q[2] * 100:+.1f} %; '
+          f'median {q[1] * 100:+.1f} %, quartiles {q[0] * 100:+.1f} .. {q[2] * 100:+.1f} %, '
+          f'mean {mean * 100:+.1f} % +- {error * 100:.1f} % (standard error); '
           f'marker code alone {own * 1e3:.2f} ms per sim s = {own / on * 100:.1f} % of the '
-          f'node, {own / fps * 1e6:.0f} us per frame; added per sim s: executor thread '
+          f'node, {own / fps * 1e6 if fps else 0.0:.0f} us per frame sent; added per sim s: '
+          f'executor thread '
           f'{(main_on - main_off) * 1e3:+.2f} ms, other threads (DDS, log writer) '
           f'{(on - main_on - off + main_off) * 1e3:+.2f} ms')
 
