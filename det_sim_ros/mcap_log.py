@@ -19,8 +19,9 @@ Crash safety. The writer keeps the chunk in progress in memory, so whatever was 
 the last flush is not in the file: a SIGKILL loses it. The writer is flushed every
 ``flush_sim_s`` of log (sim) time (0.05 s) and every ``flush_period_s`` of wall time (0.1 s),
 whichever comes first: a SIGKILL loses at most ~50 ms of sim time, in real-time and free-run
-mode alike (with ``background=True``, the writer thread's queue too: at most ``drain_period_s``,
-10 ms, more) (a wall-clock period alone lost 7 s of sim time per 0.1 s in a 70x free run). Every
+mode alike (with ``background=True``, the writer thread's queue too: at most ``max_queue``
+items more, which the recording thread writes itself when the writer falls behind) (a
+wall-clock period alone lost 7 s of sim time per 0.1 s in a 70x free run). Every
 flush is one write: the new records followed by a provisional end (DataEnd, a Footer without
 summary, the closing magic), written where the next flush continues. So a killed file is a
 valid MCAP up to its last flush, which mcap's reader and rosbags open without a manual step
@@ -600,6 +601,11 @@ class Recorder:
         only queue the (already serialized) bytes, the thread writes, compresses and flushes
         them in order every ``drain_period_s``. Counters and :attr:`fault` are updated by the
         thread; :meth:`close` writes everything queued before it finishes the file.
+    :param max_queue: background mode: when this many records wait, the recording thread
+        writes the queue itself (with the writer thread's lock) before it goes on. The writer
+        thread gets the GIL only now and then while the node's thread runs flat out, so in a
+        free run it fell behind without bound (124k samples, 82 % of a 4 s run, were still
+        queued: memory, and the crash guarantee, lost); this keeps both bounded.
     """
 
     def __init__(self, path, scene=None, *, qos_by_topic: Mapping | None = None,
@@ -611,7 +617,7 @@ class Recorder:
                  on_fault: Callable[[str], None] | None = None,
                  clock: Callable[[], float] = time.monotonic, prefix: str = 'det_sim',
                  namespace: str = '/', background: bool = False,
-                 drain_period_s: float = 0.01):
+                 drain_period_s: float = 0.01, max_queue: int = 64):
         self.fault = ''
         self.paths: list[str] = []
         self.messages = 0       # messages written
@@ -664,7 +670,10 @@ class Recorder:
         self._queue = None
         self._thread = None
         if background and self._writer is not None:
-            self._queue = collections.deque()   # append/popleft are atomic: no lock needed
+            self._queue = collections.deque()   # append/popleft are atomic
+            self._drain_lock = threading.RLock()   # one writer at a time: thread or recorder
+            self._max_queue = max(1, int(max_queue))
+            self.caught_up = 0    # times the recording thread wrote the queue itself
             self._drain_period_s = float(drain_period_s)
             self._stop = threading.Event()
             self._thread = threading.Thread(target=self._drain_loop, name='mcap-writer',
@@ -824,6 +833,8 @@ class Recorder:
                 type_name = type_name or self._type_of(msg, topic)
                 msg = serialize(msg)
             self._queue.append((topic, msg, log_time_ns, type_name))
+            if len(self._queue) > self._max_queue:
+                self._catch_up()
             return True
         if self._writer is None:
             self.dropped += 1
@@ -841,6 +852,8 @@ class Recorder:
                 self.dropped += len(data)
                 return False
             self._queue.append((log_time_ns, topics, data, types))
+            if len(self._queue) > self._max_queue:
+                self._catch_up()
             return True
         if self._writer is None:
             self.dropped += len(data)
@@ -952,7 +965,8 @@ class Recorder:
     _NEW_FILE = object()
 
     def _drain(self) -> None:
-        """Write everything queued, in order (the writer thread, or close())."""
+        """Write everything queued, in order (under _drain_lock: the writer thread, the
+        recording thread when the writer fell behind, or close())."""
         queue = self._queue
         written = 0
         while queue:
@@ -973,8 +987,18 @@ class Recorder:
     def _drain_loop(self) -> None:
         try:
             while not self._stop.wait(self._drain_period_s):
+                with self._drain_lock:
+                    self._drain()
+                    self.maybe_flush()
+        except Exception as exc:  # noqa: BLE001 - a logging fault stops logging, nothing else
+            self._set_fault(exc)
+
+    def _catch_up(self) -> None:
+        """The writer thread is behind by more than max_queue records: write them here."""
+        self.caught_up += 1
+        try:
+            with self._drain_lock:
                 self._drain()
-                self.maybe_flush()
         except Exception as exc:  # noqa: BLE001 - a logging fault stops logging, nothing else
             self._set_fault(exc)
 
@@ -1064,7 +1088,8 @@ class Recorder:
             if self._thread is not threading.current_thread():
                 self._thread.join()
             self._thread = None
-            self._drain()
+            with self._drain_lock:
+                self._drain()
         if self._writer is None:
             return
         try:

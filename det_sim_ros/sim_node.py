@@ -91,7 +91,8 @@ NODE_PARAMS = {
                     (0.0, 3600.0)),
     # shape markers (det_sim_ros.markers, issue 18)
     'markers.rate_hz': (30.0, 'shape markers (visualization_msgs/MarkerArray on markers) per '
-                        'simulated second, 0 = off', True, (0.0, 1.0e4)),
+                        'simulated second, all logged; viewers get at most twice this many '
+                        'per wall second; 0 = off', True, (0.0, 1.0e4)),
     'markers.frame_id': ('', "'': one frame per DET (<namespace>/<DET name>); else all DETs "
                          'in this one frame, side by side', True, None),
 }

@@ -417,6 +417,25 @@ def test_fast_sample_path_writes_the_same_file_as_add_message(tmp_path, monkeypa
         assert len(list(reader.iter_messages(topics=['/charge']))) == 500
 
 
+def test_background_queue_stays_bounded_when_the_writer_falls_behind(tmp_path):
+    """A free run records faster than the writer thread gets the GIL: past max_queue records
+    the recording thread writes the queue itself, so memory and what a SIGKILL could lose stay
+    bounded; everything lands, in order."""
+    from det_sim_ros.contract import encode_joint_state, TOPIC_TYPES
+    recorder = Recorder(tmp_path / 'bounded.mcap', None, background=True, max_queue=8)
+    topics = ['deflection', 'displacement']
+    longest = 0
+    for k in range(3000):
+        data = [encode_joint_state(['det0'], [float(k)], stamp_ns=k * 1000)] * len(topics)
+        recorder.record_sample(k * 1000, topics, data, TOPIC_TYPES)
+        longest = max(longest, len(recorder._queue))
+    recorder.close()
+    assert longest <= 8 and recorder.caught_up > 0
+    assert recorder.fault == '' and recorder.messages == 6000 and recorder.dropped == 0
+    times = [m.log_time for m in LogReader(tmp_path / 'bounded.mcap').messages(['/deflection'])]
+    assert times == [k * 1000 for k in range(3000)]
+
+
 def test_background_recording_drops_nothing_while_the_writer_switches_files(tmp_path):
     """The writer thread owns the MCAP writer (None for a moment between two files): records
     queued meanwhile by the node's thread must all land, none counted as dropped."""
