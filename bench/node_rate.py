@@ -203,6 +203,79 @@ def floor_node(topics, samples, n, burst):
     return cpu
 
 
+def paired_node_floor(scene_name, topics, samples, pairs, block_s, folder, seed=1, log=True):
+    """
+    Node and floor in one process, in ``pairs`` randomly ordered pairs of ``block_s`` wall
+    seconds each (only one of the two is spun at a time): the host's drift hits both alike,
+    which separate runs of a few seconds could not resolve (their rounds spread by +-30 %).
+    The node runs free with the MCAP log (unless ``log`` is false), markers off; the floor is
+    floor_node's timer.
+    Returns the CPU per period of each (totals over all blocks), the ratio of the totals and
+    the mean of the per-pair ratios with its standard error.
+    """
+    import random
+    from sensor_msgs.msg import JointState
+    from rosgraph_msgs.msg import Clock
+    contexts = [rclpy.context.Context(), rclpy.context.Context()]
+    for context in contexts:
+        rclpy.init(context=context)
+    sim_node = SimNode(context=contexts[0], parameter_overrides=[
+        Parameter('scene_file', value=scene_name), Parameter('real_time', value=False),
+        Parameter('info_period', value=0.0), Parameter('log.path', value=folder),
+        Parameter('log.enabled', value=log), Parameter('markers.rate_hz', value=0.0),
+        Parameter('scene.initial_state', value='released')])
+    floor = rclpy.create_node('bench_paired_floor', context=contexts[1])
+    pubs = [floor.create_publisher(JointState, t, QoSProfile(depth=10)) for t in topics]
+    clock = floor.create_publisher(Clock, '/clock', QoSProfile(depth=10))
+    pairs_out = [(pub.handle.publish_raw, data) for pub, data in zip(pubs, samples)]
+    publish_clock, clock_bytes = clock.handle.publish_raw, encode_clock(0)
+    floor_done = [0]
+
+    def tick():   # as floor_node: 10 periods per callback
+        for _ in range(10):
+            publish_clock(clock_bytes)
+            for publish, data in pairs_out:
+                publish(data)
+        floor_done[0] += 10
+    floor.create_timer(1.0e-6, tick)
+    executors = [make_executor(context) for context in contexts]
+    executors[0].add_node(sim_node)
+    executors[1].add_node(floor)
+    _wait_subscribers(sim_node._output_pubs + pubs, 'paired node and floor')
+    done = [lambda: sim_node._sim.k, lambda: floor_done[0]]
+    rng = random.Random(seed)
+    totals = [[0.0, 0], [0.0, 0]]   # CPU s, periods: node, floor
+    ratios = []
+    for which in (0, 1):   # warm both
+        end = time.perf_counter() + 0.5
+        while time.perf_counter() < end:
+            executors[which].spin_once(timeout_sec=0.05)
+    for _ in range(pairs):
+        per = [0.0, 0.0]
+        for which in ((0, 1) if rng.random() < 0.5 else (1, 0)):
+            k0, c0 = done[which](), _cpu()
+            end = time.perf_counter() + block_s
+            while time.perf_counter() < end:
+                executors[which].spin_once(timeout_sec=0.05)
+            cpu, periods = _cpu() - c0, done[which]() - k0
+            totals[which][0] += cpu
+            totals[which][1] += periods
+            per[which] = cpu / max(periods, 1)
+        ratios.append(per[0] / per[1])
+    for executor in executors:
+        executor.shutdown()
+    sim_node.destroy_node()
+    floor.destroy_node()
+    for context in contexts:
+        rclpy.try_shutdown(context=context)
+    node_us, floor_us = (totals[i][0] / totals[i][1] * 1e6 for i in (0, 1))
+    mean = sum(ratios) / len(ratios)
+    error = (sum((r - mean) ** 2 for r in ratios) / (len(ratios) - 1)) ** 0.5 / len(ratios) ** 0.5
+    return {'pairs': pairs, 'block_s': block_s, 'log': log, 'node_us_per_period': node_us,
+            'floor_us_per_period': floor_us, 'node_over_floor_totals': node_us / floor_us,
+            'node_over_floor_mean_of_pairs': mean, 'standard_error': error}
+
+
 def _median(values):
     values = sorted(values)
     return values[len(values) // 2] if len(values) % 2 else 0.5 * (
@@ -380,6 +453,21 @@ def bench_scene(scene_name, args, folder):
         report['free_run_single_threaded_executor'] = result
     except _Skip:
         pass
+    except BaseException:
+        if listener is not None:
+            _stop(listener)
+        raise
+
+    if args.paired > 0 and listener is None:
+        listener = _spawn(SUBSCRIBER, ','.join(topics))
+    try:
+        if args.paired > 0:
+            report['paired_node_and_floor'] = paired_node_floor(
+                scene_name, topics, samples, args.paired, args.paired_block_s, folder)
+            if args.paired_no_log:   # the log's share, measured the same way
+                report['paired_node_without_log_and_floor'] = paired_node_floor(
+                    scene_name, topics, samples, args.paired, args.paired_block_s, folder,
+                    log=False)
     finally:
         if listener is not None:
             _stop(listener)
@@ -426,6 +514,12 @@ def main():
                         "(set right after it starts: its threads inherit it)")
     parser.add_argument('--rt-no-log', action='store_true', help='real-time run without the '
                         'MCAP log (then no command-to-effect figures)')
+    parser.add_argument('--paired', type=int, default=0,
+                        help='node and floor in this many interleaved pairs of blocks in one '
+                        'process (free run, the log on; 0 = off): the precise node/floor ratio')
+    parser.add_argument('--paired-block-s', type=float, default=0.5)
+    parser.add_argument('--paired-no-log', action='store_true',
+                        help='a second paired run with the log off (the log\'s share)')
     parser.add_argument('--json', help='write the numbers to this file')
     args = parser.parse_args()
     report = {'cpus': os.cpu_count(), 'load_avg_at_start': os.getloadavg()}
