@@ -988,7 +988,6 @@ class Recorder:
         sizes = tuple(map(len, items[i][2]))
         sample_bytes = sum(sizes) + _MESSAGE_HEAD.size * len(sizes)
         room = (fast.chunk_size - fast.chunk.record_writer._buffer.tell()) // sample_bytes
-        split_at = self._file_start_t + self.split_ns if self.split_ns else None
         last_t, clamped, times, rows = self._last_t, 0, [], []
         for log_time_ns, other_topics, data, _ in items[i:i + room]:
             if (other_topics is not topics and tuple(other_topics) != key) \
@@ -998,8 +997,8 @@ class Recorder:
             if t < last_t:
                 t = last_t
                 clamped += len(data)
-            if split_at is not None and t - self._file_start_t >= self.split_ns:
-                break
+            if self.split_ns and t - self._file_start_t >= self.split_ns:
+                break   # (_write_sample splits the file before it)
             last_t = t
             times.append(t)
             rows.append(data)
