@@ -61,6 +61,8 @@ NODE_PARAMS = {
     'real_time_factor': (1.0, 'real-time mode: sim seconds per wall second', False,
                          (1.0e-3, 1.0e3)),
     'steps_per_tick': (10, 'free-run mode: control periods per timer tick', False, (1, 100000)),
+    'threads': (1, "threads that step the scene's independent coupled groups (the copies of an "
+                'array) in every period; the results do not depend on it', True, (1, 256)),
     'max_catchup_steps': (1000, 'real-time mode: most steps run in one tick; the rest run in '
                           'later ticks (never skipped)', False, (1, 1000000)),
     'max_lag': (0.05, 'real-time mode: largest lag behind the wall clock, s of sim time; beyond '
@@ -169,7 +171,7 @@ class SimNode(Node):
             raise SceneError(f"parameter 'mode': one of {', '.join(MODES)} (got {self.mode!r})")
 
         started = time.perf_counter()
-        self._sim = Simulator(self.scene)
+        self._sim = Simulator(self.scene, threads=self._p('threads'))
         self._dt = self._sim.dt
         model = self._sim.model
         self.det_names = list(model.input_names)   # voltage-command and output channel order

@@ -141,10 +141,13 @@ class Simulator:
         return 0 if self.adaptive else self.substeps
 
     def describe_stepper(self) -> str:
-        """'etdrk4 x20' or 'etdrk4 adaptive (now x12)', for logs and diagnostics."""
+        """'etdrk4 x20' or 'etdrk4 adaptive (now x12)' (', 2 threads' when stepping on more
+        than one), for logs and diagnostics."""
+        threads = self.stepper.threads
+        on = f', {threads} threads' if threads > 1 else ''
         if self.adaptive:
-            return f'{self.method.name} adaptive (now x{self.substeps})'
-        return f'{self.method.name} x{self.substeps}'
+            return f'{self.method.name} adaptive (now x{self.substeps}){on}'
+        return f'{self.method.name} x{self.substeps}{on}'
 
     # -- input ----------------------------------------------------------------------------
     def set_input(self, volts) -> InputCheck:

@@ -365,6 +365,29 @@ def test_plate_vector_command_drives_both_outputs(harness):
     assert not h.non_finite
 
 
+def test_array_on_two_threads_publishes_the_one_thread_model_bit_for_bit(harness):
+    """threads: 2 steps an array's copies on two threads per period; what the node publishes
+    is the offline single-thread model's outputs, bit for bit."""
+    h = harness(scene_file='array', start_paused=True, threads=2,
+                **{'structure.copies': 4, 'structure.spread': 0.1})
+    assert h.node._sim.stepper.threads == 2
+    volts = [3000.0, 2000.0, 1000.0, 0.0]
+    h.command(volts)
+    h.spin_until(lambda: h.node._sim.u[0] == 3000.0, 'the command')
+    assert h.call('pause', data=False).success
+    h.spin_until_sim_time(0.2)
+    ref = offline(h.node.scene, volts, 0.25)
+    names = [f'q[{name}]' for name in h.node.det_names]
+    checked = 0
+    for t_ns, values in h.samples['deflection'].items():
+        k = k_of(t_ns, h.node.scene.dt)
+        if k == 0 or k not in ref:
+            continue
+        assert list(values) == [ref[k][name] for name in names], k
+        checked += 1
+    assert checked > 100
+
+
 def test_plate_bad_inputs_per_channel(harness):
     """Vector commands: a NaN in one channel is refused naming it (count on /diagnostics),
     out-of-range channels are clamped, a wrong length is refused, joint commands update by name."""
