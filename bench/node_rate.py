@@ -166,17 +166,15 @@ def floor(scene_name, topics, samples, n, with_clock):
     return cpu
 
 
-def floor_node(topics, samples, n, burst):
-    """CPU per period of a plain node publishing pre-serialized bytes (one sample's outputs and
-    /clock per period) from an EventsExecutor timer, ``burst`` periods per callback."""
+def _make_floor_node(context, name, topics, samples, burst):
+    """A plain node publishing pre-serialized bytes (one sample's outputs and /clock per
+    period) from a timer, ``burst`` periods per callback: (node, its publishers, a list whose
+    one item counts the periods published)."""
     from sensor_msgs.msg import JointState
     from rosgraph_msgs.msg import Clock
-    context = rclpy.context.Context()
-    rclpy.init(context=context)
-    node = rclpy.create_node('bench_floor_node', context=context)
+    node = rclpy.create_node(name, context=context)
     pubs = [node.create_publisher(JointState, t, QoSProfile(depth=10)) for t in topics]
     clock = node.create_publisher(Clock, '/clock', QoSProfile(depth=10))
-    _wait_subscribers(pubs, 'floor node')
     pairs = [(pub.handle.publish_raw, data) for pub, data in zip(pubs, samples)]
     publish_clock, clock_bytes = clock.handle.publish_raw, encode_clock(0)
     done = [0]
@@ -187,16 +185,25 @@ def floor_node(topics, samples, n, burst):
             for publish, data in pairs:
                 publish(data)
         done[0] += burst
+    node.create_timer(1.0e-6, tick)
+    return node, pubs, done
+
+
+def floor_node(topics, samples, n, burst):
+    """CPU per period of a plain node publishing pre-serialized bytes (one sample's outputs and
+    /clock per period) from an EventsExecutor timer, ``burst`` periods per callback."""
+    context = rclpy.context.Context()
+    rclpy.init(context=context)
+    node, pubs, done = _make_floor_node(context, 'bench_floor_node', topics, samples, burst)
+    _wait_subscribers(pubs, 'floor node')
     executor = make_executor(context)
     executor.add_node(node)
-    timer = node.create_timer(1.0e-6, tick)
     executor.spin_once(timeout_sec=0.1)
     k0, c0, m0 = done[0], _cpu(), time.thread_time()
     while done[0] - k0 < n:
         executor.spin_once(timeout_sec=0.1)
     cpu = (_cpu() - c0) / (done[0] - k0)
     floor_node.main_thread = (time.thread_time() - m0) / (done[0] - k0)
-    timer.cancel()
     executor.shutdown()
     node.destroy_node()
     rclpy.shutdown(context=context)
@@ -214,8 +221,6 @@ def paired_node_floor(scene_name, topics, samples, pairs, block_s, folder, seed=
     the mean of the per-pair ratios with its standard error.
     """
     import random
-    from sensor_msgs.msg import JointState
-    from rosgraph_msgs.msg import Clock
     contexts = [rclpy.context.Context(), rclpy.context.Context()]
     for context in contexts:
         rclpy.init(context=context)
@@ -224,20 +229,8 @@ def paired_node_floor(scene_name, topics, samples, pairs, block_s, folder, seed=
         Parameter('info_period', value=0.0), Parameter('log.path', value=folder),
         Parameter('log.enabled', value=log), Parameter('markers.rate_hz', value=0.0),
         Parameter('scene.initial_state', value='released')])
-    floor = rclpy.create_node('bench_paired_floor', context=contexts[1])
-    pubs = [floor.create_publisher(JointState, t, QoSProfile(depth=10)) for t in topics]
-    clock = floor.create_publisher(Clock, '/clock', QoSProfile(depth=10))
-    pairs_out = [(pub.handle.publish_raw, data) for pub, data in zip(pubs, samples)]
-    publish_clock, clock_bytes = clock.handle.publish_raw, encode_clock(0)
-    floor_done = [0]
-
-    def tick():   # as floor_node: 10 periods per callback
-        for _ in range(10):
-            publish_clock(clock_bytes)
-            for publish, data in pairs_out:
-                publish(data)
-        floor_done[0] += 10
-    floor.create_timer(1.0e-6, tick)
+    floor, pubs, floor_done = _make_floor_node(contexts[1], 'bench_paired_floor', topics,
+                                               samples, 10)   # as floor_node in the rounds
     executors = [make_executor(context) for context in contexts]
     executors[0].add_node(sim_node)
     executors[1].add_node(floor)

@@ -59,7 +59,6 @@ KEEPALIVE_NS = int(KEEPALIVE_S * 1e9)
 class _StackedCells(NamedTuple):
     """One-coordinate cells as one map (see MarkerFrames._stack_polynomial_cells)."""
     maps: np.ndarray                    # (cells, values, 4): V = maps @ (1, q, q^2, q^4)
-    reference_slope: np.ndarray         # |dV/dq| of the reference point's x, per cell
     height: int                         # index of the cell height in a cell's values
     thickness: int                      # index of the drawn DET thickness (set per frame)
     thickness_times_height: np.ndarray  # n d0 l0 per cell (m^2): thickness = this / height
@@ -201,7 +200,7 @@ class MarkerFrames:
         self._cell_maps = [self._cell_map(sampler, off) for sampler, off in
                            zip(geo.samplers, self._offsets)]
         self._colored_for = None
-        self._last_sent = None    # (values, volts, stamp, q) of frame_if_moved's last frame
+        self._last_sent = None    # frame_if_moved's last frame: (volts, stamp, values or None)
         self.skipped = 0
         self._stacked = self._stack_polynomial_cells()
         self._compiled = self._compile()
@@ -259,9 +258,6 @@ class MarkerFrames:
             return None
         return _StackedCells(
             maps=np.stack([np.column_stack([V0, *poly]) for V0, *_, poly in maps]),
-            # the reference point's x (third value from the end) is S(s_ref) q, linear in q:
-            # a change dq moves the frame by at least |S(s_ref)| |dq|
-            reference_slope=np.array([abs(poly[0][-3]) for *_, poly in maps]),
             height=maps[0][5], thickness=maps[0][6],
             thickness_times_height=np.array([s.physics.n * s.physics.d0 * s.physics.l0
                                              for s in self.geometry.samplers]),
@@ -335,43 +331,28 @@ class MarkerFrames:
         same, and less than :data:`KEEPALIVE_S` of sim time has passed (markers persist in
         RViz and Foxglove until replaced, so a settled actuator needs no new frames; the
         keep-alive serves viewers that join later)."""
-        if self._compiled is not None:
-            return self._compiled_frame_if_moved(x, u, stamp_ns)
-        q = None if self._stacked is None else self._coordinates(x)
-        values = self.values(x) if q is None else self._stacked_values(q)
-        volts = list(u) if np.ndim(u) else [u]
+        volts = self._volts(u)
         last = self._last_sent
-        if (last is not None and volts == last[1] and stamp_ns - last[2] < KEEPALIVE_NS
-                and not self._moved(q, last[3], values, last[0])):
+        force = last is None or volts != last[0] or stamp_ns - last[1] >= KEEPALIVE_NS
+        if self._compiled is not None:   # the same bytes as below, in one compiled call
+            if not self._compiled.update(x, self._raw, force, int(stamp_ns)):
+                self.skipped += 1
+                return None
+            self._last_sent = (volts, stamp_ns, None)
+            self._color(volts)
+            return bytes(self._raw)
+        values = self.values(x)
+        if not force and float(np.max(np.abs(values - last[2]))) <= MOVE_TOLERANCE:
             self.skipped += 1
             return None
-        self._last_sent = (values, volts, stamp_ns, q)   # (values() returns a new array)
+        self._last_sent = (volts, stamp_ns, values)   # (values() returns a new array)
         return self.pack(values, u, stamp_ns)
 
-    def _compiled_frame_if_moved(self, x, u, stamp_ns: int) -> bytes | None:
-        """:meth:`frame_if_moved` through the compiled FrameMap (the same bytes)."""
-        volts = (u.tolist() if isinstance(u, np.ndarray) else list(u) if np.ndim(u)
-                 else [u] * len(self._samplers))
-        last = self._last_sent
-        force = last is None or volts != last[1] or stamp_ns - last[2] >= KEEPALIVE_NS
-        if not self._compiled.update(x, self._raw, force, int(stamp_ns)):
-            self.skipped += 1
-            return None
-        self._last_sent = (None, volts, stamp_ns, None)
-        self._color(volts)
-        return bytes(self._raw)
-
-    def _moved(self, q, last_q, values, last_values) -> bool:
-        """Did a drawn coordinate move by more than MOVE_TOLERANCE? Stacked cells first try
-        the reference point's shift, a lower bound from q alone (a moving actuator passes it,
-        so the full comparison runs only when it nearly stands still)."""
-        if isinstance(q, float):
-            if self._stacked.reference_slope[0] * abs(q - last_q) > MOVE_TOLERANCE:
-                return True
-        elif q is not None and float(np.max(self._stacked.reference_slope
-                                             * np.abs(q - last_q))) > MOVE_TOLERANCE:
-            return True
-        return float(np.max(np.abs(values - last_values))) > MOVE_TOLERANCE
+    def _volts(self, u) -> list:
+        """The voltages as a list, one per DET (a scalar stands for all)."""
+        if isinstance(u, np.ndarray):
+            return u.tolist()
+        return list(u) if np.ndim(u) else [u] * len(self._samplers)
 
     def values(self, x) -> np.ndarray:
         """Every drawn coordinate that moves (m; the plate's orientation as a quaternion), in
@@ -400,7 +381,7 @@ class MarkerFrames:
     def pack(self, values, u, stamp_ns: int) -> bytes:
         """The frame's bytes from :meth:`values`, the voltages and the stamp."""
         self._f64[self._f64_index] = values
-        self._color(list(u) if np.ndim(u) else [u] * len(self._samplers))
+        self._color(self._volts(u))
         sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
         self._u32[self._stamp_index[0]] = sec
         self._u32[self._stamp_index[1]] = nanosec

@@ -938,9 +938,8 @@ class Recorder:
             fast.add_sample(channel_ids, sequences, data, t)
             self.bytes += sum(map(len, data))
             self.messages += len(names)
-            if (start - self._last_flush >= self.flush_period_s
-                    or (self.flush_sim_ns and t - self._last_flush_t >= self.flush_sim_ns)):
-                self._flush(start)   # (the same rule as _write: sim time bounds a kill's loss)
+            if self._flush_due(start, t):
+                self._flush(start)
             return True
         except Exception as exc:  # noqa: BLE001 - never raise into the node
             self.dropped += len(data)
@@ -1002,7 +1001,7 @@ class Recorder:
             last_t = t
             times.append(t)
             rows.append(data)
-            if self.flush_sim_ns and t - self._last_flush_t >= self.flush_sim_ns:
+            if self._flush_due(start, t):
                 break   # (flushed after it, below)
         if not times:
             return 0
@@ -1015,8 +1014,7 @@ class Recorder:
         self.clamped += clamped
         self.bytes += sum(sizes) * len(times)
         self.messages += len(names) * len(times)
-        if (start - self._last_flush >= self.flush_period_s
-                or (self.flush_sim_ns and last_t - self._last_flush_t >= self.flush_sim_ns)):
+        if self._flush_due(start, last_t):
             self._flush(start)
         return len(times)
 
@@ -1052,8 +1050,7 @@ class Recorder:
                                          publish_time=t, sequence=sequence)
             self.messages += 1
             self.bytes += len(data)
-            if (start - self._last_flush >= self.flush_period_s
-                    or (self.flush_sim_ns and t - self._last_flush_t >= self.flush_sim_ns)):
+            if self._flush_due(start, t):
                 self._flush(start)
             return True
         except Exception as exc:  # noqa: BLE001 - never raise into the node
@@ -1125,6 +1122,12 @@ class Recorder:
                 self._drain(yield_gil=False)
         except Exception as exc:  # noqa: BLE001 - a logging fault stops logging, nothing else
             self._set_fault(exc)
+
+    def _flush_due(self, now: float, t: int) -> bool:
+        """A flush is due after the message at log time t: flush_period_s of wall time or
+        flush_sim_s of log time since the last one (sim time bounds what a kill loses)."""
+        return (now - self._last_flush >= self.flush_period_s
+                or bool(self.flush_sim_ns and t - self._last_flush_t >= self.flush_sim_ns))
 
     def _flush(self, now: float) -> None:
         self._writer.flush()
