@@ -31,7 +31,7 @@ __all__ = [
     'COMMAND_TOPIC', 'JOINT_COMMAND_TOPIC', 'COMMAND_TOPICS', 'CLOCK_TOPIC',
     'DIAGNOSTICS_TOPIC', 'TOPIC_TYPES', 'JOINT_STATE', 'FLOAT64_MULTI_ARRAY', 'CLOCK',
     'rest_shortening', 'rest_shortenings', 'structure_channels', 'OutputContract',
-    'SampleEncoder', 'Command', 'CommandDecoder', 'CdrError', 'JointStateData',
+    'SampleEncoder', 'SampleWire', 'Command', 'CommandDecoder', 'CdrError', 'JointStateData',
     'encode_joint_state', 'decode_joint_state', 'encode_float64_multi_array',
     'decode_float64_multi_array', 'encode_clock', 'stamp_ns', 'MODES',
 ]
@@ -342,24 +342,42 @@ def encode_clock(t_ns: int) -> bytes:
     return _CLOCK.pack(_HEADER_LE, sec, nanosec)
 
 
+@dataclasses.dataclass(frozen=True)
+class SampleWire:
+    """
+    The named fields the compiled encoder (``_ckernel.SampleCodec``) is built from: the
+    messages' bytes with their constant parts (``template``, each message from
+    ``message_start[k]``), and per published double its ``source`` in the output vector, its
+    ``op`` (0: v; 1: a - v, the displacement y0 - y; 2: a (v - b), the structure outputs
+    sign (v - rest)), constants ``a`` and ``b``, and byte ``position``; each message's header
+    stamp at ``stamp_position``.
+    """
+
+    template: bytes
+    message_start: np.ndarray   # int64, messages + 1
+    stamp_position: np.ndarray  # int64, per message
+    source: np.ndarray          # int64, per published double
+    op: np.ndarray              # int64
+    a: np.ndarray               # float64
+    b: np.ndarray               # float64
+    position: np.ndarray        # int64
+
+
 class SampleEncoder:
     """
     The CDR bytes of every output topic for one sample, straight from the simulator's output
-    vector: per topic one precompiled ``struct.Struct`` whose format is the whole message (the
-    constant parts, names and counts with their padding, as ``s`` fields; the stamp; the
-    doubles), so a sample costs one ``tolist``, one gather and one ``pack`` per topic, and
-    ``pack`` returns the ``bytes`` rclpy publishes and the recorder stores (4-7 µs per sample
-    for one DET against 11 µs for numpy gathers into preallocated buffers). Beyond
-    :attr:`PACK_LIMIT` published doubles (arrays of many DETs) Python floats cost more than
-    numpy calls, so the doubles are gathered by numpy and copied into per-topic buffers (an
-    array of 100 DETs: ~10 µs against ~50 µs packed).
+    vector. :meth:`encode` is one compiled call (``_ckernel.SampleCodec``, built from the
+    :class:`SampleWire` fields here): it reads the published doubles, computes y0 - y and the
+    structure outputs, and writes them and the stamp into each message's preallocated bytes
+    (~1 us per sample; the struct packs below cost 4-7 us for one DET and ~50 us for 100).
 
+    :meth:`encode_values` is the readable reference the tests hold it to byte for byte: per
+    topic one precompiled ``struct.Struct`` whose format is the whole message (the constant
+    parts, names and counts with their padding, as ``s`` fields; the stamp; the doubles).
     The doubles are the simulator's values bit for bit: the displacement is y0 - y and the
     structure outputs sign * (output - rest), the same IEEE operations
     :meth:`OutputContract.values` and :meth:`OutputContract.structure` do in numpy.
     """
-
-    PACK_LIMIT = 64
 
     def __init__(self, contract: OutputContract):
         self.contract = contract
@@ -367,7 +385,7 @@ class SampleEncoder:
         gather, y0_slots = [], []
         structure_slot = None
         layouts = []   # per topic: (pack, parts), parts: bytes (constant) or a gather slice
-        buffers = []   # per topic: (message bytes, [(offset, scratch byte range)]) (numpy path)
+        messages, positions = [], []   # per topic: its bytes; per double: its byte offset
         for topic in self.topics:
             w = _Writer()
             w.stamp(0)
@@ -376,6 +394,7 @@ class SampleEncoder:
             structure = topic == contract.structure_topic
             mapping = {'position': None} if structure else contract.fields[topic]
             blocks = []   # (offset in the message, gather slice)
+            message_start = sum(map(len, messages))
             for field in ('position', 'velocity', 'effort'):
                 n = len(contract.names(topic)) if field in mapping else 0
                 offset = w.doubles(np.zeros(n))
@@ -384,12 +403,14 @@ class SampleEncoder:
                 start = len(gather)
                 index = contract._s_idx if structure else contract.index[(topic, field)]
                 gather.extend(int(i) for i in index)
+                positions.extend(message_start + offset + 8 * j for j in range(n))
                 if (topic, field) in RELATIVE_TO_Y0:
                     y0_slots.append(slice(start, start + n))
                 if structure:
                     structure_slot = slice(start, start + n)
                 blocks.append((offset, slice(start, start + n)))
             raw = bytes(w.buf)
+            messages.append(raw)
             fmt, parts, at = ['<4siI'], [], 12       # header, stamp (sec, nanosec)
             for offset, block in blocks:
                 fmt.append(f'{offset - at}s{block.stop - block.start}d')
@@ -399,23 +420,25 @@ class SampleEncoder:
                 fmt.append(f'{len(raw) - at}s')
                 parts.append(raw[at:])
             layouts.append((struct.Struct(''.join(fmt)).pack, tuple(parts)))
-            buffers.append((bytearray(raw), [(offset, 8 * block.start, 8 * block.stop)
-                                             for offset, block in blocks]))
         self._layouts = layouts
         self._gather = tuple(gather)
         self._y0 = [(slot, [float(v) for v in contract.y0]) for slot in y0_slots]
         self._structure = (structure_slot, [float(v) for v in contract._s_sign],
                            [float(v) for v in contract._s_rest]) if structure_slot else None
-        self.packed = len(gather) <= self.PACK_LIMIT
-        # the numpy path (many DETs): one gather into a scratch vector, copied into buffers
-        self._buffers = buffers
-        self._gather_array = np.array(gather, dtype=np.intp)
-        self._scratch = np.zeros(len(gather))
-        self._scratch_bytes = memoryview(self._scratch).cast('B')
-        self._y0_views = [(self._scratch[slot], contract.y0) for slot in y0_slots]
-        self._structure_view = (self._scratch[structure_slot], contract._s_rest,
-                                contract._s_sign) if structure_slot else None
-        if not _LITTLE:  # pragma: no cover - the scratch is native, the wire little endian
+        op, a, b = np.zeros(len(gather), np.int64), np.zeros(len(gather)), np.zeros(len(gather))
+        for slot, y0 in self._y0:
+            op[slot], a[slot] = 1, y0
+        if self._structure is not None:
+            slot, signs, rest = self._structure
+            op[slot], a[slot], b[slot] = 2, signs, rest
+        starts = np.cumsum([0] + [len(m) for m in messages]).astype(np.int64)
+        self.wire = SampleWire(
+            template=b''.join(messages), message_start=starts, stamp_position=starts[:-1] + 4,
+            source=np.array(gather, np.int64), op=op, a=a, b=b,
+            position=np.array(positions, np.int64))
+        from ._ckernel import SampleCodec
+        self._codec = SampleCodec(self.wire)
+        if not _LITTLE:  # pragma: no cover - the kernel writes little endian; so does the wire
             raise NotImplementedError('SampleEncoder needs a little-endian host')
 
     def values(self, out) -> list[float]:
@@ -431,29 +454,15 @@ class SampleEncoder:
         return published
 
     def encode(self, out, t_ns: int) -> list[bytes]:
-        """The bytes of each topic of :attr:`topics` (same order) for output vector ``out``."""
-        if self.packed:
-            return self.encode_values(self.values(out), t_ns)
-        scratch = self._scratch
-        np.take(out, self._gather_array, out=scratch, mode='clip')
-        for view, y0 in self._y0_views:
-            np.subtract(y0, view, out=view)
-        if self._structure_view is not None:
-            view, rest, signs = self._structure_view
-            np.subtract(view, rest, out=view)
-            np.multiply(signs, view, out=view)
-        raw = self._scratch_bytes
-        stamp = _CLOCK.pack(_HEADER_LE, *divmod(t_ns, NS))
-        result = []
-        for buf, copies in self._buffers:
-            buf[:12] = stamp
-            for offset, start, end in copies:
-                buf[offset:offset + end - start] = raw[start:end]
-            result.append(bytes(buf))
-        return result
+        """The bytes of each topic of :attr:`topics` (same order) for output vector ``out``
+        (float64), stamped ``t_ns``: new bytes objects (earlier ones are not changed)."""
+        if type(out) is not np.ndarray or out.dtype != np.float64 or not out.flags.c_contiguous:
+            out = np.ascontiguousarray(out, dtype=np.float64)
+        return self._codec.encode(out, t_ns)
 
     def encode_values(self, published: list, t_ns: int) -> list[bytes]:
-        """The bytes of each topic from :meth:`values`."""
+        """The bytes of each topic from :meth:`values` (the reference :meth:`encode` is held
+        to)."""
         sec, nanosec = divmod(t_ns, NS)
         result = []
         for pack, parts in self._layouts:

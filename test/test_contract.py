@@ -73,20 +73,26 @@ def test_encoded_samples_decode_to_exactly_the_simulator_values(scene_name, over
 
 
 @pytest.mark.parametrize('scene_name, overrides', [
-    ('default', {}), ('plate', {}), ('array', {'structure.copies': 20})])
-def test_packed_and_numpy_encoding_give_the_same_bytes(scene_name, overrides):
-    """The two ways SampleEncoder writes a sample (one struct pack per topic for a few DETs,
-    numpy gathers into buffers for many) give the same bytes, stamps up to 2^31 s."""
+    ('default', {}), ('plate', {}), ('array', {'structure.copies': 20}),
+    ('default', {'scene.fidelity': 'exact', 'scene.n_ritz': 2})])
+def test_compiled_encoding_is_the_reference_bytes(scene_name, overrides):
+    """The compiled encoder (SampleCodec) writes the struct-packed reference's bytes, for
+    simulator states and random output vectors (signed zeros, tiny and huge values), stamps
+    from 0 to 2^31 s; it refuses an output vector too short for the contract."""
     scene = load_scene(scene_name, overrides)
     sim, out = _run(scene, [1800.0] * len(scene.cell_physics()), 11)
     encoder = OutputContract(sim.model).encoder()
-    assert encoder.packed == (len(encoder._gather) <= encoder.PACK_LIMIT)
-    for t_ns in (0, 11_000_000, 2**31 * 10**9 - 1):
-        encoder.packed = True
-        packed = encoder.encode(out, t_ns)
-        encoder.packed = False
-        assert encoder.encode(out, t_ns) == packed
-        assert decode_joint_state(packed[0]).stamp_ns == t_ns
+    rng = np.random.default_rng(7)
+    vectors = [out, np.zeros_like(out), -np.zeros_like(out),
+               rng.standard_normal(out.size) * 10.0 ** rng.integers(-300, 300, out.size)]
+    for vector in vectors:
+        for t_ns in (0, 11_000_000, 2**31 * 10**9 - 1):
+            reference = encoder.encode_values(encoder.values(vector), t_ns)
+            assert encoder.encode(vector, t_ns) == reference
+            assert encoder.encode(list(vector), t_ns) == reference   # any float sequence
+            assert decode_joint_state(reference[0]).stamp_ns == t_ns
+    with pytest.raises(ValueError, match='outputs'):
+        encoder.encode(out[:max(encoder.wire.source)], 0)
 
 
 def test_displacement_and_rest_state():

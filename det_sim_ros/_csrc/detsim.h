@@ -7,6 +7,8 @@
  * stepping.c method tables, the exponential Runge-Kutta core, charge transients, the per-period
  *            step-count controller and the per-group batch stepping
  * frames.c   marker frames of one-coordinate cells (the node's display path, not physics)
+ * wire.c     the node's sample messages (CDR) and MCAP message records, written from named
+ *            fields (the node's I/O path, not physics)
  * module.c   the Python binding (buffer protocol only: no numpy C API, no ABI coupling)
  *
  * Units: SI throughout (m, kg, s, V, C, A, W, J).
@@ -15,6 +17,7 @@
 #define DETSIM_H
 
 #include <stdint.h>
+#include <string.h>
 
 /* Status codes (same values as det_sim_ros.kernel.OK ...). */
 enum { DS_OK = 0, DS_BAD_STRETCH = 1, DS_NON_FINITE = 2, DS_BAD_SLOPE = 3 };
@@ -179,5 +182,64 @@ typedef struct {
 
 int ds_frame_update(ds_frame_map *f, const double *x, unsigned char *frame, int force,
                     int64_t stamp_ns);
+
+/* Little-endian (CDR, MCAP) scalars at ``at``. */
+static inline void ds_put_u64(unsigned char *at, uint64_t v)
+{
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
+    v = __builtin_bswap64(v);
+#endif
+    memcpy(at, &v, 8);
+}
+
+static inline void ds_put_u32(unsigned char *at, uint32_t v)
+{
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
+    v = __builtin_bswap32(v);
+#endif
+    memcpy(at, &v, 4);
+}
+
+static inline void ds_put_f64(unsigned char *at, double v)
+{
+    uint64_t bits;
+    memcpy(&bits, &v, 8);
+    ds_put_u64(at, bits);
+}
+
+/* A ROS header stamp (int32 sec, uint32 nanosec) of ``stamp_ns``, as Python's divmod gives. */
+static inline void ds_put_stamp(unsigned char *at, int64_t stamp_ns)
+{
+    int64_t sec = stamp_ns / 1000000000, nanosec = stamp_ns % 1000000000;
+    if (nanosec < 0) {
+        sec -= 1;
+        nanosec += 1000000000;
+    }
+    ds_put_u32(at, (uint32_t)(int32_t)sec);
+    ds_put_u32(at + 4, (uint32_t)nanosec);
+}
+
+/*
+ * One sample's output messages (wire.c): every published double is read from the simulator's
+ * output vector and written into the messages' CDR template, as contract.SampleEncoder does.
+ */
+enum { DS_WIRE_COPY = 0, DS_WIRE_FROM = 1, DS_WIRE_SCALED = 2 };   /* v; a - v; a (v - b) */
+typedef struct {
+    int64_t n_values, n_messages;
+    const int64_t *source;      /* each double's index in the output vector */
+    const int64_t *op;          /* DS_WIRE_COPY, DS_WIRE_FROM or DS_WIRE_SCALED */
+    const double *a, *b;        /* their constants (y0; sign and rest) */
+    const int64_t *position;    /* byte offset of each double in the messages' bytes */
+    const int64_t *stamp_position;   /* byte offset of each message's header stamp */
+} ds_sample_wire;
+
+void ds_wire_encode(const ds_sample_wire *w, const double *out, int64_t stamp_ns,
+                    unsigned char *messages);
+
+/* MCAP Message record head: opcode 0x05, record length, channel, sequence, log and publish
+ * time (the same); the payload follows it. */
+#define DS_RECORD_HEAD 31
+void ds_record_head(unsigned char *at, uint16_t channel, uint32_t sequence, uint64_t time_ns,
+                    uint64_t payload_size);
 
 #endif

@@ -11,25 +11,6 @@
 
 #include "detsim.h"
 
-/* A float64 into CDR (little-endian) bytes at ``at``. */
-static void put_f64(unsigned char *at, double v)
-{
-    uint64_t bits;
-    memcpy(&bits, &v, 8);
-#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
-    bits = __builtin_bswap64(bits);
-#endif
-    memcpy(at, &bits, 8);
-}
-
-static void put_u32(unsigned char *at, uint32_t v)
-{
-#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
-    v = __builtin_bswap32(v);
-#endif
-    memcpy(at, &v, 4);
-}
-
 /*
  * The frame's values at state x into f->values; unless ``force``, 0 when no value moved by
  * more than f->tolerance since the last frame written here. Otherwise the values and the stamp
@@ -59,13 +40,9 @@ int ds_frame_update(ds_frame_map *f, const double *x, unsigned char *frame, int 
             return 0;
     }
     for (int64_t i = 0; i < n; i++)
-        put_f64(frame + f->position[i], f->values[i]);
+        ds_put_f64(frame + f->position[i], f->values[i]);
     memcpy(f->last, f->values, (size_t)n * sizeof(double));
-    const uint32_t sec = (uint32_t)(int32_t)(stamp_ns / 1000000000);
-    const uint32_t nanosec = (uint32_t)(stamp_ns % 1000000000);
-    for (int64_t k = 0; k < f->n_stamps; k++) {
-        put_u32(frame + f->stamp_position[k], sec);
-        put_u32(frame + f->stamp_position[k] + 4, nanosec);
-    }
+    for (int64_t k = 0; k < f->n_stamps; k++)
+        ds_put_stamp(frame + f->stamp_position[k], stamp_ns);
     return 1;
 }

@@ -5,6 +5,8 @@
  *                 attribute: never positional) and keeps its own copy in C structs.
  * Stepper(...)    a method table, transient settings and step-count control for a Model.
  * FrameMap(fields) marker frames of one-coordinate cells (frames.c), from named fields.
+ * SampleCodec(fields) one sample's output messages (wire.c), from named fields.
+ * pack_records(...)   consecutive samples' MCAP Message records (wire.c).
  *
  * Arrays cross by the buffer protocol (C-contiguous float64 / int64): no numpy C API, so the
  * module builds with only a C compiler and Python's headers and works with any numpy.
@@ -876,18 +878,270 @@ static PyTypeObject FrameMapType = {
     .tp_methods = FrameMap_methods,
 };
 
+/* ---------------------------------------------------------------- SampleCodec */
+
+typedef struct {
+    PyObject_HEAD
+    ds_sample_wire w;
+    unsigned char *messages;            /* the messages' bytes: template, then each sample */
+    const int64_t *message_start;       /* n_messages + 1 byte offsets */
+    int64_t n_outputs;                  /* the output vector is at least this long */
+    arena mem;
+} SampleCodecObject;
+
+static void SampleCodec_dealloc(SampleCodecObject *self)
+{
+    free_arena(&self->mem);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static int SampleCodec_init(SampleCodecObject *self, PyObject *args, PyObject *kwds)
+{
+    static char *kwlist[] = {"fields", NULL};
+    PyObject *src;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O", kwlist, &src))
+        return -1;
+    if (self->mem.n) {
+        PyErr_SetString(PyExc_RuntimeError, "SampleCodec is already built");
+        return -1;
+    }
+    ds_sample_wire *w = &self->w;
+    arena *mem = &self->mem;
+    Py_ssize_t n, n_starts;
+    if (!(w->source = copy_field(mem, src, "source", 'q', -1, &n))
+        || !(w->op = copy_field(mem, src, "op", 'q', n, NULL))
+        || !(w->a = copy_field(mem, src, "a", 'd', n, NULL))
+        || !(w->b = copy_field(mem, src, "b", 'd', n, NULL))
+        || !(w->position = copy_field(mem, src, "position", 'q', n, NULL))
+        || !(self->message_start = copy_field(mem, src, "message_start", 'q', -1, &n_starts))
+        || !(w->stamp_position = copy_field(mem, src, "stamp_position", 'q', n_starts - 1,
+                                            NULL)))
+        return -1;
+    w->n_values = n;
+    w->n_messages = n_starts - 1;
+    PyObject *template = PyObject_GetAttrString(src, "template");
+    if (!template)
+        return -1;
+    if (!PyBytes_Check(template) || w->n_messages < 1 || self->message_start[0] != 0
+        || self->message_start[w->n_messages] != PyBytes_GET_SIZE(template)) {
+        Py_DECREF(template);
+        PyErr_SetString(PyExc_ValueError,
+                        "SampleCodec: template must be the messages' bytes, message_start "
+                        "their offsets from 0 to its length");
+        return -1;
+    }
+    const int64_t size = PyBytes_GET_SIZE(template);
+    self->messages = keep(mem, malloc((size_t)size));
+    if (!self->messages) {
+        Py_DECREF(template);
+        PyErr_NoMemory();
+        return -1;
+    }
+    memcpy(self->messages, PyBytes_AS_STRING(template), (size_t)size);
+    Py_DECREF(template);
+    for (int64_t k = 0; k < w->n_messages; k++)
+        if (self->message_start[k + 1] < self->message_start[k]
+            || w->stamp_position[k] < self->message_start[k]
+            || w->stamp_position[k] + 8 > self->message_start[k + 1]) {
+            PyErr_SetString(PyExc_ValueError, "SampleCodec: a stamp lies outside its message");
+            return -1;
+        }
+    self->n_outputs = 0;
+    for (int64_t i = 0; i < n; i++) {
+        if (w->position[i] < 0 || w->position[i] + 8 > size || w->source[i] < 0
+            || w->op[i] < DS_WIRE_COPY || w->op[i] > DS_WIRE_SCALED) {
+            PyErr_SetString(PyExc_ValueError,
+                            "SampleCodec: a value lies outside the messages, or has a bad "
+                            "source or op");
+            return -1;
+        }
+        if (w->source[i] + 1 > self->n_outputs)
+            self->n_outputs = w->source[i] + 1;
+    }
+    return 0;
+}
+
+static PyObject *SampleCodec_encode(SampleCodecObject *self, PyObject *const *args,
+                                    Py_ssize_t n)
+{
+    if (n != 2) {
+        PyErr_SetString(PyExc_TypeError, "encode(out, stamp_ns)");
+        return NULL;
+    }
+    if (!self->mem.n) {
+        PyErr_SetString(PyExc_RuntimeError, "SampleCodec was not built");
+        return NULL;
+    }
+    long long stamp = PyLong_AsLongLong(args[1]);
+    if (stamp == -1 && PyErr_Occurred())
+        return NULL;
+    buf out;
+    if (get_buffer(args[0], &out, 'd', -1, 0, "out") < 0)
+        return NULL;
+    if (out.view.len / 8 < self->n_outputs) {
+        release(&out);
+        PyErr_Format(PyExc_ValueError, "out: expected at least %lld outputs, got %zd",
+                     (long long)self->n_outputs, out.view.len / 8);
+        return NULL;
+    }
+    ds_wire_encode(&self->w, out.view.buf, (int64_t)stamp, self->messages);
+    release(&out);
+    const int64_t m = self->w.n_messages;
+    PyObject *result = PyList_New((Py_ssize_t)m);
+    for (int64_t k = 0; result && k < m; k++) {
+        const int64_t start = self->message_start[k];
+        PyObject *data = PyBytes_FromStringAndSize((const char *)self->messages + start,
+                                                   self->message_start[k + 1] - start);
+        if (!data) {
+            Py_CLEAR(result);
+            break;
+        }
+        PyList_SET_ITEM(result, k, data);
+    }
+    return result;
+}
+
+static PyMethodDef SampleCodec_methods[] = {
+    {"encode", (PyCFunction)(void (*)(void))SampleCodec_encode, METH_FASTCALL,
+     "encode(out, stamp_ns) -> [bytes]: every output message of the sample at output "
+     "vector out (float64), stamped stamp_ns"},
+    {NULL}
+};
+
+static PyTypeObject SampleCodecType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "det_sim_ros._ckernel.SampleCodec",
+    .tp_doc = "SampleCodec(fields): one sample's output messages, from named fields",
+    .tp_basicsize = sizeof(SampleCodecObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)SampleCodec_init,
+    .tp_dealloc = (destructor)SampleCodec_dealloc,
+    .tp_methods = SampleCodec_methods,
+};
+
+/* ---------------------------------------------------------------- pack_records */
+
+/* An int argument in [0, limit]. */
+static int bounded_int(PyObject *obj, unsigned long long limit, unsigned long long *out,
+                       const char *what)
+{
+    unsigned long long v = PyLong_AsUnsignedLongLong(obj);
+    if (v == (unsigned long long)-1 && PyErr_Occurred()) {
+        PyErr_Format(PyExc_ValueError, "%s: expected an int in [0, %llu]", what, limit);
+        return -1;
+    }
+    if (v > limit) {
+        PyErr_Format(PyExc_ValueError, "%s: expected an int in [0, %llu]", what, limit);
+        return -1;
+    }
+    *out = v;
+    return 0;
+}
+
+/*
+ * pack_records(channel_ids, first_sequences, times, rows, sizes) -> (records, count):
+ * the MCAP Message records of consecutive samples, sample j's message i on channel
+ * channel_ids[i] with sequence first_sequences[i] + j at log (and publish) time times[j],
+ * payload rows[j][i]. It stops before the first row whose payloads are not ``sizes`` long.
+ */
+static PyObject *pack_records(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)module;
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError,
+                        "pack_records(channel_ids, first_sequences, times, rows, sizes)");
+        return NULL;
+    }
+    PyObject *channels = NULL, *firsts = NULL, *times = NULL, *rows = NULL, *sizes = NULL;
+    PyObject *result = NULL, *records = NULL;
+    enum { MAX_WIDTH = 64 };
+    unsigned long long channel[MAX_WIDTH], first[MAX_WIDTH], size[MAX_WIDTH];
+    if (!(channels = PySequence_Fast(args[0], "channel_ids: a sequence"))
+        || !(firsts = PySequence_Fast(args[1], "first_sequences: a sequence"))
+        || !(times = PySequence_Fast(args[2], "times: a sequence"))
+        || !(rows = PySequence_Fast(args[3], "rows: a sequence"))
+        || !(sizes = PySequence_Fast(args[4], "sizes: a sequence")))
+        goto done;
+    const Py_ssize_t width = PySequence_Fast_GET_SIZE(channels);
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(rows);
+    if (width < 1 || width > MAX_WIDTH || PySequence_Fast_GET_SIZE(firsts) != width
+        || PySequence_Fast_GET_SIZE(sizes) != width || PySequence_Fast_GET_SIZE(times) < n) {
+        PyErr_SetString(PyExc_ValueError, "pack_records: channel_ids, first_sequences and "
+                        "sizes must be as long (1..64), times at least as long as rows");
+        goto done;
+    }
+    unsigned long long sample_bytes = 0;
+    for (Py_ssize_t i = 0; i < width; i++) {
+        if (bounded_int(PySequence_Fast_GET_ITEM(channels, i), 0xffff, &channel[i],
+                        "channel_ids") < 0
+            || bounded_int(PySequence_Fast_GET_ITEM(firsts, i), 0xffffffffULL, &first[i],
+                           "first_sequences") < 0
+            || bounded_int(PySequence_Fast_GET_ITEM(sizes, i), 1ULL << 40, &size[i],
+                           "sizes") < 0)
+            goto done;
+        sample_bytes += DS_RECORD_HEAD + size[i];
+    }
+    Py_ssize_t count = 0;     /* the rows that have ``sizes`` */
+    for (; count < n; count++) {
+        PyObject *row = PySequence_Fast_GET_ITEM(rows, count);
+        if (!(PyList_Check(row) || PyTuple_Check(row)) || PySequence_Fast_GET_SIZE(row) != width)
+            break;
+        PyObject **items = PySequence_Fast_ITEMS(row);
+        Py_ssize_t i = 0;
+        while (i < width && PyBytes_Check(items[i])
+               && (unsigned long long)PyBytes_GET_SIZE(items[i]) == size[i])
+            i++;
+        if (i < width)
+            break;
+    }
+    records = PyBytes_FromStringAndSize(NULL, (Py_ssize_t)(count * sample_bytes));
+    if (!records)
+        goto done;
+    unsigned char *at = (unsigned char *)PyBytes_AS_STRING(records);
+    for (Py_ssize_t j = 0; j < count; j++) {
+        unsigned long long t;
+        if (bounded_int(PySequence_Fast_GET_ITEM(times, j), 0xffffffffffffffffULL, &t,
+                        "times") < 0)
+            goto done;
+        PyObject **items = PySequence_Fast_ITEMS(PySequence_Fast_GET_ITEM(rows, j));
+        for (Py_ssize_t i = 0; i < width; i++) {
+            ds_record_head(at, (uint16_t)channel[i], (uint32_t)(first[i] + (unsigned long long)j),
+                           t, size[i]);
+            memcpy(at + DS_RECORD_HEAD, PyBytes_AS_STRING(items[i]), (size_t)size[i]);
+            at += DS_RECORD_HEAD + size[i];
+        }
+    }
+    result = Py_BuildValue("(On)", records, count);
+done:
+    Py_XDECREF(records);
+    Py_XDECREF(channels);
+    Py_XDECREF(firsts);
+    Py_XDECREF(times);
+    Py_XDECREF(rows);
+    Py_XDECREF(sizes);
+    return result;
+}
+
+static PyMethodDef module_functions[] = {
+    {"pack_records", (PyCFunction)(void (*)(void))pack_records, METH_FASTCALL,
+     "pack_records(channel_ids, first_sequences, times, rows, sizes) -> (records, count): "
+     "the MCAP Message records of consecutive samples (see wire.c)"},
+    {NULL}
+};
+
 /* ---------------------------------------------------------------- module */
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_ckernel",
     "Compiled DET-beam kernel: the model's rhs/outputs and the stepping core (see detsim.h).",
-    -1, NULL,
+    -1, module_functions,
 };
 
 PyMODINIT_FUNC PyInit__ckernel(void)
 {
     if (PyType_Ready(&ModelType) < 0 || PyType_Ready(&StepperType) < 0
-        || PyType_Ready(&FrameMapType) < 0)
+        || PyType_Ready(&FrameMapType) < 0 || PyType_Ready(&SampleCodecType) < 0)
         return NULL;
     PyObject *mod = PyModule_Create(&module);
     if (!mod)
@@ -895,9 +1149,11 @@ PyMODINIT_FUNC PyInit__ckernel(void)
     Py_INCREF(&ModelType);
     Py_INCREF(&StepperType);
     Py_INCREF(&FrameMapType);
+    Py_INCREF(&SampleCodecType);
     if (PyModule_AddObject(mod, "Model", (PyObject *)&ModelType) < 0
         || PyModule_AddObject(mod, "Stepper", (PyObject *)&StepperType) < 0
         || PyModule_AddObject(mod, "FrameMap", (PyObject *)&FrameMapType) < 0
+        || PyModule_AddObject(mod, "SampleCodec", (PyObject *)&SampleCodecType) < 0
         || PyModule_AddIntConstant(mod, "OK", DS_OK) < 0
         || PyModule_AddIntConstant(mod, "BAD_STRETCH", DS_BAD_STRETCH) < 0
         || PyModule_AddIntConstant(mod, "NON_FINITE", DS_NON_FINITE) < 0
