@@ -42,6 +42,7 @@ readable data, so a file cut by a crash gives every message of every complete ch
 from __future__ import annotations
 
 import atexit
+import bisect
 import collections
 import dataclasses
 import itertools
@@ -54,6 +55,8 @@ import threading
 import time
 import weakref
 from typing import Callable, Iterable, Iterator, Mapping, Sequence
+
+from ._ckernel import pack_records
 
 __all__ = ['Recorder', 'LogReader', 'LogMessage', 'message_definition', 'qos_profiles_yaml',
            'type_name_of', 'serialize', 'deserialize', 'recover', 'recover_unfinished',
@@ -470,11 +473,12 @@ class _FastMessages:
         chunk.num_messages += len(offsets)
         self.finalize()
 
-    def add_run(self, channel_ids: tuple, sizes: tuple, first_sequences, rows, times) -> None:
+    def add_run(self, channel_ids: tuple, sizes: tuple, records: bytes, times) -> None:
         """
-        Consecutive samples of one layout (``rows``: each sample's payloads, at ``times``;
-        the sequences count up from ``first_sequences``) as add_sample would write them one
-        by one. The caller guarantees the run fits in the chunk, so no message ends it.
+        Consecutive samples of one layout, as add_sample would write them one by one:
+        ``records`` are their Message records (``_ckernel.pack_records``: a sample's records
+        in channel order, ``sizes`` its payload sizes), ``times`` their log times. The caller
+        guarantees the run fits in the chunk, so no message ends it.
         """
         stats, chunk = self.stats, self.chunk
         buffer = chunk.record_writer._buffer
@@ -483,19 +487,9 @@ class _FastMessages:
         self._cover(stats, False, times[-1])
         self._cover(chunk, chunk.num_messages == 0, times[0])
         self._cover(chunk, False, times[-1])
-        pack, offsets = self._layout(channel_ids, sizes)
+        buffer.write(records)
+        _, offsets = self._layout(channel_ids, sizes)
         width = len(sizes)
-        template = []
-        for channel_id, size in zip(channel_ids, sizes):
-            template += (0x05, 22 + size, channel_id, 0, 0, 0, b'')
-        records = []
-        for j, (payloads, t) in enumerate(zip(rows, times)):
-            args = template[:]
-            args[3::7] = [first + j for first in first_sequences]
-            args[4::7] = args[5::7] = (t,) * width
-            args[6::7] = payloads
-            records.append(pack(*args))
-        buffer.write(b''.join(records))
         sample_bytes = sum(sizes) + _MESSAGE_HEAD.size * width
         k = len(times)
         indices, counts = chunk.message_indices, stats.channel_message_counts
@@ -912,8 +906,9 @@ class Recorder:
         plan = self._sample_plans.get(key)
         if fast is None or plan is None or self._writer is None:
             ok = True   # the first sample registers its channels: message by message
-            for topic, payload in zip(topics, data):
-                ok = self._write(topic, payload, log_time_ns, types[topic]) and ok
+            last = len(data) - 1
+            for j, (topic, payload) in enumerate(zip(topics, data)):   # (flushed after all)
+                ok = self._write(topic, payload, log_time_ns, types[topic], j == last) and ok
             if fast is not None and self._writer is not None:
                 names = tuple(self._resolve(topic) for topic in key)
                 if all(name in self._channels for name in names):
@@ -987,41 +982,48 @@ class Recorder:
         sizes = tuple(map(len, items[i][2]))
         sample_bytes = sum(sizes) + _MESSAGE_HEAD.size * len(sizes)
         room = (fast.chunk_size - fast.chunk.record_writer._buffer.tell()) // sample_bytes
-        last_t, clamped, times, rows = self._last_t, 0, [], []
-        for log_time_ns, other_topics, data, _ in items[i:i + room]:
-            if (other_topics is not topics and tuple(other_topics) != key) \
-                    or tuple(map(len, data)) != sizes:
+        window = items[i:i + room]
+        for j, item in enumerate(window):   # (the node gives the same topics object)
+            if item[1] is not topics and tuple(item[1]) != key:
+                window = window[:j]
                 break
-            t = int(log_time_ns)
-            if t < last_t:
-                t = last_t
-                clamped += len(data)
-            if self.split_ns and t - self._file_start_t >= self.split_ns:
-                break   # (_write_sample splits the file before it)
-            last_t = t
-            times.append(t)
-            rows.append(data)
-            if self._flush_due(start, t):
-                break   # (flushed after it, below)
-        if not times:
+        if not window:
+            return 0
+        given = [int(item[0]) for item in window]
+        times = list(itertools.accumulate(given, max, initial=self._last_t))[1:]  # clamped
+        end = len(times)
+        if self.split_ns:   # (_write_sample splits the file before the first one past it)
+            end = bisect.bisect_left(times, self._file_start_t + self.split_ns, 0, end)
+        if self.flush_sim_ns:   # a flush is due after it (the wall-time part is not, above)
+            end = min(end, bisect.bisect_left(times, self._last_flush_t + self.flush_sim_ns)
+                      + 1)
+        if not end:
             return 0
         sequence = self._sequence
         firsts = [sequence.get(name, 0) for name in names]
+        records, count = pack_records(channel_ids, firsts, times,
+                                      [item[2] for item in window[:end]], sizes)
+        if not count:
+            return 0
+        del times[count:]
         for name, first in zip(names, firsts):
-            sequence[name] = first + len(times)
-        fast.add_run(channel_ids, sizes, firsts, rows, times)
-        self._last_t = last_t
-        self.clamped += clamped
-        self.bytes += sum(sizes) * len(times)
-        self.messages += len(names) * len(times)
-        if self._flush_due(start, last_t):
+            sequence[name] = first + count
+        fast.add_run(channel_ids, sizes, records, times)
+        self._last_t = times[-1]
+        self.clamped += len(sizes) * sum(a != b for a, b in zip(given, times))
+        self.bytes += sum(sizes) * count
+        self.messages += len(names) * count
+        if self._flush_due(start, times[-1]):
             self._flush(start)
-        return len(times)
+        return count
 
     def _type_of(self, msg, topic):
         return self._types.get(topic) or type_name_of(msg)
 
-    def _write(self, topic: str, msg, log_time_ns: int, type_name: str | None) -> bool:
+    def _write(self, topic: str, msg, log_time_ns: int, type_name: str | None,
+               flush: bool = True) -> bool:
+        """One message; then a flush if one is due, unless not ``flush`` (a sample's messages
+        but its last: a sample is never split by a flush)."""
         if self._writer is None:
             self.dropped += 1
             return False
@@ -1050,7 +1052,7 @@ class Recorder:
                                          publish_time=t, sequence=sequence)
             self.messages += 1
             self.bytes += len(data)
-            if self._flush_due(start, t):
+            if flush and self._flush_due(start, t):
                 self._flush(start)
             return True
         except Exception as exc:  # noqa: BLE001 - never raise into the node
@@ -1092,7 +1094,7 @@ class Recorder:
                 self._write(*item)
             else:                               # samples: the ones queued after it too
                 run = [item]
-                while (queue and len(run) < 16 and queue[0] is not new_file
+                while (queue and (len(run) < 16 or not yield_gil) and queue[0] is not new_file
                        and not isinstance(queue[0][0], str)):
                     run.append(queue.popleft())
                 self._write_sample_run(run)

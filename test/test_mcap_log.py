@@ -3,6 +3,7 @@
 import os
 import pathlib
 import signal
+import struct
 import subprocess
 import sys
 import textwrap
@@ -380,41 +381,80 @@ def test_log_directory_is_bounded(tmp_path):
     assert big.deleted and [p for p in os.listdir(folder) if p.endswith('.mcap')] == \
         [os.path.basename(big.path)]
     big.close()
-def _write_samples(path, fast, background=False):
+def _write_samples(path, fast, background=False, stress=False):
+    """500 samples of four topics and a command every 7th. ``stress``: what ends a run of the
+    batched writer, often: log times that step back (clamped), a longer payload every 37th
+    sample, a flush every 20 us of log time, a new file every 150 us, a writer queue of 5."""
     from det_sim_ros.contract import encode_float64_multi_array, encode_joint_state, TOPIC_TYPES
+    options = dict(flush_sim_s=2e-5, split_s=1.5e-4, max_queue=5) if stress else {}
     recorder = Recorder(path, load_scene('default'), chunk_size=2048, background=background,
-                        flush_period_s=1e9)   # no wall-clock flushes: comparable files
+                        flush_period_s=1e9, **options)   # no wall-clock flushes: comparable
     if not fast:
         recorder._fast = None   # the plain mcap add_message path
     topics = ['deflection', 'displacement', 'charge', 'current']
     for k in range(500):
+        t = k * 1000 - (2500 if stress and k % 11 == 5 else 0)
         if k % 7 == 0:
             recorder.record('voltage_command', encode_float64_multi_array([float(k)]),
-                            k * 1000, TOPIC_TYPES['voltage_command'])
-        data = [encode_joint_state(['det0'], [k + i / 10.0], stamp_ns=k * 1000)
+                            t, TOPIC_TYPES['voltage_command'])
+        names = ['det0' + ('_long' if stress and k % 37 == 3 else '')]
+        data = [encode_joint_state(names, [k + i / 10.0], stamp_ns=k * 1000)
                 for i in range(len(topics))]
-        recorder.record_sample(k * 1000, topics, data, TOPIC_TYPES)
+        recorder.record_sample(t, topics, data, TOPIC_TYPES)
         if fast and not background:
             assert recorder._fast is not None
     recorder.close()
     assert recorder.fault == '' and recorder.messages == 500 * 4 + 72
-    return path
+    assert (recorder.clamped > 0) == stress
+    return recorder.paths
 
 
-@pytest.mark.parametrize('background', [False, True])
-def test_fast_sample_path_writes_the_same_file_as_add_message(tmp_path, monkeypatch, background):
-    """record_sample's batched writer, record's single messages (and the writer thread) give
-    the bytes mcap's own add_message gives: records, chunk indexes and statistics."""
+@pytest.mark.parametrize('background, stress', [(False, False), (True, False),
+                                                (False, True), (True, True)])
+def test_fast_sample_path_writes_the_same_file_as_add_message(tmp_path, monkeypatch, background,
+                                                              stress):
+    """record_sample's batched writer (compiled record packing, runs of samples), record's
+    single messages (and the writer thread) give the bytes mcap's own add_message gives:
+    records, chunk indexes and statistics; also when clamped times, other payload sizes,
+    flushes and file splits end the runs."""
     import time as time_module
     monkeypatch.setattr(time_module, 'time_ns', lambda: 1234)   # the wall start in the metadata
-    slow = _write_samples(tmp_path / 'slow.mcap', fast=False)
-    fast = _write_samples(tmp_path / 'fast.mcap', fast=True, background=background)
-    assert open(slow, 'rb').read() == open(fast, 'rb').read()
+    slow = _write_samples(tmp_path / 'slow.mcap', fast=False, stress=stress)
+    fast = _write_samples(tmp_path / 'fast.mcap', fast=True, background=background,
+                          stress=stress)
+    assert len(fast) == len(slow) == (4 if stress else 1)
+    for slow_path, fast_path in zip(slow, fast):
+        assert open(slow_path, 'rb').read() == open(fast_path, 'rb').read()
     from mcap.reader import make_reader
-    with open(fast, 'rb') as stream:
-        reader = make_reader(stream)
-        assert reader.get_summary().statistics.message_count == 500 * 4 + 72
-        assert len(list(reader.iter_messages(topics=['/charge']))) == 500
+    count = 0
+    for fast_path in fast:
+        with open(fast_path, 'rb') as stream:
+            count += make_reader(stream).get_summary().statistics.message_count
+    assert count == 500 * 4 + 72
+
+
+def test_pack_records_is_the_records_of_one_by_one_writes():
+    """_ckernel.pack_records: MCAP Message records (opcode 5, length, channel, sequence, log
+    and publish time, payload), sequences counting up per sample; it stops before a row of
+    other payload sizes and refuses bad arguments."""
+    from det_sim_ros._ckernel import pack_records
+    rows = [[b'ab', b'xyz'], (b'cd', b'uvw'), [b'e', b'rst']]
+    records, count = pack_records((3, 70000 % 65536), [5, 9], [10, 2**40, 2**41], rows,
+                                  (2, 3))
+    assert count == 2
+    head = struct.Struct('<BQHIQQ')
+    expected = b''.join(head.pack(5, 22 + len(p), ch, first + j, t, t) + p
+                        for j, (row, t) in enumerate(zip(rows[:2], [10, 2**40]))
+                        for ch, first, p in zip((3, 70000 % 65536), (5, 9), row))
+    assert records == expected
+    assert pack_records((1,), [0], [], [], (1,)) == (b'', 0)
+    for bad in [((70000,), [0], [1], [[b'a']], (1,)),      # channel id beyond uint16
+                ((1,), [-1], [1], [[b'a']], (1,)),         # negative sequence
+                ((1,), [0], [-1], [[b'a']], (1,)),         # negative time
+                ((1, 2), [0], [1], [[b'a']], (1,)),        # lengths disagree
+                ((1,), [0], [], [[b'a']], (1,))]:          # a row without a time
+        with pytest.raises(ValueError):
+            pack_records(*bad)
 
 
 def test_background_queue_stays_bounded_when_the_writer_falls_behind(tmp_path):
