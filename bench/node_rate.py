@@ -31,6 +31,7 @@ in the same run, side by side, so compare ratios; absolute times depend on the h
 
 Usage: python bench/node_rate.py [--scenes default,array] [--rt-seconds 60]
        [--free-seconds 3] [--rounds 7] [--realtime-priority 0] [--controller-priority 0]
+       [--paired N [--paired-no-log]] [--log-compression zstd|lz4|none]
        [--json out.json]
 """
 
@@ -210,7 +211,8 @@ def floor_node(topics, samples, n, burst):
     return cpu
 
 
-def paired_node_floor(scene_name, topics, samples, pairs, block_s, folder, seed=1, log=True):
+def paired_node_floor(scene_name, topics, samples, pairs, block_s, folder, seed=1, log=True,
+                      compression='zstd'):
     """
     Node and floor in one process, in ``pairs`` randomly ordered pairs of ``block_s`` wall
     seconds each (only one of the two is spun at a time): the host's drift hits both alike,
@@ -228,6 +230,7 @@ def paired_node_floor(scene_name, topics, samples, pairs, block_s, folder, seed=
         Parameter('scene_file', value=scene_name), Parameter('real_time', value=False),
         Parameter('info_period', value=0.0), Parameter('log.path', value=folder),
         Parameter('log.enabled', value=log), Parameter('markers.rate_hz', value=0.0),
+        Parameter('log.compression', value=compression),
         Parameter('scene.initial_state', value='released')])
     floor, pubs, floor_done = _make_floor_node(contexts[1], 'bench_paired_floor', topics,
                                                samples, 10)   # as floor_node in the rounds
@@ -455,8 +458,14 @@ def bench_scene(scene_name, args, folder):
         listener = _spawn(SUBSCRIBER, ','.join(topics))
     try:
         if args.paired > 0:
-            report['paired_node_and_floor'] = paired_node_floor(
-                scene_name, topics, samples, args.paired, args.paired_block_s, folder)
+            report['paired_node_and_floor'] = paired = paired_node_floor(
+                scene_name, topics, samples, args.paired, args.paired_block_s, folder,
+                compression=args.log_compression)
+            # the I/O alone: an array's physics is itself about the floor (100 DETs held:
+            # ~40 us per period), which no I/O work can take off
+            paired['node_minus_physics_over_floor'] = (
+                (paired['node_us_per_period'] - report['physics_us_per_period'])
+                / paired['floor_us_per_period'])
             if args.paired_no_log:   # the log's share, measured the same way
                 report['paired_node_without_log_and_floor'] = paired_node_floor(
                     scene_name, topics, samples, args.paired, args.paired_block_s, folder,
@@ -481,7 +490,8 @@ def bench_scene(scene_name, args, folder):
             result, log_path = run_node(args.rt_seconds, 'events', folder, ['displacement'],
                                         scene_file=scene_name, real_time=True,
                                         realtime_priority=args.realtime_priority,
-                                        **({'log.enabled': False} if args.rt_no_log else {}))
+                                        **({'log.enabled': False} if args.rt_no_log else
+                                           {'log.compression': args.log_compression}))
         finally:
             _stop(controller)
             busy.kill()
@@ -511,6 +521,8 @@ def main():
                         help='node and floor in this many interleaved pairs of blocks in one '
                         'process (free run, the log on; 0 = off): the precise node/floor ratio')
     parser.add_argument('--paired-block-s', type=float, default=0.5)
+    parser.add_argument('--log-compression', default='zstd', choices=('zstd', 'lz4', 'none'),
+                        help="the node's log.compression in the paired and real-time runs")
     parser.add_argument('--paired-no-log', action='store_true',
                         help='a second paired run with the log off (the log\'s share)')
     parser.add_argument('--json', help='write the numbers to this file')
