@@ -110,7 +110,8 @@ def rhs(a, x, u, quasi_static: bool = False):
     (dx/dt, P_in, P_diss) at (x, u): Lagrange's equations of model.py,
     (Mb + J' MI J) qdd = -K q - D qd - dU4/dq - J' MI (qd' H_y qd) + J/l0 [dU_DE/dlambda]
     - V (E_M eps + eta_v dlz/dt) dlz/dq, with the creep and circuit equations.
-    ``quasi_static``: the charge slots hold z = q_p - C(q) v_inf and receive dz/dt.
+    ``quasi_static``: the charge slots hold z = q_p - C(q) v_inf and receive dz/dt, and the
+    supplied-energy slot receives the rate of W_in - u q_p, u v_p / Rp (see :func:`step`).
     """
     x, u = _numbers(x), _numbers(u)
     kind = np.result_type(x, u, float)
@@ -156,8 +157,8 @@ def rhs(a, x, u, quasi_static: bool = False):
     p_diss += np.sum(vp ** 2 / a.Rp + a.volume * a.eta_v * lzd ** 2)
     dx[:nq] = qd
     dx[nq:2 * nq] = np.linalg.solve(M, F)
-    if a.power_monitor:
-        dx[i_w:i_w + 2] = p_in, p_diss
+    if a.power_monitor:   # quasi-static: the rate of W_in - u q_p (see step)
+        dx[i_w:i_w + 2] = (u @ (vp / a.Rp) if quasi_static and a.rc_source else p_in), p_diss
     return dx, p_in, p_diss
 
 
@@ -230,7 +231,10 @@ def step(a, method, x, u, h: float) -> np.ndarray:
     i_qp = _index(a)[1]
     charge = slice(i_qp, i_qp + a.n_cells)
     x = x.copy()
-    if quasi:
+    i_w = _index(a)[2]
+    if quasi:   # the stages integrate z and, with the power monitor, xi = W_in - u q_p
+        if a.power_monitor:
+            x[i_w] -= u @ x[charge]
         x[charge] -= _charge_offset(a, x, u)
 
     def weight(term):
@@ -251,4 +255,6 @@ def step(a, method, x, u, h: float) -> np.ndarray:
         N.append(rhs(a, X, u, quasi)[0] - L * X)
     if quasi:
         X[charge] += _charge_offset(a, X, u)
+        if a.power_monitor:
+            X[i_w] += u @ X[charge]
     return X

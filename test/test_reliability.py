@@ -296,7 +296,9 @@ def startup_keys():
     for name, (default, _, _, bounds) in NODE_PARAMS.items():
         wrong = {bool: 'maybe', int: 2.5, float: 'abc', str: 7}[type(default)]
         rows.append((f'node:{name}', wrong, 'type'))
-        if bounds is not None:
+        if isinstance(default, str) and bounds is not None:   # choices
+            rows.append((f'node:{name}', 'not_' + bounds[0], 'range'))
+        elif bounds is not None:
             rows.append((f'node:{name}', bounds[1] * 2 + 1, 'range'))
     return rows
 
