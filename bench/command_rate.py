@@ -25,6 +25,7 @@ import time
 import numpy as np
 
 import det_sim_ros.simulator as simulator_module
+from det_sim_ros.integrators import TransientSettings
 from det_sim_ros.scene import load_scene
 from det_sim_ros.simulator import Simulator
 
@@ -40,7 +41,7 @@ def run(scene_name, overrides, drive, periods, transient=True):
     """(CPU us per period, steps per period and DET, deflection q of the first DET)."""
     original = simulator_module.transient_settings
     if not transient:
-        simulator_module.transient_settings = lambda method, scene: (0.0, 1.0)
+        simulator_module.transient_settings = lambda method, scene: TransientSettings()
     try:
         sim = Simulator(load_scene(scene_name, overrides))
     finally:

@@ -30,7 +30,8 @@ import numpy as np
 from . import kernel
 
 __all__ = ['Method', 'METHODS', 'get_method', 'choose_substeps', 'step_control', 'error_weights',
-           'transient_settings', 'StepControl', 'make_stepper', 'advance']
+           'transient_settings', 'TransientSettings', 'StepControl', 'make_stepper',
+           'advance']
 
 
 @dataclasses.dataclass(frozen=True)
@@ -239,14 +240,20 @@ def step_control(method: Method, model, substeps: int = 0) -> StepControl:
 
 
 def make_stepper(model, method: Method, control: StepControl, dt: float,
-                 z_tol: float = 0.0, fine: float = 1.0):
-    """The compiled stepper (det_sim_ros.kernel.Stepper) of ``method`` for ``model``."""
+                 transient: 'TransientSettings | None' = None):
+    """The compiled stepper (det_sim_ros.kernel.Stepper) of ``method`` for ``model``
+    (``transient``: how charge transients are resolved; None: not at all)."""
+    transient = transient or TransientSettings()
     c, terms = method.arrays()
     return kernel.Stepper(model.kernel, c, np.ascontiguousarray(terms.reshape(-1, 5)),
                           np.asarray(method.embedded, dtype=float), error_weights(model),
-                          float(dt), float(z_tol), float(fine), int(control.substeps),
-                          float(control.tolerance), int(control.min_substeps),
-                          int(control.max_substeps), float(control.exponent))
+                          dt=float(dt), z_tol=float(transient.z_tol),
+                          fine=float(transient.fine), substeps=int(control.substeps),
+                          tolerance=float(control.tolerance),
+                          min_substeps=int(control.min_substeps),
+                          max_substeps=int(control.max_substeps),
+                          exponent=float(control.exponent),
+                          jump_ref=float(transient.jump_ref))
 
 
 def error_weights(model) -> np.ndarray:
@@ -271,17 +278,32 @@ TRANSIENT_FINE = 0.35      # at a tolerance of 3e-6
 TRANSIENT_CHARGE = 1.0
 
 
-def transient_settings(method: Method, scene) -> tuple:
-    """(z_tol in C, fine step in units of tau) for the stepper; z_tol = 0: off.
+@dataclasses.dataclass(frozen=True)
+class TransientSettings:
+    """How the stepper resolves the charge transient after an input jump (fixed_period in
+    _csrc/stepping.c): while the charge lag exceeds ``z_tol`` (C; 0: never), graded steps
+    from ``fine`` * tau, ``fine`` sized for jumps of ``jump_ref`` (V); a smaller jump du starts
+    at fine * (jump_ref / du)^(1/5), the same local error for its smaller lag (0: every jump
+    at ``fine``)."""
 
-    Only exponential methods on an RC scene use it: explicit methods must step below the
-    charge time constant anyway, and an ideal source has no charge transient.
+    z_tol: float = 0.0
+    fine: float = 1.0
+    jump_ref: float = 0.0
+
+
+def transient_settings(method: Method, scene) -> TransientSettings:
+    """The stepper's :class:`TransientSettings` for ``scene``: off unless the method is
+    exponential and the scene has an RC source (explicit methods must step below the charge
+    time constant anyway, and an ideal source has no charge transient). ``fine`` follows
+    the tolerance and was calibrated on the 'step' scenes, whose jumps are v_max: so
+    ``jump_ref`` = v_max.
     """
     fine = min(1.0, max(0.05, TRANSIENT_FINE * (scene.tolerance / 3e-6) ** 0.25))
     if not method.exponential or scene.source != 'rc':
-        return 0.0, fine
+        return TransientSettings(0.0, fine, 0.0)
     p = scene.physics
-    return TRANSIENT_CHARGE * scene.tolerance * p.C0 * p.v_max, fine
+    return TransientSettings(TRANSIENT_CHARGE * scene.tolerance * p.C0 * p.v_max, fine,
+                             p.v_max)
 
 
 def advance(x, u, model, method: Method, h: float, n_steps: int) -> int:

@@ -78,9 +78,10 @@ class Simulator:
         self.dt = self.scene.dt
         self.control = step_control(self.method, self.model, substeps)
         self.adaptive = self.control.adaptive
-        z_tol, fine = transient_settings(self.method, self.scene)
+        self.transient = transient_settings(self.method, self.scene)
         # the compiled stepper keeps its scratch and step counts between periods
-        self.stepper = make_stepper(self.model, self.method, self.control, self.dt, z_tol, fine)
+        self.stepper = make_stepper(self.model, self.method, self.control, self.dt,
+                                    self.transient)
         self.stepper.threads = threads
         self.output_names = self.model.output_names
         self._out = np.empty(len(self.output_names))

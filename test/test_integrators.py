@@ -1,5 +1,7 @@
 """Steppers: order on analytic problems, determinism, zero-order hold, stability stress suite."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -269,6 +271,31 @@ def test_supplied_energy_is_exact_under_a_new_voltage_every_period(scene_name):
     coarse, fine = run(1e-6), run(1e-10)
     assert abs(coarse.x[-2] - fine.x[-2]) / fine.x[-2] < 1e-8
     assert abs(coarse.power_residual()) < 1e-4
+
+
+def test_small_input_jumps_start_their_graded_steps_longer():
+    """A controller's 1 V change per period: the charge transient's first step is sized by
+    the jump (fine * (v_max / du)^(1/5); the 'step' scenes' v_max jumps keep fine): half the
+    steps of sizing every jump like a v_max jump, and the error stays well under the
+    tolerance (against the same drive at 1e-10)."""
+    def run(tolerance, same_first_step=False):
+        sim = Simulator(load_scene('default', {'integrator.tolerance': tolerance}))
+        if same_first_step:
+            settings = dataclasses.replace(sim.transient, jump_ref=0.0)
+            sim.stepper = integrators.make_stepper(sim.model, sim.method, sim.control, sim.dt,
+                                                   settings)
+        assert sim.transient.jump_ref == sim.scene.physics.v_max
+        q, steps = [], sim.steps_taken
+        for k in range(400):
+            sim.set_input([1500.0 + k])
+            q.append(sim.step()[0])
+        return np.array(q), sim.steps_taken - steps
+    q, steps = run(1e-6)
+    q_same, steps_same = run(1e-6, same_first_step=True)
+    q_ref, _ = run(1e-10)
+    assert steps < 0.6 * steps_same
+    for got in (q, q_same):
+        assert np.max(np.abs(got - q_ref)) / np.max(np.abs(q_ref)) < 2e-7   # tolerance 1e-6
 
 
 def test_stress_long_run_million_steps():

@@ -149,6 +149,9 @@ typedef struct {
     double dt;                          /* control period, s */
     double z_tol;                       /* charge lag that counts as a transient, C (0: off) */
     double fine;                        /* first step after an input jump, units of tau */
+    double jump_ref;                    /* the input jump (V) ``fine`` is sized for: a smaller
+                                           jump du starts at fine (jump_ref/du)^(1/5) (0: every
+                                           jump at fine) */
     int64_t n_groups;
     ds_group *group;
     double *arena;                      /* every group's scratch, in group order (locality) */

@@ -453,20 +453,22 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
 {
     static char *kwlist[] = {"model", "c", "terms", "embedded", "error_weights", "dt",
                              "z_tol", "fine", "substeps", "tolerance", "min_substeps",
-                             "max_substeps", "exponent", NULL};
+                             "max_substeps", "exponent", "jump_ref", NULL};
     PyObject *model, *c, *terms, *embedded, *weights;
-    double dt, z_tol, fine, tol, exponent;
+    double dt, z_tol, fine, tol, exponent, jump_ref = 0.0;
     long long n0, n_min, n_max;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O!OOOOdddLdLLd", kwlist, &ModelType, &model,
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O!OOOOdddLdLLd|d", kwlist, &ModelType, &model,
                                      &c, &terms, &embedded, &weights, &dt, &z_tol, &fine, &n0,
-                                     &tol, &n_min, &n_max, &exponent))
+                                     &tol, &n_min, &n_max, &exponent, &jump_ref))
         return -1;
     if (self->ready) {
         PyErr_SetString(PyExc_RuntimeError, "Stepper already initialised");
         return -1;
     }
-    if (!(dt > 0.0) || n0 < 1 || n_min < 1 || n_max < n_min || !(exponent > 0.0)) {
-        PyErr_SetString(PyExc_ValueError, "Stepper: need dt > 0, 1 <= min <= max substeps");
+    if (!(dt > 0.0) || n0 < 1 || n_min < 1 || n_max < n_min || !(exponent > 0.0)
+        || !(jump_ref >= 0.0 && jump_ref < INFINITY)) {
+        PyErr_SetString(PyExc_ValueError, "Stepper: need dt > 0, 1 <= min <= max substeps, "
+                                          "a finite jump_ref >= 0");
         return -1;
     }
     ModelObject *mo = (ModelObject *)model;
@@ -494,6 +496,7 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
         PyErr_NoMemory();
     } else {
         ds_control ctl = {n0, n_min, n_max, tol, exponent};
+        self->st.jump_ref = jump_ref;
         if (ds_stepper_init(&self->st, &mo->m, dt, z_tol, fine, &ctl, bw.buf) < 0
             || ds_work_init(&self->out_work, &mo->m) < 0) {
             ds_stepper_free(&self->st);
@@ -737,7 +740,7 @@ static PyTypeObject StepperType = {
     PyVarObject_HEAD_INIT(NULL, 0)
     .tp_name = "det_sim_ros._ckernel.Stepper",
     .tp_doc = "Stepper(model, c, terms, embedded, error_weights, dt, z_tol, fine, substeps, "
-              "tolerance, min_substeps, max_substeps, exponent)",
+              "tolerance, min_substeps, max_substeps, exponent[, jump_ref])",
     .tp_basicsize = sizeof(StepperObject),
     .tp_flags = Py_TPFLAGS_DEFAULT,
     .tp_new = PyType_GenericNew,
