@@ -755,8 +755,10 @@ class SimNode(Node):
         node_name = self.get_fully_qualified_name()
         status = DiagnosticStatus(name=f'{node_name}: simulation', hardware_id=node_name)
         distrust = self._sim.trust_issue()
-        if distrust and distrust != self._distrust_reported:
-            self.get_logger().warning(distrust)          # once per cause, until a reset
+        if distrust and not self._distrust_reported:
+            # once, until it clears (a reset): the text changes every time (the residual and
+            # the voltages), which had logged it every diagnostics period
+            self.get_logger().warning(distrust)
         self._distrust_reported = distrust
         status.level, status.message = DiagnosticStatus.OK, 'paused' if self.paused else 'running'
         if self._sim.fault:

@@ -468,9 +468,23 @@ def test_implausible_physics_is_flagged_on_diagnostics(harness):
     from det_sim_ros.simulator import POWER_RESIDUAL_LIMIT
     h = harness(diagnostics_period=0.05, **{'physics.v_max': 1.0e5,
                                             'scene.initial_state': 'released'})
+    logged, logger = [], h.node.get_logger()
+
+    class Spy:   # the node's logger, counting its warnings
+        def __getattr__(self, name):
+            return getattr(logger, name)
+
+        def warning(self, message, **kwargs):
+            logged.append(message)
+            return logger.warning(message, **kwargs)
+    h.node.get_logger = Spy
     h.command([1.0e5])
     h.spin_until(lambda: any(s.level == DiagnosticStatus.WARN and 'residual' in s.message
                              for d in h.diagnostics for s in d.status), 'a WARN on the residual')
+    h.diagnostics.clear()
+    h.spin_until(lambda: len(h.diagnostics) >= 5, 'five more diagnostics')
+    assert all(d.status[0].level == DiagnosticStatus.WARN for d in h.diagnostics)
+    assert len([m for m in logged if 'residual' in m]) == 1   # logged once, not every period
     assert abs(h.node._sim.power_residual()) > POWER_RESIDUAL_LIMIT
     assert not h.non_finite
     h.call('reset')
