@@ -90,8 +90,8 @@ NODE_PARAMS = {
     'log.max_files': (100, "keep at most this many det_sim_*.mcap files in the log directory, "
                       'oldest deleted first (0 = no limit)', True, (0, 1000000)),
     'log.compression': ('zstd', "MCAP chunk compression: 'zstd' (smallest files), 'lz4' "
-                        "(about half the log's CPU for a 100-DET array, ~20 % larger files) or "
-                        "'none'", True, ('zstd', 'lz4', 'none')),
+                        "(a 100-DET array's log: about two thirds of the CPU in a loop, ~20 % "
+                        "larger files) or 'none'", True, ('zstd', 'lz4', 'none')),
     'info_period': (5.0, 'seconds between INFO status lines (wall clock), 0 = off', True,
                     (0.0, 3600.0)),
     # shape markers (det_sim_ros.markers, issue 18)
