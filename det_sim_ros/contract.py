@@ -26,6 +26,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from .simulator import inputs_within
+
 __all__ = [
     'OUTPUT_FIELDS', 'OUTPUT_UNITS', 'RELATIVE_TO_Y0', 'STRUCTURE_TOPIC', 'STRUCTURE_NAMES',
     'COMMAND_TOPIC', 'JOINT_COMMAND_TOPIC', 'COMMAND_TOPICS', 'CLOCK_TOPIC',
@@ -532,8 +534,7 @@ class CommandDecoder:
         if topic == COMMAND_TOPIC and len(data) >= self._vector_size \
                 and data[4:16] == self._vector_head[4:16] and data[:2] == b'\x00\x01':
             volts = list(self._unpack_vector(data, 20))
-            v_max = self.v_max
-            if all(0.0 <= v <= v_max for v in volts):   # (False for NaN: the checks below)
+            if inputs_within(volts, self.v_max):   # (False for NaN: the checks below)
                 return Command(volts, '', (), self._vector_head + data[20:self._vector_size])
         try:
             if topic == JOINT_COMMAND_TOPIC:

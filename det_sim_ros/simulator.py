@@ -26,7 +26,8 @@ from .integrators import get_method, make_stepper, Method, step_control, transie
 from .model import build_model, Model, ModelDomainError
 from .scene import load_scene, Scene, SceneError
 
-__all__ = ['Simulator', 'InputCheck', 'simulate', 'SimulationResult', 'POWER_RESIDUAL_LIMIT']
+__all__ = ['Simulator', 'InputCheck', 'simulate', 'SimulationResult', 'POWER_RESIDUAL_LIMIT',
+           'inputs_within']
 
 # |power-balance residual| beyond which a run is no longer vouched for: the stress suite keeps
 # it below 1e-3 (Rs >= 1 kOhm, every pre-strain, 10^6 steps; normally ~1e-5), so a larger value
@@ -45,6 +46,16 @@ class InputCheck:
 
 
 _ACCEPTED = InputCheck(True, False)
+_FLOAT_ONLY = {float}
+
+
+def inputs_within(values: list, v_max: float) -> bool:
+    """Every value of a non-empty list of floats in [0, v_max], none NaN: the answer of
+    ``all(0.0 <= v <= v_max for v in values)`` in three C loops instead of a generator (100
+    DETs: ~3 against ~12 us per check, two per command). A NaN makes the sum NaN; without one,
+    min and max are exact."""
+    total = sum(values)
+    return total == total and min(values) >= 0.0 and max(values) <= v_max
 
 
 class Simulator:
@@ -160,7 +171,7 @@ class Simulator:
         """
         v_max = self.scene.physics.v_max
         if type(volts) in (list, tuple) and len(volts) == len(self.u) \
-                and all(type(v) is float and 0.0 <= v <= v_max for v in volts):
+                and set(map(type, volts)) == _FLOAT_ONLY and inputs_within(list(volts), v_max):
             # the common case, a list of valid floats (the node's commands): no numpy round
             # trip (the general path below costs ~8 us, more than a whole control period)
             if list(volts) != self.u.tolist():

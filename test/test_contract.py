@@ -240,3 +240,19 @@ def test_contract_and_replay_need_no_rclpy(tmp_path):
     proc = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
                           env=env, timeout=600)
     assert proc.returncode == 0 and proc.stdout.strip() == 'ok', proc.stderr
+
+
+def test_inputs_within_is_the_generator_check():
+    """simulator.inputs_within (sum, min, max in C) answers as all(0 <= v <= v_max) does, for
+    NaN, infinities, signed zeros, subnormals, overflowing sums and random lists."""
+    import random
+    from det_sim_ros.simulator import inputs_within
+    nan, inf = float('nan'), float('inf')
+    pool = [0.0, -0.0, 1.0, 3000.0, 3000.0000001, -1e-300, 5e-324, nan, inf, -inf, 1e308,
+            -1e308, 1500.0]
+    rng = random.Random(1)
+    for n in (1, 2, 3, 100):
+        for _ in range(3000):
+            values = [rng.choice(pool) if rng.random() < 0.3 else rng.uniform(-10.0, 3010.0)
+                      for _ in range(n)]
+            assert inputs_within(values, 3000.0) == all(0.0 <= v <= 3000.0 for v in values)
