@@ -256,3 +256,27 @@ def test_inputs_within_is_the_generator_check():
             values = [rng.choice(pool) if rng.random() < 0.3 else rng.uniform(-10.0, 3010.0)
                       for _ in range(n)]
             assert inputs_within(values, 3000.0) == all(0.0 <= v <= 3000.0 for v in values)
+
+
+def test_sample_codec_refuses_inconsistent_fields():
+    """_ckernel.SampleCodec checks its named fields: a value or stamp outside the messages, a
+    bad op, offsets that do not span the template; it is built once."""
+    import dataclasses
+    from det_sim_ros._ckernel import SampleCodec
+    encoder = OutputContract(Simulator(load_scene('default')).model).encoder()
+    wire = encoder.wire
+    size = len(wire.template)
+    bad = [dataclasses.replace(wire, position=wire.position + size),
+           dataclasses.replace(wire, op=wire.op + 3),
+           dataclasses.replace(wire, source=wire.source - 1000),
+           dataclasses.replace(wire, stamp_position=wire.stamp_position + size),
+           dataclasses.replace(wire, template=wire.template + b'\0'),
+           dataclasses.replace(wire, a=wire.a[:-1])]
+    for fields in bad:
+        with pytest.raises(ValueError):
+            SampleCodec(fields)
+    codec = SampleCodec(wire)
+    with pytest.raises(RuntimeError):
+        codec.__init__(wire)
+    with pytest.raises(TypeError):
+        codec.encode([0.0] * 3, 0)   # not a buffer of float64
