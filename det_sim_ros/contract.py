@@ -26,6 +26,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from ._ckernel import SampleCodec
 from .simulator import inputs_within
 
 __all__ = [
@@ -438,7 +439,6 @@ class SampleEncoder:
             template=b''.join(messages), message_start=starts, stamp_position=starts[:-1] + 4,
             source=np.array(gather, np.int64), op=op, a=a, b=b,
             position=np.array(positions, np.int64))
-        from ._ckernel import SampleCodec
         self._codec = SampleCodec(self.wire)
         if not _LITTLE:  # pragma: no cover - the kernel writes little endian; so does the wire
             raise NotImplementedError('SampleEncoder needs a little-endian host')

@@ -384,7 +384,7 @@ class _FastMessages:
         self.finalize = writer._Writer__maybe_finalize_chunk
         self.chunk_size = writer._Writer__chunk_size
         self.index_type = _MessageIndex
-        self._sample_layouts = {}   # (channel ids, payload sizes) -> (pack, record offsets)
+        self._sample_offsets = {}   # (channel ids, payload sizes) -> record offsets
 
     @classmethod
     def attach(cls, writer):
@@ -428,50 +428,33 @@ class _FastMessages:
             chunk.num_messages += 1
             self.finalize()
 
-    def _layout(self, channel_ids: tuple, sizes: tuple):
-        """(pack, ((channel id, record offset), ...)) of one sample: its records packed by one
-        precompiled struct (a sample's payload sizes are fixed for a model)."""
-        layout = self._sample_layouts.get((channel_ids, sizes))
-        if layout is None:
-            offsets, at = [], 0
+    def _offsets(self, channel_ids: tuple, sizes: tuple) -> tuple:
+        """((channel id, record offset), ...) of one sample's records (a sample's payload sizes
+        are fixed for a model, so this is computed once per layout)."""
+        offsets = self._sample_offsets.get((channel_ids, sizes))
+        if offsets is None:
+            starts, at = [], 0
             for size in sizes:
-                offsets.append(at)
+                starts.append(at)
                 at += _MESSAGE_HEAD.size + size
-            layout = self._sample_layouts[(channel_ids, sizes)] = (
-                struct.Struct('<' + ''.join(f'{_MESSAGE_HEAD.format[1:]}{size}s'
-                                            for size in sizes)).pack,
-                tuple(zip(channel_ids, offsets)))
-        return layout
+            offsets = self._sample_offsets[(channel_ids, sizes)] = tuple(zip(channel_ids,
+                                                                             starts))
+        return offsets
 
     def add_sample(self, channel_ids: tuple, sequences, payloads, log_time: int) -> None:
         """The messages of one sample (one per channel, all at ``log_time``) as one write:
-        the records are packed by one precompiled struct per layout (a sample's payload sizes
-        are fixed for a model), then indexed. A sample that would end the chunk goes message by
-        message (:meth:`add`), so chunks end where add_message ends them."""
-        stats, chunk = self.stats, self.chunk
-        buffer = chunk.record_writer._buffer    # replaced when a chunk ends
-        base = buffer.tell()
-        if base + sum(map(len, payloads)) + _MESSAGE_HEAD.size * len(payloads) \
-                > self.chunk_size:
-            self.add(list(zip(channel_ids, sequences, payloads)), log_time)
-            return
-        self._cover(stats, stats.message_count == 0, log_time)
-        self._cover(chunk, chunk.num_messages == 0, log_time)
-        pack, offsets = self._layout(channel_ids, tuple(map(len, payloads)))
-        args = []
-        for channel_id, sequence, data in zip(channel_ids, sequences, payloads):
-            args += (0x05, 22 + len(data), channel_id, sequence, log_time, log_time, data)
-        buffer.write(pack(*args))
-        indices, counts = chunk.message_indices, stats.channel_message_counts
-        for channel_id, offset in offsets:
-            index = indices.get(channel_id)
-            if index is None:
-                index = indices[channel_id] = _MessageIndex(channel_id=channel_id, records=[])
-            index.records.append((log_time, base + offset))
-            counts[channel_id] += 1
-        stats.message_count += len(offsets)
-        chunk.num_messages += len(offsets)
-        self.finalize()
+        a run of one (:meth:`add_run`). A sample that would end the chunk, or whose payloads
+        are not ``bytes``, goes message by message (:meth:`add`), so chunks end where
+        add_message ends them."""
+        sizes = tuple(map(len, payloads))
+        if self.chunk.record_writer._buffer.tell() + sum(sizes) \
+                + _MESSAGE_HEAD.size * len(sizes) <= self.chunk_size:
+            records, count = pack_records(channel_ids, sequences, (log_time,), (payloads,),
+                                          sizes)
+            if count:
+                self.add_run(channel_ids, sizes, records, (log_time,))
+                return
+        self.add(list(zip(channel_ids, sequences, payloads)), log_time)
 
     def add_run(self, channel_ids: tuple, sizes: tuple, records: bytes, times) -> None:
         """
@@ -488,7 +471,7 @@ class _FastMessages:
         self._cover(chunk, chunk.num_messages == 0, times[0])
         self._cover(chunk, False, times[-1])
         buffer.write(records)
-        _, offsets = self._layout(channel_ids, sizes)
+        offsets = self._offsets(channel_ids, sizes)
         width = len(sizes)
         sample_bytes = sum(sizes) + _MESSAGE_HEAD.size * width
         k = len(times)
@@ -952,7 +935,8 @@ class Recorder:
         in runs packed at once. A run stops before a sample that would end the chunk, split
         the file or come after a due flush, so inside it only the records change and the
         lookups, checks and counters are done once. (The Python per sample was most of the
-        log's cost: 10 us per sample in a loop, 0.9 of it compression.)
+        log's cost: 10 us per sample in a loop; packed in C, with the run's end found by
+        bisection, 3.5 us.)
         """
         i, n = 0, len(items)
         while i < n:

@@ -170,12 +170,13 @@ class Simulator:
         outside [0, v_max] are clamped.
         """
         v_max = self.scene.physics.v_max
-        if type(volts) in (list, tuple) and len(volts) == len(self.u) \
-                and set(map(type, volts)) == _FLOAT_ONLY and inputs_within(list(volts), v_max):
+        values = list(volts) if type(volts) in (list, tuple) else None
+        if values is not None and len(values) == len(self.u) \
+                and set(map(type, values)) == _FLOAT_ONLY and inputs_within(values, v_max):
             # the common case, a list of valid floats (the node's commands): no numpy round
             # trip (the general path below costs ~8 us, more than a whole control period)
-            if list(volts) != self.u.tolist():
-                new = np.array(volts)
+            if values != self.u.tolist():
+                new = np.array(values)
                 self.model.apply_input_jump(self.x, self.u, new)
                 self.u = new
             return _ACCEPTED

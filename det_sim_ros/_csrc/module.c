@@ -750,31 +750,57 @@ static PyTypeObject StepperType = {
     .tp_getset = Stepper_getset,
 };
 
+/* ---------------------------------------------------------------- types built from fields */
+
+/* FrameMap and SampleCodec are built once from an object's named fields into owned copies:
+ * their structs start with this prefix, so one dealloc and one set of checks serve both. */
+typedef struct {
+    PyObject_HEAD
+    arena mem;
+} BuiltObject;
+
+static void Built_dealloc(PyObject *self)
+{
+    free_arena(&((BuiltObject *)self)->mem);
+    Py_TYPE(self)->tp_free(self);
+}
+
+/* The ``fields`` argument of __init__ into *src; refuses a second build (-1, error set). */
+static int built_fields(PyObject *self, PyObject *args, PyObject *kwds, PyObject **src)
+{
+    static char *kwlist[] = {"fields", NULL};
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O", kwlist, src))
+        return -1;
+    if (((BuiltObject *)self)->mem.n) {
+        PyErr_Format(PyExc_RuntimeError, "%s is already built", Py_TYPE(self)->tp_name);
+        return -1;
+    }
+    return 0;
+}
+
+/* 0 when built, else -1 with the error set (a method called before a successful __init__). */
+static int built_ready(PyObject *self)
+{
+    if (((BuiltObject *)self)->mem.n)
+        return 0;
+    PyErr_Format(PyExc_RuntimeError, "%s was not built", Py_TYPE(self)->tp_name);
+    return -1;
+}
+
 /* ---------------------------------------------------------------- FrameMap */
 
 typedef struct {
     PyObject_HEAD
+    arena mem;                          /* first: the BuiltObject prefix */
     ds_frame_map f;
     Py_ssize_t frame_size;
-    arena mem;
 } FrameMapObject;
-
-static void FrameMap_dealloc(FrameMapObject *self)
-{
-    free_arena(&self->mem);
-    Py_TYPE(self)->tp_free((PyObject *)self);
-}
 
 static int FrameMap_init(FrameMapObject *self, PyObject *args, PyObject *kwds)
 {
-    static char *kwlist[] = {"fields", NULL};
     PyObject *src;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O", kwlist, &src))
+    if (built_fields((PyObject *)self, args, kwds, &src) < 0)
         return -1;
-    if (self->mem.n) {
-        PyErr_SetString(PyExc_RuntimeError, "FrameMap is already built");
-        return -1;
-    }
     ds_frame_map *f = &self->f;
     arena *mem = &self->mem;
     int64_t frame_size;
@@ -826,10 +852,8 @@ static PyObject *FrameMap_update(FrameMapObject *self, PyObject *const *args, Py
         PyErr_SetString(PyExc_TypeError, "update(x, frame, force, stamp_ns)");
         return NULL;
     }
-    if (!self->mem.n) {
-        PyErr_SetString(PyExc_RuntimeError, "FrameMap was not built");
+    if (built_ready((PyObject *)self) < 0)
         return NULL;
-    }
     int force = PyObject_IsTrue(args[2]);
     long long stamp = PyLong_AsLongLong(args[3]);
     if (force < 0 || (stamp == -1 && PyErr_Occurred()))
@@ -877,7 +901,7 @@ static PyTypeObject FrameMapType = {
     .tp_flags = Py_TPFLAGS_DEFAULT,
     .tp_new = PyType_GenericNew,
     .tp_init = (initproc)FrameMap_init,
-    .tp_dealloc = (destructor)FrameMap_dealloc,
+    .tp_dealloc = Built_dealloc,
     .tp_methods = FrameMap_methods,
 };
 
@@ -885,29 +909,18 @@ static PyTypeObject FrameMapType = {
 
 typedef struct {
     PyObject_HEAD
+    arena mem;                          /* first: the BuiltObject prefix */
     ds_sample_wire w;
     unsigned char *messages;            /* the messages' bytes: template, then each sample */
     const int64_t *message_start;       /* n_messages + 1 byte offsets */
     int64_t n_outputs;                  /* the output vector is at least this long */
-    arena mem;
 } SampleCodecObject;
-
-static void SampleCodec_dealloc(SampleCodecObject *self)
-{
-    free_arena(&self->mem);
-    Py_TYPE(self)->tp_free((PyObject *)self);
-}
 
 static int SampleCodec_init(SampleCodecObject *self, PyObject *args, PyObject *kwds)
 {
-    static char *kwlist[] = {"fields", NULL};
     PyObject *src;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O", kwlist, &src))
+    if (built_fields((PyObject *)self, args, kwds, &src) < 0)
         return -1;
-    if (self->mem.n) {
-        PyErr_SetString(PyExc_RuntimeError, "SampleCodec is already built");
-        return -1;
-    }
     ds_sample_wire *w = &self->w;
     arena *mem = &self->mem;
     Py_ssize_t n, n_starts;
@@ -971,10 +984,8 @@ static PyObject *SampleCodec_encode(SampleCodecObject *self, PyObject *const *ar
         PyErr_SetString(PyExc_TypeError, "encode(out, stamp_ns)");
         return NULL;
     }
-    if (!self->mem.n) {
-        PyErr_SetString(PyExc_RuntimeError, "SampleCodec was not built");
+    if (built_ready((PyObject *)self) < 0)
         return NULL;
-    }
     long long stamp = PyLong_AsLongLong(args[1]);
     if (stamp == -1 && PyErr_Occurred())
         return NULL;
@@ -1019,7 +1030,7 @@ static PyTypeObject SampleCodecType = {
     .tp_flags = Py_TPFLAGS_DEFAULT,
     .tp_new = PyType_GenericNew,
     .tp_init = (initproc)SampleCodec_init,
-    .tp_dealloc = (destructor)SampleCodec_dealloc,
+    .tp_dealloc = Built_dealloc,
     .tp_methods = SampleCodec_methods,
 };
 
