@@ -1,6 +1,6 @@
 """Packaging for det_sim_ros (ament_python layout; also installs with plain pip).
 
-The kernel (det_sim_ros/_csrc) is a C extension compiled here, at install time, with the
+The kernel (det_sim_ros/core/_csrc) is a C extension compiled here, at install time, with the
 machine's C compiler: `pip install .` and `colcon build` take a few seconds and nothing is
 compiled when the node runs. It uses only Python's headers (arrays cross by the buffer
 protocol), so the build needs no numpy headers and works with any numpy.
@@ -15,7 +15,7 @@ from setuptools import Extension, find_packages, setup
 from setuptools.command.build_ext import build_ext
 
 package_name = 'det_sim_ros'
-KERNEL_SOURCES = sorted(glob('det_sim_ros/_csrc/*.c'))
+KERNEL_SOURCES = sorted(glob('det_sim_ros/core/_csrc/*.c'))
 # -O3 without -ffast-math: IEEE semantics (NaN checks, bit-identical runs) are kept;
 # -fno-math-errno lets sqrt/exp compile to plain instructions.
 KERNEL_FLAGS = ['-O3', '-std=c99', '-fno-math-errno']
@@ -55,8 +55,8 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*', 'bench']),
-    ext_modules=[Extension('det_sim_ros._ckernel', KERNEL_SOURCES,
-                           depends=glob('det_sim_ros/_csrc/*.h'),
+    ext_modules=[Extension('det_sim_ros.core._ckernel', KERNEL_SOURCES,
+                           depends=glob('det_sim_ros/core/_csrc/*.h'),
                            extra_compile_args=KERNEL_FLAGS)],
     cmdclass={'build_ext': BuildKernel},
     data_files=[
@@ -95,11 +95,11 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'sim_node = det_sim_ros.sim_node:main',
+            'sim_node = det_sim_ros.cli.sim_node:main',
             'det_sim = det_sim_ros.cli:main',
-            'det_sim_replay = det_sim_ros.replay:main',
+            'det_sim_replay = det_sim_ros.io.replay:main',
         ],
         # the det_sim fixture (lockstep controller tests), available wherever this is installed
-        'pytest11': ['det_sim = det_sim_ros.testing'],
+        'pytest11': ['det_sim = det_sim_ros.ros.testing'],
     },
 )

@@ -27,8 +27,8 @@ import time
 
 import numpy as np
 
-from det_sim_ros.scene import load_scene
-from det_sim_ros.simulator import simulate, Simulator
+from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.simulator import simulate, Simulator
 
 
 def _commands(n, periods, dt, v_max, synchronized=False, kind='square'):

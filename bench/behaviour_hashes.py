@@ -26,9 +26,9 @@ warnings.simplefilter('ignore', DeprecationWarning)   # old module paths, if any
 try:
     from det_sim_ros.io.mcap_log import LogReader, Recorder
     from det_sim_ros.io.replay import resimulate, simulate_to_log
-    from det_sim_ros.physics.scene import load_scene
+    from det_sim_ros.scenes.scene import load_scene
     from det_sim_ros.sim.simulator import simulate, Simulator
-except ImportError:
+except ImportError:   # the flat layout before the layer subpackages
     from det_sim_ros.mcap_log import LogReader, Recorder
     from det_sim_ros.replay import resimulate, simulate_to_log
     from det_sim_ros.scene import load_scene

@@ -24,10 +24,10 @@ import time
 
 import numpy as np
 
-import det_sim_ros.simulator as simulator_module
-from det_sim_ros.integrators import TransientSettings
-from det_sim_ros.scene import load_scene
-from det_sim_ros.simulator import Simulator
+import det_sim_ros.sim.simulator as simulator_module
+from det_sim_ros.sim.integrators import TransientSettings
+from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.simulator import Simulator
 
 DRIVES = {
     'held': lambda k: 1500.0,

@@ -30,11 +30,11 @@ import time
 
 import numpy as np
 
-from det_sim_ros import elastica as E
-from det_sim_ros import fidelity as F
-from det_sim_ros.scenarios import STEP_SWITCH_TIMES, delta_y, step_scene, step_voltage
-from det_sim_ros.model import ModelDomainError
-from det_sim_ros.simulator import Simulator, simulate
+from det_sim_ros.analysis import elastica as E
+from det_sim_ros.analysis import fidelity as F
+from det_sim_ros.analysis.scenarios import STEP_SWITCH_TIMES, delta_y, step_scene, step_voltage
+from det_sim_ros.physics.model import ModelDomainError
+from det_sim_ros.sim.simulator import Simulator, simulate
 
 BEAMS = ('simply_supported', 'fixed')
 LEVELS = ([('paper', 1)] + [('consistent', n) for n in range(1, 8)]

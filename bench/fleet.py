@@ -2,7 +2,7 @@
 """
 Benchmark fleets of sim_nodes (issue 20; a script, not a test). Run each part under the CPU lock.
 
-capacity  N default-scene nodes in real time at 1 kHz on this host (det_sim_ros.fleet), one
+capacity  N default-scene nodes in real time at 1 kHz on this host (det_sim_ros.ros.fleet), one
           listener process subscribed (reliable, depth 1000) to every node's displacement:
           per node samples lost and sim seconds per wall second over the window; the nodes'
           CPU (s per wall s, all N together); the nodes' own real-time factor (their INFO
@@ -11,7 +11,7 @@ capacity  N default-scene nodes in real time at 1 kHz on this host (det_sim_ros.
 lockstep  N lockstep nodes, each answered by its own controller process (bench/node_rate.py's
           CONTROLLER): aggregate simulated seconds per wall second (sum over nodes).
 hosts     One node at 1 kHz in real time (lockstep_* cases: lockstep, sim s per wall s) on
-          namespace host h0 (det_sim_ros.netns), its controller
+          namespace host h0 (det_sim_ros.ros.netns), its controller
           (node_rate CONTROLLER: answers every displacement sample) on host h1, unicast discovery
           over UDP: command-to-effect latency p50/p99 (controller publishes a command -> it
           receives the first sample that shows it) and samples lost at the controller; the h1
@@ -42,7 +42,7 @@ os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 101))
 
 from node_rate import command_latency, CONTROLLER  # noqa: E402
-from det_sim_ros.fleet import Fleet, FleetNode  # noqa: E402
+from det_sim_ros.ros.fleet import Fleet, FleetNode  # noqa: E402
 
 DT_NS = 1_000_000          # the default scene's period (1 kHz)
 STARTUP_LIMIT = 120.0      # s: bounds a start that hangs (never part of a measurement)
@@ -54,7 +54,7 @@ LISTENER = '''
 import json, sys, time, rclpy
 from rclpy.experimental import EventsExecutor
 from sensor_msgs.msg import JointState
-from det_sim_ros.contract import decode_joint_state
+from det_sim_ros.io.contract import decode_joint_state
 n, out_path = int(sys.argv[1]), sys.argv[2]
 rclpy.init()
 node = rclpy.create_node('bench_listener')
@@ -224,7 +224,7 @@ CASES = {
 
 
 def hosts(case, seconds):
-    from det_sim_ros.netns import NetnsHosts
+    from det_sim_ros.ros.netns import NetnsHosts
     link, keep_all, profile, same_host, mode = CASES[case]
     extra = ({'FASTRTPS_DEFAULT_PROFILES_FILE': os.path.join(ROOT, 'config', 'dds_lossy.xml')}
              if profile else {})

@@ -18,9 +18,10 @@ import time
 
 import numpy as np
 
-from det_sim_ros.integrators import get_method, make_stepper, StepControl
-from det_sim_ros.model import build_model
-from det_sim_ros.scene import load_scene
+from det_sim_ros.sim.integrators import get_method, make_stepper, StepControl
+from det_sim_ros.physics.model import build_model
+from det_sim_ros.physics.statics import initial_state
+from det_sim_ros.scenes.scene import load_scene
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 FIELDS = ('m_tot', 'Mb', 'K', 'D', 'm', 'c2', 'e4', 'length', 'l0', 'VY', 'C0', 'V', 'E_M',
@@ -58,7 +59,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     model = build_model(load_scene('default'))
     volts, h = 1500.0, 2e-6      # stable for explicit RK4 on the RC charge (tau ~ 28 us)
-    x0 = model.initial_state()
+    x0 = initial_state(model)
     x0[0], x0[1] = 4e-3, 0.1      # a buckled beam in motion
     u = np.array([volts])
     with tempfile.TemporaryDirectory() as tmp:

@@ -1,6 +1,6 @@
 """
 Cost of MCAP logging per simulation step (issue 5, reworked in issue 15): the node's per-step
-work offline (no ROS graph): encode the output bytes (det_sim_ros.contract), record them (and a
+work offline (no ROS graph): encode the output bytes (det_sim_ros.io.contract), record them (and a
 command every 10 steps), synchronously or with the writer thread. Prints CPU microseconds per
 step (all threads); run on a shared host, compare the rows of one run.
 
@@ -12,10 +12,10 @@ import sys
 import tempfile
 import time
 
-from det_sim_ros.contract import encode_float64_multi_array, OutputContract, TOPIC_TYPES
-from det_sim_ros.mcap_log import Recorder
-from det_sim_ros.scene import load_scene
-from det_sim_ros.simulator import Simulator
+from det_sim_ros.io.contract import encode_float64_multi_array, OutputContract, TOPIC_TYPES
+from det_sim_ros.io.mcap_log import Recorder
+from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.simulator import Simulator
 
 
 def main(n_steps=20000):

@@ -57,7 +57,7 @@ def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1, rea
     import random
     import rclpy
     from rclpy.parameter import Parameter
-    from det_sim_ros.sim_node import make_executor, SimNode
+    from det_sim_ros.ros.node import make_executor, SimNode
     context = rclpy.context.Context()
     rclpy.init(context=context)
     node = SimNode(context=context, parameter_overrides=[

@@ -53,10 +53,10 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import QoSProfile  # noqa: E402
 
-from det_sim_ros.contract import decode_float64_multi_array, encode_clock  # noqa: E402
-from det_sim_ros.mcap_log import LogReader  # noqa: E402
-from det_sim_ros.sim_node import make_executor, SimNode  # noqa: E402
-from det_sim_ros.simulator import Simulator  # noqa: E402
+from det_sim_ros.io.contract import decode_float64_multi_array, encode_clock  # noqa: E402
+from det_sim_ros.io.mcap_log import LogReader  # noqa: E402
+from det_sim_ros.ros.node import make_executor, SimNode  # noqa: E402
+from det_sim_ros.sim.simulator import Simulator  # noqa: E402
 
 SUBSCRIBER = '''
 import sys, rclpy
@@ -81,7 +81,7 @@ from rclpy.experimental import EventsExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
-from det_sim_ros.contract import decode_joint_state, encode_float64_multi_array
+from det_sim_ros.io.contract import decode_joint_state, encode_float64_multi_array
 n_det, out_path = int(sys.argv[1]), sys.argv[2]
 keep_all = sys.argv[3:4] == ['keep_all']     # reliable KEEP_ALL both ways (lossy links)
 rclpy.init()
@@ -378,8 +378,8 @@ def lockstep_in_process(scene_name, sim_seconds):
     sim seconds per wall second."""
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
-    from det_sim_ros.contract import decode_joint_state, encode_float64_multi_array
-    from det_sim_ros.testing import LockstepSim
+    from det_sim_ros.io.contract import decode_joint_state, encode_float64_multi_array
+    from det_sim_ros.ros.testing import LockstepSim
     sim = LockstepSim(scene_name, domain_id=1 + (os.getpid() + 7) % 101)
     try:
         node = rclpy.create_node('bench_p', context=sim.context)
@@ -407,8 +407,8 @@ class _Skip(Exception):
 
 
 def bench_scene(scene_name, args, folder):
-    from det_sim_ros.contract import OutputContract
-    from det_sim_ros.scene import load_scene
+    from det_sim_ros.io.contract import OutputContract
+    from det_sim_ros.scenes.scene import load_scene
     report = {}
     scene = load_scene(scene_name)
     sim = Simulator(scene)

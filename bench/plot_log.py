@@ -15,11 +15,11 @@ import time
 
 import numpy as np
 
-from det_sim_ros import logplot
-from det_sim_ros.mcap_log import Recorder, serialize
-from det_sim_ros.replay import OutputContract
-from det_sim_ros.scene import load_scene
-from det_sim_ros.simulator import simulate
+from det_sim_ros.io import logplot
+from det_sim_ros.io.mcap_log import Recorder, serialize
+from det_sim_ros.io.replay import OutputContract
+from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.simulator import simulate
 
 
 def write_log(path, scene_name, minutes):
@@ -61,7 +61,7 @@ _MODELS = {}
 
 
 def run_model(scene):
-    from det_sim_ros.model import build_model
+    from det_sim_ros.physics.model import build_model
     key = id(scene)
     if key not in _MODELS:
         _MODELS[key] = build_model(scene)

@@ -11,8 +11,8 @@ import argparse
 import statistics
 import time
 
-from det_sim_ros.scenarios import STEP_END, step_scene, step_voltage
-from det_sim_ros.simulator import simulate, Simulator
+from det_sim_ros.analysis.scenarios import STEP_END, step_scene, step_voltage
+from det_sim_ros.sim.simulator import simulate, Simulator
 
 
 def _cpu(fn):

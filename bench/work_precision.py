@@ -1,8 +1,8 @@
-"""Work-precision benchmark script: see det_sim_ros/benchmark.py (also `det_sim bench`)."""
+"""Work-precision benchmark script: see det_sim_ros/analysis/benchmark.py (also `det_sim bench`)."""
 
 import sys
 
-from det_sim_ros.benchmark import main
+from det_sim_ros.analysis.benchmark import main
 
 if __name__ == '__main__':
     sys.exit(main())

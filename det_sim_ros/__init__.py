@@ -1,34 +1,46 @@
-"""det_sim_ros: dielectric elastomer transducers coupled with buckled beams, simulated for ROS 2."""
+"""
+det_sim_ros: dielectric elastomer transducers coupled with buckled beams, simulated for ROS 2.
+
+The package is layered; each layer imports only the layers below it (test/test_layers.py
+checks every module's imports):
+
+    cli        one ``det_sim`` command with its verbs, and the ``sim_node`` entry point
+    ros        the node, its pacing and diagnostics, markers, fleets, the pytest plugin
+    io         the topic contract and its CDR bytes, MCAP recording, reading and replay
+    analysis   elastica, fidelity studies, the paper's scenarios, benchmarks
+    sim        the sim-time grid, inputs held per period, the integration methods' tables
+    physics    energies -> model, statics, linearization, the numpy reference
+    scenes     scene files (YAML): loading and validation
+    core       the compiled kernel (C) behind its one facade, core.kernel
+
+Importing the package has no side effects beyond making the old flat module paths
+(``det_sim_ros.scene``, ``det_sim_ros.sim_node``, ...) aliases of their new homes, which warn
+once when imported. The common entry points are here too, imported on first use:
+:func:`load_scene`, :class:`Simulator`, :func:`simulate`, :func:`linearize`.
+"""
+
+from ._moved import install as _install_moved_paths
 
 __version__ = '0.1.0'
 
+_PUBLIC = {
+    'load_scene': 'det_sim_ros.scenes.scene',
+    'Scene': 'det_sim_ros.scenes.scene',
+    'SceneError': 'det_sim_ros.scenes.scene',
+    'Simulator': 'det_sim_ros.sim.simulator',
+    'simulate': 'det_sim_ros.sim.simulator',
+    'linearize': 'det_sim_ros.physics.linearize',
+}
 
-def _quiet_stop_while_the_node_imports() -> None:
-    """
-    Run as the node (``sim_node``, ``python -m det_sim_ros.sim_node``): SIGINT and SIGTERM while
-    its modules are still importing (rclpy, numpy, the kernels; before ``sim_node.main`` takes
-    the signals over) exit quietly with code 0 instead of a KeyboardInterrupt traceback or a
-    kill by the signal. Nothing has been started then, so there is nothing to finish.
-    """
-    import os
-    import signal
-    import sys
-    argv = list(getattr(sys, 'orig_argv', []))
-    as_module = any(a == 'det_sim_ros.sim_node' for a in argv[:4])
-    if not (as_module or os.path.basename(sys.argv[0] if sys.argv else '') == 'sim_node'):
-        return
-
-    def stop(signum, frame):
-        # not an exception: raised inside a C extension's initialisation (rclpy's pybind11
-        # module) it would come out as an ImportError traceback
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except Exception:  # noqa: BLE001
-                pass
-        os._exit(0)
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, stop)
+__all__ = ['__version__', *_PUBLIC]
 
 
-_quiet_stop_while_the_node_imports()
+def __getattr__(name):
+    module = _PUBLIC.get(name)
+    if module is None:
+        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+    import importlib
+    return getattr(importlib.import_module(module), name)
+
+
+_install_moved_paths()

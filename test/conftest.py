@@ -17,7 +17,7 @@ import pytest
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 # Test the installed package (with its compiled kernel), never the source tree beside it: child
-# processes (`python -m det_sim_ros.sim_node`) inherit the working directory, and without this
+# processes (`python -m det_sim_ros.cli.sim_node`) inherit the working directory, and without this
 # their sys.path would start there (Python 3.11+: PYTHONSAFEPATH).
 os.environ.setdefault('PYTHONSAFEPATH', '1')
 
@@ -85,7 +85,7 @@ class Harness:
         import rclpy
         self.closed = False
 
-        from det_sim_ros.sim_node import make_executor, SimNode
+        from det_sim_ros.ros.node import make_executor, SimNode
 
         params.setdefault('real_time', False)
         params.setdefault('info_period', 0.0)

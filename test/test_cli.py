@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 import yaml
 
-from det_sim_ros import cli, statics
-from det_sim_ros.scene import load_scene, scene_to_dict
+from det_sim_ros.cli import det_sim as cli
+from det_sim_ros.physics import statics
+from det_sim_ros.scenes.scene import load_scene, scene_to_dict
 
 
 def read_csv(path):
@@ -187,16 +188,16 @@ def test_help_exits_0(capsys):
 
 
 def test_bench_missing_and_present(monkeypatch, capsys):
-    monkeypatch.setitem(sys.modules, 'det_sim_ros.benchmark', None)
+    monkeypatch.setitem(sys.modules, 'det_sim_ros.analysis.benchmark', None)
     assert cli.main(['bench']) == 1
     err = capsys.readouterr().err
     assert 'not available' in err and len(err.strip().splitlines()) == 1
     seen = {}
-    fake = types.ModuleType('det_sim_ros.benchmark')
+    fake = types.ModuleType('det_sim_ros.analysis.benchmark')
     fake.main = lambda argv: seen.setdefault('argv', argv) and 0
-    monkeypatch.setitem(sys.modules, 'det_sim_ros.benchmark', fake)
-    import det_sim_ros
-    monkeypatch.setattr(det_sim_ros, 'benchmark', fake, raising=False)
+    monkeypatch.setitem(sys.modules, 'det_sim_ros.analysis.benchmark', fake)
+    import det_sim_ros.analysis
+    monkeypatch.setattr(det_sim_ros.analysis, 'benchmark', fake, raising=False)
     assert cli.main(['bench', '--quick', '--out', 'x']) == 0
     assert seen['argv'] == ['--quick', '--out', 'x']
 

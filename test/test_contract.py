@@ -9,11 +9,11 @@ import sys
 import numpy as np
 import pytest
 
-from det_sim_ros.contract import (CdrError, Command, CommandDecoder, decode_float64_multi_array,
+from det_sim_ros.io.contract import (CdrError, Command, CommandDecoder, decode_float64_multi_array,
                                   decode_joint_state, encode_clock, encode_float64_multi_array,
                                   encode_joint_state, JOINT_STATE, OUTPUT_FIELDS, OutputContract)
-from det_sim_ros.scene import load_scene
-from det_sim_ros.simulator import Simulator
+from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.simulator import Simulator
 from conftest import child_env
 
 
@@ -100,7 +100,7 @@ def test_displacement_and_rest_state():
     scene = load_scene('default')
     sim = Simulator(scene)
     contract = OutputContract(sim.model)
-    from det_sim_ros.statics import rest_shortening
+    from det_sim_ros.physics.statics import rest_shortening
     assert contract.y0.tolist() == [rest_shortening(scene)]
     sim, out = _run(scene, [3000.0], 300)
     dy = contract.values(out, 'displacement', 'position')
@@ -221,10 +221,10 @@ def test_contract_and_replay_need_no_rclpy(tmp_path):
     code = (
         'import sys\n'
         'from det_sim_ros import contract\n'
-        'from det_sim_ros.mcap_log import Recorder\n'
-        'from det_sim_ros.replay import resimulate, simulate_to_log\n'
-        'from det_sim_ros.scene import load_scene\n'
-        'from det_sim_ros.simulator import Simulator\n'
+        'from det_sim_ros.io.mcap_log import Recorder\n'
+        'from det_sim_ros.io.replay import resimulate, simulate_to_log\n'
+        'from det_sim_ros.scenes.scene import load_scene\n'
+        'from det_sim_ros.sim.simulator import Simulator\n'
         'scene = load_scene("plate")\n'
         'sim = Simulator(scene)\n'
         f'recorder = Recorder({str(tmp_path / "run.mcap")!r}, scene, metadata={{\n'
@@ -246,7 +246,7 @@ def test_inputs_within_is_the_generator_check():
     """simulator.inputs_within (sum, min, max in C) answers as all(0 <= v <= v_max) does, for
     NaN, infinities, signed zeros, subnormals, overflowing sums and random lists."""
     import random
-    from det_sim_ros.simulator import inputs_within
+    from det_sim_ros.sim.simulator import inputs_within
     nan, inf = float('nan'), float('inf')
     pool = [0.0, -0.0, 1.0, 3000.0, 3000.0000001, -1e-300, 5e-324, nan, inf, -inf, 1e308,
             -1e308, 1500.0]
@@ -262,7 +262,7 @@ def test_sample_codec_refuses_inconsistent_fields():
     """_ckernel.SampleCodec checks its named fields: a value or stamp outside the messages, a
     bad op, offsets that do not span the template; it is built once."""
     import dataclasses
-    from det_sim_ros._ckernel import SampleCodec
+    from det_sim_ros.core._ckernel import SampleCodec
     encoder = OutputContract(Simulator(load_scene('default')).model).encoder()
     wire = encoder.wire
     size = len(wire.template)

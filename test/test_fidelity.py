@@ -2,9 +2,9 @@
 Model fidelity against exact solutions (issue 6): the Euler critical loads, the exact elastica,
 and the multi-term Ritz model with consistent (fourth-order) kinematics.
 
-Oracles: det_sim_ros.elastica (tan mu = mu and 4 pi^2; the elastica by shooting and, for the
+Oracles: det_sim_ros.analysis.elastica (tan mu = mu and 4 pi^2; the elastica by shooting and, for the
 clamped-clamped beam, in closed form by elliptic integrals). The Ritz statics
-(det_sim_ros.fidelity) use the model's own basis and are checked against the model's outputs.
+(det_sim_ros.analysis.fidelity) use the model's own basis and are checked against the model's outputs.
 """
 
 import math
@@ -12,11 +12,11 @@ import math
 import numpy as np
 import pytest
 
-from det_sim_ros import elastica as E
-from det_sim_ros import fidelity as F
-from det_sim_ros.scenarios import step_scene, step_voltage
-from det_sim_ros.model import ModelDomainError
-from det_sim_ros.simulator import simulate, Simulator
+from det_sim_ros.analysis import elastica as E
+from det_sim_ros.analysis import fidelity as F
+from det_sim_ros.analysis.scenarios import step_scene, step_voltage
+from det_sim_ros.physics.model import ModelDomainError
+from det_sim_ros.sim.simulator import simulate, Simulator
 
 BEAMS = ('simply_supported', 'fixed')
 Y_PATH = np.linspace(0.01, 0.15, 15)          # y/l up to 0.15

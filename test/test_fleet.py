@@ -12,8 +12,8 @@ import time
 import pytest
 import yaml
 
-from det_sim_ros.fleet import FleetError, load_fleet
-from det_sim_ros.scene import load_scene, scene_to_dict
+from det_sim_ros.ros.fleet import FleetError, load_fleet
+from det_sim_ros.scenes.scene import load_scene, scene_to_dict
 from conftest import child_env
 from test_reliability import finished_logs
 
@@ -75,7 +75,7 @@ def test_fleet_starts_its_nodes_and_forwards_the_stop(tmp_path, stop):
         assert len(finished_logs(str(tmp_path / 'logs' / name))) == 1
     params = yaml.safe_load((tmp_path / 'logs' / 'a.params.yaml').read_text())
     assert params['/**']['ros__parameters']['physics']['Rs'] == 1e3
-    from det_sim_ros.mcap_log import LogReader
+    from det_sim_ros.io.mcap_log import LogReader
     (log,) = os.listdir(tmp_path / 'logs' / 'a')
     scene = yaml.safe_load(LogReader(str(tmp_path / 'logs' / 'a' / log)).info['scene_yaml'])
     assert scene['sim_node']['ros__parameters']['physics']['Rs'] == 1e3   # applied
@@ -149,7 +149,7 @@ BAD_FLEETS = [
 
 @pytest.mark.parametrize('fleet,message', BAD_FLEETS)
 def test_bad_fleet_file_is_one_line_and_starts_nothing(tmp_path, capsys, fleet, message):
-    from det_sim_ros import cli
+    from det_sim_ros.cli import det_sim as cli
     path = tmp_path / 'fleet.yaml'
     path.write_text(yaml.safe_dump(fleet))
     assert cli.main(['fleet', str(path), '--host', 'here']) == 2
@@ -246,13 +246,13 @@ def _run_loops(net, tmp, node_hosts, controller_hosts, env):
 
 
 def _records(log_dir):
-    from det_sim_ros.mcap_log import LogReader
+    from det_sim_ros.io.mcap_log import LogReader
     (path,) = [os.path.join(log_dir, f) for f in os.listdir(log_dir) if f.endswith('.mcap')]
     return [(m.topic, m.log_time, m.sequence, m.data) for m in LogReader(path).messages()]
 
 
 def _dy(records, namespace):
-    from det_sim_ros.contract import decode_joint_state
+    from det_sim_ros.io.contract import decode_joint_state
     return {log_time: decode_joint_state(data).position[0]
             for topic, log_time, _, data in records if topic == f'{namespace}/displacement'}
 
@@ -274,7 +274,7 @@ def test_fleet_across_three_namespace_hosts(tmp_path):
     on every host, its PI controller on host i + 1. Every loop brings Δy to its target within
     5 %, and the lockstep logs equal those of the same fleet and controllers on one host.
     """
-    from det_sim_ros.netns import can_make_namespaces, NetnsHosts
+    from det_sim_ros.ros.netns import can_make_namespaces, NetnsHosts
     why = can_make_namespaces()
     if why:
         pytest.skip(f'{why}: the hosts of this test are network namespaces')
@@ -306,9 +306,9 @@ def test_qos_keep_all_for_lossy_links(harness, tmp_path, ros_context):
     log records it); with qos_sensor_data it is refused with one line."""
     from rclpy.parameter import Parameter
     from rclpy.qos import HistoryPolicy, ReliabilityPolicy
-    from det_sim_ros.mcap_log import LogReader
-    from det_sim_ros.scene import SceneError
-    from det_sim_ros.sim_node import SimNode
+    from det_sim_ros.io.mcap_log import LogReader
+    from det_sim_ros.scenes.scene import SceneError
+    from det_sim_ros.ros.node import SimNode
     h = harness(qos_keep_all=True, mode='free_run', start_paused=True,
                 **{'log.path': str(tmp_path / 'log')})
     endpoints = ([p.qos_profile for p in h.node._output_pubs + [h.node._clock_pub]]
@@ -328,7 +328,7 @@ def test_qos_keep_all_for_lossy_links(harness, tmp_path, ros_context):
 
 
 def _needs_namespaces():
-    from det_sim_ros.netns import can_make_namespaces
+    from det_sim_ros.ros.netns import can_make_namespaces
     why = can_make_namespaces()
     if why:
         pytest.skip(f'{why}: the hosts of this test are network namespaces')
@@ -338,8 +338,8 @@ def test_namespaces_left_by_a_killed_run_are_removed(tmp_path):
     """A run SIGKILLed with its hosts up leaves namespaces behind; the next run removes them
     (and only those of dead processes)."""
     _needs_namespaces()
-    from det_sim_ros.netns import NetnsHosts
-    code = ('import sys, time\nfrom det_sim_ros.netns import NetnsHosts\n'
+    from det_sim_ros.ros.netns import NetnsHosts
+    code = ('import sys, time\nfrom det_sim_ros.ros.netns import NetnsHosts\n'
             'net = NetnsHosts(2).create()\nprint(" ".join(net.hosts + [net.bridge]), flush=True)'
             '\ntime.sleep(600)\n')
     proc = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE, text=True,
@@ -386,7 +386,7 @@ def test_relay_link_delays_and_drops_frames():
     trip takes less than 10 ms, and some of 200 datagrams are not answered (~36 %); the
     direct host answers all."""
     _needs_namespaces()
-    from det_sim_ros.netns import NetnsHosts
+    from det_sim_ros.ros.netns import NetnsHosts
     with NetnsHosts(3, lossy={1: (0.005, 0.2)}) as net:
         results = {}
         for host in (1, 2):

@@ -6,11 +6,11 @@ The initial state (issue 19): 'rest' (the stable buckled equilibrium at 0 V, the
 import numpy as np
 import pytest
 
-from det_sim_ros.scene import load_scene, SceneError
-from det_sim_ros.scenarios import step_scene
-from det_sim_ros.sim_node import rest_shortenings
-from det_sim_ros.simulator import simulate, Simulator
-from det_sim_ros.statics import equilibria, rest_coords, RestStateError
+from det_sim_ros.scenes.scene import load_scene, SceneError
+from det_sim_ros.analysis.scenarios import step_scene
+from det_sim_ros.ros.node import rest_shortenings
+from det_sim_ros.sim.simulator import simulate, Simulator
+from det_sim_ros.physics.statics import equilibria, rest_coords, RestStateError
 
 TOL = 1e-9   # m: the issue's stationarity bound on Delta-y and q - q_B
 
@@ -149,7 +149,7 @@ def test_bad_initial_state_keys_are_one_line_errors():
 
 def test_missing_rest_state_is_refused_with_a_reason(monkeypatch):
     """No stable state on the branch: a one-line RestStateError (a SceneError)."""
-    import det_sim_ros.statics as statics
+    import det_sim_ros.physics.statics as statics
     scene = load_scene('default', {'scene.eps_b': 0.21})
     real = statics._Statics.equilibria
 
@@ -172,8 +172,8 @@ def test_node_starts_and_resets_to_the_initial_state_and_logs_it(tmp_path, harne
     """What the node published (its MCAP log holds every sample): the first 100 ms at 0 V are
     stationary at rest; ~/reset returns to the same initial state (the same samples again);
     the log records it and re-simulates bit for bit."""
-    from det_sim_ros.mcap_log import LogReader
-    from det_sim_ros.replay import resimulate
+    from det_sim_ros.io.mcap_log import LogReader
+    from det_sim_ros.io.replay import resimulate
     h = harness(steps_per_tick=5, **{'log.path': str(tmp_path / 'logs'),
                                      'scene.initial_state': initial_state})
     h.spin_until(lambda: h.node._sim.k >= 110, 'sim time 0.11 s')
@@ -204,9 +204,9 @@ def test_node_starts_and_resets_to_the_initial_state_and_logs_it(tmp_path, harne
 
 def test_log_without_the_key_replays_as_released(tmp_path):
     """Logs written before scene.initial_state existed started released from q0."""
-    from det_sim_ros.mcap_log import Recorder
-    from det_sim_ros.replay import resimulate, simulate_to_log
-    from det_sim_ros.scene import scene_to_dict
+    from det_sim_ros.io.mcap_log import Recorder
+    from det_sim_ros.io.replay import resimulate, simulate_to_log
+    from det_sim_ros.scenes.scene import scene_to_dict
     scene = load_scene('default', {'scene.initial_state': 'released'})
     old = scene_to_dict(scene, wrap=True)
     for key in ('initial_state', 'rest_branch'):

@@ -5,10 +5,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from det_sim_ros import integrators
-from det_sim_ros.model import build_model, ModelDomainError
-from det_sim_ros.scene import load_scene
-from det_sim_ros.simulator import simulate, Simulator
+from det_sim_ros.sim import integrators
+from det_sim_ros.physics.model import build_model, ModelDomainError
+from det_sim_ros.physics.statics import initial_state
+from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.simulator import simulate, Simulator
 
 # the paper's start (q = q0, released): these tests exercise the buckling transient
 RELEASED = {'scene.initial_state': 'released'}
@@ -53,7 +54,7 @@ def _linear_charge_error(method, n_steps):
                                    'source': 'ideal', 'creep': False, 'monitor_power': False,
                                    'eps_b': 0.2, 'rate_hz': 100.0})
     model = build_model(scene)
-    x0 = model.initial_state()
+    x0 = initial_state(model)
     x0[0] = 0.0125
 
     def run(name, n):
@@ -80,13 +81,13 @@ def test_exponential_methods_solve_pure_charge_relaxation_exactly(name):
     scene = load_scene('default', {**RELEASED, 'm': 1e6, 'rho_b': 1e9, 'creep': False,
                                    'monitor_power': False})
     model = build_model(scene)
-    x = model.initial_state()
+    x = initial_state(model)
     h = 1e-3   # ~30 electrical time constants per step
     status = integrators.advance(x, np.array([3000.0]), model,
                                  integrators.get_method(name), h, 1)
     assert status == 0
     p = scene.physics
-    cap = model.outputs(model.initial_state(), [0.0])['C']
+    cap = model.outputs(initial_state(model), [0.0])['C']
     tau = cap * p.Rs * p.Rp / (p.Rs + p.Rp)
     exact = cap * 3000.0 * p.Rp / (p.Rs + p.Rp) * (1 - np.exp(-h / tau))
     assert x[2] == pytest.approx(exact, rel=1e-6)
@@ -136,7 +137,7 @@ def test_auto_step_meets_its_tolerance_on_the_step_scenario():
     stroke = np.ptp(fine['y'])
     assert np.max(np.abs(coarse['y'] - fine['y'])) / stroke <= 1e-6
     # over the whole 'step' scenario (4.5 s, mostly settled) it takes under half those steps
-    from det_sim_ros.scenarios import STEP_END, step_voltage
+    from det_sim_ros.analysis.scenarios import STEP_END, step_voltage
     sim = Simulator(scene)
     simulate(sim, step_voltage(3000.0), STEP_END)
     assert sim.steps_taken < 0.5 * fixed * sim.k
@@ -198,7 +199,7 @@ def test_embedded_error_estimate_has_the_order_of_its_pair(name):
     h^(p+1) with p the embedded order (RK4(3) FSAL pair: h^4; Dormand-Prince 5(4): h^5)."""
     sim = Simulator(load_scene('default', {**RELEASED, 'scene.source': 'ideal'}), method=name)
     method = sim.method
-    x0 = sim.model.initial_state()
+    x0 = initial_state(sim.model)
     x0[0], x0[1] = 4e-3, 0.3          # a buckled beam in motion
     estimates = []
     for h in (2e-5, 1e-5):

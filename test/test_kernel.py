@@ -1,4 +1,4 @@
-"""The compiled kernel against the numpy reference (det_sim_ros/reference.py), to round-off, on
+"""The compiled kernel against the numpy reference (det_sim_ros/physics/reference.py), to round-off, on
 random states of every scene kind; batch stepping per coupled group; named-record input."""
 
 import dataclasses
@@ -7,11 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from det_sim_ros import kernel, reference
-from det_sim_ros.integrators import get_method, make_stepper, METHODS, StepControl
-from det_sim_ros.model import build_model
-from det_sim_ros.scene import load_scene
-from det_sim_ros.simulator import simulate, Simulator
+from det_sim_ros.core import kernel
+from det_sim_ros.physics import reference
+from det_sim_ros.sim.integrators import get_method, make_stepper, METHODS, StepControl
+from det_sim_ros.physics.model import build_model
+from det_sim_ros.physics.statics import initial_state
+from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.simulator import simulate, Simulator
 
 SCENES = {
     'single paper rc creep': ('default', {}),
@@ -37,7 +39,7 @@ def _random_state(model, rng):
     """A buckled beam in motion: q near the rest deflection with every mode excited, a
     velocity, creep strain and a charge near C0 v."""
     a = model.arrays
-    x = model.initial_state()
+    x = initial_state(model)
     for c in range(a.n_cells):
         s = a.cell_slice(c)
         r = s.stop - s.start
@@ -210,10 +212,10 @@ def test_kernel_reads_named_fields_and_checks_them():
 def test_a_failing_period_leaves_the_last_good_state(overrides):
     """Simulator.step() steps x in place; a period that leaves the domain (here the beam ends
     meet, lambda <= 0, within the period) must leave x exactly at the period's start."""
-    from det_sim_ros.model import ModelDomainError
+    from det_sim_ros.physics.model import ModelDomainError
     sim = Simulator(load_scene('default', overrides))
     a = sim.model.arrays
-    x0 = sim.model.initial_state()
+    x0 = initial_state(sim.model)
     # near the end of the domain and moving fast towards it: y -> l within 1 ms
     x0[0] = 0.97 * np.sqrt(a.length[0] / a.c2[0])
     x0[1] = 5000.0 * x0[0]   # (slower: the adaptive stepper finds the beam turns back)

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from det_sim_ros.cli import main
-from det_sim_ros.linearize import LinearizationError, linearize
-from det_sim_ros.scene import load_scene
-from det_sim_ros.simulator import Simulator
-from det_sim_ros.statics import rest_shortening
+from det_sim_ros.cli.det_sim import main
+from det_sim_ros.physics.linearize import LinearizationError, linearize
+from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.simulator import Simulator
+from det_sim_ros.physics.statics import rest_shortening
 
 
 def richardson_jacobian(func, x, scales):

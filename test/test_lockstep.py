@@ -12,12 +12,12 @@ import textwrap
 import numpy as np
 import pytest
 
-from det_sim_ros.contract import OutputContract
-from det_sim_ros.mcap_log import LogReader
-from det_sim_ros.replay import resimulate
-from det_sim_ros.scene import load_scene
-from det_sim_ros.simulator import Simulator
-from det_sim_ros.testing import det_sim  # noqa: F401 - the fixture, as the plugin gives it
+from det_sim_ros.io.contract import OutputContract
+from det_sim_ros.io.mcap_log import LogReader
+from det_sim_ros.io.replay import resimulate
+from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.simulator import Simulator
+from det_sim_ros.ros.testing import det_sim  # noqa: F401 - the fixture, as the plugin gives it
 from conftest import child_env
 
 KP, KI, T_STEP, TARGET = 2.0e4, 6.0e6, 0.6, 2.0e-3   # V/m, V/(m s), s, m
@@ -235,8 +235,8 @@ def test_lockstep_pause_step_reset_and_clock(harness, ros_context):
 
 def test_bad_mode_is_refused(ros_context):
     from rclpy.parameter import Parameter
-    from det_sim_ros.scene import SceneError
-    from det_sim_ros.sim_node import SimNode
+    from det_sim_ros.scenes.scene import SceneError
+    from det_sim_ros.ros.node import SimNode
     with pytest.raises(SceneError, match="mode.*lockstep"):
         SimNode(context=ros_context, parameter_overrides=[Parameter('mode', value='fast')])
 
@@ -271,10 +271,10 @@ def test_readme_example_runs_as_a_plugin(tmp_path):
     readme = open(os.path.join(os.path.dirname(__file__), '..', 'README.md')).read()
     assert README_EXAMPLE.strip() in readme   # the tested code is the documented code
     (tmp_path / 'test_example.py').write_text(README_EXAMPLE)
-    installed = any(e.value == 'det_sim_ros.testing' for e in entry_points(group='pytest11'))
+    installed = any(e.value == 'det_sim_ros.ros.testing' for e in entry_points(group='pytest11'))
     env = child_env()
     proc = subprocess.run([sys.executable, '-m', 'pytest', '-q', '-p', 'no:cacheprovider']
-                          + ([] if installed else ['-p', 'det_sim_ros.testing'])
+                          + ([] if installed else ['-p', 'det_sim_ros.ros.testing'])
                           + [str(tmp_path / 'test_example.py')],
                           capture_output=True, text=True, env=env, cwd=tmp_path, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr

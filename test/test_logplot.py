@@ -6,12 +6,12 @@ import math
 import numpy as np
 import pytest
 
-from det_sim_ros import logplot
-from det_sim_ros.cli import main
-from det_sim_ros.mcap_log import Recorder
-from det_sim_ros.replay import OutputContract, simulate_to_log
-from det_sim_ros.scene import load_scene
-from det_sim_ros.simulator import Simulator
+from det_sim_ros.io import logplot
+from det_sim_ros.cli.det_sim import main
+from det_sim_ros.io.mcap_log import Recorder
+from det_sim_ros.io.replay import OutputContract, simulate_to_log
+from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.simulator import Simulator
 
 
 def make_log(path, scene, commands, n_steps, joint=False):

@@ -6,11 +6,11 @@ node's marker topic (display rate, frames, q at the reference point, MCAP record
 import numpy as np
 import pytest
 
-from det_sim_ros.geometry import ActuatorGeometry
-from det_sim_ros.markers import MARKER_TYPE, MarkerFrames
-from det_sim_ros.mcap_log import deserialize
-from det_sim_ros.scene import load_scene
-from det_sim_ros.simulator import Simulator
+from det_sim_ros.physics.geometry import ActuatorGeometry
+from det_sim_ros.ros.markers import MARKER_TYPE, MarkerFrames
+from det_sim_ros.io.mcap_log import deserialize
+from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.simulator import Simulator
 
 
 def driven(scene, volts, steps=60):
@@ -133,7 +133,7 @@ def test_node_publishes_markers_at_the_display_rate(harness, tmp_path):
             assert ref.pose.position.x == pytest.approx(h.samples['deflection'][t_ns][0],
                                                        rel=1e-12, abs=1e-18)
     h.close()
-    from det_sim_ros.mcap_log import LogReader
+    from det_sim_ros.io.mcap_log import LogReader
     logged = [m for m in LogReader(str(log)).messages() if m.topic == '/markers']
     assert logged and logged[0].type_name == MARKER_TYPE
     # the snap-through moves the beam: every frame of the display grid is in the log
@@ -147,7 +147,7 @@ def test_viewers_get_frames_at_most_twice_per_display_period_of_wall_time():
     at real-time pace viewers get every frame; a frame held back while the beam moved is sent
     once it settles, so a viewer ends with the last shape."""
     import types
-    from det_sim_ros.markers import NodeMarkers
+    from det_sim_ros.ros.markers import NodeMarkers
     sent, logged, now = [], [], [0.0]
     publisher = types.SimpleNamespace(handle=types.SimpleNamespace(publish_raw=sent.append),
                                       get_subscription_count=lambda: 1)
@@ -182,7 +182,7 @@ def test_viewers_get_frames_at_most_twice_per_display_period_of_wall_time():
 def test_frames_that_show_nothing_new_are_not_sent():
     """frame_if_moved: a frame when a coordinate moved by more than MOVE_TOLERANCE, the
     voltage changed, or KEEPALIVE_S passed; otherwise None. What is sent is frame()'s bytes."""
-    from det_sim_ros.markers import KEEPALIVE_NS, MarkerFrames, MOVE_TOLERANCE
+    from det_sim_ros.ros.markers import KEEPALIVE_NS, MarkerFrames, MOVE_TOLERANCE
     sim = Simulator(load_scene('default'))
     frames = MarkerFrames(sim.model)
     x, u = sim.x.copy(), sim.u.copy()
@@ -212,7 +212,7 @@ def test_stacked_cells_give_the_general_paths_frame(name, overrides, volts):
     plate the compiled FrameMap (frames.c) builds the node's frames from it. The stacked map
     draws what the general basis-and-kinematics path draws; the compiled frames are the
     numpy frames' bytes exactly; all three agree on whether a frame moved enough to send."""
-    from det_sim_ros.markers import MOVE_TOLERANCE
+    from det_sim_ros.ros.markers import MOVE_TOLERANCE
     sim = driven(load_scene(name, overrides=overrides), volts, 40)
 
     def paths():
@@ -287,7 +287,7 @@ def test_foxglove_layout_uses_the_nodes_topics():
     import json
     import os
     import re
-    from det_sim_ros.sim_node import OUTPUT_TOPICS
+    from det_sim_ros.ros.node import OUTPUT_TOPICS
     path = os.path.join(os.path.dirname(__file__), '..', 'config', 'foxglove_layout.json')
     with open(path, encoding='utf-8') as stream:
         layout = json.load(stream)

@@ -12,11 +12,11 @@ import pytest
 import yaml
 
 from det_sim_ros import __version__
-from det_sim_ros.mcap_log import (LogReader, message_definition, qos_profiles_yaml, Recorder,
+from det_sim_ros.io.mcap_log import (LogReader, message_definition, qos_profiles_yaml, Recorder,
                                   recover)
-from det_sim_ros.replay import OUTPUT_FIELDS, simulate_to_log
-from det_sim_ros.scene import load_scene, scene_to_dict
-from det_sim_ros.simulator import Simulator
+from det_sim_ros.io.replay import OUTPUT_FIELDS, simulate_to_log
+from det_sim_ros.scenes.scene import load_scene, scene_to_dict
+from det_sim_ros.sim.simulator import Simulator
 from conftest import child_env
 
 N_STEPS = 300
@@ -210,7 +210,7 @@ def test_split_by_size_and_duration(tmp_path):
 CHILD = textwrap.dedent('''
     import sys, time
     from std_msgs.msg import Float64MultiArray
-    from det_sim_ros.mcap_log import Recorder
+    from det_sim_ros.io.mcap_log import Recorder
     recorder = Recorder(sys.argv[1], None, flush_period_s=0.02, background=sys.argv[2] == 'bg')
     flushes = 0
     k = 0
@@ -303,7 +303,7 @@ def test_cdr_serializer_matches_rclpy_and_rosbags():
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Empty, Float64MultiArray
 
-    from det_sim_ros.mcap_log import serialize, type_name_of
+    from det_sim_ros.io.mcap_log import serialize, type_name_of
     store = get_typestore(Stores.ROS2_JAZZY)
     joint = JointState(name=['det0', 'det1'], position=[1.0, -2.5], velocity=[3.0])
     joint.header.stamp.sec, joint.header.frame_id = 7, 'beam'
@@ -334,7 +334,7 @@ def test_torn_file_is_recovered_in_place(tmp_path):
     """A file cut inside a write (power loss): recover_unfinished repairs it in place."""
     from mcap.reader import make_reader
     from std_msgs.msg import Float64MultiArray
-    from det_sim_ros.mcap_log import is_torn, recover_unfinished
+    from det_sim_ros.io.mcap_log import is_torn, recover_unfinished
     path = tmp_path / 'det_sim_torn.mcap'
     recorder = Recorder(path, None, flush_sim_s=0.01)
     for k in range(100):
@@ -385,7 +385,7 @@ def _write_samples(path, fast, background=False, stress=False):
     """500 samples of four topics and a command every 7th. ``stress``: what ends a run of the
     batched writer, often: log times that step back (clamped), a longer payload every 37th
     sample, a flush every 20 us of log time, a new file every 150 us, a writer queue of 5."""
-    from det_sim_ros.contract import encode_float64_multi_array, encode_joint_state, TOPIC_TYPES
+    from det_sim_ros.io.contract import encode_float64_multi_array, encode_joint_state, TOPIC_TYPES
     options = dict(flush_sim_s=2e-5, split_s=1.5e-4, max_queue=5) if stress else {}
     recorder = Recorder(path, load_scene('default'), chunk_size=2048, background=background,
                         flush_period_s=1e9, **options)   # no wall-clock flushes: comparable
@@ -437,7 +437,7 @@ def test_pack_records_is_the_records_of_one_by_one_writes():
     """_ckernel.pack_records: MCAP Message records (opcode 5, length, channel, sequence, log
     and publish time, payload), sequences counting up per sample; it stops before a row of
     other payload sizes and refuses bad arguments."""
-    from det_sim_ros._ckernel import pack_records
+    from det_sim_ros.core._ckernel import pack_records
     rows = [[b'ab', b'xyz'], (b'cd', b'uvw'), [b'e', b'rst']]
     records, count = pack_records((3, 70000 % 65536), [5, 9], [10, 2**40, 2**41], rows,
                                   (2, 3))
@@ -461,7 +461,7 @@ def test_background_queue_stays_bounded_when_the_writer_falls_behind(tmp_path):
     """A free run records faster than the writer thread gets the GIL: past max_queue records
     the recording thread writes the queue itself, so memory and what a SIGKILL could lose stay
     bounded; everything lands, in order."""
-    from det_sim_ros.contract import encode_joint_state, TOPIC_TYPES
+    from det_sim_ros.io.contract import encode_joint_state, TOPIC_TYPES
     recorder = Recorder(tmp_path / 'bounded.mcap', None, background=True, max_queue=8)
     topics = ['deflection', 'displacement']
     longest = 0

@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from det_sim_ros.model import build_model
-from det_sim_ros.scene import load_scene, SceneError
-from det_sim_ros.simulator import simulate, Simulator
+from det_sim_ros.physics.model import build_model
+from det_sim_ros.physics.statics import initial_state
+from det_sim_ros.scenes.scene import load_scene, SceneError
+from det_sim_ros.sim.simulator import simulate, Simulator
 
 # the paper's start (q = q0, released): these tests exercise the buckling transient
 RELEASED = {'scene.initial_state': 'released'}
@@ -49,7 +50,7 @@ def test_plate_rotates_with_one_input_and_the_sign_follows_the_side(active):
 def test_plate_power_balance_closes():
     scene = load_scene('plate', {**RELEASED, 'Rs': 2e4})
     model = build_model(scene)
-    x = model.initial_state()
+    x = initial_state(model)
     H0 = model.outputs(x, [0.0, 0.0])['H']
     u = np.array([2500.0, 800.0])
     scale = np.where(np.char.startswith(np.array(model.state_names), 'q_p'), 1e-5, 1e-3)
@@ -117,7 +118,7 @@ def test_yaml_text_numbers_in_det_overrides_are_caught():
 
 
 def _default_dict():
-    from det_sim_ros.scene import scene_to_dict
+    from det_sim_ros.scenes.scene import scene_to_dict
     return scene_to_dict(load_scene('default', RELEASED))
 
 

@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from det_sim_ros.model import build_model, ModelDomainError
-from det_sim_ros.scene import EPS0, load_scene, SceneError
-from det_sim_ros.shapes import make_basis, ritz_coefficients
+from det_sim_ros.physics.model import build_model, ModelDomainError
+from det_sim_ros.physics.statics import initial_state
+from det_sim_ros.scenes.scene import EPS0, load_scene, SceneError
+from det_sim_ros.physics.shapes import make_basis, ritz_coefficients
 
 # the paper's start (q = q0, released): these tests exercise the buckling transient
 RELEASED = {'scene.initial_state': 'released'}
@@ -127,7 +128,7 @@ def test_power_balance_closes_with_losses(source):
     scene = load_scene('default', {**RELEASED,
                                    'source': source, 'Rs': 2e4 if source == 'rc' else 2e3})
     model = build_model(scene)
-    x0 = model.initial_state()
+    x0 = initial_state(model)
     x0[0] = 0.013
     H0 = model.outputs(x0, [0.0])['H']
     # charge phase then free motion: both supplied and dissipated energy are non-trivial
@@ -159,7 +160,7 @@ def test_ideal_source_is_the_small_rs_limit():
 
 
 def test_no_creep_is_the_zero_maxwell_modulus_limit():
-    from det_sim_ros.simulator import simulate
+    from det_sim_ros.sim.simulator import simulate
     no_creep = simulate(load_scene('default', {**RELEASED,
                                                'creep': False}), lambda t: 3000.0 * (t > 0.05),
                         0.2)
@@ -174,7 +175,7 @@ def test_no_creep_is_the_zero_maxwell_modulus_limit():
 
 def test_domain_error_names_the_stretch():
     model = build_model(load_scene('default', RELEASED))
-    x = model.initial_state()
+    x = initial_state(model)
     x[0] = 1.0   # y = c2 q^2 far beyond the beam length
     with pytest.raises(ModelDomainError, match='lambda'):
         model.f(0, x, [0.0])
@@ -201,7 +202,7 @@ def test_bad_parameters_are_refused_with_the_key(overrides, message):
 
 
 def test_missing_key_and_malformed_yaml(tmp_path):
-    from det_sim_ros.scene import scene_to_dict
+    from det_sim_ros.scenes.scene import scene_to_dict
     data = scene_to_dict(load_scene('default', RELEASED))
     del data['physics']['Rp']
     with pytest.raises(SceneError, match=r"physics.'Rp'.*missing"):

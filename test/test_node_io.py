@@ -9,10 +9,10 @@ Real-time pacing is driven by a fake wall clock (``node.wall_clock``): no wall-c
 import numpy as np
 import pytest
 
-from det_sim_ros.contract import decode_joint_state, OUTPUT_FIELDS
-from det_sim_ros.mcap_log import LogReader
-from det_sim_ros.replay import resimulate
-from det_sim_ros.simulator import Simulator
+from det_sim_ros.io.contract import decode_joint_state, OUTPUT_FIELDS
+from det_sim_ros.io.mcap_log import LogReader
+from det_sim_ros.io.replay import resimulate
+from det_sim_ros.sim.simulator import Simulator
 
 from conftest import WALL_TIMEOUT
 

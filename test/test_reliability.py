@@ -24,10 +24,11 @@ import time
 
 import pytest
 
-from det_sim_ros.mcap_log import is_torn, LogReader
-from det_sim_ros.scene import (INTEGRATOR_SPEC, load_scene, PHYSICS_SPEC, SCENE_SPEC,
+from det_sim_ros.io.mcap_log import is_torn, LogReader
+from det_sim_ros.scenes.scene import (INTEGRATOR_SPEC, load_scene, PHYSICS_SPEC, SCENE_SPEC,
                                scene_to_dict, STRUCTURE_SPEC)
-from det_sim_ros.sim_node import main, NODE_PARAMS
+from det_sim_ros.ros.node import main
+from det_sim_ros.ros.params import NODE_PARAMS
 from conftest import child_env
 
 FULL = os.environ.get('DET_SIM_RELIABILITY', '') == 'full'
@@ -80,7 +81,7 @@ class Run:
 def start_node(tmp, name, *params):
     log_dir = os.path.join(tmp, name)
     out = os.path.join(tmp, name + '.txt')
-    args = [sys.executable, '-m', 'det_sim_ros.sim_node', '--ros-args',
+    args = [sys.executable, '-m', 'det_sim_ros.cli.sim_node', '--ros-args',
             '-r', f'__ns:=/{name}', '-p', f'log.path:={log_dir}', '-p', 'info_period:=0.0']
     for p in params:
         args += ['-p', p]
@@ -373,7 +374,7 @@ def test_bad_startup_inputs_as_processes(tmp_path):
     def run(row):
         key, value, _ = row
         arg = _as_parameter(key, value)
-        proc = subprocess.run([sys.executable, '-m', 'det_sim_ros.sim_node', '--ros-args',
+        proc = subprocess.run([sys.executable, '-m', 'det_sim_ros.cli.sim_node', '--ros-args',
                                *_quiet(key), '-p', arg], capture_output=True,
                               text=True, timeout=WALL_LIMIT, env=_env())
         return row, proc.returncode, (proc.stdout + proc.stderr).strip()
@@ -390,7 +391,7 @@ def test_integer_for_a_double_parameter_is_accepted(capfd):
     from rclpy.context import Context
     from rclpy.parameter import Parameter
 
-    from det_sim_ros.sim_node import SimNode
+    from det_sim_ros.ros.node import SimNode
     context = Context()
     rclpy.init(context=context)
     try:
@@ -408,7 +409,7 @@ def test_node_repairs_a_torn_log_in_its_directory_at_start(tmp_path, harness):
     """A log cut inside a write (power loss): the next start in that directory repairs it."""
     from std_msgs.msg import Float64MultiArray
 
-    from det_sim_ros.mcap_log import Recorder
+    from det_sim_ros.io.mcap_log import Recorder
     folder = tmp_path / 'logs'
     torn = folder / 'det_sim_20260101-000000_1.mcap'
     recorder = Recorder(torn, None, flush_sim_s=0.01)

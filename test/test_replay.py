@@ -4,10 +4,10 @@ import threading
 
 import pytest
 
-from det_sim_ros.mcap_log import LogReader, Recorder
-from det_sim_ros.replay import main, OUTPUT_FIELDS, play, resimulate, simulate_to_log
-from det_sim_ros.scene import load_scene
-from det_sim_ros.simulator import Simulator
+from det_sim_ros.io.mcap_log import LogReader, Recorder
+from det_sim_ros.io.replay import main, OUTPUT_FIELDS, play, resimulate, simulate_to_log
+from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.simulator import Simulator
 
 N_STEPS = 400
 
@@ -271,9 +271,9 @@ def test_node_plate_log_resimulates_bit_for_bit(tmp_path, harness):
 
 
 def test_command_decoding_refuses_repeated_and_empty_names():
-    """Resim reads joint commands as the node does (both decode with det_sim_ros.contract): a
+    """Resim reads joint commands as the node does (both decode with det_sim_ros.io.contract): a
     repeated or empty name list is refused."""
-    from det_sim_ros.contract import CommandDecoder, encode_joint_state
+    from det_sim_ros.io.contract import CommandDecoder, encode_joint_state
     decoder = CommandDecoder(['left', 'right'], 3000.0)
     held = [1.0, 2.0]
 

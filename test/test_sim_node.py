@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 
-from det_sim_ros.scene import load_scene, SceneError
-from det_sim_ros.sim_node import _rest_shortening, SimNode
-from det_sim_ros.simulator import Simulator
+from det_sim_ros.scenes.scene import load_scene, SceneError
+from det_sim_ros.ros.node import _rest_shortening, SimNode
+from det_sim_ros.sim.simulator import Simulator
 
 MS = 1_000_000  # ns
 
@@ -260,7 +260,7 @@ def test_log_compression_parameter(harness, tmp_path, compression):
     """log.compression picks the MCAP chunk compression; the log reads back and re-simulates
     bit for bit."""
     from mcap.reader import make_reader
-    from det_sim_ros.replay import resimulate
+    from det_sim_ros.io.replay import resimulate
     h = harness(steps_per_tick=5, **{'log.path': str(tmp_path / 'run.mcap'),
                                      'log.compression': compression})
     h.command([2000.0])
@@ -299,7 +299,7 @@ def test_malformed_scene_exits_with_one_line(tmp_path):
     text = open(os.path.join(os.path.dirname(__file__), '..', 'config', 'default.yaml')).read()
     bad.write_text(text.replace('Rs: 2.0e+3', 'Rs: -2.0e+3'))
     proc = subprocess.run(
-        [sys.executable, '-m', 'det_sim_ros.sim_node', '--ros-args', '-p',
+        [sys.executable, '-m', 'det_sim_ros.cli.sim_node', '--ros-args', '-p',
          f'scene_file:={bad}'], capture_output=True, text=True, timeout=120)
     output = (proc.stdout + proc.stderr).strip()
     assert proc.returncode != 0
@@ -465,7 +465,7 @@ def test_implausible_physics_is_flagged_on_diagnostics(harness):
     """Issue 17: v_max = 1e5 V driven at 1e5 V: the power-balance residual leaves its bound,
     /diagnostics says WARN with the cause (not OK); nothing non-finite is published."""
     from diagnostic_msgs.msg import DiagnosticStatus
-    from det_sim_ros.simulator import POWER_RESIDUAL_LIMIT
+    from det_sim_ros.sim.simulator import POWER_RESIDUAL_LIMIT
     h = harness(diagnostics_period=0.05, **{'physics.v_max': 1.0e5,
                                             'scene.initial_state': 'released'})
     logged, logger = [], h.node.get_logger()

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from det_sim_ros import statics
-from det_sim_ros.scene import load_scene
-from det_sim_ros.simulator import simulate
+from det_sim_ros.physics import statics
+from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.simulator import simulate
 
 BEAMS = ('simply_supported', 'fixed')
 V_MAX = 3000.0
@@ -193,7 +193,7 @@ def test_brentq_finds_the_roots_scipy_finds():
     """statics.brentq (written out to keep scipy.optimize out of a node's start) is Brent's
     method with scipy's steps and stopping rule: the same roots, to the last bit."""
     from scipy.optimize import brentq as scipy_brentq
-    from det_sim_ros.statics import brentq
+    from det_sim_ros.physics.statics import brentq
     cases = [(lambda x: x ** 3 - 2 * x - 5, 2.0, 3.0), (np.cos, 0.0, 3.0),
              (lambda x: np.tanh(40 * (x - 0.3)) + 1e-3 * x, -1.0, 2.0),
              (lambda x: np.exp(x) - 1e6, 0.0, 30.0)]

@@ -1,0 +1,2 @@
+"""Studies on top of the simulator: the elastica, fidelity against it, the paper's scenarios and
+the benchmarks behind ``det_sim bench``."""

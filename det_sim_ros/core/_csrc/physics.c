@@ -1,0 +1,564 @@
+/*
+ * The DET-beam physics: right-hand side, stiff rates, outputs (see det_sim_ros/physics/model.py for the
+ * derivation from energies and virtual works, and det_sim_ros/physics/reference.py for the same
+ * equations in readable numpy, which the tests hold this code to).
+ *
+ * State layout: q (n_q), qdot (n_q), eps_E (n_cells, if creep), q_p (n_cells, if RC source),
+ * then the supplied and dissipated energy (2, if the power monitor is on).
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "detsim.h"
+
+int64_t ds_work_size(const ds_model *m)
+{
+    const int64_t nc = m->n_cells, nq = m->n_q;
+    return 2 * nc + 2 * nq + nq * m->mass_block + 2 * nc + m->n_state + 1;
+}
+
+/* Lay the scratch out in ``buf`` (ds_work_size doubles, owned by the caller). */
+void ds_work_attach(ds_work *w, const ds_model *m, double *buf)
+{
+    const int64_t nc = m->n_cells, nq = m->n_q;
+    memset(w, 0, sizeof(*w));
+    w->y = buf;
+    w->h = w->y + nc;
+    w->J = w->h + nc;
+    w->F = w->J + nq;
+    w->Mt = w->F + nq;
+    w->Us4 = w->Mt + nq * m->mass_block;
+    w->ydot = w->Us4 + nc;
+    w->dx = w->ydot + nc;
+}
+
+int ds_work_init(ds_work *w, const ds_model *m)
+{
+    double *buf = calloc((size_t)ds_work_size(m), sizeof(double));
+    if (!buf)
+        return -1;
+    ds_work_attach(w, m, buf);
+    w->owned = 1;
+    return 0;
+}
+
+void ds_work_free(ds_work *w)
+{
+    if (w->owned)
+        free(w->y);
+    w->y = NULL;
+    w->owned = 0;
+}
+
+int64_t ds_n_outputs(const ds_model *m)
+{
+    return m->n_cells * DS_CELL_OUTPUTS + m->n_structure + 3;
+}
+
+/* y = c2 q^2 + kappa c4 q^4 of a one-term cell (paper/consistent kinematics). */
+static inline double one_term_shortening(const ds_cell *cell, double q)
+{
+    const double c2 = cell->c2, c4 = cell->kappa * cell->c4, q2 = q * q;
+    return c2 * q2 + c4 * q2 * q2;
+}
+
+/*
+ * End shortening y_c, its gradient J = dy/dq, qd' H_y qd per cell and, with ``with_bending``,
+ * the bending energy beyond EI int w''^2 (Us4), from q = x[:n_q], qd = x[n_q:2 n_q].
+ *
+ * paper/consistent: y = int w'^2/2 + kappa w'^4/8; exact: sin(theta) = w', y = int 1 - cos theta,
+ * bending beyond EI int w''^2 is EI int w''^2 w'^2 / (1 - w'^2) (curvature^2 = w''^2/(1 - w'^2));
+ * |w'| >= 1 gives NaN, which the callers report as a slope domain error.
+ */
+void ds_kinematics(const ds_model *m, const double *x, ds_work *w, int with_bending)
+{
+    const int64_t nq = m->n_q, R = m->r_max;
+    const double *qd = x + nq;
+    for (int64_t c = 0; c < m->n_cells; c++) {
+        const ds_cell *cell = &m->cell[c];
+        const int64_t o = cell->q0, r = cell->nr;
+        const int exact = cell->kinematics == KIN_EXACT;
+        if (r == 1 && !exact) {   /* one term: polynomials in q, ~5x cheaper than quadrature */
+            const double c2 = cell->c2, c4 = cell->kappa * cell->c4;
+            const double qc = x[o], q2 = qc * qc;
+            w->y[c] = one_term_shortening(cell, qc);
+            w->J[o] = 2.0 * c2 * qc + 4.0 * c4 * q2 * qc;
+            w->h[c] = (2.0 * c2 + 12.0 * c4 * q2) * qd[o] * qd[o];
+            if (with_bending)
+                w->Us4[c] = cell->e4 * q2 * q2;
+            continue;
+        }
+        double yc = 0.0, hc = 0.0, u4 = 0.0;
+        for (int64_t j = 0; j < r; j++)
+            w->J[o + j] = 0.0;
+        for (int64_t g = cell->g0; g < cell->g1; g++) {
+            const double *b1 = m->B1 + g * R, *b2 = m->B2 + g * R;
+            double wp = 0.0, wd = 0.0, gy;
+            for (int64_t j = 0; j < r; j++) {
+                wp += b1[j] * x[o + j];
+                wd += b1[j] * qd[o + j];
+            }
+            const double wg = m->W[g], wp2 = wp * wp;
+            if (exact) {
+                const double cos2 = 1.0 - wp2, cs = sqrt(cos2);
+                yc += wg * (1.0 - cs);
+                hc += wg * wd * wd / (cos2 * cs);
+                gy = wg * wp / cs;
+            } else {
+                yc += wg * (0.5 * wp2 + 0.125 * cell->kappa * wp2 * wp2);
+                hc += wg * (1.0 + 1.5 * cell->kappa * wp2) * wd * wd;
+                gy = wg * (wp + 0.5 * cell->kappa * wp2 * wp);
+            }
+            for (int64_t j = 0; j < r; j++)
+                w->J[o + j] += gy * b1[j];
+            if (with_bending) {
+                double wpp = 0.0;
+                for (int64_t j = 0; j < r; j++)
+                    wpp += b2[j] * x[o + j];
+                u4 += cell->EI * wg * wpp * wpp * (exact ? wp2 / (1.0 - wp2) : wp2);
+            }
+        }
+        w->y[c] = yc;
+        w->h[c] = hc;
+        if (with_bending)
+            w->Us4[c] = u4;
+    }
+}
+
+/* F -= gradient of the bending energy beyond EI int w''^2: EI int w''^2 g, g = w'^2 (eq 51) or,
+ * exact, g = w'^2 / (1 - w'^2). */
+static void quartic_force(const ds_model *m, const double *x, double *F)
+{
+    const int64_t R = m->r_max;
+    for (int64_t c = 0; c < m->n_cells; c++) {
+        const ds_cell *cell = &m->cell[c];
+        const int64_t o = cell->q0, r = cell->nr;
+        const int exact = cell->kinematics == KIN_EXACT;
+        if (r == 1 && !exact) {
+            F[o] -= 4.0 * cell->e4 * x[o] * x[o] * x[o];
+            continue;
+        }
+        const double EI2 = 2.0 * cell->EI;
+        for (int64_t g = cell->g0; g < cell->g1; g++) {
+            const double *b1 = m->B1 + g * R, *b2 = m->B2 + g * R;
+            double wp = 0.0, wpp = 0.0, s1, s2;
+            for (int64_t j = 0; j < r; j++) {
+                wp += b1[j] * x[o + j];
+                wpp += b2[j] * x[o + j];
+            }
+            if (exact) {
+                const double cos2 = 1.0 - wp * wp;
+                s1 = EI2 * m->W[g] * wpp * wpp * wp / (cos2 * cos2);
+                s2 = EI2 * m->W[g] * wpp * wp * wp / cos2;
+            } else {
+                s1 = EI2 * m->W[g] * wpp * wpp * wp;
+                s2 = EI2 * m->W[g] * wpp * wp * wp;
+            }
+            for (int64_t j = 0; j < r; j++)
+                F[o + j] -= s1 * b1[j] + s2 * b2[j];
+        }
+    }
+}
+
+/* Solve Mt out = F for a small symmetric positive definite block (rows of stride ``ld``),
+ * Cholesky in place. */
+static void solve_spd(double *Mt, int64_t ld, const double *F, double *out, int64_t n)
+{
+    if (n == 1) {
+        out[0] = F[0] / Mt[0];
+        return;
+    }
+    for (int64_t j = 0; j < n; j++) {
+        double s = Mt[j * ld + j];
+        for (int64_t k = 0; k < j; k++)
+            s -= Mt[j * ld + k] * Mt[j * ld + k];
+        const double d = sqrt(s);
+        Mt[j * ld + j] = d;
+        for (int64_t i = j + 1; i < n; i++) {
+            double t = Mt[i * ld + j];
+            for (int64_t k = 0; k < j; k++)
+                t -= Mt[i * ld + k] * Mt[j * ld + k];
+            Mt[i * ld + j] = t / d;
+        }
+    }
+    for (int64_t i = 0; i < n; i++) {
+        double s = F[i];
+        for (int64_t k = 0; k < i; k++)
+            s -= Mt[i * ld + k] * out[k];
+        out[i] = s / Mt[i * ld + i];
+    }
+    for (int64_t i = n - 1; i >= 0; i--) {
+        double s = out[i];
+        for (int64_t k = i + 1; k < n; k++)
+            s -= Mt[k * ld + i] * out[k];
+        out[i] = s / Mt[i * ld + i];
+    }
+}
+
+/*
+ * ds_rhs for a model of one one-term cell (the default scene, and each copy of an array when
+ * it steps as its own group): the same operations in the same order as the general code below
+ * (so the same bits), with everything in registers instead of the scratch arrays. About half
+ * the cost of the general path, which loops over cells, terms and mass entries.
+ */
+static int rhs_one_term(const ds_model *m, const double *x, const double *u, double *dx,
+                        ds_work *w, int quasi_static)
+{
+    const ds_cell *cell = &m->cell[0];
+    const ds_det *d = &m->det[0];
+    const double q = x[0], qd = x[1], q2 = q * q;
+    const double c2 = cell->c2, c4 = cell->kappa * cell->c4;
+    const double y = one_term_shortening(cell, q);
+    const double J = 2.0 * c2 * q + 4.0 * c4 * q2 * q;
+    const double hq = (2.0 * c2 + 12.0 * c4 * q2) * qd * qd;
+    const double dq = m->D[0] * qd;
+    double F = -(m->K[0] * q) - dq;
+    double p_diss = qd * dq;
+    F -= 4.0 * cell->e4 * q * q * q;
+    double Mt = m->Mb[0];
+    for (int64_t e = 0; e < m->n_mi; e++) {   /* at most one entry: MI[0, 0] */
+        F -= m->mi_val[e] * J * hq;
+        Mt += m->mi_val[e] * J * J;
+    }
+    w->y[0] = y;
+    const double lam = (cell->length - y) * d->inv_l0;
+    if (!(lam > 0.0))
+        return lam == lam ? DS_BAD_STRETCH : DS_BAD_SLOPE;
+    const double inv_lam = 1.0 / lam, inv_lam2 = inv_lam * inv_lam;
+    const double v = u[0];
+    double vp, bracket;
+    if (m->rc_source) {
+        double qp = x[m->i_qp];
+        if (quasi_static)
+            qp += d->C0 * lam * lam * v * d->share;
+        vp = qp * d->inv_C0 * inv_lam2;
+        bracket = d->VY / 3.0 * (lam - inv_lam2 * inv_lam) - qp * vp * inv_lam;
+    } else {
+        vp = v;
+        bracket = d->VY / 3.0 * (lam - inv_lam2 * inv_lam) - d->C0 * lam * vp * vp;
+    }
+    const double jqd = 0.0 + J * qd;
+    const double lzd = jqd * d->inv_l0 * inv_lam2;
+    const double eps = m->creep ? x[m->i_eps] : 0.0;
+    const double visc = d->volume * (d->E_M * eps + d->eta_v * lzd);
+    const double coef = (bracket - visc * inv_lam2) * d->inv_l0;
+    F += coef * J;
+    if (m->creep)
+        dx[m->i_eps] = lzd - d->relax_M * eps;
+    double i_de, p_in = 0.0;
+    if (m->rc_source) {
+        i_de = (v - vp) * d->inv_Rs;
+        dx[m->i_qp] = v * d->inv_Rs - (d->inv_Rs + d->inv_Rp) * vp;
+        if (quasi_static)
+            dx[m->i_qp] += 2.0 * d->C0 * lam * jqd * d->inv_l0 * v * d->share;
+        p_diss += (v - vp) * i_de;
+    } else {
+        i_de = -2.0 * d->C0 * lam * jqd * d->inv_l0 * vp + vp * d->inv_Rp;
+    }
+    p_in += v * i_de;
+    p_diss += vp * vp * d->inv_Rp + d->volume * d->eta_v * lzd * lzd;
+    if (m->creep)
+        p_diss += d->volume * d->E_M * d->relax_M * eps * eps;
+    dx[1] = F / Mt;
+    dx[0] = qd;
+    w->p_in = p_in;
+    w->p_diss = p_diss;
+    if (m->power) {   /* quasi-static: the rate of W_in - v q_p (see ds_shift_charge) */
+        dx[m->i_power] = quasi_static && m->rc_source ? v * vp * d->inv_Rp : p_in;
+        dx[m->i_power + 1] = p_diss;
+    }
+    return DS_OK;
+}
+
+/* ds_rhs for any model: cells of any number of Ritz terms, coupled groups, the exact kinematics
+ * (kept out of line: its register saves and set-up would otherwise run on every one-term call). */
+static int __attribute__((noinline))
+rhs_general(const ds_model *m, const double *x, const double *u, double *dx, ds_work *w,
+            int quasi_static)
+{
+    const int64_t nq = m->n_q, nc = m->n_cells, R = m->r_max, ld = m->mass_block;
+    const double *qd = x + nq;
+    double *F = w->F, *J = w->J, *Mt = w->Mt;
+    ds_kinematics(m, x, w, 0);
+    double p_diss = 0.0;
+    for (int64_t c = 0; c < nc; c++) {   /* cell blocks of K, D and Mb */
+        const ds_cell *cell = &m->cell[c];
+        const int64_t o = cell->q0, r = cell->nr, col = cell->mass_col;
+        const int64_t size = m->group_q[cell->group + 1] - m->group_q[cell->group];
+        for (int64_t i = o; i < o + r; i++) {
+            double s = 0.0, dq = 0.0;
+            for (int64_t k = 0; k < r; k++) {
+                s += m->K[i * R + k] * x[o + k];
+                dq += m->D[i * R + k] * qd[o + k];
+            }
+            F[i] = -s - dq;
+            p_diss += qd[i] * dq;
+        }
+        for (int64_t i = o; i < o + r; i++) {
+            for (int64_t k = 0; k < size; k++)
+                Mt[i * ld + k] = 0.0;
+            for (int64_t k = 0; k < r; k++)
+                Mt[i * ld + col + k] = m->Mb[i * R + k];
+        }
+    }
+    quartic_force(m, x, F);
+    /* Interface mass on the end shortenings: T_I = 1/2 ydot' MI ydot with ydot_c = J_c . qdot */
+    for (int64_t e = 0; e < m->n_mi; e++) {
+        const int64_t c = m->mi_row[e], c2 = m->mi_col[e];
+        const double mi = m->mi_val[e];
+        const int64_t go = m->group_q[m->cell[c].group];
+        const ds_cell *a = &m->cell[c], *b = &m->cell[c2];
+        for (int64_t j = a->q0; j < a->q0 + a->nr; j++) {
+            F[j] -= mi * J[j] * w->h[c2];
+            for (int64_t k = b->q0; k < b->q0 + b->nr; k++)
+                Mt[j * ld + k - go] += mi * J[j] * J[k];
+        }
+    }
+    double p_in = 0.0, p_leak_in = 0.0;   /* p_leak_in: v v_p / Rp summed */
+    int status = DS_OK;
+    for (int64_t i = 0; i < nc; i++) {
+        const ds_det *d = &m->det[i];
+        const ds_cell *cell = &m->cell[i];
+        const double lam = (cell->length - w->y[i]) * d->inv_l0;
+        if (!(lam > 0.0)) {   /* NaN: exact kinematics past |w'| = 1 (states are finite) */
+            status = lam == lam ? DS_BAD_STRETCH : DS_BAD_SLOPE;
+            break;
+        }
+        const double inv_lam = 1.0 / lam, inv_lam2 = inv_lam * inv_lam;
+        double vp, bracket;
+        /* dU_DE/dlambda without the sign of dlambda/dq = -J/l0 (eq 53, corrected eq 71) */
+        if (m->rc_source) {
+            double qp = x[m->i_qp + i];
+            if (quasi_static)
+                qp += d->C0 * lam * lam * u[i] * d->share;
+            vp = qp * d->inv_C0 * inv_lam2;
+            bracket = d->VY / 3.0 * (lam - inv_lam2 * inv_lam) - qp * vp * inv_lam;
+        } else {
+            vp = u[i];
+            bracket = d->VY / 3.0 * (lam - inv_lam2 * inv_lam) - d->C0 * lam * vp * vp;
+        }
+        double jqd = 0.0;
+        for (int64_t j = cell->q0; j < cell->q0 + cell->nr; j++)
+            jqd += J[j] * qd[j];
+        const double lzd = jqd * d->inv_l0 * inv_lam2;   /* d(lambda_z)/dt, lambda_z = 1/lambda */
+        const double eps = m->creep ? x[m->i_eps + i] : 0.0;
+        /* Maxwell spring + Kelvin-Voigt stress (eq 67) */
+        const double visc = d->volume * (d->E_M * eps + d->eta_v * lzd);
+        const double coef = (bracket - visc * inv_lam2) * d->inv_l0;
+        for (int64_t j = cell->q0; j < cell->q0 + cell->nr; j++)
+            F[j] += coef * J[j];
+        if (m->creep)
+            dx[m->i_eps + i] = lzd - d->relax_M * eps;
+        double i_de;
+        if (m->rc_source) {
+            i_de = (u[i] - vp) * d->inv_Rs;
+            dx[m->i_qp + i] = u[i] * d->inv_Rs - (d->inv_Rs + d->inv_Rp) * vp;
+            if (quasi_static)   /* minus d(C v_inf)/dt, dC/dt = 2 C0 lam dlam/dt */
+                dx[m->i_qp + i] += 2.0 * d->C0 * lam * jqd * d->inv_l0 * u[i] * d->share;
+            p_diss += (u[i] - vp) * i_de;
+        } else {
+            /* q_p = C0 lam^2 v: i = dq_p/dt + v/Rp with dlambda/dt = -J.qdot / l0 */
+            i_de = -2.0 * d->C0 * lam * jqd * d->inv_l0 * vp + vp * d->inv_Rp;
+        }
+        p_in += u[i] * i_de;
+        p_leak_in += u[i] * vp * d->inv_Rp;
+        p_diss += vp * vp * d->inv_Rp + d->volume * d->eta_v * lzd * lzd;
+        if (m->creep)
+            p_diss += d->volume * d->E_M * d->relax_M * eps * eps;
+    }
+    if (nq == 1) {
+        dx[1] = F[0] / Mt[0];
+    } else {
+        for (int64_t g = 0; g < m->n_groups; g++) {
+            const int64_t a = m->group_q[g], b = m->group_q[g + 1];
+            solve_spd(Mt + a * ld, ld, F + a, dx + nq + a, b - a);
+        }
+    }
+    for (int64_t i = 0; i < nq; i++)
+        dx[i] = qd[i];
+    w->p_in = p_in;
+    w->p_diss = p_diss;
+    if (m->power) {   /* quasi-static: the rate of W_in - v q_p (see ds_shift_charge) */
+        dx[m->i_power] = quasi_static && m->rc_source ? p_leak_in : p_in;
+        dx[m->i_power + 1] = p_diss;
+    }
+    return status;
+}
+
+/*
+ * dx = f(x, u); returns a status code. Finiteness of x is checked once per step by the callers.
+ *
+ * With ``quasi_static`` the charge slots hold z = q_p - C(q) v_inf (v_inf = v Rp/(Rs+Rp), the
+ * charge the circuit relaxes to for frozen q) and receive dz/dt (see stepping.c), and the
+ * supplied-energy slot receives the rate of W_in - v q_p, v v_p / Rp (see ds_shift_charge).
+ * w->p_in, w->p_diss receive the supplied and dissipated power (W) either way.
+ */
+int ds_rhs(const ds_model *m, const double *x, const double *u, double *dx, ds_work *w,
+           int quasi_static)
+{
+    if (m->one_term)
+        return rhs_one_term(m, x, u, dx, w, quasi_static);
+    return rhs_general(m, x, u, dx, w, quasi_static);
+}
+
+/* Diagonal linear part for exponential steppers: dq_p/dt = -q_p/(C Rs||Rp) + ...; all zero
+ * unless ``enabled`` (an exponential method on an RC scene). Returns a status code. */
+int ds_stiff_rates(const ds_model *m, const double *x, double *L, ds_work *w, int enabled)
+{
+    for (int64_t k = 0; k < m->n_state; k++)
+        L[k] = 0.0;
+    if (!enabled || !m->rc_source)
+        return DS_OK;
+    if (m->one_term)   /* once per step: only y is needed, not the whole kinematics */
+        w->y[0] = one_term_shortening(&m->cell[0], x[0]);
+    else
+        ds_kinematics(m, x, w, 0);
+    for (int64_t i = 0; i < m->n_cells; i++) {
+        const ds_det *d = &m->det[i];
+        const double lam = (m->cell[i].length - w->y[i]) / d->l0;
+        if (!(lam > 0.0))
+            return lam == lam ? DS_BAD_STRETCH : DS_BAD_SLOPE;
+        L[m->i_qp + i] = -(d->inv_Rs + d->inv_Rp) * d->inv_C0 / (lam * lam);
+    }
+    return DS_OK;
+}
+
+/* DET stretches lambda_c = (l_c - y_c(q)) / l0_c. */
+void ds_stretches(const ds_model *m, const double *x, ds_work *w, double *lam)
+{
+    ds_kinematics(m, x, w, 0);
+    for (int64_t i = 0; i < m->n_cells; i++)
+        lam[i] = (m->cell[i].length - w->y[i]) / m->det[i].l0;
+}
+
+/*
+ * q_p += sign * C(q) v_inf: to (sign -1) and from (+1) the quasi-static charge coordinates z.
+ * With the power monitor, also W_in -= v q_p on the way in and += on the way out: in between,
+ * the stages integrate xi = W_in - v q_p, whose rate v v_p / Rp (v held) is as smooth as the
+ * mechanics, instead of the supplied power v i, whose charging current follows every input
+ * jump on the charge time scale (~30 us). The supplied energy v dq_p then comes exactly from
+ * the charge the exponential stages integrate: under a controller's new voltage every period
+ * the quadrature of v i had put a 1.4e-3 relative error into W_in after 3 s at tolerance 1e-6
+ * (the state 1e-9), and the power balance had flagged a run whose outputs were right.
+ */
+void ds_shift_charge(const ds_model *m, double *x, const double *u, double sign, ds_work *w)
+{
+    ds_kinematics(m, x, w, 0);
+    double work_in = 0.0, work_out = 0.0;   /* v q_p before the shift, after it */
+    for (int64_t i = 0; i < m->n_cells; i++) {
+        const ds_det *d = &m->det[i];
+        const double lam = (m->cell[i].length - w->y[i]) / d->l0;
+        work_in += u[i] * x[m->i_qp + i];
+        x[m->i_qp + i] += sign * d->C0 * lam * lam * u[i] * d->share;
+        work_out += u[i] * x[m->i_qp + i];
+    }
+    if (m->power)
+        x[m->i_power] += sign < 0.0 ? -work_in : work_out;
+}
+
+/*
+ * Ideal source with the power monitor: book an instantaneous recharge (in place). A voltage
+ * step moves the charge C dv at once: the source supplies v_new C dv and the vanishing series
+ * resistance dissipates C dv^2 / 2 (the R -> 0 limit of the RC charging loss).
+ */
+void ds_book_input_jump(const ds_model *m, double *x, const double *u_old, const double *u_new,
+                        ds_work *w)
+{
+    if (m->rc_source || !m->power)
+        return;
+    int jump = 0;
+    for (int64_t i = 0; i < m->n_cells; i++)
+        jump |= u_new[i] != u_old[i];
+    if (!jump)
+        return;
+    ds_kinematics(m, x, w, 0);
+    for (int64_t i = 0; i < m->n_cells; i++) {
+        const double lam = (m->cell[i].length - w->y[i]) / m->det[i].l0;
+        const double cap = m->det[i].C0 * lam * lam, dv = u_new[i] - u_old[i];
+        x[m->i_power] += u_new[i] * cap * dv;
+        x[m->i_power + 1] += 0.5 * cap * dv * dv;
+    }
+}
+
+/*
+ * The named outputs (det_sim_ros.physics.model.output_names); returns a status code.
+ * Per cell: q_ref, qdot_ref, y, lambda, q_p, v_p, i_DE, C, eps_E; then the structure outputs
+ * (rows of P applied to y), H, P_in, P_diss.
+ */
+int ds_outputs(const ds_model *m, const double *x, const double *u, double *out, ds_work *w)
+{
+    const int64_t nq = m->n_q, nc = m->n_cells, R = m->r_max;
+    const double *qd = x + nq;
+    int status = DS_OK;
+    for (int64_t k = 0; k < m->n_state; k++)
+        if (!isfinite(x[k]))
+            status = DS_NON_FINITE;
+    const int rhs_status = ds_rhs(m, x, u, w->dx, w, 0);
+    if (status == DS_OK)
+        status = rhs_status;
+    const double p_in = w->p_in, p_diss = w->p_diss;
+    ds_kinematics(m, x, w, 1);
+    double energy = 0.0;
+    for (int64_t c = 0; c < nc; c++) {
+        const int64_t o = m->cell[c].q0, r = m->cell[c].nr;
+        w->ydot[c] = 0.0;
+        for (int64_t i = o; i < o + r; i++)
+            for (int64_t k = 0; k < r; k++)
+                energy += 0.5 * qd[i] * m->Mb[i * R + k] * qd[o + k]
+                          + 0.5 * x[i] * m->K[i * R + k] * x[o + k];
+        energy += w->Us4[c];
+        for (int64_t j = o; j < o + r; j++)
+            w->ydot[c] += w->J[j] * qd[j];
+    }
+    for (int64_t e = 0; e < m->n_mi; e++)
+        energy += 0.5 * m->mi_val[e] * w->ydot[m->mi_row[e]] * w->ydot[m->mi_col[e]];
+    for (int64_t c = 0; c < nc; c++) {
+        const ds_det *d = &m->det[c];
+        const double lam = (m->cell[c].length - w->y[c]) / d->l0, lam2 = lam * lam;
+        const double cap = d->C0 * lam2;
+        double qp, vp, i_de;
+        if (m->rc_source) {
+            qp = x[m->i_qp + c];
+            vp = qp / cap;
+            i_de = (u[c] - vp) / d->Rs;
+        } else {
+            vp = u[c];
+            qp = cap * vp;
+            i_de = 2.0 * d->C0 * lam * (-w->ydot[c] / d->l0) * vp + vp / d->Rp;
+        }
+        const double eps = m->creep ? x[m->i_eps + c] : 0.0;
+        energy += d->VY / 6.0 * (lam2 + 1.0 / lam2 - 2.0) + 0.5 * qp * qp / cap;
+        energy += 0.5 * d->volume * d->E_M * eps * eps;
+        double qr = 0.0, qdr = 0.0;
+        for (int64_t j = m->cell[c].q0; j < m->cell[c].q0 + m->cell[c].nr; j++) {
+            qr += m->ref[j] * x[j];
+            qdr += m->ref[j] * qd[j];
+        }
+        double *o = out + c * DS_CELL_OUTPUTS;
+        o[0] = qr;
+        o[1] = qdr;
+        o[2] = w->y[c];
+        o[3] = lam;
+        o[4] = qp;
+        o[5] = vp;
+        o[6] = i_de;
+        o[7] = cap;
+        o[8] = eps;
+    }
+    int64_t k = nc * DS_CELL_OUTPUTS;
+    for (int64_t r = 0; r < m->n_structure; r++) {
+        double value = 0.0;
+        for (int64_t c = 0; c < nc; c++)
+            value += m->P[r * nc + c] * w->y[c];
+        out[k++] = value;
+    }
+    out[k] = energy;
+    out[k + 1] = p_in;
+    out[k + 2] = p_diss;
+    const int64_t n_out = ds_n_outputs(m);
+    for (k = 0; k < n_out; k++)
+        if (!isfinite(out[k]) && status == DS_OK)
+            status = DS_NON_FINITE;
+    return status;
+}

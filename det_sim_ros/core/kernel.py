@@ -1,0 +1,33 @@
+"""
+The compiled kernel's one Python facade (C, built at install time from det_sim_ros/core/_csrc).
+Nothing else in the package imports ``_ckernel``.
+
+Physics and stepping:
+
+- ``Model(arrays)``: the model's right-hand side, outputs and stiff rates, built from the named
+  fields of :class:`det_sim_ros.physics.model.ModelArrays`.
+- ``Stepper(model, ...)``: a method table (det_sim_ros.sim.integrators), the charge-transient
+  settings and the per-period step-count control; one count per independent coupled group.
+- status codes ``OK``, ``BAD_STRETCH``, ``NON_FINITE``, ``BAD_SLOPE``.
+
+Wire and log (the bytes of det_sim_ros.io.contract and det_sim_ros.io.mcap_log):
+
+- ``SampleCodec``: one sample's output messages written from named fields in one call;
+- ``pack_records``: MCAP Message records of consecutive samples;
+- ``FrameMap``: marker frames of one-coordinate cells (det_sim_ros.ros.markers).
+
+det_sim_ros/physics/reference.py is the same physics in readable numpy; the tests hold the
+compiled kernel to it on random states of every scene kind.
+"""
+
+try:
+    from ._ckernel import (BAD_SLOPE, BAD_STRETCH, CELL_OUTPUTS, FrameMap, Model, NON_FINITE,
+                           OK, pack_records, SampleCodec, Stepper)
+except ImportError as error:  # pragma: no cover - only a broken install gets here
+    raise ImportError(
+        'det_sim_ros: the compiled kernel det_sim_ros.core._ckernel is missing or broken '
+        f'({error}). It is built when the package is installed: `pip install .` (needs a C '
+        'compiler); in a source checkout, `python setup.py build_ext --inplace`.') from None
+
+__all__ = ['Model', 'Stepper', 'OK', 'BAD_STRETCH', 'NON_FINITE', 'BAD_SLOPE', 'CELL_OUTPUTS',
+           'SampleCodec', 'pack_records', 'FrameMap']

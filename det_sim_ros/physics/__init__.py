@@ -1,0 +1,2 @@
+"""The physics: Ritz shapes, energies -> model, statics, linearization, geometry and the numpy
+reference of the compiled right-hand side."""

@@ -1,0 +1,242 @@
+"""
+pytest plugin for deterministic controller tests against sim_node (registered as ``det_sim``
+through the ``pytest11`` entry point, so installing det_sim_ros makes the fixture available).
+
+The fixture ``det_sim`` makes :class:`LockstepSim` objects: sim_node in-process, in lockstep
+(``mode: lockstep``), in a ROS context of its own on a domain picked from the pid with
+localhost-only discovery. Your controller nodes are created in ``sim.context`` and spun with
+sim_node in one executor; every period waits for their answer, so a run gives the same numbers
+whatever the host load::
+
+    def test_pi(det_sim):
+        sim = det_sim('default')
+        controller = MyController(context=sim.context)   # any rclpy node
+        run = sim.run(until=1.0, nodes=[controller])
+        assert run.step_metrics('dy', target=2e-3, t_step=0.6).settling_time <= 0.5
+
+:class:`SimRun` holds the run as arrays, one row per sample (t = k dt) and one column per DET:
+``t`` (s), ``voltage`` (V held during the period that ended at t), ``q`` (m), ``dy`` (m),
+``charge`` (C), ``current`` (A).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+from typing import Iterable, Sequence
+
+import numpy as np
+
+__all__ = ['LockstepSim', 'SimRun', 'StepMetrics', 'det_sim']
+
+WALL_TIMEOUT = 600.0   # s: a safety net against a controller that never answers
+
+
+@dataclasses.dataclass(frozen=True)
+class StepMetrics:
+    """Step-response figures of one signal (times in s after the step, ``nan`` if never)."""
+
+    rise_time: float           # from 10 % to 90 % of the step
+    overshoot: float           # max beyond the target, relative to the step size (0.05 = 5 %)
+    settling_time: float       # last entry into the band target +- band * |step|
+    steady_state_error: float  # target - final value (same unit as the signal)
+
+
+@dataclasses.dataclass
+class SimRun:
+    """A lockstep run as arrays (rows: samples t = k dt; columns: DETs in command order)."""
+
+    det_names: list
+    t: np.ndarray
+    voltage: np.ndarray
+    q: np.ndarray
+    dy: np.ndarray
+    charge: np.ndarray
+    current: np.ndarray
+
+    def signal(self, name: str, det: int | str = 0) -> np.ndarray:
+        """One column: ``name`` in voltage, q, dy, charge, current; ``det`` index or name."""
+        column = self.det_names.index(det) if isinstance(det, str) else det
+        return getattr(self, name)[:, column]
+
+    def at(self, t: float, name: str, det: int | str = 0) -> float:
+        """The value of a signal at the sample nearest sim time t."""
+        return float(self.signal(name, det)[int(np.argmin(np.abs(self.t - t)))])
+
+    def step_metrics(self, name: str = 'dy', target: float = 0.0, t_step: float = 0.0,
+                     det: int | str = 0, band: float = 0.05) -> StepMetrics:
+        """
+        Rise time (10-90 %), overshoot, settling time (into ``band`` of the step size) and
+        steady-state error of a response to a set-point step to ``target`` at ``t_step``.
+        """
+        x = self.signal(name, det)
+        after = self.t >= t_step - 1e-12
+        t, x = self.t[after] - t_step, x[after]
+        if x.size == 0:
+            raise ValueError(f'no samples after t_step = {t_step} s')
+        start = x[0]
+        size = target - start
+        if size == 0.0:
+            raise ValueError('the step has size 0 (the signal starts at the target)')
+        progress = (x - start) / size
+
+        def first(condition):
+            hits = np.nonzero(condition)[0]
+            return float(t[hits[0]]) if hits.size else float('nan')
+        rise = first(progress >= 0.9) - first(progress >= 0.1)
+        overshoot = max(0.0, float(progress.max()) - 1.0)
+        outside = np.nonzero(np.abs(x - target) > band * abs(size))[0]
+        if outside.size == 0:
+            settling = 0.0
+        elif outside[-1] + 1 < x.size:
+            settling = float(t[outside[-1] + 1])
+        else:
+            settling = float('nan')
+        return StepMetrics(rise, overshoot, settling, float(target - x[-1]))
+
+
+class LockstepSim:
+    """
+    sim_node in lockstep with the controller nodes you give it, in one process and executor.
+
+    :param scene: scene file name or path (``scene_file``).
+    :param overrides: scene keys, e.g. ``{'physics.Rs': 1.0e3, 'structure.copies': 4}``.
+    :param params: other node parameters (``lockstep.sources``, ``lockstep.timeout``,
+        ``log.path`` to record the run, ...).
+    :param executor: 'events' (sim_node's own) or 'single' (SingleThreadedExecutor).
+    """
+
+    def __init__(self, scene: str = 'default', overrides: dict | None = None,
+                 params: dict | None = None, domain_id: int | None = None,
+                 executor: str = 'events'):
+        os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+        import rclpy
+        from rclpy.context import Context
+        self.domain_id = 1 + os.getpid() % 101 if domain_id is None else domain_id
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=self.domain_id)
+        self._scene, self._overrides = scene, dict(overrides or {})
+        self._params = dict(params or {})
+        self._executor_kind = executor
+        self.node = None
+        self.executor = None
+        self._rows: list = []
+        self._nodes: list = []
+
+    # -- set-up ----------------------------------------------------------------------------
+    def start(self, nodes: Iterable = (), wait: bool = True) -> 'LockstepSim':
+        """Create sim_node (paused), spin it with ``nodes``, wait until the controllers'
+        command publishers are matched (``lockstep.sources`` of them; ``wait=False``: not),
+        then let the lockstep run."""
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.parameter import Parameter
+        from .node import make_executor, SimNode
+        if self.node is None:
+            params = {'log.enabled': 'log.path' in self._params, 'info_period': 0.0,
+                      **self._params, 'mode': 'lockstep', 'start_paused': True,
+                      'scene_file': self._scene, **self._overrides}
+            self.node = SimNode(context=self.context, parameter_overrides=[
+                Parameter(name, value=value) for name, value in params.items()])
+            self.node.on_sample = self._record
+            self._record(0, self.node._current_outputs())
+            self.executor = (make_executor(self.context) if self._executor_kind == 'events'
+                             else SingleThreadedExecutor(context=self.context))
+            self.executor.add_node(self.node)
+        for node in nodes:
+            if node not in self._nodes:
+                self._nodes.append(node)
+                self.executor.add_node(node)
+        if self.node.paused:
+            sources = self.node._p('lockstep.sources')
+            subs = [sub for _, sub in self.node._command_subs]
+            if wait:
+                self.spin_until(lambda: sum(s.get_publisher_count() for s in subs) >= sources,
+                                'the controller command publishers')
+            self.node._srv_pause(_Request(False), _Response())
+        return self
+
+    def _record(self, k, out):
+        node = self.node
+        contract = node.contract
+        self._rows.append((k, node._sim.u.copy(),
+                           contract.values(out, 'deflection', 'position'),
+                           contract.values(out, 'displacement', 'position'),
+                           contract.values(out, 'charge', 'position'),
+                           contract.values(out, 'current', 'position')))
+
+    # -- running -----------------------------------------------------------------------------
+    def spin_until(self, condition, what='condition') -> None:
+        """Spin sim_node and the controllers until ``condition()``."""
+        deadline = time.monotonic() + WALL_TIMEOUT
+        while not condition():
+            if time.monotonic() > deadline:
+                raise TimeoutError(f'lockstep: timed out waiting for {what} (does the '
+                                   'controller answer every sample?)')
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def run(self, until: float, nodes: Sequence = ()) -> SimRun:
+        """Run (starting if needed) until the sample at sim time ``until`` (s); the run so far."""
+        self.start(nodes)
+        k_end = int(round(until / self.node._dt))
+        self.spin_until(lambda: self.node._sim.k >= k_end or self.node._sim.fault,
+                        f'sim time {until} s')
+        if self.node._sim.fault:
+            raise RuntimeError(f'sim_node fault: {self.node._sim.fault}')
+        return self.result()
+
+    def result(self) -> SimRun:
+        """The samples recorded so far (the t = 0 sample first)."""
+        rows = self._rows
+        dt = self.node._dt
+
+        def column(i):
+            return np.array([row[i] for row in rows], dtype=float)
+        return SimRun(list(self.node.det_names), column(0) * dt, column(1), column(2),
+                      column(3), column(4), column(5))
+
+    def close(self) -> None:
+        """Destroy the nodes (the log, if any, is finished) and shut the context down."""
+        import rclpy
+        if self.executor is not None:
+            self.executor.shutdown()
+        for node in self._nodes:
+            node.destroy_node()
+        if self.node is not None:
+            self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+class _Request:
+    def __init__(self, data):
+        self.data = data
+
+
+class _Response:
+    success = False
+    message = ''
+
+
+def _fixture():
+    import pytest
+
+    @pytest.fixture
+    def det_sim():
+        """Make :class:`LockstepSim` objects (``det_sim(scene, overrides, params)``); closed
+        after the test."""
+        made = []
+
+        def make(scene='default', overrides=None, params=None, **kwargs):
+            sim = LockstepSim(scene, overrides, params, **kwargs)
+            made.append(sim)
+            return sim
+        yield make
+        for sim in made:
+            sim.close()
+    return det_sim
+
+
+try:
+    det_sim = _fixture()
+except ImportError:   # pragma: no cover - pytest absent: the classes still work
+    pass

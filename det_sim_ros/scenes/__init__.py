@@ -1,0 +1,1 @@
+"""Scene files (YAML): loading, validation and defaults (:mod:`.scene`)."""

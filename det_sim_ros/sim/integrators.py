@@ -1,0 +1,313 @@
+"""
+Fixed-step steppers declared as coefficient tables over one compiled stepping core.
+
+Each :class:`Method` is data: stage nodes ``c`` and the coefficients a_ij, b_i written as sums of
+``weight * phi_k(c_arg * h * L)`` (``k = -1``: a constant weight). The compiled core
+(``ds_advance`` in det_sim_ros/core/_csrc/stepping.c) treats x' = L x + N(x) with the stiff diagonal L of the
+charge equation (dq_p/dt = -q_p / (C0 lam^2 Rs||Rp) + v/Rs, linear in q_p for frozen q) exactly
+and everything else explicitly; for states with L = 0 every exponential method reduces to the
+classical Runge-Kutta method with the same table (phi_k(0) = 1/k!).
+
+Why exponential: the electrical time constant Rs C ~ 30 us is 300 times shorter than the beam's
+period, so explicit RK4 at a 1 ms step diverges; an exponential update keeps every step size
+stable (tested from Rs = 1 Ohm to 1 MOhm) at the cost of one exp per step and charge state.
+
+How many steps: within a control period the steps are equal; their number is either fixed
+(``integrator.substeps`` > 0, or a method without an embedded pair) or adapts per period to the
+scene's tolerance from the method's embedded error estimate (:func:`step_control`). The 'step'
+scenario spends most of its time settled, where one step per 1 ms period suffices, and a
+snap-through needs ~30: at tolerance 1e-6 adapting takes 5.3-11.9 steps per period on the six
+'step' scenes instead of the fixed 20.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from ..core import kernel
+
+__all__ = ['Method', 'METHODS', 'get_method', 'choose_substeps', 'step_control', 'error_weights',
+           'transient_settings', 'TransientSettings', 'StepControl', 'make_stepper',
+           'advance']
+
+
+@dataclasses.dataclass(frozen=True)
+class Method:
+    """A fixed-step method as data (see module docstring)."""
+
+    name: str
+    order: int
+    c: tuple
+    terms: tuple          # (stage i or n_stages for b, j, k, c_arg, weight)
+    exponential: bool
+    description: str
+    # Embedded error estimate h sum_j e_j N_j at L = 0 (main minus embedded solution): weights
+    # e_0..e_{s-1} of the stages and e_s of f(x_new) (first same as last: the next step's
+    # first stage), and the embedded solution's order. () = none: fixed substeps only.
+    embedded: tuple = ()
+    embedded_order: int = 0
+
+    @property
+    def n_stages(self) -> int:
+        return len(self.c)
+
+    def arrays(self):
+        """The table as the float arrays the compiled core reads (terms sorted by stage row)."""
+        terms = sorted(self.terms, key=lambda term: term[0])
+        return np.asarray(self.c, dtype=float), np.asarray(terms, dtype=float)
+
+    @property
+    def adaptive(self) -> bool:
+        """Whether the step count can follow an error estimate (the method has an embedded pair)."""
+        return bool(self.embedded)
+
+
+def _explicit(name, order, a, b, c, description):
+    terms = [(i, j, -1, 0.0, a[i][j]) for i in range(len(c)) for j in range(i) if a[i][j]]
+    terms += [(len(c), j, -1, 0.0, bj) for j, bj in enumerate(b) if bj]
+    return Method(name, order, tuple(c), tuple(terms), False, description)
+
+
+def _lawson(name, base, description):
+    """
+    Lawson (integrating-factor) form of an explicit table: a_ij -> a_ij exp((c_i - c_j) h L),
+    b_j -> b_j exp((1 - c_j) h L). Needs non-decreasing nodes c (else exp grows for stiff L).
+    """
+    c = base.c
+    if any(b < a for a, b in zip(c, c[1:])):
+        raise ValueError(f'{base.name}: Lawson form needs non-decreasing nodes c')
+    s = len(c)
+    terms = tuple((i, j, 0, (c[i] if i < s else 1.0) - c[j], w) for i, j, _, _, w in base.terms)
+    return Method(name, base.order, c, terms, True, description, base.embedded,
+                  base.embedded_order)
+
+
+def _dormand_prince():
+    """Dormand-Prince 5(4) (Dormand & Prince 1980; the table of scipy's RK45, checked equal by
+    test_integrators.py). Written out so that importing the simulator does not import
+    scipy.integrate (0.4 s of a node's start)."""
+    a = [[0, 0, 0, 0, 0, 0],
+         [1 / 5, 0, 0, 0, 0, 0],
+         [3 / 40, 9 / 40, 0, 0, 0, 0],
+         [44 / 45, -56 / 15, 32 / 9, 0, 0, 0],
+         [19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729, 0, 0],
+         [9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656, 0]]
+    b = [35 / 384, 0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84]
+    c = [0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1]
+    # y5 - y4 from the six stages and f(x_new) (scipy's RK45.E)
+    e = [-71 / 57600, 0, 71 / 16695, -71 / 1920, 17253 / 339200, -22 / 525, 1 / 40]
+    method = _explicit('dp5', 5, a, b, c, 'Dormand-Prince order 5 (the table of scipy RK45)')
+    return dataclasses.replace(method, embedded=tuple(e), embedded_order=4)
+
+
+# Exponential tables: (i, j, k, c_arg, weight) means weight * phi_k(c_arg * h L).
+_ETD_EULER = ((1, 0, 1, 1.0, 1.0),)
+_ETD2 = (  # Cox & Matthews ETD2RK
+    (1, 0, 1, 1.0, 1.0),
+    (2, 0, 1, 1.0, 1.0), (2, 0, 2, 1.0, -1.0), (2, 1, 2, 1.0, 1.0),
+)
+_ETD_KROGSTAD = (  # Krogstad (2005) ETDRK4-B; Hochbruck & Ostermann, Acta Numerica 2010, Sec 2.3
+    (1, 0, 1, 0.5, 0.5),
+    (2, 0, 1, 0.5, 0.5), (2, 0, 2, 0.5, -1.0), (2, 1, 2, 0.5, 1.0),
+    (3, 0, 1, 1.0, 1.0), (3, 0, 2, 1.0, -2.0), (3, 2, 2, 1.0, 2.0),
+    (4, 0, 1, 1.0, 1.0), (4, 0, 2, 1.0, -3.0), (4, 0, 3, 1.0, 4.0),
+    (4, 1, 2, 1.0, 2.0), (4, 1, 3, 1.0, -4.0),
+    (4, 2, 2, 1.0, 2.0), (4, 2, 3, 1.0, -4.0),
+    (4, 3, 2, 1.0, -1.0), (4, 3, 3, 1.0, 4.0),
+)
+
+_DP5 = _dormand_prince()
+# RK4 with the third-order FSAL pair b^ = (1/6, 1/3, 1/3, 0, 1/6) (the fifth stage is f(x_new),
+# the next step's first): y4 - y3 = h/6 (k4 - f(x_new)). Krogstad's ETDRK4 is RK4 at L = 0.
+_RK4_EMBEDDED = ((0.0, 0.0, 0.0, 1 / 6, -1 / 6), 3)
+_RK4 = dataclasses.replace(
+    _explicit('rk4', 4, [[0, 0, 0, 0], [0.5, 0, 0, 0], [0, 0.5, 0, 0], [0, 0, 1, 0]],
+              [1 / 6, 1 / 3, 1 / 3, 1 / 6], [0, 0.5, 0.5, 1], 'classical Runge-Kutta'),
+    embedded=_RK4_EMBEDDED[0], embedded_order=_RK4_EMBEDDED[1])
+METHODS = {m.name: m for m in (
+    _explicit('euler', 1, [[0]], [1], [0], 'explicit Euler (for tests and stress runs)'),
+    _explicit('midpoint', 2, [[0, 0], [0.5, 0]], [0, 1], [0, 0.5], 'explicit midpoint'),
+    _explicit('rk3', 3, [[0, 0, 0], [0.5, 0, 0], [-1, 2, 0]], [1 / 6, 2 / 3, 1 / 6],
+              [0, 0.5, 1], "Kutta's third-order method"),
+    _RK4,
+    _DP5,
+    _lawson('lawson4', _RK4, 'Lawson-RK4: integrating factor exp(h L) on the charge'),
+    _lawson('lawson5', _DP5, 'Lawson-Dormand-Prince 5: integrating factor on the charge'),
+    Method('exp_euler', 1, (0.0,), _ETD_EULER, True, 'exponential Euler'),
+    Method('etd2', 2, (0.0, 1.0), _ETD2, True, 'Cox-Matthews ETD2RK'),
+    Method('etdrk4', 4, (0.0, 0.5, 0.5, 1.0), _ETD_KROGSTAD, True,
+           'Krogstad ETDRK4-B: classical RK4 on the mechanics, exact charge relaxation',
+           *_RK4_EMBEDDED),
+)}
+
+
+def get_method(name: str) -> Method:
+    """Look up a method by name with a clear error."""
+    try:
+        return METHODS[name]
+    except KeyError:
+        raise ValueError(f'unknown integrator method {name!r}; known: '
+                         + ', '.join(sorted(METHODS)) + ", or 'auto'") from None
+
+
+# Step size that meets a tolerance: a method of order p reaches a relative Delta-y error of
+# about ERROR_CONSTANT * (h / 1 ms)^p on the 'step' scenario. Measured on all six scenes (both
+# beams, eps_b 0.15/0.20/0.25) against Radau/DOP853 rtol 1e-12 references, with the charge
+# transients resolved (fixed_period in _csrc/stepping.c): etdrk4 (RC source) 0.035...0.14, dp5 (ideal source)
+# 0.0013...0.05; the largest, at eps_b = 0.15 where the snap-through is most sensitive, is used
+# so the tolerance holds on every shared scene.
+ERROR_CONSTANT = {'etdrk4': 0.15, 'dp5': 0.06}
+MAX_STEP = 1.0e-3   # s: keeps h * omega_beam < 0.6 (stable for every table here)
+
+
+STABLE_STEP = 2.0   # h * fastest beam rate: inside every table's stability region (RK4 2.8)
+
+
+def choose_substeps(method: Method, dt: float, tolerance: float, beam_rate: float = 0.0) -> int:
+    """
+    Internal steps per control period so that the expected error is below ``tolerance`` and the
+    explicit stages stay stable for the fastest beam mode (``beam_rate``, 1/s; see
+    Model.fastest_beam_rate: it decides from about 6 Ritz terms on).
+    """
+    const = ERROR_CONSTANT.get(method.name)
+    if const is None:
+        return min_substeps(dt, beam_rate)
+    h_max = 1.0e-3 * (tolerance / const) ** (1.0 / method.order)
+    return max(min_substeps(dt, beam_rate), int(math.ceil(dt / h_max - 1e-9)))
+
+
+def min_substeps(dt: float, beam_rate: float = 0.0) -> int:
+    """The fewest steps per period: h <= MAX_STEP and h * beam_rate <= STABLE_STEP."""
+    h_max = MAX_STEP if beam_rate <= 0.0 else min(MAX_STEP, STABLE_STEP / beam_rate)
+    return max(1, int(math.ceil(dt / h_max - 1e-9)))
+
+
+# Adaptive step counts (period_core in _csrc/stepping.c): fixed steps inside each control period, their
+# number chosen per period from the method's embedded error estimate, weighted per Ritz
+# coordinate by 1/l (deflection) and dt/l (velocity) with l the cell's beam length. The local
+# tolerance is LOCAL_TOLERANCE[embedded order] times the scene tolerance: the scene tolerance
+# bounds the 'step' error (max over the run of |Delta-y error| / stroke), which accumulates
+# local errors and amplifies them through snap-through. Calibrated on all six 'step' scenes
+# at tolerances 1e-3 ... 1e-8 against the Radau rtol 1e-12 references: with 5e-4 the worst
+# error is 0.27...0.55 x tolerance for etdrk4 (RC source; 2.0 steps per period at 1e-3, 8.9
+# at 1e-6, 27.5 at 1e-8) and 0.09...0.62 x for dp5 (ideal source; 1.2 / 3.1 / 6.9), where the
+# fixed counts of choose_substeps take 20 (etdrk4) and 10 (dp5) steps per period at 1e-6.
+# The error grows slightly faster than the tolerance (about tol^1.05), hence the margin.
+LOCAL_TOLERANCE = {3: 5e-4, 4: 5e-4}
+# At most MAX_SUBSTEPS_FACTOR x the fixed count of choose_substeps per period: bounds the cost
+# of a period. A single actuator never reaches it at the calibrated settings (a snap-through
+# takes ~30 steps, the bound at 1e-6 is 40), but an array whose copies switch at different
+# times shares one count (bench/batch.py: 100 staggered copies, 155 us per actuator and period
+# unbounded, 35 with this bound, 15 with a bound of 1x, which let the error exceed 1e-3 at
+# tolerance 1e-3).
+MAX_SUBSTEPS_FACTOR = 2
+
+
+@dataclasses.dataclass(frozen=True)
+class StepControl:
+    """The per-period step-count controller's settings (period_core in _csrc/stepping.c):
+    fixed at ``substeps`` when ``tolerance`` is 0, else adaptive between ``min_substeps`` and
+    ``max_substeps`` from the embedded estimate (which scales as n^-``exponent``)."""
+
+    substeps: int
+    tolerance: float = 0.0
+    min_substeps: int = 1
+    max_substeps: int = 1
+    exponent: float = 1.0
+
+    @property
+    def adaptive(self) -> bool:
+        return self.tolerance > 0.0
+
+
+def step_control(method: Method, model, substeps: int = 0) -> StepControl:
+    """
+    The step-count controller's settings: adaptive when ``substeps`` is 0 and the method has
+    an embedded estimate, else fixed at ``substeps`` (0: :func:`choose_substeps`).
+    """
+    scene = model.scene
+    beam_rate = model.fastest_beam_rate()
+    n0 = substeps or choose_substeps(method, scene.dt, scene.tolerance, beam_rate)
+    if substeps or not method.adaptive:
+        return StepControl(n0, 0.0, n0, n0, 1.0)
+    n_min = min_substeps(scene.dt, beam_rate)
+    tol = LOCAL_TOLERANCE[method.embedded_order] * scene.tolerance
+    return StepControl(max(n0, n_min), tol, n_min, MAX_SUBSTEPS_FACTOR * max(n0, n_min),
+                       method.embedded_order + 1.0)
+
+
+def make_stepper(model, method: Method, control: StepControl, dt: float,
+                 transient: 'TransientSettings | None' = None):
+    """The compiled stepper (det_sim_ros.core.kernel.Stepper) of ``method`` for ``model``
+    (``transient``: how charge transients are resolved; None: not at all)."""
+    transient = transient or TransientSettings()
+    c, terms = method.arrays()
+    return kernel.Stepper(model.kernel, c, np.ascontiguousarray(terms.reshape(-1, 5)),
+                          np.asarray(method.embedded, dtype=float), error_weights(model),
+                          dt=float(dt), z_tol=float(transient.z_tol),
+                          fine=float(transient.fine), substeps=int(control.substeps),
+                          tolerance=float(control.tolerance),
+                          min_substeps=int(control.min_substeps),
+                          max_substeps=int(control.max_substeps),
+                          exponent=float(control.exponent),
+                          jump_ref=float(transient.jump_ref))
+
+
+def error_weights(model) -> np.ndarray:
+    """1 / scale of each state in the embedded error norm: q_j by its cell's beam length l,
+    qdot_j by l / dt; the other states are not in the norm (0)."""
+    a = model.arrays
+    w = np.zeros(a.n_state)
+    for c in range(a.n_cells):
+        s = a.cell_slice(c)
+        w[s] = 1.0 / a.length[c]
+        w[a.n_q + s.start:a.n_q + s.stop] = model.scene.dt / a.length[c]
+    return w
+
+
+# Resolving the charge transient after an input jump (fixed_period in _csrc/stepping.c): steps of
+# TRANSIENT_FINE * tau while the charge lag exceeds TRANSIENT_CHARGE * tolerance * C0 v_max.
+# The first step after a jump is TRANSIENT_FINE * tau, later ones grow geometrically (see
+# fixed_period). Measured on 'step' with etdrk4 (fixed 0.15/0.20, simply supported 0.15):
+# 0.35 at 3e-6, scaled as tolerance^(1/4), keeps the error below the tolerance at 1e-6 and 1e-8
+# (2.4e-7...5.7e-7 and 2.5e-9...4.9e-9), so the first step follows the tolerance.
+TRANSIENT_FINE = 0.35      # at a tolerance of 3e-6
+TRANSIENT_CHARGE = 1.0
+
+
+@dataclasses.dataclass(frozen=True)
+class TransientSettings:
+    """How the stepper resolves the charge transient after an input jump (fixed_period in
+    _csrc/stepping.c): while the charge lag exceeds ``z_tol`` (C; 0: never), graded steps
+    from ``fine`` * tau, ``fine`` sized for jumps of ``jump_ref`` (V); a smaller jump du starts
+    at fine * (jump_ref / du)^(1/5), the same local error for its smaller lag (0: every jump
+    at ``fine``)."""
+
+    z_tol: float = 0.0
+    fine: float = 1.0
+    jump_ref: float = 0.0
+
+
+def transient_settings(method: Method, scene) -> TransientSettings:
+    """The stepper's :class:`TransientSettings` for ``scene``: off unless the method is
+    exponential and the scene has an RC source (explicit methods must step below the charge
+    time constant anyway, and an ideal source has no charge transient). ``fine`` follows
+    the tolerance and was calibrated on the 'step' scenes, whose jumps are v_max: so
+    ``jump_ref`` = v_max.
+    """
+    fine = min(1.0, max(0.05, TRANSIENT_FINE * (scene.tolerance / 3e-6) ** 0.25))
+    if not method.exponential or scene.source != 'rc':
+        return TransientSettings(0.0, fine, 0.0)
+    p = scene.physics
+    return TransientSettings(TRANSIENT_CHARGE * scene.tolerance * p.C0 * p.v_max, fine,
+                             p.v_max)
+
+
+def advance(x, u, model, method: Method, h: float, n_steps: int) -> int:
+    """Advance ``x`` in place by ``n_steps`` steps of ``h`` with ``u`` held; returns a kernel
+    status (x is unchanged on failure). Builds a stepper per call: for tests and one-offs."""
+    stepper = make_stepper(model, method, StepControl(max(1, n_steps)), max(h, 1e-300))
+    return stepper.advance(x, np.asarray(u, dtype=float), float(h), int(n_steps))
