@@ -273,3 +273,24 @@ def test_progress_bar_only_after_delay():
 def test_module_entry_point_runs():
     assert os.path.isfile(cli.__file__)
     assert callable(cli.main)
+
+
+@pytest.mark.parametrize('error, code, line', [
+    (KeyboardInterrupt(), 130, 'det_sim: interrupted'),
+    (RuntimeError('boom'), 1, 'det_sim: error: RuntimeError: boom'),
+    (OSError('disk full'), 1, 'det_sim: error: disk full'),
+])
+def test_any_error_of_a_verb_is_one_line(monkeypatch, capsys, error, code, line):
+    from det_sim_ros.cli.verbs import fleet
+
+    def fail(args):
+        raise error
+    monkeypatch.setattr(fleet, 'main', fail)
+    monkeypatch.delenv('DET_SIM_TRACEBACK', raising=False)
+    assert cli.main(['fleet', 'any.yaml']) == code
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and err.startswith(line)
+    monkeypatch.setenv('DET_SIM_TRACEBACK', '1')        # the developer's way to the traceback
+    if isinstance(error, RuntimeError):
+        with pytest.raises(RuntimeError):
+            cli.main(['fleet', 'any.yaml'])
