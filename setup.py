@@ -86,6 +86,8 @@ setup(
                  'matplotlib>=3.7'],
         'plots': ['matplotlib>=3.7'],
         'control': ['control>=0.10'],   # LinearModel.to_statespace()
+        # det_sim bench: sympy for the analytic Jacobian, the python-control runs, the diagram
+        'bench': ['sympy>=1.12', 'control>=0.10', 'matplotlib>=3.7'],
     },
     zip_safe=False,
     maintainer='det_sim_ros maintainers',
@@ -97,7 +99,7 @@ setup(
         'console_scripts': [
             'sim_node = det_sim_ros.cli.sim_node:main',
             'det_sim = det_sim_ros.cli:main',
-            'det_sim_replay = det_sim_ros.io.replay:main',
+            'det_sim_replay = det_sim_ros.cli:main_replay',
         ],
         # the det_sim fixture (lockstep controller tests), available wherever this is installed
         'pytest11': ['det_sim = det_sim_ros.ros.testing'],

@@ -1,8 +1,9 @@
-"""Work-precision benchmark script: see det_sim_ros/analysis/benchmark.py (also `det_sim bench`)."""
+"""Work-precision benchmark script: ``det_sim bench`` (det_sim_ros/cli/verbs/bench.py, the
+measurements in det_sim_ros/analysis/benchmark.py), with the same options."""
 
 import sys
 
-from det_sim_ros.analysis.benchmark import main
+from det_sim_ros.cli import main
 
 if __name__ == '__main__':
-    sys.exit(main())
+    sys.exit(main(['bench', *sys.argv[1:]]))

@@ -31,7 +31,7 @@ MOVED = {
     'benchmark': 'analysis.benchmark',
     'contract': 'io.contract',
     'mcap_log': 'io.mcap_log',
-    'replay': 'io.replay',
+    'replay': 'ros.play',          # play, and io.replay's names re-exported
     'logplot': 'io.logplot',
     'sim_node': 'ros.node',
     'markers': 'ros.markers',
@@ -40,7 +40,7 @@ MOVED = {
     'testing': 'ros.testing',
 }
 _ROOT = __name__.rpartition('.')[0]
-_RUN_AS_MAIN = {'sim_node': 'cli.sim_node'}
+_RUN_AS_MAIN = {'sim_node': 'cli.sim_node', 'replay': 'cli.replay'}
 
 
 class _MovedPath(importlib.abc.MetaPathFinder, importlib.abc.Loader):

@@ -11,6 +11,7 @@ import pytest
 import yaml
 
 from det_sim_ros.cli import det_sim as cli
+from det_sim_ros.cli.common import Progress
 from det_sim_ros.physics import statics
 from det_sim_ros.scenes.scene import load_scene, scene_to_dict
 
@@ -182,35 +183,86 @@ def test_bad_arguments_exit_2_with_one_line(argv, fragment, tmp_path, capsys):
     assert err.strip().splitlines()[-1].startswith('det_sim')
 
 
-def test_help_exits_0(capsys):
+def test_help_exits_0_and_lists_every_verb(capsys):
     assert cli.main(['--help']) == 0
-    assert 'statics' in capsys.readouterr().out
+    text = capsys.readouterr().out
+    for verb in ('statics', 'step', 'bench', 'plot', 'linearize', 'fleet', 'replay'):
+        assert f'    {verb} ' in text
 
 
-def test_bench_missing_and_present(monkeypatch, capsys):
+def test_bench_missing_module(monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, 'sympy', types.ModuleType('sympy'))
     monkeypatch.setitem(sys.modules, 'det_sim_ros.analysis.benchmark', None)
     assert cli.main(['bench']) == 1
     err = capsys.readouterr().err
     assert 'not available' in err and len(err.strip().splitlines()) == 1
+
+
+def test_bench_without_sympy_says_which_extra_in_one_line(monkeypatch, capsys):
+    """Checked before anything runs (the benchmark needs sympy minutes into its run)."""
+    ran = []
+    fake = types.ModuleType('det_sim_ros.analysis.benchmark')
+    fake.run = lambda *a, **k: ran.append(a) or iter(())
+    monkeypatch.setitem(sys.modules, 'det_sim_ros.analysis.benchmark', fake)
+    monkeypatch.setitem(sys.modules, 'sympy', None)            # import sympy -> ImportError
+    assert cli.main(['bench', '--quick']) == 1
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and 'Traceback' not in err
+    assert 'sympy' in err and "det_sim_ros[bench]" in err
+    assert not ran
+
+
+def _fake_benchmark(monkeypatch, tmp_path):
     seen = {}
     fake = types.ModuleType('det_sim_ros.analysis.benchmark')
-    fake.main = lambda argv: seen.setdefault('argv', argv) and 0
+    row = dict(beam='fixed', eps_b=0.2, solver='auto', setting='tol 1e-06', cpu_per_sim_s=0.01,
+               err_dy=1e-6, err_qp=1e-6, realtime_factor=100.0, steps_per_period=1.0)
+
+    def run(beams, eps_values, quick, repeats, reference_dir=None, log=print):
+        seen.update(beams=beams, eps=eps_values, quick=quick, repeats=repeats)
+        yield [row]
+
+    fake.run = run
+    fake.write_tables = lambda rows, out: seen.setdefault('written', (rows, out))
+    monkeypatch.setitem(sys.modules, 'sympy', types.ModuleType('sympy'))
     monkeypatch.setitem(sys.modules, 'det_sim_ros.analysis.benchmark', fake)
     import det_sim_ros.analysis
     monkeypatch.setattr(det_sim_ros.analysis, 'benchmark', fake, raising=False)
-    assert cli.main(['bench', '--quick', '--out', 'x']) == 0
-    assert seen['argv'] == ['--quick', '--out', 'x']
+    return seen
+
+
+def test_bench_arguments_reach_the_benchmark(monkeypatch, tmp_path, capsys):
+    seen = _fake_benchmark(monkeypatch, tmp_path)
+    out = str(tmp_path / 'wp')
+    assert cli.main(['bench', '--quick', '--out', out, '--beams', 'simply_supported,fixed',
+                     '--repeats', '2']) == 0
+    assert seen['beams'] == ['simply_supported'] and seen['eps'] == [0.20]
+    assert seen['quick'] and seen['repeats'] == 2 and seen['written'][1] == out
+    assert 'wrote' in capsys.readouterr().out
+    if has_matplotlib():
+        assert (tmp_path / 'wp' / 'work_precision.png').is_file()
+    seen.clear()
+    assert cli.main(['bench', '--eps-b', '0.15,0.25', '--out', out, '--no-such-option']) == 2
+    assert not seen and 'unrecognized arguments' in capsys.readouterr().err
+    assert cli.main(['bench', '--beams', 'hinged', '--out', out]) == 2
+    assert 'unknown beam' in capsys.readouterr().err
+
+
+def test_bench_help_lists_its_options(capsys):
+    assert cli.main(['bench', '--help']) == 0
+    text = capsys.readouterr().out
+    assert '--quick' in text and '--reference-dir' in text and 'det_sim_ros[bench]' in text
 
 
 def test_progress_bar_only_after_delay():
     quiet = io.StringIO()
-    bar = cli.Progress(10, 'sweep', stream=quiet, delay=3600.0)
+    bar = Progress(10, 'sweep', stream=quiet, delay=3600.0)
     for k in range(10):
         bar.advance()
     bar.close()
     assert quiet.getvalue() == ''
     loud = io.StringIO()
-    bar = cli.Progress(4, 'sweep', stream=loud, delay=0.0)
+    bar = Progress(4, 'sweep', stream=loud, delay=0.0)
     for k in range(4):
         bar.advance()
     bar.close()
@@ -221,3 +273,24 @@ def test_progress_bar_only_after_delay():
 def test_module_entry_point_runs():
     assert os.path.isfile(cli.__file__)
     assert callable(cli.main)
+
+
+@pytest.mark.parametrize('error, code, line', [
+    (KeyboardInterrupt(), 130, 'det_sim: interrupted'),
+    (RuntimeError('boom'), 1, 'det_sim: error: RuntimeError: boom'),
+    (OSError('disk full'), 1, 'det_sim: error: disk full'),
+])
+def test_any_error_of_a_verb_is_one_line(monkeypatch, capsys, error, code, line):
+    from det_sim_ros.cli.verbs import fleet
+
+    def fail(args):
+        raise error
+    monkeypatch.setattr(fleet, 'main', fail)
+    monkeypatch.delenv('DET_SIM_TRACEBACK', raising=False)
+    assert cli.main(['fleet', 'any.yaml']) == code
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and err.startswith(line)
+    monkeypatch.setenv('DET_SIM_TRACEBACK', '1')        # the developer's way to the traceback
+    if isinstance(error, RuntimeError):
+        with pytest.raises(RuntimeError):
+            cli.main(['fleet', 'any.yaml'])

@@ -1,11 +1,17 @@
-"""Replay of MCAP logs: bit-exact re-simulation, republishing with the recorded timing, CLI."""
+"""Replay of MCAP logs: bit-exact re-simulation, republishing with the recorded timing, CLI
+(``det_sim_replay`` and ``det_sim replay``)."""
 
+import subprocess
+import sys
 import threading
 
 import pytest
 
+from det_sim_ros.cli import main as det_sim
+from det_sim_ros.cli import main_replay as main
 from det_sim_ros.io.mcap_log import LogReader, Recorder
-from det_sim_ros.io.replay import main, OUTPUT_FIELDS, play, resimulate, simulate_to_log
+from det_sim_ros.io.replay import OUTPUT_FIELDS, resimulate, simulate_to_log
+from det_sim_ros.ros.play import play
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import Simulator
 
@@ -23,7 +29,7 @@ def _commands(k):
 def _write_log(path, scene, joint_commands=False, n_steps=N_STEPS, commands=_commands):
     sim = Simulator(scene)
     recorder = Recorder(path, scene, metadata={'method': sim.method.name,
-                                                'substeps': sim.substeps_setting})
+                                               'substeps': sim.substeps_setting})
     simulate_to_log(recorder, sim, commands, n_steps, joint_commands=joint_commands)
     recorder.close()
     assert recorder.fault == ''
@@ -102,6 +108,62 @@ def test_info_and_recover_cli(tmp_path, log_path, capsys):
     fixed = LogReader(tmp_path / 'fixed.mcap')
     assert list(fixed.messages()) and fixed.complete
     assert resimulate(str(tmp_path / 'fixed.mcap')).ok()
+
+
+def test_det_sim_replay_verb_is_the_same_command(tmp_path, log_path, capsys):
+    """``det_sim replay ...`` and ``det_sim_replay ...`` print the same and exit alike."""
+    other = _other_substeps(log_path)
+    for argv in (['info', log_path], ['resim', log_path],
+                 ['resim', log_path, '--substeps', other]):
+        code = main(argv)
+        alone = capsys.readouterr()
+        assert det_sim(['replay'] + argv) == code
+        assert capsys.readouterr() == alone
+    assert main([]) == 2 and det_sim(['replay']) == 2
+    assert 'required: command' in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['resim', 'nowhere.mcap'], 'No such file'),
+    (['info', 'nowhere.mcap'], 'No such file'),
+    (['recover', 'nowhere.mcap', 'out.mcap'], 'No such file'),
+    (['resim', 'NOT_MCAP'], 'the log holds no scene'),
+])
+def test_replay_errors_are_one_line(tmp_path, monkeypatch, capsys, argv, message):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / 'NOT_MCAP').write_bytes(b'not an mcap file')
+    for run, prog in ((main, 'det_sim_replay'), (lambda a: det_sim(['replay'] + a), 'det_sim')):
+        assert run(argv) == 1
+        err = capsys.readouterr().err
+        assert err.count('\n') == 1 and err.startswith(f'{prog}: error: ') and message in err
+
+
+def test_ros_args_end_the_line(log_path):
+    """``--ros-args ...`` at the end of a replay line is taken whole (the player node's)."""
+    from det_sim_ros.cli.det_sim import build_parser
+    args = build_parser().parse_args(['replay', 'play', log_path, '--rate', '0', '--ros-args',
+                                      '-r', '__ns:=/x', '-p', 'use_sim_time:=true'])
+    assert args.log == [log_path] and args.rate == 0.0
+    assert args.ros_args == ['-r', '__ns:=/x', '-p', 'use_sim_time:=true']
+    args = build_parser().parse_args(['replay', 'info', log_path, '--ros-args', '-r', 'a:=b'])
+    assert args.ros_args == ['-r', 'a:=b']
+
+
+def test_old_replay_path_gives_both_halves():
+    """``det_sim_ros.replay`` (the old module path) has the ROS-free re-simulation and the
+    ROS player; ``python -m det_sim_ros.replay`` is the command."""
+    code = ('import warnings\n'
+            'warnings.simplefilter("ignore")\n'
+            'import det_sim_ros.replay as old\n'
+            'from det_sim_ros.io import replay\n'
+            'from det_sim_ros.ros import play\n'
+            'assert old.resimulate is replay.resimulate and old.play is play.play\n'
+            'assert old.simulate_to_log is replay.simulate_to_log\n'
+            'assert old.qos_from_yaml is play.qos_from_yaml\n')
+    subprocess.run([sys.executable, '-c', code], check=True)
+    done = subprocess.run([sys.executable, '-W', 'ignore', '-m', 'det_sim_ros.replay', '--help'],
+                          capture_output=True, text=True, check=True)
+    assert done.stdout.startswith('usage: det_sim_replay') and 'resim' in done.stdout
 
 
 def _subscribe(context, topics):

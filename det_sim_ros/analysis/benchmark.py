@@ -14,23 +14,23 @@ input_output_response:
 Error: max |Delta-y - Delta-y_ref| / stroke over the 1 ms samples, reference Radau rtol 1e-12
 restarted every period. Cost: process CPU seconds per simulated second, median of ``--repeats``.
 Every solver gets the same start: the model built and the inputs prepared outside the timing
-(scipy the voltage per segment or period, the project's runs the per-period voltage array); the
-project's timing includes constructing its Simulator (stepper set-up), scipy's its solve_ivp set-up.
+(scipy the voltage per segment or period, the project's runs the per-period voltage array);
+the project's timing includes constructing its Simulator (stepper set-up), scipy's its
+solve_ivp set-up.
 The summary table (:func:`speedups`) gives, per error level, the CPU of the cheapest competitor
 run that reaches it divided by the CPU of 'auto' at that error.
 
-Writes ``work_precision.csv``, ``work_precision.md`` and (with matplotlib) ``work_precision.png``.
-Run: ``python bench/work_precision.py --out bench/out`` (about 10 min per scene; ``--quick``: one
-scene, fewer points).
+:func:`run` measures, :func:`write_tables` writes ``work_precision.csv`` and
+``work_precision.md``. Run: ``det_sim bench --out bench/out`` (about 10 min per scene;
+``--quick``: one scene, fewer points), which also draws ``work_precision.png``; it needs the
+``bench`` extra (sympy for the analytic Jacobian, python-control, matplotlib).
 """
 
 from __future__ import annotations
 
-import argparse
 import csv
 import os
 import statistics
-import sys
 import time
 
 import numpy as np
@@ -42,7 +42,7 @@ from .scenarios import (reference_solution, step_error, step_scene, step_voltage
                         STEP_SWITCH_TIMES)
 from ..sim.simulator import simulate, Simulator
 
-__all__ = ['main', 'run_scene']
+__all__ = ['run', 'run_scene', 'write_tables', 'cost_at_error', 'speedups', 'one_term_jacobian']
 
 
 def _cpu(fn, repeats):
@@ -212,70 +212,108 @@ def _control_run(model, rtol, t_end):
     return resp.states.T[keep]
 
 
+def _reference(scene, beam, eps_b, t_end, reference_dir, log):
+    """The sample times and the Radau rtol 1e-12 reference of a scene (cached as .npy in
+    ``reference_dir`` if given)."""
+    cached = (os.path.join(reference_dir, f'ref_{beam}_{eps_b:g}_rc.npy') if reference_dir
+              else None)
+    if cached and os.path.exists(cached):
+        log(f'[{beam} eps_b={eps_b}] reference from {cached}')
+        return np.arange(int(round(t_end / scene.dt)) + 1) * scene.dt, np.load(cached)
+    log(f'[{beam} eps_b={eps_b}] reference (Radau rtol 1e-12) ...')
+    t, X_ref = reference_solution(scene, t_end)
+    if cached:
+        os.makedirs(reference_dir, exist_ok=True)
+        np.save(cached, X_ref)
+    return t, X_ref
+
+
+class _Rows:
+    """The result rows of one scene: each run's cost and its error against the reference."""
+
+    def __init__(self, beam, eps_b, model, t, X_ref, t_end, log):
+        self.beam, self.eps_b, self.model = beam, eps_b, model
+        self.t, self.X_ref, self.t_end, self.log = t, X_ref, t_end, log
+        self.rows = []
+
+    def add(self, solver, setting, cpu, X, steps=np.nan):
+        """A run with its error (NaN if it failed: ``X`` None)."""
+        err_y, err_q = (step_error(self.model, self.t, X, self.X_ref) if X is not None
+                        else (np.nan, np.nan))
+        self.rows.append(dict(beam=self.beam, eps_b=self.eps_b, solver=solver, setting=setting,
+                              cpu_per_sim_s=cpu / self.t_end, err_dy=err_y, err_qp=err_q,
+                              realtime_factor=self.t_end / cpu, steps_per_period=steps))
+        self.log(f'  {solver:>14} {setting:>10}  cpu/sim-s {cpu / self.t_end:9.4f}  '
+                 f'err {err_y:.2e}')
+
+    def add_reduced(self, label, setting, cpu, steps):
+        """A run of a reduced model (its own error is not measured)."""
+        self.rows.append(dict(beam=self.beam, eps_b=self.eps_b, solver=f'auto ({label})',
+                              setting=setting, cpu_per_sim_s=cpu / self.t_end, err_dy=np.nan,
+                              err_qp=np.nan, realtime_factor=self.t_end / cpu,
+                              steps_per_period=steps))
+        self.log(f'  {label:>24}  cpu/sim-s {cpu / self.t_end:9.4f} '
+                 '(reduced model: own error not shown)')
+
+
 def run_scene(beam, eps_b, quick=False, repeats=3, log=print, reference_dir=None):
     """All competitors on one scene; returns a list of result rows (dicts)."""
     scene = step_scene(beam, eps_b)
     model = build_model(scene)
     t_end = STEP_END
-    cached = (os.path.join(reference_dir, f'ref_{beam}_{eps_b:g}_rc.npy') if reference_dir
-              else None)
-    if cached and os.path.exists(cached):
-        t, X_ref = np.arange(int(round(t_end / scene.dt)) + 1) * scene.dt, np.load(cached)
-        log(f'[{beam} eps_b={eps_b}] reference from {cached}')
-    else:
-        log(f'[{beam} eps_b={eps_b}] reference (Radau rtol 1e-12) ...')
-        t, X_ref = reference_solution(scene, t_end)
-        if cached:
-            os.makedirs(reference_dir, exist_ok=True)
-            np.save(cached, X_ref)
-    rows = []
-
-    def add(solver, setting, cpu, X, steps=np.nan):
-        err_y, err_q = step_error(model, t, X, X_ref) if X is not None else (np.nan, np.nan)
-        rows.append(dict(beam=beam, eps_b=eps_b, solver=solver, setting=setting,
-                         cpu_per_sim_s=cpu / t_end, err_dy=err_y, err_qp=err_q,
-                         realtime_factor=t_end / cpu, steps_per_period=steps))
-        log(f'  {solver:>14} {setting:>10}  cpu/sim-s {cpu / t_end:9.4f}  err {err_y:.2e}')
-
+    t, X_ref = _reference(scene, beam, eps_b, t_end, reference_dir, log)
+    rows = _Rows(beam, eps_b, model, t, X_ref, t_end, log)
     volts = step_voltage(scene.physics.v_max)
     U = np.array([volts(k * scene.dt) for k in range(int(round(t_end / scene.dt)))])
-    reduced = {'ideal source': {'scene.source': 'ideal'}, 'no creep': {'scene.creep': False},
-               'no power monitor': {'scene.monitor_power': False}}
+    _project_runs(rows, model, U, quick, repeats)
+    _scipy_runs(rows, model, quick, log)
+    _control_runs(rows, model, quick, log)
+    return rows.rows
+
+
+def _project_runs(rows, model, U, quick, repeats):
+    """The project's steppers at fixed substeps, 'auto' at several tolerances, and 'auto' on
+    the reduced models."""
+    beam, eps_b, t_end = rows.beam, rows.eps_b, rows.t_end
+    n_periods = round(t_end / model.scene.dt)
     for method, subs in (('etdrk4', (4, 8, 16, 32, 64)), ('lawson5', (8, 16, 32, 64)),
                          ('etd2', (32, 128)), ('rk4', (64, 128, 256))):
         for sub in (subs[1:3] if quick else subs):
             try:
                 cpu, r = _cpu(lambda: simulate(Simulator(model, method, sub), U, t_end),
                               repeats)
-                add(method, f'{sub} sub', cpu, r.x)
+                rows.add(method, f'{sub} sub', cpu, r.x)
             except ArithmeticError:
-                add(method, f'{sub} sub', np.nan, None)
+                rows.add(method, f'{sub} sub', np.nan, None)
     # default 'auto' stepper at several tolerances, and the reductions at equal settings
     for tol in ((1e-4, 1e-6) if quick else (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)):
         tol_model = build_model(step_scene(beam, eps_b, **{'integrator.tolerance': tol}))
         cpu, r = _cpu(lambda: simulate(Simulator(tol_model), U, t_end), repeats)
         counted = Simulator(tol_model)   # the same run once more, to count its internal steps
         simulate(counted, U, t_end)
-        add('auto', f'tol {tol:g}', cpu, r.x, counted.steps_taken / round(t_end / scene.dt))
+        rows.add('auto', f'tol {tol:g}', cpu, r.x, counted.steps_taken / n_periods)
     # reductions at the same tolerance (auto picks method and substeps for each model)
+    reduced = {'ideal source': {'scene.source': 'ideal'}, 'no creep': {'scene.creep': False},
+               'no power monitor': {'scene.monitor_power': False}}
     for label, over in {'full model': {}, **reduced}.items():
         reduced_model = build_model(step_scene(beam, eps_b, **over))
         cpu, r = _cpu(lambda: simulate(Simulator(reduced_model), U, t_end), repeats)
         sim = Simulator(reduced_model)
         simulate(sim, U, t_end)
-        rows.append(dict(beam=beam, eps_b=eps_b, solver=f'auto ({label})',
-                         setting=f'tol 1e-06, {sim.method.name}',
-                         cpu_per_sim_s=cpu / t_end, err_dy=np.nan, err_qp=np.nan,
-                         realtime_factor=t_end / cpu,
-                         steps_per_period=sim.steps_taken / round(t_end / scene.dt)))
-        log(f'  {label:>24}  cpu/sim-s {cpu / t_end:9.4f} (reduced model: own error not shown)')
+        rows.add_reduced(label, f'tol 1e-06, {sim.method.name}', cpu,
+                         sim.steps_taken / n_periods)
+
+
+def _scipy_runs(rows, model, quick, log):
+    """solve_ivp per period, then per constant-voltage segment with the analytic Jacobian."""
+    t_end = rows.t_end
     for method in ('RK45', 'DOP853', 'Radau', 'BDF', 'LSODA'):
         for rtol in ((1e-6,) if quick else (1e-4, 1e-6, 1e-8)):
             try:
                 cpu, X = _cpu(lambda: _scipy_run(model, method, rtol, t_end), 1)
             except (ArithmeticError, ValueError):   # solver failure (domain, NaN Jacobian)
                 cpu, X = np.nan, None
-            add(f'scipy {method}', f'rtol {rtol:g}', cpu, X)
+            rows.add(f'scipy {method}', f'rtol {rtol:g}', cpu, X)
     jac = one_term_jacobian(model)
     log(f'  analytic Jacobian vs central differences: {_check_jacobian(model, jac):.1e}')
     for method in ('RK45', 'DOP853', 'Radau', 'BDF', 'LSODA'):
@@ -285,21 +323,24 @@ def run_scene(beam, eps_b, quick=False, repeats=3, log=print, reference_dir=None
                     model, method, rtol, t_end, jac if method in IMPLICIT else None), 1)
             except (ArithmeticError, ValueError):   # solver failure (domain, NaN Jacobian)
                 cpu, X = np.nan, None
-            add(f'scipy {method} whole run', f'rtol {rtol:g}', cpu, X)
+            rows.add(f'scipy {method} whole run', f'rtol {rtol:g}', cpu, X)
+
+
+def _control_runs(rows, model, quick, log):
+    """python-control's input_output_response, if installed."""
     try:
         import control  # noqa: F401
     except ImportError:
         log('  python-control not installed: skipped')
-    else:
-        # input_output_response integrates the whole run with the input interpolated linearly
-        # between the 1 ms samples (not a zero-order hold): its error includes that difference
-        for rtol in ((1e-6,) if quick else (1e-6, 1e-8)):
-            try:
-                cpu, X = _cpu(lambda: _control_run(model, rtol, t_end), 1)
-            except (ArithmeticError, ValueError):   # solver failure (domain, NaN Jacobian)
-                cpu, X = np.nan, None
-            add('python-control', f'rtol {rtol:g}', cpu, X)
-    return rows
+        return
+    # input_output_response integrates the whole run with the input interpolated linearly
+    # between the 1 ms samples (not a zero-order hold): its error includes that difference
+    for rtol in ((1e-6,) if quick else (1e-6, 1e-8)):
+        try:
+            cpu, X = _cpu(lambda: _control_run(model, rtol, rows.t_end), 1)
+        except (ArithmeticError, ValueError):   # solver failure (domain, NaN Jacobian)
+            cpu, X = np.nan, None
+        rows.add('python-control', f'rtol {rtol:g}', cpu, X)
 
 
 ERROR_LEVELS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
@@ -357,7 +398,9 @@ def _whole_run(solver):
     return solver.endswith('whole run')
 
 
-def _write(rows, out):
+def write_tables(rows, out):
+    """``work_precision.csv`` (one row per run) and ``work_precision.md`` (the runs and the
+    speed-up tables) in the folder ``out``."""
     os.makedirs(out, exist_ok=True)
     with open(os.path.join(out, 'work_precision.csv'), 'w', newline='') as stream:
         writer = csv.DictWriter(stream, fieldnames=list(rows[0]))
@@ -385,54 +428,13 @@ def _write(rows, out):
             for (beam, eps_b), ratios in speedups(rows, pick).items():
                 stream.write(f'| {beam} | {eps_b} | ' + ' | '.join(
                     '—' if not np.isfinite(r) else f'{r:.0f}×' for r in ratios) + ' |\n')
-    try:
-        import matplotlib
-        matplotlib.use('Agg')
-        import matplotlib.pyplot as plt
-    except ImportError:
-        print('matplotlib not installed: CSV and markdown written; pip install .[plots] for the PNG')
-        return
-    fig, ax = plt.subplots(figsize=(7, 5), dpi=90)
-    for solver in dict.fromkeys(r['solver'] for r in rows):
-        pts = [(r['cpu_per_sim_s'], r['err_dy']) for r in rows
-               if r['solver'] == solver and np.isfinite(r['err_dy']) and r['err_dy'] > 0]
-        if pts:
-            xs, ys = zip(*sorted(pts))
-            ax.loglog(xs, ys, 'o-', label=solver)
-    ax.set_xlabel('CPU seconds per simulated second')
-    ax.set_ylabel('max |Δy − Δy_ref| / stroke')
-    ax.set_title('work-precision, step scenario')
-    ax.grid(True, which='both', alpha=0.3)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(os.path.join(out, 'work_precision.png'))
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog='work_precision', description=__doc__.split('\n')[1])
-    parser.add_argument('--out', default='bench/out')
-    parser.add_argument('--quick', action='store_true', help='one scene, fewer points')
-    parser.add_argument('--beams', default='fixed,simply_supported')
-    parser.add_argument('--eps-b', default='0.15,0.20,0.25')
-    parser.add_argument('--repeats', type=int, default=3)
-    parser.add_argument('--reference-dir', default=None,
-                        help='cache the Radau references here (about a minute each)')
-    args = parser.parse_args(argv)
-    beams = args.beams.split(',')
-    eps = [float(e) for e in args.eps_b.split(',')]
-    if args.quick:
-        beams, eps = beams[:1], [0.20]
+def run(beams, eps_values, quick=False, repeats=3, reference_dir=None, log=print):
+    """:func:`run_scene` on each beam and pre-strain in turn; yields the rows measured so far
+    after each scene (so that a long run can write what it measured as it goes)."""
     rows = []
     for beam in beams:
-        for e in eps:
-            rows += run_scene(beam, e, args.quick, args.repeats,
-                              log=lambda s: print(s, file=sys.stderr, flush=True),
-                              reference_dir=args.reference_dir)
-            _write(rows, args.out)   # after every scene: a long run keeps what it measured
-    _write(rows, args.out)
-    print(f'wrote {args.out}/work_precision.{{csv,md,png}}')
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())
+        for eps_b in eps_values:
+            rows += run_scene(beam, eps_b, quick, repeats, log=log, reference_dir=reference_dir)
+            yield rows

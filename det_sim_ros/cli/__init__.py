@@ -1,11 +1,17 @@
 """
-Command-line entry points: ``det_sim`` (:func:`main`, one command with its verbs),
-``sim_node`` (:mod:`.sim_node`) and ``det_sim_replay``. Nothing heavy is imported until a
-command runs.
+Command-line entry points: ``det_sim`` (:func:`main`, one command with its verbs, one module
+each in :mod:`.verbs`), ``det_sim_replay`` (:func:`main_replay`, the ``replay`` verb on its
+own) and ``sim_node`` (:mod:`.sim_node`). Nothing heavy is imported until a command runs.
 """
 
 
 def main(argv=None) -> int:
     """``det_sim``: parse ``argv`` (default: the command line) and run its verb."""
     from .det_sim import main as run
+    return run(argv)
+
+
+def main_replay(argv=None) -> int:
+    """``det_sim_replay``: parse ``argv`` (default: the command line) and run it."""
+    from .det_sim import main_replay as run
     return run(argv)

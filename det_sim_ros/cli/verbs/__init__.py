@@ -1,0 +1,2 @@
+"""The verbs of ``det_sim``, one module each: ``HELP``, optionally ``DESCRIPTION``,
+``add_arguments(parser)`` and ``main(args) -> exit code`` (det_sim_ros.cli.det_sim lists them)."""
