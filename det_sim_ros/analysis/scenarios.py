@@ -1,5 +1,5 @@
 """
-Named reference scenarios (../shared/design/scenarios.md) and the benchmark error metric.
+Named reference scenarios (described in docs/model.md) and the benchmark error metric.
 
 'step': 0 V for 0 <= t < 1.5 s, v_max for 1.5 <= t < 3 s, 0 V until 4.5 s, sampled every 1 ms;
 Delta-y = y0 - y with y0 the end shortening at the end of the 0 V phase, eps_y = Delta-y / l_y,

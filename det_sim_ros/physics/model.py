@@ -20,7 +20,7 @@ Lagrange's equations (35) then give, with lz = 1/lambda and dlz/dq = J / (l0 lam
     dq_p/dt   = v / Rs - (1/Rs + 1/Rp) v_p,    v_p = q_p / (C0 lambda^2),  i_DE = (v - v_p) / Rs
 
 For one cell and the paper's one-term shape this is the paper's eq 71 with its errata corrected
-(see ../shared/design/model-notes.md, verified here by the tests):
+(listed in docs/model.md, verified here by the tests):
 
 1. the inertia term is a m (q^2 qddot + q qdot^2), not a m (q^2 qddot + 2 q qdot^2): the printed
    form forgets dT/dq and injects the spurious power -a m q qdot^3 (eq 75 likewise);
