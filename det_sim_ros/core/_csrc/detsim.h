@@ -38,7 +38,8 @@ typedef struct {
     double length;          /* beam length l, m */
     double EI;              /* bending stiffness, N m^2 */
     double kappa;           /* 1: the w'^4/8 end-shortening term (consistent), else 0 */
-    double c2, c4, e4;      /* one-term closed forms: 1/2 int S'^2, 1/8 int S'^4, EI int S''^2 S'^2 */
+    /* one-term closed forms: 1/2 int S'^2, 1/8 int S'^4, EI int S''^2 S'^2 */
+    double c2, c4, e4;
 } ds_cell;
 
 /* The DET spanning a cell (eqs 53-57, 66-67) and its supply circuit. */
