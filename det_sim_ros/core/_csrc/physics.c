@@ -1,7 +1,7 @@
 /*
- * The DET-beam physics: right-hand side, stiff rates, outputs (see det_sim_ros/physics/model.py for the
- * derivation from energies and virtual works, and det_sim_ros/physics/reference.py for the same
- * equations in readable numpy, which the tests hold this code to).
+ * The DET-beam physics: right-hand side, stiff rates, outputs (see det_sim_ros/physics/model.py
+ * for the derivation from energies and virtual works, and det_sim_ros/physics/reference.py for
+ * the same equations in readable numpy, which the tests hold this code to).
  *
  * State layout: q (n_q), qdot (n_q), eps_E (n_cells, if creep), q_p (n_cells, if RC source),
  * then the supplied and dissipated energy (2, if the power monitor is on).
@@ -196,6 +196,34 @@ static void solve_spd(double *Mt, int64_t ld, const double *F, double *out, int6
     }
 }
 
+/* The beam of a one-term cell: its end shortening y, dy/dq J and the force F (N) and mass Mt
+ * (kg) of its coordinate without the DET, with their damping power p_diss (W). */
+typedef struct {
+    double y, J, F, Mt, p_diss;
+} one_term_beam;
+
+static inline __attribute__((always_inline)) one_term_beam
+one_term_mechanics(const ds_model *m, double q, double qd)
+{
+    const ds_cell *cell = &m->cell[0];
+    const double q2 = q * q;
+    const double c2 = cell->c2, c4 = cell->kappa * cell->c4;
+    one_term_beam b;
+    b.y = one_term_shortening(cell, q);
+    b.J = 2.0 * c2 * q + 4.0 * c4 * q2 * q;
+    const double hq = (2.0 * c2 + 12.0 * c4 * q2) * qd * qd;
+    const double dq = m->D[0] * qd;
+    b.F = -(m->K[0] * q) - dq;
+    b.p_diss = qd * dq;
+    b.F -= 4.0 * cell->e4 * q * q * q;
+    b.Mt = m->Mb[0];
+    for (int64_t e = 0; e < m->n_mi; e++) {   /* at most one entry: MI[0, 0] */
+        b.F -= m->mi_val[e] * b.J * hq;
+        b.Mt += m->mi_val[e] * b.J * b.J;
+    }
+    return b;
+}
+
 /*
  * ds_rhs for a model of one one-term cell (the default scene, and each copy of an array when
  * it steps as its own group): the same operations in the same order as the general code below
@@ -207,20 +235,10 @@ static int rhs_one_term(const ds_model *m, const double *x, const double *u, dou
 {
     const ds_cell *cell = &m->cell[0];
     const ds_det *d = &m->det[0];
-    const double q = x[0], qd = x[1], q2 = q * q;
-    const double c2 = cell->c2, c4 = cell->kappa * cell->c4;
-    const double y = one_term_shortening(cell, q);
-    const double J = 2.0 * c2 * q + 4.0 * c4 * q2 * q;
-    const double hq = (2.0 * c2 + 12.0 * c4 * q2) * qd * qd;
-    const double dq = m->D[0] * qd;
-    double F = -(m->K[0] * q) - dq;
-    double p_diss = qd * dq;
-    F -= 4.0 * cell->e4 * q * q * q;
-    double Mt = m->Mb[0];
-    for (int64_t e = 0; e < m->n_mi; e++) {   /* at most one entry: MI[0, 0] */
-        F -= m->mi_val[e] * J * hq;
-        Mt += m->mi_val[e] * J * J;
-    }
+    const double qd = x[1];
+    const one_term_beam beam = one_term_mechanics(m, x[0], qd);
+    const double y = beam.y, J = beam.J;
+    double F = beam.F, p_diss = beam.p_diss;
     w->y[0] = y;
     const double lam = (cell->length - y) * d->inv_l0;
     if (!(lam > 0.0))
@@ -260,7 +278,7 @@ static int rhs_one_term(const ds_model *m, const double *x, const double *u, dou
     p_diss += vp * vp * d->inv_Rp + d->volume * d->eta_v * lzd * lzd;
     if (m->creep)
         p_diss += d->volume * d->E_M * d->relax_M * eps * eps;
-    dx[1] = F / Mt;
+    dx[1] = F / beam.Mt;
     dx[0] = qd;
     w->p_in = p_in;
     w->p_diss = p_diss;
@@ -271,16 +289,14 @@ static int rhs_one_term(const ds_model *m, const double *x, const double *u, dou
     return DS_OK;
 }
 
-/* ds_rhs for any model: cells of any number of Ritz terms, coupled groups, the exact kinematics
- * (kept out of line: its register saves and set-up would otherwise run on every one-term call). */
-static int __attribute__((noinline))
-rhs_general(const ds_model *m, const double *x, const double *u, double *dx, ds_work *w,
-            int quasi_static)
+/* The cells' blocks of K, D and Mb: F = -K q - D qd and the mass blocks Mt; then the bending
+ * force beyond EI int w''^2 and the interface mass's terms (w->J, w->h from ds_kinematics).
+ * Returns the damping power qd' D qd. */
+static double structure_forces(const ds_model *m, const double *x, ds_work *w)
 {
     const int64_t nq = m->n_q, nc = m->n_cells, R = m->r_max, ld = m->mass_block;
     const double *qd = x + nq;
     double *F = w->F, *J = w->J, *Mt = w->Mt;
-    ds_kinematics(m, x, w, 0);
     double p_diss = 0.0;
     for (int64_t c = 0; c < nc; c++) {   /* cell blocks of K, D and Mb */
         const ds_cell *cell = &m->cell[c];
@@ -315,58 +331,84 @@ rhs_general(const ds_model *m, const double *x, const double *u, double *dx, ds_
                 Mt[j * ld + k - go] += mi * J[j] * J[k];
         }
     }
-    double p_in = 0.0, p_leak_in = 0.0;   /* p_leak_in: v v_p / Rp summed */
-    int status = DS_OK;
-    for (int64_t i = 0; i < nc; i++) {
-        const ds_det *d = &m->det[i];
-        const ds_cell *cell = &m->cell[i];
-        const double lam = (cell->length - w->y[i]) * d->inv_l0;
-        if (!(lam > 0.0)) {   /* NaN: exact kinematics past |w'| = 1 (states are finite) */
-            status = lam == lam ? DS_BAD_STRETCH : DS_BAD_SLOPE;
-            break;
-        }
-        const double inv_lam = 1.0 / lam, inv_lam2 = inv_lam * inv_lam;
-        double vp, bracket;
-        /* dU_DE/dlambda without the sign of dlambda/dq = -J/l0 (eq 53, corrected eq 71) */
-        if (m->rc_source) {
-            double qp = x[m->i_qp + i];
-            if (quasi_static)
-                qp += d->C0 * lam * lam * u[i] * d->share;
-            vp = qp * d->inv_C0 * inv_lam2;
-            bracket = d->VY / 3.0 * (lam - inv_lam2 * inv_lam) - qp * vp * inv_lam;
-        } else {
-            vp = u[i];
-            bracket = d->VY / 3.0 * (lam - inv_lam2 * inv_lam) - d->C0 * lam * vp * vp;
-        }
-        double jqd = 0.0;
-        for (int64_t j = cell->q0; j < cell->q0 + cell->nr; j++)
-            jqd += J[j] * qd[j];
-        const double lzd = jqd * d->inv_l0 * inv_lam2;   /* d(lambda_z)/dt, lambda_z = 1/lambda */
-        const double eps = m->creep ? x[m->i_eps + i] : 0.0;
-        /* Maxwell spring + Kelvin-Voigt stress (eq 67) */
-        const double visc = d->volume * (d->E_M * eps + d->eta_v * lzd);
-        const double coef = (bracket - visc * inv_lam2) * d->inv_l0;
-        for (int64_t j = cell->q0; j < cell->q0 + cell->nr; j++)
-            F[j] += coef * J[j];
-        if (m->creep)
-            dx[m->i_eps + i] = lzd - d->relax_M * eps;
-        double i_de;
-        if (m->rc_source) {
-            i_de = (u[i] - vp) * d->inv_Rs;
-            dx[m->i_qp + i] = u[i] * d->inv_Rs - (d->inv_Rs + d->inv_Rp) * vp;
-            if (quasi_static)   /* minus d(C v_inf)/dt, dC/dt = 2 C0 lam dlam/dt */
-                dx[m->i_qp + i] += 2.0 * d->C0 * lam * jqd * d->inv_l0 * u[i] * d->share;
-            p_diss += (u[i] - vp) * i_de;
-        } else {
-            /* q_p = C0 lam^2 v: i = dq_p/dt + v/Rp with dlambda/dt = -J.qdot / l0 */
-            i_de = -2.0 * d->C0 * lam * jqd * d->inv_l0 * vp + vp * d->inv_Rp;
-        }
-        p_in += u[i] * i_de;
-        p_leak_in += u[i] * vp * d->inv_Rp;
-        p_diss += vp * vp * d->inv_Rp + d->volume * d->eta_v * lzd * lzd;
-        if (m->creep)
-            p_diss += d->volume * d->E_M * d->relax_M * eps * eps;
+    return p_diss;
+}
+
+/* What the DETs supply and dissipate, summed over the cells in order (W). */
+typedef struct {
+    double p_in, p_leak_in, p_diss;     /* p_leak_in: v v_p / Rp summed */
+} det_power;
+
+/* The DET of cell i: its force on the cell's coordinates (into w->F), the rates of its creep
+ * strain and charge (into dx), its powers (added to *pw). Returns a status code. */
+static int det_cell(const ds_model *m, int64_t i, const double *x, const double *u, double *dx,
+                    ds_work *w, int quasi_static, det_power *pw)
+{
+    const double *qd = x + m->n_q, *J = w->J;
+    const ds_det *d = &m->det[i];
+    const ds_cell *cell = &m->cell[i];
+    const double lam = (cell->length - w->y[i]) * d->inv_l0;
+    if (!(lam > 0.0))   /* NaN: exact kinematics past |w'| = 1 (states are finite) */
+        return lam == lam ? DS_BAD_STRETCH : DS_BAD_SLOPE;
+    const double inv_lam = 1.0 / lam, inv_lam2 = inv_lam * inv_lam;
+    double vp, bracket;
+    /* dU_DE/dlambda without the sign of dlambda/dq = -J/l0 (eq 53, corrected eq 71) */
+    if (m->rc_source) {
+        double qp = x[m->i_qp + i];
+        if (quasi_static)
+            qp += d->C0 * lam * lam * u[i] * d->share;
+        vp = qp * d->inv_C0 * inv_lam2;
+        bracket = d->VY / 3.0 * (lam - inv_lam2 * inv_lam) - qp * vp * inv_lam;
+    } else {
+        vp = u[i];
+        bracket = d->VY / 3.0 * (lam - inv_lam2 * inv_lam) - d->C0 * lam * vp * vp;
     }
+    double jqd = 0.0;
+    for (int64_t j = cell->q0; j < cell->q0 + cell->nr; j++)
+        jqd += J[j] * qd[j];
+    const double lzd = jqd * d->inv_l0 * inv_lam2;   /* d(lambda_z)/dt, lambda_z = 1/lambda */
+    const double eps = m->creep ? x[m->i_eps + i] : 0.0;
+    /* Maxwell spring + Kelvin-Voigt stress (eq 67) */
+    const double visc = d->volume * (d->E_M * eps + d->eta_v * lzd);
+    const double coef = (bracket - visc * inv_lam2) * d->inv_l0;
+    for (int64_t j = cell->q0; j < cell->q0 + cell->nr; j++)
+        w->F[j] += coef * J[j];
+    if (m->creep)
+        dx[m->i_eps + i] = lzd - d->relax_M * eps;
+    double i_de;
+    if (m->rc_source) {
+        i_de = (u[i] - vp) * d->inv_Rs;
+        dx[m->i_qp + i] = u[i] * d->inv_Rs - (d->inv_Rs + d->inv_Rp) * vp;
+        if (quasi_static)   /* minus d(C v_inf)/dt, dC/dt = 2 C0 lam dlam/dt */
+            dx[m->i_qp + i] += 2.0 * d->C0 * lam * jqd * d->inv_l0 * u[i] * d->share;
+        pw->p_diss += (u[i] - vp) * i_de;
+    } else {
+        /* q_p = C0 lam^2 v: i = dq_p/dt + v/Rp with dlambda/dt = -J.qdot / l0 */
+        i_de = -2.0 * d->C0 * lam * jqd * d->inv_l0 * vp + vp * d->inv_Rp;
+    }
+    pw->p_in += u[i] * i_de;
+    pw->p_leak_in += u[i] * vp * d->inv_Rp;
+    pw->p_diss += vp * vp * d->inv_Rp + d->volume * d->eta_v * lzd * lzd;
+    if (m->creep)
+        pw->p_diss += d->volume * d->E_M * d->relax_M * eps * eps;
+    return DS_OK;
+}
+
+/* ds_rhs for any model: cells of any number of Ritz terms, coupled groups, the exact kinematics
+ * (kept out of line: its register saves and set-up would otherwise run on every one-term call). */
+static int __attribute__((noinline))
+rhs_general(const ds_model *m, const double *x, const double *u, double *dx, ds_work *w,
+            int quasi_static)
+{
+    const int64_t nq = m->n_q, nc = m->n_cells, ld = m->mass_block;
+    const double *qd = x + nq;
+    double *F = w->F, *Mt = w->Mt;
+    ds_kinematics(m, x, w, 0);
+    det_power pw = {0.0, 0.0, 0.0};
+    pw.p_diss = structure_forces(m, x, w);
+    int status = DS_OK;
+    for (int64_t i = 0; i < nc && status == DS_OK; i++)
+        status = det_cell(m, i, x, u, dx, w, quasi_static, &pw);
     if (nq == 1) {
         dx[1] = F[0] / Mt[0];
     } else {
@@ -377,11 +419,11 @@ rhs_general(const ds_model *m, const double *x, const double *u, double *dx, ds_
     }
     for (int64_t i = 0; i < nq; i++)
         dx[i] = qd[i];
-    w->p_in = p_in;
-    w->p_diss = p_diss;
+    w->p_in = pw.p_in;
+    w->p_diss = pw.p_diss;
     if (m->power) {   /* quasi-static: the rate of W_in - v q_p (see ds_shift_charge) */
-        dx[m->i_power] = quasi_static && m->rc_source ? p_leak_in : p_in;
-        dx[m->i_power + 1] = p_diss;
+        dx[m->i_power] = quasi_static && m->rc_source ? pw.p_leak_in : pw.p_in;
+        dx[m->i_power + 1] = pw.p_diss;
     }
     return status;
 }
@@ -481,26 +523,14 @@ void ds_book_input_jump(const ds_model *m, double *x, const double *u_old, const
     }
 }
 
-/*
- * The named outputs (det_sim_ros.physics.model.output_names); returns a status code.
- * Per cell: q_ref, qdot_ref, y, lambda, q_p, v_p, i_DE, C, eps_E; then the structure outputs
- * (rows of P applied to y), H, P_in, P_diss.
- */
-int ds_outputs(const ds_model *m, const double *x, const double *u, double *out, ds_work *w)
+/* The beams' kinetic and elastic energy (J), with the interface mass's kinetic energy; the
+ * end-shortening rates dy/dt into w->ydot (w->J, w->Us4 from ds_kinematics with bending). */
+static double mechanical_energy(const ds_model *m, const double *x, ds_work *w)
 {
-    const int64_t nq = m->n_q, nc = m->n_cells, R = m->r_max;
-    const double *qd = x + nq;
-    int status = DS_OK;
-    for (int64_t k = 0; k < m->n_state; k++)
-        if (!isfinite(x[k]))
-            status = DS_NON_FINITE;
-    const int rhs_status = ds_rhs(m, x, u, w->dx, w, 0);
-    if (status == DS_OK)
-        status = rhs_status;
-    const double p_in = w->p_in, p_diss = w->p_diss;
-    ds_kinematics(m, x, w, 1);
+    const int64_t R = m->r_max;
+    const double *qd = x + m->n_q;
     double energy = 0.0;
-    for (int64_t c = 0; c < nc; c++) {
+    for (int64_t c = 0; c < m->n_cells; c++) {
         const int64_t o = m->cell[c].q0, r = m->cell[c].nr;
         w->ydot[c] = 0.0;
         for (int64_t i = o; i < o + r; i++)
@@ -513,6 +543,40 @@ int ds_outputs(const ds_model *m, const double *x, const double *u, double *out,
     }
     for (int64_t e = 0; e < m->n_mi; e++)
         energy += 0.5 * m->mi_val[e] * w->ydot[m->mi_row[e]] * w->ydot[m->mi_col[e]];
+    return energy;
+}
+
+/* The structure outputs: rows of P applied to the end shortenings y. */
+static void structure_outputs(const ds_model *m, const double *y, double *out)
+{
+    const int64_t nc = m->n_cells;
+    for (int64_t r = 0; r < m->n_structure; r++) {
+        double value = 0.0;
+        for (int64_t c = 0; c < nc; c++)
+            value += m->P[r * nc + c] * y[c];
+        out[r] = value;
+    }
+}
+
+/*
+ * The named outputs (det_sim_ros.physics.model.output_names); returns a status code.
+ * Per cell: q_ref, qdot_ref, y, lambda, q_p, v_p, i_DE, C, eps_E; then the structure outputs
+ * (rows of P applied to y), H, P_in, P_diss.
+ */
+int ds_outputs(const ds_model *m, const double *x, const double *u, double *out, ds_work *w)
+{
+    const int64_t nq = m->n_q, nc = m->n_cells;
+    const double *qd = x + nq;
+    int status = DS_OK;
+    for (int64_t k = 0; k < m->n_state; k++)
+        if (!isfinite(x[k]))
+            status = DS_NON_FINITE;
+    const int rhs_status = ds_rhs(m, x, u, w->dx, w, 0);
+    if (status == DS_OK)
+        status = rhs_status;
+    const double p_in = w->p_in, p_diss = w->p_diss;
+    ds_kinematics(m, x, w, 1);
+    double energy = mechanical_energy(m, x, w);
     for (int64_t c = 0; c < nc; c++) {
         const ds_det *d = &m->det[c];
         const double lam = (m->cell[c].length - w->y[c]) / d->l0, lam2 = lam * lam;
@@ -547,12 +611,8 @@ int ds_outputs(const ds_model *m, const double *x, const double *u, double *out,
         o[8] = eps;
     }
     int64_t k = nc * DS_CELL_OUTPUTS;
-    for (int64_t r = 0; r < m->n_structure; r++) {
-        double value = 0.0;
-        for (int64_t c = 0; c < nc; c++)
-            value += m->P[r * nc + c] * w->y[c];
-        out[k++] = value;
-    }
+    structure_outputs(m, w->y, out + k);
+    k += m->n_structure;
     out[k] = energy;
     out[k + 1] = p_in;
     out[k + 2] = p_diss;
