@@ -81,8 +81,8 @@ KINEMATICS = {'paper': 0, 'consistent': 1, 'exact': 2}
 @dataclasses.dataclass(frozen=True, eq=False)
 class ModelArrays:
     """
-    Everything the compiled kernel reads, by name (det_sim_ros/core/_csrc/model_type.c reads these
-    fields one attribute at a time; no positional tuple). SI units. Built by :func:`build_model`.
+    Everything the compiled kernel reads, by name (core/_csrc/model_type.c reads these fields
+    one attribute at a time; no positional tuple). SI units. Built by :func:`build_model`.
 
     The state is q (n_q Ritz coordinates, cell by cell), qdot (n_q), eps_E (n_cells, if
     ``creep``), q_p (n_cells, if ``rc_source``), then W_in, W_diss (if ``power_monitor``).
