@@ -113,7 +113,7 @@ def test_lockstep_loop_equals_the_offline_loop_and_the_pi_settles(det_sim, joint
     assert metrics.settling_time <= 0.5
     assert abs(metrics.steady_state_error) <= 0.05 * TARGET
     assert metrics.overshoot < 0.05 and 0.0 < metrics.rise_time < metrics.settling_time
-    assert sim.node.pacing.missed_deadlines == 0 and sim.node.refused_commands == 0
+    assert sim.node.pacing.missed_deadlines == 0 and sim.node.commands.refused == 0
 
 
 def _busy(n):
@@ -178,7 +178,7 @@ def test_two_sources_and_stale_answers(det_sim):
                                      controller('b', 'right', 2000.0, False)])
     assert sim.node.pacing.stale_answers == 1 and sim.node.pacing.missed_deadlines == 0
     assert run.voltage[1:].tolist() == [[1000.0, 2000.0]] * 50
-    assert sim.node.commands_received >= 2 * 50 + 1   # the answers to samples 0..49 + stale
+    assert sim.node.commands.received >= 2 * 50 + 1   # the answers to samples 0..49 + stale
 
 
 def test_timeout_holds_the_voltages_and_counts_missed_deadlines(det_sim):

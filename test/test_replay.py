@@ -204,7 +204,7 @@ def test_node_log_resimulates_bit_for_bit(tmp_path, harness):
     assert recorder is not None and recorder.active
     for volts in (800.0, 1500.0, 400.0):
         h.command([volts])
-        h.spin_until(lambda: h.node.commands_received >= 1, 'command')
+        h.spin_until(lambda: h.node.commands.received >= 1, 'command')
         h.spin_until_sim_time(h.node.simulator.t + 0.02)
     h.joint_command(['det0'], [1200.0])
     h.spin_until_sim_time(h.node.simulator.t + 0.02)

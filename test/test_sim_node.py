@@ -98,22 +98,22 @@ def test_bad_inputs_refused_or_clamped(harness):
     h = harness(start_paused=True)
     u = lambda: h.node.simulator.u.tolist()  # noqa: E731
     h.command([1000.0])
-    assert u() == [1000.0] and h.node.refused_commands == 0
+    assert u() == [1000.0] and h.node.commands.refused == 0
     for bad in ([math.nan], [math.inf], [-math.inf], [1.0, 2.0], []):
         h.command(bad)
         assert u() == [1000.0]
-    assert h.node.refused_commands == 5
+    assert h.node.commands.refused == 5
     h.joint_command(['det7'], [500.0])
     h.joint_command(['det0'], [math.nan])
-    assert u() == [1000.0] and h.node.refused_commands == 7
+    assert u() == [1000.0] and h.node.commands.refused == 7
     h.command([-5.0])
     assert u() == [0.0]
     h.command([5000.0])
     assert u() == [h.node.scene.physics.v_max]
-    assert h.node.clamped_commands == 2
+    assert h.node.commands.clamped == 2
     h.joint_command(['det0'], [2500.0])
     assert u() == [2500.0]
-    assert h.node.refused_commands == 7
+    assert h.node.commands.refused == 7
     # the held voltage drives the model (charge follows C v) and nothing published is NaN
     assert h.call('pause', data=False).success
     h.spin_until_sim_time(0.2, 'charge')
@@ -426,32 +426,33 @@ def test_plate_bad_inputs_per_channel(harness):
     assert u() == [1000.0, 2000.0]
     h.command([1500.0, math.nan])
     assert u() == [1000.0, 2000.0]
-    assert h.node.refused_commands == 1
-    assert 'right' in h.node.last_refused and 'left' not in h.node.last_refused
+    assert h.node.commands.refused == 1
+    assert 'right' in h.node.commands.last_refused and 'left' not in h.node.commands.last_refused
     h.command([math.inf, 100.0])
-    assert u() == [1000.0, 2000.0] and 'left' in h.node.last_refused
+    assert u() == [1000.0, 2000.0] and 'left' in h.node.commands.last_refused
     h.command([1.0, 2.0, 3.0])
-    assert u() == [1000.0, 2000.0] and h.node.refused_commands == 3
-    assert 'left, right' in h.node.last_refused
+    assert u() == [1000.0, 2000.0] and h.node.commands.refused == 3
+    assert 'left, right' in h.node.commands.last_refused
     h.command([5000.0, 100.0])
-    assert u() == [h.node.scene.physics.v_max, 100.0] and h.node.clamped_commands == 1
+    assert u() == [h.node.scene.physics.v_max, 100.0] and h.node.commands.clamped == 1
     # joint commands: partial updates by name, the other channel holds
     h.joint_command(['right'], [700.0])
     assert u() == [h.node.scene.physics.v_max, 700.0]
     h.joint_command(['left'], [math.nan])
-    assert u() == [h.node.scene.physics.v_max, 700.0] and 'left' in h.node.last_refused
+    assert u() == [h.node.scene.physics.v_max, 700.0] and 'left' in h.node.commands.last_refused
     h.joint_command(['det0'], [1.0])
-    assert h.node.refused_commands == 5
+    assert h.node.commands.refused == 5
     h.joint_command(['right', 'left'], [10.0, 20.0])
     assert u() == [20.0, 10.0]
     # issue 17: a DET named twice is refused (not the last one silently winning); an empty
     # JointState says it is empty (not 'unknown DET name(s) []')
     h.joint_command(['left', 'right', 'left'], [1.0, 2.0, 3.0])
-    assert u() == [20.0, 10.0] and h.node.refused_commands == 6
-    assert "['left'] given more than once" in h.node.last_refused
+    assert u() == [20.0, 10.0] and h.node.commands.refused == 6
+    assert "['left'] given more than once" in h.node.commands.last_refused
     h.joint_command([], [])
-    assert u() == [20.0, 10.0] and h.node.refused_commands == 7
-    assert 'empty JointState' in h.node.last_refused and '[]' not in h.node.last_refused
+    assert u() == [20.0, 10.0] and h.node.commands.refused == 7
+    reason = h.node.commands.last_refused
+    assert 'empty JointState' in reason and '[]' not in reason
     h.joint_command(['right'], [30.0])
     assert u() == [20.0, 30.0]
     assert h.call('pause', data=False).success

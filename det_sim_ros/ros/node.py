@@ -13,30 +13,28 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                SetParametersResult)
+from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, qos_profile_sensor_data, QoSProfile
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
-from .diagnostics import CommandCounts, diagnostics_message, RateWindow, status_line
-from ..io.contract import (clamp_message, CLOCK_TOPIC, COMMAND_TOPIC, CommandDecoder,
-                           DIAGNOSTICS_TOPIC, encode_clock, JOINT_COMMAND_TOPIC, OUTPUT_FIELDS,
-                           OutputContract, rest_shortenings, STRUCTURE_TOPIC, stamp_ns,
-                           structure_channels, TOPIC_TYPES)
+from .commands import CommandInput
+from .declaration import declare_parameters, validate_parameters
+from .diagnostics import diagnostics_message, RateWindow, status_line
+from ..io.contract import (CLOCK_TOPIC, COMMAND_TOPIC, DIAGNOSTICS_TOPIC, encode_clock,
+                           JOINT_COMMAND_TOPIC, OUTPUT_FIELDS, OutputContract, rest_shortenings,
+                           STRUCTURE_TOPIC, stamp_ns, structure_channels, TOPIC_TYPES)
 from .markers import attach_markers
 from .pacing import make_pacing
-from .params import (node_parameter_values, NODE_PARAMS, runtime_refusal,
-                     SCENE_PARAM_DESCRIPTION, scene_parameters, SCENE_SECTIONS)
+from .params import SCENE_SECTIONS
 from ..physics.model import ModelDomainError
 from .recording import open_recorder
 from .spinning import make_executor, spin, spin_until_stopped, StopRequested, StopSignals
@@ -81,15 +79,13 @@ class SimNode(Node):
         self.y0 = rest_shortenings(self.scene)     # per DET, m
         # nothing is compiled at run time (the kernel is built at install): this is the model's
         # Ritz integrals, its stepper and the rest state's statics solve
-        self.get_logger().info(f'scene {scene_file!r} prepared in '
-                               f'{time.perf_counter() - started:.2f} s (model, stepper, rest state)')
+        elapsed = time.perf_counter() - started
+        self.get_logger().info(f'scene {scene_file!r} prepared in {elapsed:.2f} s (model, '
+                               'stepper, rest state)')
         self.contract = OutputContract(self._sim.model, self.y0)
         self.structure_names = self.contract.structure_names
         self._encoder = self.contract.encoder()
         self._topics = tuple(self._encoder.topics)
-        self._decoder = CommandDecoder(self.det_names, self.scene.physics.v_max)
-        self.commands_received = self.refused_commands = self.clamped_commands = 0
-        self.last_refused = ''
         self.steps_total = 0
         self.achieved_rtf = 0.0
         self.realtime_scheduling = False   # SCHED_FIFO in force (realtime_priority)
@@ -118,15 +114,7 @@ class SimNode(Node):
                 get_method(self.scene.method)
             except ValueError as exc:
                 raise SceneError(f"scene key 'integrator.method': {exc}") from None
-        for name, value in scene_parameters(self.scene):
-            self._set_override(name, value)   # the scene's checked value (e.g. 1 -> 1.0)
-            self.declare_parameter(name, value, ParameterDescriptor(
-                description=SCENE_PARAM_DESCRIPTION, read_only=True))
-        values = node_parameter_values(self.scene.node,
-                                       {name: p.value for name, p in overrides.items()})
-        for name, value in values.items():   # -p name:=value wins over the scene file
-            self._set_override(name, value)
-            self.declare_parameter(name, value, _descriptor(NODE_PARAMS[name]))
+        declare_parameters(self, self.scene, {name: p.value for name, p in overrides.items()})
         return scene_file
 
     def _start(self, scene_file):
@@ -151,6 +139,9 @@ class SimNode(Node):
             'initial_state': self._initial_text,
             'x0': repr(self._sim.x0.tolist()),   # what ~/reset returns to
             'node': self.get_fully_qualified_name()}, self.get_namespace(), self.get_logger())
+        self.commands = CommandInput(self._sim, self.det_names, self.scene.physics.v_max,
+                                     self._recorder, self.get_logger(),
+                                     self.pacing.command_received)
         if self._p('realtime_priority'):   # last: every thread of the node exists by now
             self.realtime_scheduling = self.pacing.apply_priority(
                 self._p('realtime_priority'), self.get_logger())
@@ -180,14 +171,14 @@ class SimNode(Node):
         # re-encoded with zero padding (equal commands give equal logs)
         self._command_subs = {
             topic: self.create_subscription(
-                msg_type, topic, lambda data, topic=topic: self._on_command(topic, data), in_qos,
-                raw=True)
+                msg_type, topic, lambda data, topic=topic: self.commands.apply(topic, data),
+                in_qos, raw=True)
             for topic, msg_type in ((COMMAND_TOPIC, Float64MultiArray),
                                     (JOINT_COMMAND_TOPIC, JointState))}
         self.create_service(SetBool, '~/pause', self._srv_pause)
         self.create_service(Trigger, '~/step', self._srv_step)
         self.create_service(Trigger, '~/reset', self._srv_reset)
-        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_on_set_parameters_callback(validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
 
     # -- read-only accessors ----------------------------------------------------------------
@@ -231,7 +222,7 @@ class SimNode(Node):
         # free-run tick (the executor would deliver them only after the whole tick)
         for topic, sub in self._command_subs.items():
             while (taken := sub.handle.take_message(sub.msg_type, True)) is not None:
-                self._on_command(topic, taken[0])
+                self.commands.apply(topic, taken[0])
         try:
             out = self._sim.step()
         except ModelDomainError as exc:
@@ -288,33 +279,6 @@ class SimNode(Node):
             self.get_logger().error(f'fault, integration stopped (call ~/reset): {reason}')
             self.publish_diagnostics()
 
-    # -- commands ---------------------------------------------------------------------------
-    def _on_command(self, topic, data):
-        """A command's CDR bytes: decode, check, log (at the period it applies to), hold."""
-        self.commands_received += 1
-        command = self._decoder.decode(topic, data, self._sim.u)
-        if self._recorder is not None and command.canonical:
-            self._recorder.record(topic, command.canonical, stamp_ns(self._sim.k, self._sim.dt),
-                                  TOPIC_TYPES[topic])
-        if command.volts is None:
-            self._refuse(command.reason + ('' if command.reason.startswith(
-                JOINT_COMMAND_TOPIC + ':') else '; holding the previous voltages'))
-        else:
-            check = self._sim.set_input(command.volts)
-            if not check.accepted:   # the contract's checks are the simulator's; not expected
-                self._refuse(f'{topic}: {check.reason}; holding the previous voltages')
-            elif command.clamped:
-                self.clamped_commands += 1
-                self.get_logger().warning(
-                    clamp_message(topic, command.clamped, self.scene.physics.v_max),
-                    throttle_duration_sec=1.0)
-        self.pacing.command_received(command)
-
-    def _refuse(self, reason):
-        self.refused_commands += 1
-        self.last_refused = reason
-        self.get_logger().warning(f'command refused: {reason}', throttle_duration_sec=1.0)
-
     # -- services ---------------------------------------------------------------------------
     def set_paused(self, paused: bool) -> str:
         """Pause or resume (as ~/pause does); the service's answer."""
@@ -357,19 +321,6 @@ class SimNode(Node):
     def _p(self, name):
         return self.get_parameter(name).value
 
-    def _set_override(self, name, value):
-        """Replace a -p override by its checked value: rclpy refuses an override whose type
-        differs from the declared one (an integer given for a double, e.g. physics.Rs:=1)."""
-        if name in self._parameter_overrides:
-            self._parameter_overrides[name] = Parameter(name, value=value)
-
-    def _validate_parameters(self, params):
-        for param in params:
-            reason = runtime_refusal(param.name, param.value)
-            if reason:
-                return SetParametersResult(successful=False, reason=reason)
-        return SetParametersResult(successful=True)
-
     def _apply_parameters(self, params):
         self.pacing.parameters_changed(self._p, {param.name for param in params})
 
@@ -391,8 +342,7 @@ class SimNode(Node):
             mode=pacing.mode, paused=self.paused, simulator=self._sim, window=window,
             achieved_rtf=self.achieved_rtf, pacing=report, late_ticks=pacing.late_ticks,
             slipped_s=pacing.slipped_s, distrust=distrust, recorder=self._recorder,
-            commands=CommandCounts(self.commands_received, self.refused_commands,
-                                   self.clamped_commands, self.last_refused))
+            commands=self.commands.counts())
         self._diag_pub.publish(msg)
         return msg
 
@@ -405,19 +355,6 @@ class SimNode(Node):
             q_mm=self.contract.values(out, 'deflection', 'position') * 1e3,
             dy_mm=self.contract.values(out, 'displacement', 'position') * 1e3,
             state='FAULT' if self._sim.fault else ('paused' if self.paused else 'running')))
-
-
-def _descriptor(param) -> ParameterDescriptor:
-    """A node parameter's descriptor: its description, read-only flag and range."""
-    descriptor = ParameterDescriptor(description=param.description, read_only=param.read_only)
-    bounds, default = param.bounds, param.default
-    if bounds is not None and isinstance(default, float):
-        descriptor.floating_point_range = [FloatingPointRange(
-            from_value=float(bounds[0]), to_value=float(bounds[1]), step=0.0)]
-    elif bounds is not None and isinstance(default, int):
-        descriptor.integer_range = [IntegerRange(
-            from_value=bounds[0], to_value=bounds[1], step=1)]
-    return descriptor
 
 
 def main(args=None):
