@@ -45,8 +45,7 @@ __all__ = ['SimNode', 'main', 'OUTPUT_TOPICS', 'STRUCTURE_TOPIC', 'rest_shorteni
            'structure_channels', 'make_executor', 'spin']
 
 NODE_NAME = 'sim_node'
-# The topic contract (names, types, channels, y0, the bytes on the wire) is
-# det_sim_ros.io.contract.
+# (the topic contract: names, types, channels, y0, the bytes on the wire: det_sim_ros.io.contract)
 OUTPUT_TOPICS = {topic: mapping['position'] for topic, mapping in OUTPUT_FIELDS.items()}
 
 
@@ -70,7 +69,7 @@ class SimNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         scene_file = self._load_scene()
-        self.pacing = make_pacing(self._p)
+        self._pacing = make_pacing(self._p)
         started = time.perf_counter()
         self._sim = Simulator(self.scene, threads=self._p('threads'))
         self.det_names = list(self._sim.model.input_names)   # command and output order
@@ -125,7 +124,7 @@ class SimNode(Node):
         in_qos = keep_all if self._p('qos_keep_all') else QoSProfile(depth=10)
         out_qos = qos_profile_sensor_data if self._p('qos_sensor_data') else in_qos
         self._create_endpoints(in_qos, out_qos)
-        self.pacing.start(self)
+        self._pacing.start(self)
         self._diag_window, self._info_window = RateWindow(), RateWindow()
         self.create_timer(self._p('diagnostics_period'), self.publish_diagnostics,
                           clock=self._steady)
@@ -139,17 +138,17 @@ class SimNode(Node):
             'initial_state': self._initial_text,
             'x0': repr(self._sim.x0.tolist()),   # what ~/reset returns to
             'node': self.get_fully_qualified_name()}, self.get_namespace(), self.get_logger())
-        self.commands = CommandInput(self._sim, self.det_names, self.scene.physics.v_max,
-                                     self._recorder, self.get_logger(),
-                                     self.pacing.command_received)
+        self._commands = CommandInput(self._sim, self.det_names, self.scene.physics.v_max,
+                                      self._recorder, self.get_logger(),
+                                      self._pacing.command_received)
         if self._p('realtime_priority'):   # last: every thread of the node exists by now
-            self.realtime_scheduling = self.pacing.apply_priority(
+            self.realtime_scheduling = self._pacing.apply_priority(
                 self._p('realtime_priority'), self.get_logger())
         self._publish_sample(self.current_outputs())
         self.get_logger().info(
             f'scene {scene_file!r}: {self.scene.beam} beam, eps_b = {self.scene.eps_b:g}, '
             f'{self.scene.rate_hz:g} Hz, {self._sim.describe_stepper()}; '
-            f'{self.pacing.label()}{", paused" if self.paused else ""}; initial state '
+            f'{self._pacing.label()}{", paused" if self.paused else ""}; initial state '
             f'{self._initial_text}; {len(self.det_names)} DET(s), '
             f'voltage command order: [{", ".join(self.det_names)}]'
             + (f'; structure outputs [{", ".join(self.structure_names)}]'
@@ -162,7 +161,7 @@ class SimNode(Node):
         # destroy guard (~2.5 us per call); the node publishes through the handle directly
         self._publish_raw = [pub.handle.publish_raw for pub in self._output_pubs.values()]
         self._clock_pub = (self.create_publisher(ClockMsg, CLOCK_TOPIC, in_qos)
-                           if self.pacing.publishes_clock else None)
+                           if self._pacing.publishes_clock else None)
         self._publish_clock = self._clock_pub.handle.publish_raw if self._clock_pub else None
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         self._markers = attach_markers(self, self._sim.model, self._p('markers.rate_hz'),
@@ -171,7 +170,7 @@ class SimNode(Node):
         # re-encoded with zero padding (equal commands give equal logs)
         self._command_subs = {
             topic: self.create_subscription(
-                msg_type, topic, lambda data, topic=topic: self.commands.apply(topic, data),
+                msg_type, topic, lambda data, topic=topic: self._commands.apply(topic, data),
                 in_qos, raw=True)
             for topic, msg_type in ((COMMAND_TOPIC, Float64MultiArray),
                                     (JOINT_COMMAND_TOPIC, JointState))}
@@ -186,7 +185,9 @@ class SimNode(Node):
     recorder = property(lambda self: self._recorder, doc='The MCAP Recorder, or None.')
     markers = property(lambda self: self._markers, doc='The NodeMarkers, or None (off).')
     dt = property(lambda self: self._sim.dt, doc='The control period, s.')
-    mode = property(lambda self: self.pacing.mode, doc='real_time, free_run or lockstep.')
+    mode = property(lambda self: self._pacing.mode, doc='real_time, free_run or lockstep.')
+    pacing = property(lambda self: self._pacing, doc='The Pacing of this mode (ros.pacing).')
+    commands = property(lambda self: self._commands, doc='The CommandInput (its counters).')
     steady_clock = property(lambda self: self._steady, doc='The clock of the node timers.')
     output_publishers = property(lambda self: dict(self._output_pubs),
                                  doc='Topic -> the publisher of that output.')
@@ -222,7 +223,7 @@ class SimNode(Node):
         # free-run tick (the executor would deliver them only after the whole tick)
         for topic, sub in self._command_subs.items():
             while (taken := sub.handle.take_message(sub.msg_type, True)) is not None:
-                self.commands.apply(topic, taken[0])
+                self._commands.apply(topic, taken[0])
         try:
             out = self._sim.step()
         except ModelDomainError as exc:
@@ -246,7 +247,7 @@ class SimNode(Node):
         except RuntimeError:   # rclpy's RCLError: Ctrl-C shut the context down mid-tick
             if self.context.ok():
                 raise
-            self.pacing.stop()
+            self._pacing.stop()
             return False
         return True
 
@@ -257,7 +258,7 @@ class SimNode(Node):
         k = self._sim.k
         t_ns = stamp_ns(k, self._sim.dt)
         samples = self._encoder.encode(out, t_ns)
-        self.pacing.sample_ready(k, samples)
+        self._pacing.sample_ready(k, samples)
         recorder = self._recorder
         if recorder is not None:   # (the log's order: the sample, then its marker frame)
             recorder.record_sample(t_ns, self._topics, samples, TOPIC_TYPES)
@@ -273,7 +274,7 @@ class SimNode(Node):
         return True
 
     def _enter_fault(self, reason):
-        self.pacing.stop()
+        self._pacing.stop()
         if self._fault_reported != reason:
             self._fault_reported = reason
             self.get_logger().error(f'fault, integration stopped (call ~/reset): {reason}')
@@ -283,7 +284,7 @@ class SimNode(Node):
     def set_paused(self, paused: bool) -> str:
         """Pause or resume (as ~/pause does); the service's answer."""
         self.paused = bool(paused)
-        self.pacing.run(self.running)
+        self._pacing.run(self.running)
         return f"{'paused' if self.paused else 'running'} at t = {self._sim.t:.6g} s"
 
     def _srv_pause(self, request, response):
@@ -304,14 +305,14 @@ class SimNode(Node):
 
     def _srv_reset(self, request, response):
         self._sim.reset()
-        self.pacing.reset()
+        self._pacing.reset()
         if self._recorder is not None:
             self._recorder.new_file()  # sim time restarts: one file per continuous run
             if self._recorder.active:
                 self.get_logger().info(f'reset: the log continues in a new file after '
                                        f'{self._recorder.path}')
         self._fault_reported = ''
-        self.pacing.run(self.running)
+        self._pacing.run(self.running)
         self._publish_sample(self.current_outputs())
         response.success = True
         response.message = f'reset to t = 0, initial state {self._initial_text}, 0 V'
@@ -322,12 +323,12 @@ class SimNode(Node):
         return self.get_parameter(name).value
 
     def _apply_parameters(self, params):
-        self.pacing.parameters_changed(self._p, {param.name for param in params})
+        self._pacing.parameters_changed(self._p, {param.name for param in params})
 
     # -- reporting --------------------------------------------------------------------------
     def publish_diagnostics(self):
         """Publish the /diagnostics status for the window since the last one; the message."""
-        pacing = self.pacing
+        pacing = self._pacing
         window = self._diag_window.take(self.steps_total, pacing.late_ticks, pacing.slipped_s)
         self.achieved_rtf = window.rate_hz * self._sim.dt
         report = pacing.report(window.rate_hz, window.slipped_s, window.wall_s)
@@ -342,12 +343,12 @@ class SimNode(Node):
             mode=pacing.mode, paused=self.paused, simulator=self._sim, window=window,
             achieved_rtf=self.achieved_rtf, pacing=report, late_ticks=pacing.late_ticks,
             slipped_s=pacing.slipped_s, distrust=distrust, recorder=self._recorder,
-            commands=self.commands.counts())
+            commands=self._commands.counts())
         self._diag_pub.publish(msg)
         return msg
 
     def _log_info(self):
-        pacing = self.pacing
+        pacing = self._pacing
         window = self._info_window.take(self.steps_total, pacing.late_ticks, pacing.slipped_s)
         out = self.current_outputs()
         self.get_logger().info(status_line(
