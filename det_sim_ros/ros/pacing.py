@@ -40,6 +40,10 @@ class Pacing:
     The common interface; the base class also holds what most modes share (one timer that
     runs while the node runs, no wall-clock reference, nothing to add to diagnostics).
 
+    What a pacing uses of its node: ``dt``, ``simulator``, ``running``, ``paused``,
+    ``wall_clock``, ``steady_clock``, ``run_period``, ``send``, ``subscriptions_matched``,
+    ``create_timer``, ``destroy_timer`` and ``get_logger``.
+
     :param get: a parameter's current value by name (``PARAMETERS`` are read).
     """
 
