@@ -67,12 +67,13 @@ def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1, rea
         Parameter('start_paused', value=True), Parameter('markers.rate_hz', value=30.0)])
     executor = make_executor(context)   # the node's own executor (EventsExecutor)
     executor.add_node(node)
-    markers = node._markers
+    markers = node.markers
+    every, OFF = markers.every, 1 << 62
     deadline = time.monotonic() + 20.0
     # wait for the subscriber, so every message it asks for is delivered
     waits = [markers.publisher]
     if subscribe == 'all':
-        waits.append(node._output_pubs[node._encoder.topics.index('deflection')])
+        waits.append(node.output_publishers['deflection'])
     while not all(p.get_subscription_count() for p in waits) and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.05)
     spent = [0.0]
@@ -91,8 +92,8 @@ def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1, rea
     markers.publish = timed(markers.publish)
     if drive_hz > 0:   # a square wave 0 V <-> 2.5 kV: the actuator snaps and creeps, so frames
         # change (a settled actuator sends one frame per simulated second)
-        half = max(1, int(round(0.5 / drive_hz / node._dt)))
-        simulator, step = node._sim, node._sim.step
+        half = max(1, int(round(0.5 / drive_hz / node.dt)))
+        simulator, step = node.simulator, node.simulator.step
 
         def driven_step():
             k = simulator.k
@@ -101,8 +102,7 @@ def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1, rea
                                     * len(simulator.u))
             return step()
         simulator.step = driven_step
-    node.paused = False
-    node._run_timer(True)
+    node.set_paused(False)
     warm = time.perf_counter() + 1.0
     while time.perf_counter() < warm:
         executor.spin_once(timeout_sec=0.1)
@@ -113,12 +113,12 @@ def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1, rea
     for _ in range(blocks):
         pair = {}
         for on in ((False, True) if rng.random() < 0.5 else (True, False)):
-            node._markers = markers if on else None
-            k0, c0, m0 = node._sim.k, time.process_time(), time.thread_time()
+            markers.every = every if on else OFF   # off: no sample is on the display grid
+            k0, c0, m0 = node.simulator.k, time.process_time(), time.thread_time()
             end = time.perf_counter() + block_s
             while time.perf_counter() < end:
                 executor.spin_once(timeout_sec=0.1)
-            cpu, sim = time.process_time() - c0, (node._sim.k - k0) * node._dt
+            cpu, sim = time.process_time() - c0, (node.simulator.k - k0) * node.dt
             totals[on][0] += cpu
             totals[on][1] += sim
             totals[on][2] += time.thread_time() - m0   # the executor's (this) thread

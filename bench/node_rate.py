@@ -237,8 +237,8 @@ def paired_node_floor(scene_name, topics, samples, pairs, block_s, folder, seed=
     executors = [make_executor(context) for context in contexts]
     executors[0].add_node(sim_node)
     executors[1].add_node(floor)
-    _wait_subscribers(sim_node._output_pubs + pubs, 'paired node and floor')
-    done = [lambda: sim_node._sim.k, lambda: floor_done[0]]
+    _wait_subscribers([*sim_node.output_publishers.values(), *pubs], 'paired node and floor')
+    done = [lambda: sim_node.simulator.k, lambda: floor_done[0]]
     rng = random.Random(seed)
     totals = [[0.0, 0], [0.0, 0]]   # CPU s, periods: node, floor
     ratios = []
@@ -306,30 +306,30 @@ def run_node(seconds, executor_kind, folder, wait_topics=None, **params):
     executor = (make_executor(context) if executor_kind == 'events'
                 else SingleThreadedExecutor(context=context))
     executor.add_node(node)
-    _wait_subscribers([p for p, t in zip(node._output_pubs, node._encoder.topics)
+    _wait_subscribers([p for t, p in node.output_publishers.items()
                        if wait_topics is None or t in wait_topics], 'node')
     executor.spin_once(timeout_sec=0.1)
-    node._resync()
-    k0, c0, w0, m0 = node._sim.k, _cpu(), time.perf_counter(), time.thread_time()
-    slipped0, late0 = node.slipped_s, node.late_ticks
+    node.pacing.resync()
+    k0, c0, w0, m0 = node.simulator.k, _cpu(), time.perf_counter(), time.thread_time()
+    slipped0, late0 = node.pacing.slipped_s, node.pacing.late_ticks
     max_lag = 0
     end = w0 + seconds
     real_time = node.mode == 'real_time'
     while time.perf_counter() < end:
         executor.spin_once(timeout_sec=0.05)
         if real_time:
-            max_lag = max(max_lag, node._max_lag_seen)
+            max_lag = max(max_lag, node.pacing.max_lag_seen)
     cpu, wall, main = _cpu() - c0, time.perf_counter() - w0, time.thread_time() - m0
-    steps = node._sim.k - k0
-    result = {'steps': steps, 'wall_s': wall, 'rtf': steps * node._dt / wall,
+    steps = node.simulator.k - k0
+    result = {'steps': steps, 'wall_s': wall, 'rtf': steps * node.dt / wall,
               'cpu_us_per_period': cpu / steps * 1e6,
               'main_thread_us_per_period': main / steps * 1e6}
     if real_time:
-        result.update({'lag_at_end_ms': max(0, node._steps_due(node.wall_clock()) - 1)
-                       * node._dt * 1e3, 'max_lag_ms': max_lag * node._dt * 1e3,
-                       'slipped_s': node.slipped_s - slipped0,
-                       'late_ticks': node.late_ticks - late0})
-    recorder = node._recorder
+        result.update({'lag_at_end_ms': max(0, node.pacing.steps_due(node.wall_clock()) - 1)
+                       * node.dt * 1e3, 'max_lag_ms': max_lag * node.dt * 1e3,
+                       'slipped_s': node.pacing.slipped_s - slipped0,
+                       'late_ticks': node.pacing.late_ticks - late0})
+    recorder = node.recorder
     executor.shutdown()
     node.destroy_node()
     rclpy.shutdown(context=context)
@@ -391,13 +391,13 @@ def lockstep_in_process(scene_name, sim_seconds):
             pub.publish(encode_float64_multi_array(volts))
         node.create_subscription(JointState, 'displacement', on_dy, 10, raw=True)
         sim.start([node])
-        k0, w0, c0 = sim.node._sim.k, time.perf_counter(), _cpu()
+        k0, w0, c0 = sim.node.simulator.k, time.perf_counter(), _cpu()
         sim.run(until=sim_seconds, nodes=[node])
         wall, cpu = time.perf_counter() - w0, _cpu() - c0
-        steps = sim.node._sim.k - k0
-        return {'steps': steps, 'rtf': steps * sim.node._dt / wall,
+        steps = sim.node.simulator.k - k0
+        return {'steps': steps, 'rtf': steps * sim.node.dt / wall,
                 'cpu_us_per_period': cpu / steps * 1e6,
-                'missed_deadlines': sim.node.missed_deadlines}
+                'missed_deadlines': sim.node.pacing.missed_deadlines}
     finally:
         sim.close()
 

@@ -179,9 +179,9 @@ class Harness:
                                               position=[float(v) for v in volts]))
 
     def _send(self, publisher, msg):
-        before = self.node.commands_received
+        before = self.node.commands.received
         publisher.publish(msg)
-        self.spin_until(lambda: self.node.commands_received > before, 'command delivery')
+        self.spin_until(lambda: self.node.commands.received > before, 'command delivery')
 
     def close(self):
         """Destroy the nodes and the executor (once: tests may close early to flush a log)."""

@@ -311,12 +311,13 @@ def test_qos_keep_all_for_lossy_links(harness, tmp_path, ros_context):
     from det_sim_ros.ros.node import SimNode
     h = harness(qos_keep_all=True, mode='free_run', start_paused=True,
                 **{'log.path': str(tmp_path / 'log')})
-    endpoints = ([p.qos_profile for p in h.node._output_pubs + [h.node._clock_pub]]
-                 + [s.qos_profile for _, s in h.node._command_subs])
+    publishers = [*h.node.output_publishers.values(), h.node.clock_publisher]
+    endpoints = ([p.qos_profile for p in publishers]
+                 + [s.qos_profile for s in h.node.command_subscriptions.values()])
     assert {(q.history, q.reliability) for q in endpoints} == {
         (HistoryPolicy.KEEP_ALL, ReliabilityPolicy.RELIABLE)}
     h.command([1000.0])
-    path = h.node._recorder.path
+    path = h.node.recorder.path
     h.close()
     reader = LogReader(path)
     list(reader.messages())

@@ -176,12 +176,12 @@ def test_node_starts_and_resets_to_the_initial_state_and_logs_it(tmp_path, harne
     from det_sim_ros.io.replay import resimulate
     h = harness(steps_per_tick=5, **{'log.path': str(tmp_path / 'logs'),
                                      'scene.initial_state': initial_state})
-    h.spin_until(lambda: h.node._sim.k >= 110, 'sim time 0.11 s')
+    h.spin_until(lambda: h.node.simulator.k >= 110, 'sim time 0.11 s')
     h.command([2000.0])
-    h.spin_until_sim_time(h.node._sim.t + 0.03)
+    h.spin_until_sim_time(h.node.simulator.t + 0.03)
     assert initial_state in h.call('reset').message
-    h.spin_until(lambda: h.node._sim.k >= 110, 'sim time 0.11 s after the reset')
-    recorder, x0 = h.node._recorder, h.node._sim.x0.tolist()
+    h.spin_until(lambda: h.node.simulator.k >= 110, 'sim time 0.11 s after the reset')
+    recorder, x0 = h.node.recorder, h.node.simulator.x0.tolist()
     h.close()
     assert len(recorder.paths) == 2        # a reset starts a new file
     runs = []

@@ -113,7 +113,7 @@ def test_lockstep_loop_equals_the_offline_loop_and_the_pi_settles(det_sim, joint
     assert metrics.settling_time <= 0.5
     assert abs(metrics.steady_state_error) <= 0.05 * TARGET
     assert metrics.overshoot < 0.05 and 0.0 < metrics.rise_time < metrics.settling_time
-    assert sim.node.missed_deadlines == 0 and sim.node.refused_commands == 0
+    assert sim.node.pacing.missed_deadlines == 0 and sim.node.commands.refused == 0
 
 
 def _busy(n):
@@ -133,7 +133,7 @@ def test_two_lockstep_runs_give_identical_logs_even_with_every_core_busy(det_sim
         try:
             sim = det_sim('default', params={'log.path': str(tmp_path / f'run{n_busy}.mcap')})
             sim.run(until=0.8, nodes=[make_pi(sim.context, joint=True)])
-            recorder = sim.node._recorder
+            recorder = sim.node.recorder
             sim.close()
         finally:
             for proc in busy:
@@ -176,9 +176,9 @@ def test_two_sources_and_stale_answers(det_sim):
         return node
     run = sim.run(until=0.05, nodes=[controller('a', 'left', 1000.0, True),
                                      controller('b', 'right', 2000.0, False)])
-    assert sim.node.stale_answers == 1 and sim.node.missed_deadlines == 0
+    assert sim.node.pacing.stale_answers == 1 and sim.node.pacing.missed_deadlines == 0
     assert run.voltage[1:].tolist() == [[1000.0, 2000.0]] * 50
-    assert sim.node.commands_received >= 2 * 50 + 1   # the answers to samples 0..49 + stale
+    assert sim.node.commands.received >= 2 * 50 + 1   # the answers to samples 0..49 + stale
 
 
 def test_timeout_holds_the_voltages_and_counts_missed_deadlines(det_sim):
@@ -186,9 +186,10 @@ def test_timeout_holds_the_voltages_and_counts_missed_deadlines(det_sim):
     held voltages and counts a missed deadline."""
     sim = det_sim('default', params={'lockstep.timeout': 0.005})
     sim.start(wait=False)
-    sim.spin_until(lambda: sim.node._sim.k >= 20, '20 periods')
-    assert sim.node.missed_deadlines == sim.node._sim.k and sim.node._sim.u.tolist() == [0.0]
-    assert sim.result().t.size == sim.node._sim.k + 1   # every period ran and was recorded
+    sim.spin_until(lambda: sim.node.simulator.k >= 20, '20 periods')
+    simulator = sim.node.simulator
+    assert sim.node.pacing.missed_deadlines == simulator.k and simulator.u.tolist() == [0.0]
+    assert sim.result().t.size == simulator.k + 1   # every period ran and was recorded
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
     import rclpy
     listener = rclpy.create_node('diag_listener', context=sim.context)
@@ -196,7 +197,7 @@ def test_timeout_holds_the_voltages_and_counts_missed_deadlines(det_sim):
     listener.create_subscription(DiagnosticArray, '/diagnostics', seen.append, 10)
     sim.start([listener], wait=False)
     sim.spin_until(lambda: listener.count_publishers('/diagnostics') > 0, 'discovery')
-    sim.node._publish_diagnostics()
+    sim.node.publish_diagnostics()
     sim.spin_until(lambda: seen, '/diagnostics')
     status = seen[-1].status[0]
     values = {kv.key: kv.value for kv in status.values}
@@ -219,16 +220,16 @@ def test_lockstep_pause_step_reset_and_clock(harness, ros_context):
     assert h.call('pause', data=False).success
     for _ in range(20):   # running, but nobody answers: the node waits at k = 3
         h.executor.spin_once(timeout_sec=0.005)
-    assert h.node._sim.k == 3
+    assert h.node.simulator.k == 3
     h.command([1500.0])   # the test node answers once: one period
     h.spin_until(lambda: h.latest('displacement') == 4 * 1_000_000, 'sample 4')
     h.spin_until(lambda: max(h.clock, default=0) == 4 * 1_000_000, '/clock at t_4')
     h.spin_until(lambda: follower.get_clock().now().nanoseconds == 4 * 1_000_000,
                  'the follower clock')
-    assert h.node._sim.k == 4
-    assert h.call('reset').success and h.node._sim.k == 0
+    assert h.node.simulator.k == 4
+    assert h.call('reset').success and h.node.simulator.k == 0
     h.command([800.0])
-    h.spin_until(lambda: h.node._sim.k == 1, 'the first period after the reset')
+    h.spin_until(lambda: h.node.simulator.k == 1, 'the first period after the reset')
     h.executor.remove_node(follower)
     follower.destroy_node()
 

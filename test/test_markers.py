@@ -108,7 +108,7 @@ def test_node_publishes_markers_at_the_display_rate(harness, tmp_path):
     h.spin_until_sim_time(0.3)
     h.spin_until(lambda: len(frames) >= 3, 'marker frames of the snap-through')
     assert h.call('pause', data=True).success
-    every = h.node._markers.every
+    every = h.node.markers.every
     assert every == round(1000 / 30)
 
     def stamp_k(frame):
@@ -262,7 +262,7 @@ def test_no_frames_without_a_viewer_or_a_log(harness):
     lost); they start when a viewer subscribes."""
     from visualization_msgs.msg import MarkerArray
     h = harness(start_paused=True, **{'log.enabled': False})
-    markers = h.node._markers
+    markers = h.node.markers
     h.command([3000.0])
     assert h.call('pause', data=False).success
     h.spin_until_sim_time(0.2)
@@ -276,7 +276,7 @@ def test_no_frames_without_a_viewer_or_a_log(harness):
 
 def test_markers_off(harness):
     h = harness(**{'markers.rate_hz': 0.0})
-    assert h.node._markers is None
+    assert h.node.markers is None
     names = {n for n, _ in h.node.get_publisher_names_and_types_by_node('sim_node', '/')}
     assert '/markers' not in names
 

@@ -30,7 +30,7 @@ class FakeWall:
 def _wait_readable(node, topic='voltage_command'):
     """Block until a command sits in the node's subscription (delivered, not yet taken)."""
     from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
-    sub = dict(node._command_subs)[topic]
+    sub = node.command_subscriptions[topic]
     with sub.handle, node.context.handle:
         wait_set = _rclpy.WaitSet(1, 0, 0, 0, 0, 0, node.context.handle)
         wait_set.clear_entities()
@@ -47,7 +47,7 @@ def _real_time_node(harness, tmp_path, **params):
     assert h.call('pause', data=False).success   # the pacing reference: now, k = 0
     for _ in range(5):
         h.executor.spin_once(timeout_sec=0.005)
-    assert h.node._sim.k == 0                     # the fake clock has not moved
+    assert h.node.simulator.k == 0                     # the fake clock has not moved
     return h, wall
 
 
@@ -98,13 +98,13 @@ def test_command_during_catch_up_applies_from_the_next_period(harness, tmp_path,
         if k == 5:
             h.cmd.publish(Float64MultiArray(data=[2500.0]))
             _wait_readable(node)
-        arrivals.append((k, node._sim.u.tolist()))
+        arrivals.append((k, node.simulator.u.tolist()))
     node.on_sample = on_sample
-    wall.now += 40 * node._dt   # 40 periods due: one tick runs them all
-    h.spin_until(lambda: node._sim.k >= 40, '40 periods')
-    assert node._sim.k == 40 and node.late_ticks >= 1
+    wall.now += 40 * node.dt   # 40 periods due: one tick runs them all
+    h.spin_until(lambda: node.simulator.k >= 40, '40 periods')
+    assert node.simulator.k == 40 and node.pacing.late_ticks >= 1
     assert dict(arrivals)[5] == [0.0] and dict(arrivals)[6] == [2500.0]
-    recorder = node._recorder
+    recorder = node.recorder
     h.close()
     commands = [m.log_time for m in LogReader(recorder.path).messages(['voltage_command'])]
     assert commands == [5_000_000]      # applied before the step from t_5 to t_6
@@ -118,20 +118,20 @@ def test_lag_is_bounded_by_slipping(harness, tmp_path):
     from diagnostic_msgs.msg import DiagnosticStatus
     h, wall = _real_time_node(harness, tmp_path, max_lag=0.02)
     node = h.node
-    dt = node._dt
+    dt = node.dt
     wall.now += 10.0
-    h.spin_until(lambda: node._sim.k > 0, 'the late tick')
+    h.spin_until(lambda: node.simulator.k > 0, 'the late tick')
     for _ in range(5):
         h.executor.spin_once(timeout_sec=0.005)
-    assert node._sim.k == 21          # the period due now plus 20 ms of lag, no more
-    assert node.slipped_s == pytest.approx(10.0 - 21 * dt, abs=1e-9)
-    assert node._steps_due(wall()) == 0
+    assert node.simulator.k == 21          # the period due now plus 20 ms of lag, no more
+    assert node.pacing.slipped_s == pytest.approx(10.0 - 21 * dt, abs=1e-9)
+    assert node.pacing.steps_due(wall()) == 0
     # after the slip the node keeps pace with the clock again: one period per period
     for n in range(1, 4):
         wall.now += dt
-        h.spin_until(lambda n=n: node._sim.k == 21 + n, 'the next period')
-    assert node.slipped_s == pytest.approx(10.0 - 21 * dt, abs=1e-9)
-    node._publish_diagnostics()
+        h.spin_until(lambda n=n: node.simulator.k == 21 + n, 'the next period')
+    assert node.pacing.slipped_s == pytest.approx(10.0 - 21 * dt, abs=1e-9)
+    node.publish_diagnostics()
     h.spin_until(lambda: h.diagnostics, '/diagnostics')
     status = h.diagnostics[-1].status[0]
     values = {kv.key: kv.value for kv in status.values}
@@ -140,11 +140,11 @@ def test_lag_is_bounded_by_slipping(harness, tmp_path):
     assert float(values['max_lag_ms']) == pytest.approx(20.0)
     # a quiet window afterwards: OK again
     h.diagnostics.clear()
-    node._publish_diagnostics()
+    node.publish_diagnostics()
     h.spin_until(lambda: h.diagnostics, '/diagnostics')
     assert h.diagnostics[-1].status[0].level == DiagnosticStatus.OK
     # every period was run (no sim step dropped) and published in order
-    recorder = node._recorder
+    recorder = node.recorder
     h.close()
     stamps = [decode_joint_state(m.data).stamp_ns
               for m in LogReader(recorder.path).messages(['displacement'])]
@@ -155,9 +155,9 @@ def test_small_lag_catches_up_without_slipping(harness, tmp_path):
     """A late tick within max_lag runs every due period and slips nothing."""
     h, wall = _real_time_node(harness, tmp_path)   # default max_lag 50 ms
     node = h.node
-    wall.now += 30 * node._dt
-    h.spin_until(lambda: node._sim.k == 30, '30 periods')
-    assert node.slipped_s == 0.0 and node.late_ticks == 1
+    wall.now += 30 * node.dt
+    h.spin_until(lambda: node.simulator.k == 30, '30 periods')
+    assert node.pacing.slipped_s == 0.0 and node.pacing.late_ticks == 1
 
 
 @pytest.mark.parametrize('executor', ['events', 'single'])
@@ -171,8 +171,8 @@ def test_services_and_parameters_with_either_executor(harness, executor):
         h.spin_until(lambda k=k: h.latest('deflection') == k * 1_000_000, f'sample {k}')
     assert h.node.set_parameters([Parameter('max_lag', value=0.2)])[0].successful
     assert not h.node.set_parameters([Parameter('max_lag', value=-1.0)])[0].successful
-    assert h.node._max_lag == 0.2
-    assert h.call('reset').success and h.node._sim.k == 0
+    assert h.node.get_parameter('max_lag').value == 0.2
+    assert h.call('reset').success and h.node.simulator.k == 0
     assert h.call('pause', data=False).success
     h.spin_until_sim_time(0.05)
     assert not h.non_finite
@@ -201,7 +201,7 @@ def test_realtime_priority_is_applied_to_every_thread_or_degrades(harness, monke
     else:
         assert not h.node.realtime_scheduling
         assert all(policy == os.SCHED_OTHER for _, policy, _ in calls)   # all or nothing
-    h.spin_until(lambda: h.node._sim.k > 3, 'periods')   # running either way
+    h.spin_until(lambda: h.node.simulator.k > 3, 'periods')   # running either way
 
 
 def test_realtime_priority_is_ignored_outside_real_time(harness, monkeypatch):

@@ -422,4 +422,4 @@ def test_node_repairs_a_torn_log_in_its_directory_at_start(tmp_path, harness):
     h = harness(**{'log.path': str(folder)})
     assert not is_torn(str(torn))
     assert len(list(LogReader(str(torn)).messages())) >= 90
-    assert h.node._recorder.path != str(torn)
+    assert h.node.recorder.path != str(torn)

@@ -262,14 +262,14 @@ def test_play_preserves_order_stamps_and_rate(tmp_path, scene, ros_context):
 def test_node_log_resimulates_bit_for_bit(tmp_path, harness):
     """The node's own log (free-run, commands at arbitrary steps, a reset) re-simulates exactly."""
     h = harness(**{'log.path': str(tmp_path / 'logs'), 'steps_per_tick': 5})
-    recorder = h.node._recorder
+    recorder = h.node.recorder
     assert recorder is not None and recorder.active
     for volts in (800.0, 1500.0, 400.0):
         h.command([volts])
-        h.spin_until(lambda: h.node.commands_received >= 1, 'command')
-        h.spin_until_sim_time(h.node._sim.t + 0.02)
+        h.spin_until(lambda: h.node.commands.received >= 1, 'command')
+        h.spin_until_sim_time(h.node.simulator.t + 0.02)
     h.joint_command(['det0'], [1200.0])
-    h.spin_until_sim_time(h.node._sim.t + 0.02)
+    h.spin_until_sim_time(h.node.simulator.t + 0.02)
     h.call('reset')
     h.command([600.0])
     h.spin_until_sim_time(0.03)
@@ -317,12 +317,12 @@ def test_node_plate_log_resimulates_bit_for_bit(tmp_path, harness):
     """The node's log of a plate run (vector and joint commands) re-simulates exactly, the
     per-DET y0 logged as a list."""
     h = harness(scene_file='plate', steps_per_tick=5, **{'log.path': str(tmp_path / 'logs')})
-    recorder = h.node._recorder
+    recorder = h.node.recorder
     for volts in ([800.0, 1500.0], [400.0, 3000.0]):
         h.command(volts)
-        h.spin_until_sim_time(h.node._sim.t + 0.02)
+        h.spin_until_sim_time(h.node.simulator.t + 0.02)
     h.joint_command(['left'], [2000.0])
-    h.spin_until_sim_time(h.node._sim.t + 0.02, 'structure')
+    h.spin_until_sim_time(h.node.simulator.t + 0.02, 'structure')
     h.close()   # destroys the node: the recorder closes its file
     assert recorder.fault == '' and len(recorder.paths) == 1
     assert LogReader(recorder.paths[0]).info['y0'].startswith('[')

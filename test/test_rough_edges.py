@@ -15,10 +15,8 @@ def test_diagnostics_name_the_fully_qualified_node(ros_context):
     node = SimNode(context=ros_context, namespace='arm1', parameter_overrides=[
         Parameter('real_time', value=False), Parameter('start_paused', value=True),
         Parameter('log.enabled', value=False)])
-    sent = []
-    node._diag_pub.publish = sent.append
     try:
-        node._publish_diagnostics()
+        sent = [node.publish_diagnostics()]
     finally:
         node.destroy_node()
     status = sent[-1].status[0]

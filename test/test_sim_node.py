@@ -14,7 +14,8 @@ import pytest
 from rclpy.parameter import Parameter
 
 from det_sim_ros.scenes.scene import load_scene, SceneError
-from det_sim_ros.ros.node import _rest_shortening, SimNode
+from det_sim_ros.io.contract import rest_shortening
+from det_sim_ros.ros.node import SimNode
 from det_sim_ros.sim.simulator import Simulator
 
 MS = 1_000_000  # ns
@@ -54,7 +55,7 @@ def test_step_response_matches_offline_model(harness, how):
     scene = h.node.scene
     dt = scene.dt
     ref = offline(scene, [volts], t_end + 0.1)
-    y0 = _rest_shortening(scene)
+    y0 = rest_shortening(scene)
     assert [y0] == pytest.approx(h.node.y0)
     assert not h.non_finite
     channels = {'deflection': 'q', 'charge': 'q_p', 'current': 'i_DE'}
@@ -95,24 +96,24 @@ def test_step_response_matches_offline_model(harness, how):
 def test_bad_inputs_refused_or_clamped(harness):
     """NaN/inf/wrong length are refused (last valid voltage held); out-of-range is clamped."""
     h = harness(start_paused=True)
-    u = lambda: h.node._sim.u.tolist()  # noqa: E731
+    u = lambda: h.node.simulator.u.tolist()  # noqa: E731
     h.command([1000.0])
-    assert u() == [1000.0] and h.node.refused_commands == 0
+    assert u() == [1000.0] and h.node.commands.refused == 0
     for bad in ([math.nan], [math.inf], [-math.inf], [1.0, 2.0], []):
         h.command(bad)
         assert u() == [1000.0]
-    assert h.node.refused_commands == 5
+    assert h.node.commands.refused == 5
     h.joint_command(['det7'], [500.0])
     h.joint_command(['det0'], [math.nan])
-    assert u() == [1000.0] and h.node.refused_commands == 7
+    assert u() == [1000.0] and h.node.commands.refused == 7
     h.command([-5.0])
     assert u() == [0.0]
     h.command([5000.0])
     assert u() == [h.node.scene.physics.v_max]
-    assert h.node.clamped_commands == 2
+    assert h.node.commands.clamped == 2
     h.joint_command(['det0'], [2500.0])
     assert u() == [2500.0]
-    assert h.node.refused_commands == 7
+    assert h.node.commands.refused == 7
     # the held voltage drives the model (charge follows C v) and nothing published is NaN
     assert h.call('pause', data=False).success
     h.spin_until_sim_time(0.2, 'charge')
@@ -150,7 +151,8 @@ def test_invalid_parameters_refused(harness):
     assert node.get_parameter('steps_per_tick').value == 10
     for param in (Parameter('real_time_factor', value=2.5), Parameter('steps_per_tick', value=3)):
         assert node.set_parameters([param])[0].successful
-    assert node._rtf == 2.5 and node._steps_per_tick == 3
+    assert node.get_parameter('real_time_factor').value == 2.5
+    assert node.pacing.steps_per_tick == 3            # the free-run pacing reads it
 
 
 def test_pause_step_reset(harness):
@@ -161,20 +163,20 @@ def test_pause_step_reset(harness):
         response = h.call('step')
         assert response.success, response.message
         h.spin_until(lambda k=k: h.latest('deflection') == k * MS, f'sample {k}')
-    assert h.node._sim.k == 3
+    assert h.node.simulator.k == 3
     assert h.call('pause', data=False).success
     refused = h.call('step')
     assert not refused.success and 'paused' in refused.message
     h.spin_until_sim_time(0.1)
     assert h.call('pause', data=True).success
-    k_paused = h.node._sim.k
+    k_paused = h.node.simulator.k
     for _ in range(5):
         h.executor.spin_once(timeout_sec=0.01)
-    assert h.node._sim.k == k_paused
+    assert h.node.simulator.k == k_paused
     for topic in h.samples:
         h.samples[topic].clear()
     assert h.call('reset').success
-    assert h.node._sim.k == 0 and h.node._sim.u.tolist() == [0.0]
+    assert h.node.simulator.k == 0 and h.node.simulator.u.tolist() == [0.0]
     h.spin_until(lambda: 0 in h.samples['displacement'], 'the t = 0 sample after reset')
     initial = Simulator(h.node.scene).outputs()
     assert h.samples['displacement'][0][0] == pytest.approx(h.node.y0[0] - initial['y'],
@@ -217,20 +219,20 @@ def test_fault_stops_integration_and_reset_recovers(harness):
     assert h.call('pause', data=False).success
     h.spin_until(lambda: any(s.level == DiagnosticStatus.ERROR
                              for d in h.diagnostics for s in d.status), 'ERROR diagnostics')
-    fault = h.node._sim.fault
+    fault = h.node.simulator.fault
     assert fault
     error = [s for d in h.diagnostics for s in d.status if s.level == DiagnosticStatus.ERROR][0]
     assert fault in error.message
-    k_fault = h.node._sim.k
+    k_fault = h.node.simulator.k
     for _ in range(20):
         h.executor.spin_once(timeout_sec=0.01)
-    assert h.node._sim.k == k_fault
+    assert h.node.simulator.k == k_fault
     assert max(h.samples['deflection'], default=0) <= k_fault * MS
     assert not h.non_finite
     step = h.call('step')
     assert not step.success
     assert h.call('reset').success
-    assert not h.node._sim.fault
+    assert not h.node.simulator.fault
     h.spin_until_sim_time(0.05)
     assert not h.non_finite
     h.diagnostics.clear()
@@ -264,8 +266,8 @@ def test_log_compression_parameter(harness, tmp_path, compression):
     h = harness(steps_per_tick=5, **{'log.path': str(tmp_path / 'run.mcap'),
                                      'log.compression': compression})
     h.command([2000.0])
-    h.spin_until(lambda: h.node._sim.k >= 60, 'sim time 0.06 s')
-    path = h.node._recorder.path
+    h.spin_until(lambda: h.node.simulator.k >= 60, 'sim time 0.06 s')
+    path = h.node.recorder.path
     h.close()
     with open(path, 'rb') as stream:
         chunks = list(make_reader(stream).get_summary().chunk_indexes)
@@ -351,7 +353,7 @@ def test_plate_vector_command_drives_both_outputs(harness):
     w = scene.structure['plate_width']
     assert node.det_names == ['left', 'right']
     assert node.structure_names == ('plate_dy', 'plate_phi')
-    y0 = [_rest_shortening(scene.cell_scene(i)) for i in range(2)]
+    y0 = [rest_shortening(scene.cell_scene(i)) for i in range(2)]
     assert node.y0 == pytest.approx(y0, rel=1e-12)
 
     # equal voltages: equal deflections in both channels, no tilt
@@ -397,10 +399,10 @@ def test_array_on_two_threads_publishes_the_one_thread_model_bit_for_bit(harness
     is the offline single-thread model's outputs, bit for bit."""
     h = harness(scene_file='array', start_paused=True, threads=2,
                 **{'structure.copies': 4, 'structure.spread': 0.1})
-    assert h.node._sim.stepper.threads == 2
+    assert h.node.simulator.stepper.threads == 2
     volts = [3000.0, 2000.0, 1000.0, 0.0]
     h.command(volts)
-    h.spin_until(lambda: h.node._sim.u[0] == 3000.0, 'the command')
+    h.spin_until(lambda: h.node.simulator.u[0] == 3000.0, 'the command')
     assert h.call('pause', data=False).success
     h.spin_until_sim_time(0.2)
     ref = offline(h.node.scene, volts, 0.25)
@@ -419,37 +421,38 @@ def test_plate_bad_inputs_per_channel(harness):
     """Vector commands: a NaN in one channel is refused naming it (count on /diagnostics),
     out-of-range channels are clamped, a wrong length is refused, joint commands update by name."""
     h = harness(scene_file='plate', start_paused=True)
-    u = lambda: h.node._sim.u.tolist()  # noqa: E731
+    u = lambda: h.node.simulator.u.tolist()  # noqa: E731
     h.command([1000.0, 2000.0])
     assert u() == [1000.0, 2000.0]
     h.command([1500.0, math.nan])
     assert u() == [1000.0, 2000.0]
-    assert h.node.refused_commands == 1
-    assert 'right' in h.node.last_refused and 'left' not in h.node.last_refused
+    assert h.node.commands.refused == 1
+    assert 'right' in h.node.commands.last_refused and 'left' not in h.node.commands.last_refused
     h.command([math.inf, 100.0])
-    assert u() == [1000.0, 2000.0] and 'left' in h.node.last_refused
+    assert u() == [1000.0, 2000.0] and 'left' in h.node.commands.last_refused
     h.command([1.0, 2.0, 3.0])
-    assert u() == [1000.0, 2000.0] and h.node.refused_commands == 3
-    assert 'left, right' in h.node.last_refused
+    assert u() == [1000.0, 2000.0] and h.node.commands.refused == 3
+    assert 'left, right' in h.node.commands.last_refused
     h.command([5000.0, 100.0])
-    assert u() == [h.node.scene.physics.v_max, 100.0] and h.node.clamped_commands == 1
+    assert u() == [h.node.scene.physics.v_max, 100.0] and h.node.commands.clamped == 1
     # joint commands: partial updates by name, the other channel holds
     h.joint_command(['right'], [700.0])
     assert u() == [h.node.scene.physics.v_max, 700.0]
     h.joint_command(['left'], [math.nan])
-    assert u() == [h.node.scene.physics.v_max, 700.0] and 'left' in h.node.last_refused
+    assert u() == [h.node.scene.physics.v_max, 700.0] and 'left' in h.node.commands.last_refused
     h.joint_command(['det0'], [1.0])
-    assert h.node.refused_commands == 5
+    assert h.node.commands.refused == 5
     h.joint_command(['right', 'left'], [10.0, 20.0])
     assert u() == [20.0, 10.0]
     # issue 17: a DET named twice is refused (not the last one silently winning); an empty
     # JointState says it is empty (not 'unknown DET name(s) []')
     h.joint_command(['left', 'right', 'left'], [1.0, 2.0, 3.0])
-    assert u() == [20.0, 10.0] and h.node.refused_commands == 6
-    assert "['left'] given more than once" in h.node.last_refused
+    assert u() == [20.0, 10.0] and h.node.commands.refused == 6
+    assert "['left'] given more than once" in h.node.commands.last_refused
     h.joint_command([], [])
-    assert u() == [20.0, 10.0] and h.node.refused_commands == 7
-    assert 'empty JointState' in h.node.last_refused and '[]' not in h.node.last_refused
+    assert u() == [20.0, 10.0] and h.node.commands.refused == 7
+    reason = h.node.commands.last_refused
+    assert 'empty JointState' in reason and '[]' not in reason
     h.joint_command(['right'], [30.0])
     assert u() == [20.0, 30.0]
     assert h.call('pause', data=False).success
@@ -487,7 +490,7 @@ def test_implausible_physics_is_flagged_on_diagnostics(harness):
     h.spin_until(lambda: len(ours()) >= 5, 'five more diagnostics')
     assert all(status.level == DiagnosticStatus.WARN for status in ours())
     assert len([m for m in logged if 'residual' in m]) == 1   # logged once, not every period
-    assert abs(h.node._sim.power_residual()) > POWER_RESIDUAL_LIMIT
+    assert abs(h.node.simulator.power_residual()) > POWER_RESIDUAL_LIMIT
     assert not h.non_finite
     h.call('reset')
     h.diagnostics.clear()

@@ -2,77 +2,102 @@
 The node's parameters, as one ROS-free table: the node declares them from it, the fleet loader
 checks fleet files against it, and the parameter reference in docs/ is generated from it.
 
-``NODE_PARAMS``: name -> (default, description, read_only, range (lo, hi) or choices (strings)
-or None). The type of the default is the parameter's type (an integer is accepted for a double).
+``NODE_PARAMS``: name -> :class:`Param` (default, description, read_only, bounds). The type of
+the default is the parameter's type (an integer is accepted for a double); ``bounds`` is a
+range (lo, hi), the allowed strings, or None. A :class:`Param` is a tuple, so
+``default, description, read_only, bounds = NODE_PARAMS[name]`` works too.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any, Iterator, NamedTuple
 
-from ..scenes.scene import SceneError
+from ..scenes.scene import scene_to_dict, SceneError
 
-__all__ = ['NODE_PARAMS', 'SCENE_SECTIONS', 'check_node_value', 'flatten']
+__all__ = ['NODE_PARAMS', 'Param', 'SCENE_PARAM_DESCRIPTION', 'SCENE_SECTIONS',
+           'check_node_value', 'flatten', 'node_parameter_values', 'runtime_refusal',
+           'scene_parameters']
 
 SCENE_SECTIONS = ('scene', 'physics', 'integrator', 'structure', 'dets')
-# name: (default, description, read_only, range (lo, hi), choices (strings) or None)
+SCENE_PARAM_DESCRIPTION = 'scene value (read-only; set in the scene file or with -p at start)'
+
+
+class Param(NamedTuple):
+    """One node parameter: its default (whose type is the parameter's), what it does, whether
+    it is fixed at start, and its range (lo, hi), allowed strings or None."""
+
+    default: Any
+    description: str
+    read_only: bool
+    bounds: tuple | None
+
+
 NODE_PARAMS = {
-    'mode': ('', 'real_time: sim time follows the wall clock; free_run: as fast as possible, '
-             'publishes /clock; lockstep: publishes /clock and advances a period only when the '
-             "controller has answered the last sample ('' = from real_time)", True, None),
-    'real_time': (True, 'alias of mode: true = real_time, false = free_run (mode, when set, '
-                  'wins)', True, None),
-    'lockstep.sources': (1, 'lockstep: commands that answer a sample before the next period '
-                         'runs (one per controller)', False, (1, 10000)),
-    'lockstep.timeout': (0.0, 'lockstep: wall seconds to wait for the answers, then hold the '
-                         'voltages, count a missed deadline and go on (0 = wait forever)', False,
+    'mode': Param('', 'real_time: sim time follows the wall clock; free_run: as fast as '
+                  'possible, publishes /clock; lockstep: publishes /clock and advances a period '
+                  "only when the controller has answered the last sample ('' = from real_time)",
+                  True, None),
+    'real_time': Param(True, 'alias of mode: true = real_time, false = free_run (mode, when '
+                       'set, wins)', True, None),
+    'lockstep.sources': Param(1, 'lockstep: commands that answer a sample before the next '
+                              'period runs (one per controller)', False, (1, 10000)),
+    'lockstep.timeout': Param(0.0, 'lockstep: wall seconds to wait for the answers, then hold '
+                              'the voltages, count a missed deadline and go on (0 = wait '
+                              'forever)', False, (0.0, 3600.0)),
+    'real_time_factor': Param(1.0, 'real-time mode: sim seconds per wall second', False,
+                              (1.0e-3, 1.0e3)),
+    'steps_per_tick': Param(10, 'free-run mode: control periods per timer tick', False,
+                            (1, 100000)),
+    'threads': Param(1, "threads that step the scene's independent coupled groups (the copies "
+                     'of an array) in every period; the results do not depend on it', True,
+                     (1, 256)),
+    'max_catchup_steps': Param(1000, 'real-time mode: most steps run in one tick; the rest run '
+                               'in later ticks (never skipped)', False, (1, 1000000)),
+    'max_lag': Param(0.05, 'real-time mode: largest lag behind the wall clock, s of sim time; '
+                     'beyond it the node slips (drops the excess wall time, never a sim step)',
+                     False, (0.0, 3600.0)),
+    'realtime_priority': Param(0, "real-time mode: run the node's threads under SCHED_FIFO at "
+                               'this priority (1-98; needs CAP_SYS_NICE or an rtprio limit, '
+                               'otherwise one warning and normal scheduling); 0 = off', True,
+                               (0, 98)),
+    'qos_sensor_data': Param(False, 'outputs best-effort SensorDataQoS instead of reliable '
+                             'depth 10', True, None),
+    'qos_keep_all': Param(False, 'outputs, /clock and command subscriptions reliable KEEP_ALL '
+                          'instead of depth 10: over a lossy link every lost sample is '
+                          'repaired, none overwritten (README: Fleets, QoS across hosts)', True,
+                          None),
+    'start_paused': Param(False, 'start paused (resume with ~/pause false, or ~/step)', True,
+                          None),
+    'diagnostics_period': Param(1.0, 'seconds between /diagnostics messages (wall clock)', True,
+                                (0.01, 3600.0)),
+    'log.enabled': Param(True, 'record the run to MCAP: commands in, outputs out, scene', True,
+                         None),
+    'log.path': Param('./det_sim_logs', 'MCAP log directory (a new file per run) or a .mcap '
+                      'file', True, None),
+    'log.split_mb': Param(256.0, 'start a new log file after this many MiB (0 = one file per '
+                          'run and reset; then log.max_mb cannot cut a long run)', True,
+                          (0.0, 1.0e6)),
+    'log.max_mb': Param(2048.0, "keep the log directory's det_sim_*.mcap files under this many "
+                        'MiB in all, oldest deleted first (0 = no limit)', True, (0.0, 1.0e9)),
+    'log.max_files': Param(100, 'keep at most this many det_sim_*.mcap files in the log '
+                           'directory, oldest deleted first (0 = no limit)', True, (0, 1000000)),
+    'log.compression': Param('zstd', "MCAP chunk compression: 'zstd' (smallest files), 'lz4' "
+                             "(a 100-DET array's log: about two thirds of the CPU in a loop, "
+                             "~20 % larger files) or 'none'", True, ('zstd', 'lz4', 'none')),
+    'info_period': Param(5.0, 'seconds between INFO status lines (wall clock), 0 = off', True,
                          (0.0, 3600.0)),
-    'real_time_factor': (1.0, 'real-time mode: sim seconds per wall second', False,
-                         (1.0e-3, 1.0e3)),
-    'steps_per_tick': (10, 'free-run mode: control periods per timer tick', False, (1, 100000)),
-    'threads': (1, "threads that step the scene's independent coupled groups (the copies of an "
-                'array) in every period; the results do not depend on it', True, (1, 256)),
-    'max_catchup_steps': (1000, 'real-time mode: most steps run in one tick; the rest run in '
-                          'later ticks (never skipped)', False, (1, 1000000)),
-    'max_lag': (0.05, 'real-time mode: largest lag behind the wall clock, s of sim time; beyond '
-                'it the node slips (drops the excess wall time, never a sim step)', False,
-                (0.0, 3600.0)),
-    'realtime_priority': (0, 'real-time mode: run the node\'s threads under SCHED_FIFO at this '
-                          'priority (1-98; needs CAP_SYS_NICE or an rtprio limit, otherwise one '
-                          'warning and normal scheduling); 0 = off', True, (0, 98)),
-    'qos_sensor_data': (False, 'outputs best-effort SensorDataQoS instead of reliable depth 10',
-                        True, None),
-    'qos_keep_all': (False, 'outputs, /clock and command subscriptions reliable KEEP_ALL instead '
-                     'of depth 10: over a lossy link every lost sample is repaired, none '
-                     'overwritten (README: Fleets, QoS across hosts)', True, None),
-    'start_paused': (False, 'start paused (resume with ~/pause false, or ~/step)', True, None),
-    'diagnostics_period': (1.0, 'seconds between /diagnostics messages (wall clock)', True,
-                           (0.01, 3600.0)),
-    'log.enabled': (True, 'record the run to MCAP: commands in, outputs out, scene (issue 5)',
-                    True, None),
-    'log.path': ('./det_sim_logs', 'MCAP log directory (a new file per run) or a .mcap file',
-                 True, None),
-    'log.split_mb': (256.0, 'start a new log file after this many MiB (0 = one file per run '
-                     'and reset; then log.max_mb cannot cut a long run)', True, (0.0, 1.0e6)),
-    'log.max_mb': (2048.0, "keep the log directory's det_sim_*.mcap files under this many MiB "
-                   'in all, oldest deleted first (0 = no limit)', True, (0.0, 1.0e9)),
-    'log.max_files': (100, "keep at most this many det_sim_*.mcap files in the log directory, "
-                      'oldest deleted first (0 = no limit)', True, (0, 1000000)),
-    'log.compression': ('zstd', "MCAP chunk compression: 'zstd' (smallest files), 'lz4' "
-                        "(a 100-DET array's log: about two thirds of the CPU in a loop, ~20 % "
-                        "larger files) or 'none'", True, ('zstd', 'lz4', 'none')),
-    'info_period': (5.0, 'seconds between INFO status lines (wall clock), 0 = off', True,
-                    (0.0, 3600.0)),
-    # shape markers (det_sim_ros.markers, issue 18)
-    'markers.rate_hz': (30.0, 'shape markers (visualization_msgs/MarkerArray on markers) per '
-                        'simulated second, all logged; viewers get at most twice this many '
-                        'per wall second; 0 = off', True, (0.0, 1.0e4)),
-    'markers.frame_id': ('', "'': one frame per DET (<namespace>/<DET name>); else all DETs "
-                         'in this one frame, side by side', True, None),
+    # shape markers (det_sim_ros.ros.markers)
+    'markers.rate_hz': Param(30.0, 'shape markers (visualization_msgs/MarkerArray on markers) '
+                             'per simulated second, all logged; viewers get at most twice this '
+                             'many per wall second; 0 = off', True, (0.0, 1.0e4)),
+    'markers.frame_id': Param('', "'': one frame per DET (<namespace>/<DET name>); else all "
+                              'DETs in this one frame, side by side', True, None),
 }
 
 
-def flatten(data, prefix=''):
+def flatten(data: dict, prefix: str = '') -> Iterator[tuple[str, Any]]:
+    """Nested mappings as (dotted name, value) pairs: {'a': {'b': 1}} -> ('a.b', 1)."""
     for key, value in data.items():
         if isinstance(value, dict):
             yield from flatten(value, f'{prefix}{key}.')
@@ -80,10 +105,18 @@ def flatten(data, prefix=''):
             yield f'{prefix}{key}', value
 
 
-def check_node_value(name, value, where='scene key node.'):
+def scene_parameters(scene) -> Iterator[tuple[str, Any]]:
+    """The loaded scene's values as (parameter name, value), its ``node:`` section left out
+    (those are the node parameters)."""
+    for name, value in flatten(scene_to_dict(scene)):
+        if not name.startswith('node.'):
+            yield name, value
+
+
+def check_node_value(name: str, value, where: str = 'scene key node.'):
     """A node parameter's value checked against its type and range (an integer is accepted
     for a double); :class:`SceneError` naming the key otherwise."""
-    default, bounds = NODE_PARAMS[name][0], NODE_PARAMS[name][3]
+    default, bounds = NODE_PARAMS[name].default, NODE_PARAMS[name].bounds
     if isinstance(default, bool):
         ok = isinstance(value, bool)
     elif isinstance(default, int):
@@ -104,3 +137,41 @@ def check_node_value(name, value, where='scene key node.'):
         raise SceneError(f'{where}{name}: out of range [{bounds[0]:g}, {bounds[1]:g}] '
                          f'(got {value!r})')
     return value
+
+
+def node_parameter_values(scene_node: dict, overrides: dict) -> dict:
+    """
+    Every node parameter's checked start value, in table order: a ``-p name:=value`` override
+    (``overrides``: name -> value) wins over the scene file's ``node:`` section
+    (``scene_node``, nested or dotted; ``-p node.name:=value`` overrides it too), which wins
+    over the default. :class:`SceneError` for an unknown key or a value that does not fit.
+    """
+    node_section = dict(flatten(scene_node))       # node: {log: {enabled: ...}} too
+    for name, value in overrides.items():
+        if name.startswith('node.'):
+            node_section[name[5:]] = value
+    unknown = sorted(set(node_section) - set(NODE_PARAMS))
+    if unknown:
+        raise SceneError(f"scene key 'node.{unknown[0]}': unknown (allowed: "
+                         + ', '.join(NODE_PARAMS) + ')')
+    values = {}
+    for name, param in NODE_PARAMS.items():
+        if name in overrides:
+            values[name] = check_node_value(name, overrides[name], 'parameter ')
+        else:
+            values[name] = check_node_value(name, node_section.get(name, param.default))
+    return values
+
+
+def runtime_refusal(name: str, value) -> str:
+    """Why a change of parameter ``name`` to ``value`` while running is refused ('' if it is
+    not): the checks beyond the declared type and range (finite, positive, ...)."""
+    if name == 'real_time_factor':
+        ok, need = isinstance(value, float) and math.isfinite(value) and value > 0.0, '> 0'
+    elif name in ('steps_per_tick', 'max_catchup_steps', 'lockstep.sources'):
+        ok, need = isinstance(value, int) and value >= 1, '>= 1'
+    elif name in ('lockstep.timeout', 'max_lag'):
+        ok, need = isinstance(value, float) and math.isfinite(value) and value >= 0.0, '>= 0 s'
+    else:
+        return ''
+    return '' if ok else f'{name} must be {need} (got {value!r})'

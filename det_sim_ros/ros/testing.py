@@ -139,7 +139,7 @@ class LockstepSim:
             self.node = SimNode(context=self.context, parameter_overrides=[
                 Parameter(name, value=value) for name, value in params.items()])
             self.node.on_sample = self._record
-            self._record(0, self.node._current_outputs())
+            self._record(0, self.node.current_outputs())
             self.executor = (make_executor(self.context) if self._executor_kind == 'events'
                              else SingleThreadedExecutor(context=self.context))
             self.executor.add_node(self.node)
@@ -148,18 +148,18 @@ class LockstepSim:
                 self._nodes.append(node)
                 self.executor.add_node(node)
         if self.node.paused:
-            sources = self.node._p('lockstep.sources')
-            subs = [sub for _, sub in self.node._command_subs]
+            sources = self.node.get_parameter('lockstep.sources').value
+            subs = list(self.node.command_subscriptions.values())
             if wait:
                 self.spin_until(lambda: sum(s.get_publisher_count() for s in subs) >= sources,
                                 'the controller command publishers')
-            self.node._srv_pause(_Request(False), _Response())
+            self.node.set_paused(False)
         return self
 
     def _record(self, k, out):
         node = self.node
         contract = node.contract
-        self._rows.append((k, node._sim.u.copy(),
+        self._rows.append((k, node.simulator.u.copy(),
                            contract.values(out, 'deflection', 'position'),
                            contract.values(out, 'displacement', 'position'),
                            contract.values(out, 'charge', 'position'),
@@ -178,17 +178,17 @@ class LockstepSim:
     def run(self, until: float, nodes: Sequence = ()) -> SimRun:
         """Run (starting if needed) until the sample at sim time ``until`` (s); the run so far."""
         self.start(nodes)
-        k_end = int(round(until / self.node._dt))
-        self.spin_until(lambda: self.node._sim.k >= k_end or self.node._sim.fault,
-                        f'sim time {until} s')
-        if self.node._sim.fault:
-            raise RuntimeError(f'sim_node fault: {self.node._sim.fault}')
+        simulator = self.node.simulator
+        k_end = int(round(until / self.node.dt))
+        self.spin_until(lambda: simulator.k >= k_end or simulator.fault, f'sim time {until} s')
+        if simulator.fault:
+            raise RuntimeError(f'sim_node fault: {simulator.fault}')
         return self.result()
 
     def result(self) -> SimRun:
         """The samples recorded so far (the t = 0 sample first)."""
         rows = self._rows
-        dt = self.node._dt
+        dt = self.node.dt
 
         def column(i):
             return np.array([row[i] for row in rows], dtype=float)
@@ -205,16 +205,6 @@ class LockstepSim:
         if self.node is not None:
             self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
-
-
-class _Request:
-    def __init__(self, data):
-        self.data = data
-
-
-class _Response:
-    success = False
-    message = ''
 
 
 def _fixture():

@@ -1,0 +1,58 @@
+"""
+The node's parameters declared in ROS from the ROS-free table (det_sim_ros.ros.params): the
+scene's values read-only, the node parameters with their descriptions and ranges, and the
+checks a change at run time must pass.
+"""
+
+from __future__ import annotations
+
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
+from rclpy.parameter import Parameter
+
+from .params import (node_parameter_values, NODE_PARAMS, Param, runtime_refusal,
+                     SCENE_PARAM_DESCRIPTION, scene_parameters)
+
+__all__ = ['declare_parameters', 'descriptor', 'validate_parameters']
+
+
+def descriptor(param: Param) -> ParameterDescriptor:
+    """A node parameter's descriptor: its description, read-only flag and range."""
+    result = ParameterDescriptor(description=param.description, read_only=param.read_only)
+    bounds, default = param.bounds, param.default
+    if bounds is not None and isinstance(default, float):
+        result.floating_point_range = [FloatingPointRange(
+            from_value=float(bounds[0]), to_value=float(bounds[1]), step=0.0)]
+    elif bounds is not None and isinstance(default, int):
+        result.integer_range = [IntegerRange(from_value=bounds[0], to_value=bounds[1], step=1)]
+    return result
+
+
+def declare_parameters(node, scene, overrides: dict) -> None:
+    """
+    Declare the scene's values (read-only) and the node parameters on ``node``.
+
+    ``overrides`` (name -> value) are the ``-p`` values the node was started with; each is
+    replaced by its checked value, since rclpy refuses an override whose type differs from the
+    declared one (an integer given for a double, e.g. physics.Rs:=1).
+    """
+    given = node._parameter_overrides      # rclpy's: read when a parameter is declared
+
+    def declare(name, value, param_descriptor):
+        if name in given:
+            given[name] = Parameter(name, value=value)
+        node.declare_parameter(name, value, param_descriptor)
+    for name, value in scene_parameters(scene):
+        declare(name, value, ParameterDescriptor(description=SCENE_PARAM_DESCRIPTION,
+                                                 read_only=True))
+    for name, value in node_parameter_values(scene.node, overrides).items():
+        declare(name, value, descriptor(NODE_PARAMS[name]))
+
+
+def validate_parameters(params) -> SetParametersResult:
+    """The on-set-parameters callback: refuse a change that :func:`runtime_refusal` refuses."""
+    for param in params:
+        reason = runtime_refusal(param.name, param.value)
+        if reason:
+            return SetParametersResult(successful=False, reason=reason)
+    return SetParametersResult(successful=True)

@@ -1,0 +1,123 @@
+"""
+What the node reports: the /diagnostics status (level, message, key-value pairs) and the
+periodic INFO line, each built in one place from named inputs. Keys and values: README.md
+(Diagnostics). Wall times in s, rates per wall second.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import NamedTuple
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+__all__ = ['CommandCounts', 'diagnostics_message', 'RateWindow', 'status_line', 'Window']
+
+
+class Window(NamedTuple):
+    """What happened between two reports."""
+
+    rate_hz: float        # control periods run per wall second
+    late_ticks: int
+    slipped_s: float      # wall time dropped from the real-time schedule
+    wall_s: float
+
+
+class RateWindow:
+    """Counts since the previous :meth:`take` (or since it was made)."""
+
+    def __init__(self, steps: int = 0, late_ticks: int = 0, slipped_s: float = 0.0):
+        self._start = (time.perf_counter(), steps, late_ticks, slipped_s)
+
+    def take(self, steps: int, late_ticks: int, slipped_s: float) -> Window:
+        """The window up to now, given the running totals; the next window starts now."""
+        now = (time.perf_counter(), steps, late_ticks, slipped_s)
+        start, self._start = self._start, now
+        wall = now[0] - start[0]
+        rate = (now[1] - start[1]) / wall if wall > 0 else 0.0
+        return Window(rate, now[2] - start[2], now[3] - start[3], wall)
+
+
+class CommandCounts(NamedTuple):
+    """The node's command counters (totals)."""
+
+    received: int
+    refused: int
+    clamped: int
+    last_refused: str     # the latest refusal's reason
+
+
+def diagnostics_message(*, node_name: str, stamp, mode: str, paused: bool, simulator,
+                        window: Window, achieved_rtf: float, pacing, late_ticks: int,
+                        slipped_s: float, commands: CommandCounts, distrust: str,
+                        recorder) -> DiagnosticArray:
+    """
+    One /diagnostics message with the node's one status ``<node_name>: simulation``.
+
+    :param simulator: the :class:`~det_sim_ros.sim.simulator.Simulator` (sim time, fault,
+        voltages, stepper, power residual).
+    :param pacing: the pacing's :class:`~det_sim_ros.ros.pacing.PacingReport` (lag, its
+        warning, its own keys).
+    :param late_ticks, slipped_s: the pacing's totals.
+    :param distrust: why the results are not to be trusted ('' if they are).
+    :param recorder: the MCAP :class:`~det_sim_ros.io.mcap_log.Recorder`, or None.
+    """
+    # the fully qualified name tells namespaced nodes apart (/arm1/sim_node: simulation)
+    status = DiagnosticStatus(name=f'{node_name}: simulation', hardware_id=node_name)
+    status.level, status.message = DiagnosticStatus.OK, 'paused' if paused else 'running'
+    if simulator.fault:
+        status.level, status.message = DiagnosticStatus.ERROR, f'fault: {simulator.fault}'
+    elif distrust:
+        status.level, status.message = DiagnosticStatus.WARN, distrust
+    elif pacing.warning:
+        status.level, status.message = DiagnosticStatus.WARN, pacing.warning
+    dt, wall = simulator.dt, window.wall_s
+    residual = simulator.power_residual() if not simulator.fault else math.nan
+    values = {
+        'sim_time_s': f'{simulator.t:.6f}',
+        'mode': mode,
+        'paused': str(paused).lower(),
+        'step_rate_hz': f'{window.rate_hz:.1f}',
+        'real_time_factor': f'{achieved_rtf:.3f}',
+        'lag_ms': f'{pacing.lag_steps * dt * 1e3:.1f}',
+        'max_lag_ms': f'{pacing.max_lag_steps * dt * 1e3:.1f}',
+        'late_ticks': str(late_ticks),
+        'late_ticks_per_s': f'{window.late_ticks / wall:.1f}' if wall > 0 else '0.0',
+        'slipped_s': f'{slipped_s:.3f}',
+        'slipped_ms_per_s': f'{window.slipped_s / wall * 1e3:.1f}' if wall > 0 else '0.0',
+        'refused_commands': str(commands.refused),
+        'last_refused': commands.last_refused,
+        'clamped_commands': str(commands.clamped),
+        'commands_received': str(commands.received),
+        'power_residual': f'{residual:.3e}',
+        'voltage_V': str(simulator.u.tolist()),
+        'fault': simulator.fault,
+        'stepper': simulator.describe_stepper(),      # adaptive: the current step count
+        **pacing.values,
+        'internal_steps': str(simulator.steps_taken),
+    }
+    if recorder is not None:
+        values.update({'log_file': recorder.path, 'log_messages': str(recorder.messages),
+                       'log_fault': recorder.fault})
+        if recorder.fault and status.level == DiagnosticStatus.OK:
+            status.level, status.message = DiagnosticStatus.WARN, recorder.fault
+    status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
+    msg = DiagnosticArray(status=[status])
+    msg.header.stamp = stamp
+    return msg
+
+
+def _mm(values) -> str:
+    if len(values) == 1:
+        return f'{values[0]:.3f}'
+    if len(values) <= 4:
+        return '[' + ', '.join(f'{v:.3f}' for v in values) + ']'
+    return f'{values.min():.3f}..{values.max():.3f}'
+
+
+def status_line(*, t: float, volts, q_mm, dy_mm, rtf: float, state: str) -> str:
+    """The periodic INFO line: sim time (s), voltages (V), deflection and displacement (mm),
+    the achieved real-time factor and the state (running, paused, FAULT)."""
+    v = volts.tolist() if len(volts) <= 4 else f'{volts.min():g}..{volts.max():g}'
+    return f't={t:.3f} s v={v} V q={_mm(q_mm)} mm dy={_mm(dy_mm)} mm RTF={rtf:.2f} {state}'
