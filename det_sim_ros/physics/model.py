@@ -32,7 +32,8 @@ For one cell and the paper's one-term shape this is the paper's eq 71 with its e
 The 'consistent' fidelity uses the fourth-order end shortening y = int (w'^2/2 + w'^4/8) dx that
 matches eq 51's energy (eq 65 drops it). The 'exact' fidelity keeps the inextensible kinematics
 untruncated: with sin(theta) = w', y = int (1 - cos theta) dx and the bending energy
-EI int w''^2 / (1 - w'^2) dx (curvature theta' = w''/cos theta), which converge to the elastica. Reductions: no creep drops eps_E; the ideal source
+EI int w''^2 / (1 - w'^2) dx (curvature theta' = w''/cos theta), which converge to the
+elastica. Reductions: no creep drops eps_E; the ideal source
 (Rs -> 0) makes q_p = C0 lambda^2 v algebraic and drops the stiff charge state; a dropped state
 is neither stored nor computed.
 """
@@ -65,8 +66,8 @@ class ModelDomainError(ArithmeticError):
 
     def __init__(self, status: int, where: str = ''):
         self.status = status
-        super().__init__(_STATUS_TEXT.get(status, f'status {status}') + (f' {where}' if where
-                                                                          else ''))
+        text = _STATUS_TEXT.get(status, f'status {status}')
+        super().__init__(text + (f' {where}' if where else ''))
 
 
 def check(status: int, where: str = '') -> None:
@@ -164,7 +165,8 @@ class Model:
 
     @property
     def structure_map(self) -> np.ndarray:
-        """P (n_structure_outputs x n_cells): structure outputs = P @ y (cells' end shortenings)."""
+        """P (n_structure_outputs x n_cells): structure outputs = P @ y (the cells' end
+        shortenings)."""
         return self.arrays.P
 
     def channel(self, base: str) -> list:

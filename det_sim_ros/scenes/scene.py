@@ -82,7 +82,8 @@ SECTION_DEFAULTS = {('scene', 'initial_state'): 'rest', ('scene', 'rest_branch')
 INTEGRATOR_SPEC = {
     'method': ('str', 'stepper name or auto'),
     'tolerance': ('float', 0.0, False, 0.1, '-', 'target error of auto'),
-    'substeps': ('int', 0, True, 100000, '-', 'internal steps per control period (0 = adaptive from the tolerance)'),
+    'substeps': ('int', 0, True, 100000, '-',
+                 'internal steps per control period (0 = adaptive from the tolerance)'),
 }
 # Optional section: how cells (each one DET and its pair of buckled beams, Section 3) are put
 # together. Missing keys take STRUCTURE_DEFAULTS, so scene files without the section (and logs
