@@ -62,7 +62,7 @@ SCENE_SPEC = {
     'rest_branch': ('choice', REST_BRANCHES, "the rest state's side: 'buckled+' (q > 0) or "
                     "'buckled-' (q < 0)"),
 }
-# Optional keys and their values when a scene (or a log written before the key existed) omits
+# Optional keys and their values when a scene (a file, a mapping, or a log's stored scene) omits
 # them; every other key of SECTIONS must be given.
 SECTION_DEFAULTS = {('scene', 'initial_state'): 'rest', ('scene', 'rest_branch'): 'buckled+'}
 INTEGRATOR_SPEC = {
@@ -72,8 +72,8 @@ INTEGRATOR_SPEC = {
                  'internal steps per control period (0 = adaptive from the tolerance)'),
 }
 # Optional section: how cells (each one DET and its pair of buckled beams, Section 3) are put
-# together. Missing keys take STRUCTURE_DEFAULTS, so scene files without the section (and logs
-# written before it existed) still load as one cell.
+# together. Missing keys take STRUCTURE_DEFAULTS, so a scene without the section (a file or a
+# log's stored scene) loads as one cell.
 STRUCTURE_SPEC = {
     'type': ('choice', STRUCTURES, "'single' cell, two cells under a rigid 'plate' (Fig. 7), "
              "or an 'array' of independent copies"),
