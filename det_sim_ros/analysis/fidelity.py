@@ -91,6 +91,7 @@ class BeamRitz:
 
     @property
     def n_ritz(self) -> int:
+        """Ritz terms of the beam."""
         return self.basis.n_ritz
 
     # -- energies (per beam) -------------------------------------------------------------------

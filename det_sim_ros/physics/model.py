@@ -133,6 +133,7 @@ class ModelArrays:
 
     @property
     def n_groups(self) -> int:
+        """Independent coupled groups of cells (the copies of an array)."""
         return len(self.group_q) - 1
 
     def cell_slice(self, c: int) -> slice:

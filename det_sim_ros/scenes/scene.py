@@ -108,6 +108,7 @@ class Scene:
 
     @property
     def n_dets(self) -> int:
+        """Number of DETs (one per cell, the voltage command's length)."""
         return len(self.structure['dets'])
 
     def cell_physics(self) -> tuple:

@@ -52,6 +52,7 @@ class Method:
 
     @property
     def n_stages(self) -> int:
+        """Stages per step."""
         return len(self.c)
 
     def arrays(self):
@@ -220,6 +221,7 @@ class StepControl:
 
     @property
     def adaptive(self) -> bool:
+        """Whether the count adapts per period (a tolerance is set)."""
         return self.tolerance > 0.0
 
 
