@@ -18,8 +18,8 @@ the clamped-clamped beam also in closed form by elliptic integrals (four quarter
 Euler elastica: p = 16 K(k)^2, y/l = 2 (1 - E(k)/K(k)), w(l/2)/l = k/K(k)), which the tests use to
 check the BVP solve.
 
-Deflections are those of a material point: ``q_ref`` is w at arc length s = x_ref (x_ref = 2l/3
-for 'simply_supported' and l/2 for 'fixed', :data:`det_sim_ros.physics.shapes.REFERENCE_POINT`), the
+Deflections are those of a material point: ``q_ref`` is w at arc length s = x_ref (x_ref = 2l/3 for
+'simply_supported' and l/2 for 'fixed', :data:`det_sim_ros.physics.shapes.REFERENCE_POINT`), the
 point whose deflection the simulator publishes as q; ``q_max`` is the largest |w|. The Ritz model
 uses the same Lagrangian coordinate (its end shortening int (w'^2/2 + w'^4/8) dx is the expansion
 of int (1 - cos theta) ds with w' = sin theta), so both are compared at the same material point.

@@ -3,8 +3,8 @@ Ritz statics of one beam alone, for measuring the model's fidelity against the e
 of :mod:`det_sim_ros.analysis.elastica`.
 
 The beam is the one the simulator builds: its Ritz basis comes from
-:func:`det_sim_ros.physics.model.build_model` for the scene (``model.bases``), and its energies are the
-model's (model.py): per beam
+:func:`det_sim_ros.physics.model.build_model` for the scene (``model.bases``), and its energies
+are the model's (model.py): per beam
 
     U(q) = 1/2 EI int w''^2 (1 + w'^2) dx,      y(q) = int (1/2 w'^2 + kappa/8 w'^4) dx,
 
@@ -91,6 +91,7 @@ class BeamRitz:
 
     @property
     def n_ritz(self) -> int:
+        """Ritz terms of the beam."""
         return self.basis.n_ritz
 
     # -- energies (per beam) -------------------------------------------------------------------

@@ -14,9 +14,9 @@ The equilibrium at constant DET voltages V (one per DET, V) on a branch ('buckle
 At that point dx/dt = f(x, u) is linearized: dx' = A dx + B du, dz = C dx + D du with the
 outputs z = [dy_i, q_i] per DET i: the published displacement Delta-y_i = y0_i - y_i (m) and
 deflection q_i (reference-point deflection, m); u in V. A and B come from complex-step
-differentiation of det_sim_ros.physics.reference.rhs (exact to round-off, no step-size trade-off), C
-from the kinematics (dy/dq) and the reference rows; D = 0. The power monitor's energy states
-are left out (they integrate power and feed nothing back).
+differentiation of det_sim_ros.physics.reference.rhs (exact to round-off, no step-size trade-off),
+C from the kinematics (dy/dq) and the reference rows; D = 0. The power monitor's energy states are
+left out (they integrate power and feed nothing back).
 
 ``LinearModel.to_statespace()`` gives a python-control ``StateSpace`` (optional dependency:
 ``pip install control``).

@@ -32,7 +32,8 @@ For one cell and the paper's one-term shape this is the paper's eq 71 with its e
 The 'consistent' fidelity uses the fourth-order end shortening y = int (w'^2/2 + w'^4/8) dx that
 matches eq 51's energy (eq 65 drops it). The 'exact' fidelity keeps the inextensible kinematics
 untruncated: with sin(theta) = w', y = int (1 - cos theta) dx and the bending energy
-EI int w''^2 / (1 - w'^2) dx (curvature theta' = w''/cos theta), which converge to the elastica. Reductions: no creep drops eps_E; the ideal source
+EI int w''^2 / (1 - w'^2) dx (curvature theta' = w''/cos theta), which converge to the
+elastica. Reductions: no creep drops eps_E; the ideal source
 (Rs -> 0) makes q_p = C0 lambda^2 v algebraic and drops the stiff charge state; a dropped state
 is neither stored nor computed.
 """
@@ -65,8 +66,8 @@ class ModelDomainError(ArithmeticError):
 
     def __init__(self, status: int, where: str = ''):
         self.status = status
-        super().__init__(_STATUS_TEXT.get(status, f'status {status}') + (f' {where}' if where
-                                                                          else ''))
+        text = _STATUS_TEXT.get(status, f'status {status}')
+        super().__init__(text + (f' {where}' if where else ''))
 
 
 def check(status: int, where: str = '') -> None:
@@ -132,6 +133,7 @@ class ModelArrays:
 
     @property
     def n_groups(self) -> int:
+        """Independent coupled groups of cells (the copies of an array)."""
         return len(self.group_q) - 1
 
     def cell_slice(self, c: int) -> slice:
@@ -164,7 +166,8 @@ class Model:
 
     @property
     def structure_map(self) -> np.ndarray:
-        """P (n_structure_outputs x n_cells): structure outputs = P @ y (cells' end shortenings)."""
+        """P (n_structure_outputs x n_cells): structure outputs = P @ y (the cells' end
+        shortenings)."""
         return self.arrays.P
 
     def channel(self, base: str) -> list:
@@ -303,7 +306,10 @@ def _groups(MI):
     return cell_grp.astype(np.int64), len(labels)
 
 
-def _assemble(scene, cells, MI, det_physics, P, structure_names):
+def _cell_arrays(scene, cells, det_physics):
+    """The per-cell blocks (see ModelArrays): quadrature rows B1, B2, W by cell_g, the mass,
+    stiffness and damping blocks by cell_q, the reference rows, and the cells' beam and DET
+    constants (name -> one value per cell)."""
     nc = len(cells)
     r = [b.n_ritz for b in cells]
     nq = int(sum(r))
@@ -342,6 +348,28 @@ def _assemble(scene, cells, MI, det_physics, P, structure_names):
                       eta_M=ph.eta_M, eta_v=ph.eta_v, Rs=ph.Rs, Rp=ph.Rp)
         for key, value in values.items():
             (cell if key in cell else det)[key][c] = value
+    return dict(nq=nq, r_max=r_max, cell_q=cell_q, cell_g=cell_g, B1=B1, B2=B2, W=W, Mb=Mb,
+                K=K, D=D, ref=ref, cell=cell, det=det)
+
+
+def _state_names(scene, nq, nc):
+    """q[j], q_dot[j], then eps_E[i] (creep), q_p[i] (RC source), W_in, W_diss (power)."""
+    names = [f'q[{j}]' for j in range(nq)] + [f'q_dot[{j}]' for j in range(nq)]
+    if scene.creep:
+        names += [f'eps_E[{i}]' for i in range(nc)]
+    if scene.source == 'rc':
+        names += [f'q_p[{i}]' for i in range(nc)]
+    if scene.monitor_power:
+        names += ['W_in', 'W_diss']
+    return names
+
+
+def _assemble(scene, cells, MI, det_physics, P, structure_names):
+    """The :class:`Model` of ``cells`` (one Ritz basis per cell) coupled by the structure's
+    inverse-mass map MI, with the structure outputs P @ y."""
+    nc = len(cells)
+    blocks = _cell_arrays(scene, cells, det_physics)
+    nq, cell_q = blocks['nq'], blocks['cell_q']
     MI = np.asarray(MI, dtype=float)
     mi_idx = np.argwhere(MI != 0.0)            # row-major: entries of a group are contiguous
     cell_grp, n_groups = _groups(MI)
@@ -349,22 +377,17 @@ def _assemble(scene, cells, MI, det_physics, P, structure_names):
     for c in range(nc):
         grp_q[cell_grp[c] + 1] = cell_q[c + 1]
     creep, rc, power = int(scene.creep), int(scene.source == 'rc'), int(scene.monitor_power)
-    names = [f'q[{j}]' for j in range(nq)] + [f'q_dot[{j}]' for j in range(nq)]
-    if creep:
-        names += [f'eps_E[{i}]' for i in range(nc)]
-    if rc:
-        names += [f'q_p[{i}]' for i in range(nc)]
-    if power:
-        names += ['W_in', 'W_diss']
+    names = _state_names(scene, nq, nc)
     ints = lambda v: np.ascontiguousarray(v, dtype=np.int64)  # noqa: E731
     arrays = ModelArrays(
-        n_q=nq, n_cells=nc, n_state=len(names), r_max=r_max, creep=creep, rc_source=rc,
-        power_monitor=power, cell_q=ints(cell_q), cell_g=ints(cell_g), cell_group=ints(cell_grp),
-        group_q=ints(grp_q), kinematics=ints(np.full(nc, KINEMATICS[scene.fidelity])),
-        B1=B1, B2=B2, W=W, Mb=Mb, K=K, D=D, ref=ref,
+        n_q=nq, n_cells=nc, n_state=len(names), r_max=blocks['r_max'], creep=creep, rc_source=rc,
+        power_monitor=power, cell_q=ints(cell_q), cell_g=ints(blocks['cell_g']),
+        cell_group=ints(cell_grp), group_q=ints(grp_q),
+        kinematics=ints(np.full(nc, KINEMATICS[scene.fidelity])),
+        **{key: blocks[key] for key in ('B1', 'B2', 'W', 'Mb', 'K', 'D', 'ref')},
         mi_val=np.ascontiguousarray(MI[MI != 0.0], dtype=float),
         mi_row=ints(mi_idx[:, 0]), mi_col=ints(mi_idx[:, 1]),
-        P=np.ascontiguousarray(P, dtype=float), **cell, **det)
+        P=np.ascontiguousarray(P, dtype=float), **blocks['cell'], **blocks['det'])
     det_names = scene.det_names
     if nc == 1:
         out_names = CELL_OUTPUTS

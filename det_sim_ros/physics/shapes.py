@@ -45,10 +45,12 @@ class RitzBasis:
 
     @property
     def n_ritz(self) -> int:
+        """Number of shape functions."""
         return len(self.coefficients)
 
     @property
     def degree(self) -> int:
+        """Highest polynomial degree among the shape functions."""
         return max(len(c) - 1 for c in self.coefficients)
 
     def values(self, x, derivative: int = 0) -> np.ndarray:

@@ -22,93 +22,14 @@ from typing import Any, Mapping
 import numpy as np
 import yaml
 
+from .keys import (BEAMS, check_value, FIDELITIES, INITIAL_STATES, INTEGRATOR_SPEC,
+                   PHYSICS_SPEC, REST_BRANCHES, SCENE_SPEC, SceneError, SECTION_DEFAULTS,
+                   SECTIONS, SOURCES, STRUCTURE_DEFAULTS, STRUCTURE_SPEC, STRUCTURES, TOP_SPEC)
+
 __all__ = ['SceneError', 'Physics', 'Scene', 'load_scene', 'scene_to_dict', 'find_config',
            'BEAMS', 'FIDELITIES', 'SOURCES', 'STRUCTURES', 'INITIAL_STATES', 'REST_BRANCHES']
 
-BEAMS = ('simply_supported', 'fixed')
-FIDELITIES = ('paper', 'consistent', 'exact')
-SOURCES = ('rc', 'ideal')
-STRUCTURES = ('single', 'plate', 'array')
-# 'rest': every cell at its stable buckled equilibrium at 0 V (on rest_branch), at rest, no
-# charge, no creep; 'released': the paper's start, q = q0 (nearly straight), released at t = 0
-INITIAL_STATES = ('rest', 'released')
-REST_BRANCHES = ('buckled+', 'buckled-')
 EPS0 = 8.8541878128e-12  # F/m, vacuum permittivity
-
-
-class SceneError(ValueError):
-    """A scene or parameter value that cannot be simulated; the message names the key."""
-
-
-# name: (kind, lower bound, lower bound inclusive, upper bound, unit, description)
-_POS = (0.0, False, math.inf)
-PHYSICS_SPEC = {
-    'l0': ('float', *_POS, 'm', 'active DET length (stretch direction)'),
-    'A0': ('float', *_POS, 'm^2', 'electrode area per layer'),
-    'd0': ('float', *_POS, 'm', 'layer thickness'),
-    'n': ('int', 1, True, 10000, '-', 'number of DET layers'),
-    'Y': ('float', *_POS, 'Pa', 'Neo-Hooke modulus'),
-    'eps_r': ('float', *_POS, '-', 'relative permittivity'),
-    'E_M': ('float', 0.0, True, math.inf, 'Pa', 'Maxwell (creep) spring modulus'),
-    'eta_M': ('float', *_POS, 'Pa s', 'Maxwell dashpot viscosity'),
-    'eta_v': ('float', 0.0, True, math.inf, 'Pa s', 'DE Kelvin-Voigt viscosity'),
-    'E_b': ('float', *_POS, 'Pa', "beam Young's modulus"),
-    'rho_b': ('float', *_POS, 'kg/m^3', 'beam density'),
-    'b_b': ('float', *_POS, 'm', 'beam width'),
-    't_b': ('float', *_POS, 'm', 'beam thickness'),
-    'eta_b': ('float', 0.0, True, math.inf, 'Pa s', 'beam Kelvin-Voigt viscosity'),
-    'm': ('float', 0.0, True, math.inf, 'kg', 'interface mass'),
-    'Rs': ('float', *_POS, 'Ohm', 'series resistance'),
-    'Rp': ('float', *_POS, 'Ohm', 'parallel (leakage) resistance'),
-    'v_max': ('float', *_POS, 'V', 'maximum voltage'),
-    'q0': ('float', -math.inf, False, math.inf, 'm', 'initial deflection'),
-}
-SCENE_SPEC = {
-    'beam': ('choice', BEAMS, 'mechanical interface'),
-    'eps_b': ('float', -1.0, False, 2.0, '-', 'pre-strain, eq 77 (l = l0 (1 + eps_b) > 0)'),
-    'fidelity': ('choice', FIDELITIES, 'model fidelity'),
-    'n_ritz': ('int', 1, True, 12, '-', 'Ritz terms per beam'),
-    'creep': ('bool', 'Maxwell creep state'),
-    'source': ('choice', SOURCES, 'electrical source model'),
-    'monitor_power': ('bool', 'integrate the power balance'),
-    'initial_state': ('choice', INITIAL_STATES, "initial state: 'rest' (stable buckled "
-                      "equilibrium at 0 V) or 'released' (q = q0, the paper's start)"),
-    'rest_branch': ('choice', REST_BRANCHES, "the rest state's side: 'buckled+' (q > 0) or "
-                    "'buckled-' (q < 0)"),
-}
-# Optional keys and their values when a scene (or a log written before the key existed) omits
-# them; every other key of SECTIONS must be given.
-SECTION_DEFAULTS = {('scene', 'initial_state'): 'rest', ('scene', 'rest_branch'): 'buckled+'}
-INTEGRATOR_SPEC = {
-    'method': ('str', 'stepper name or auto'),
-    'tolerance': ('float', 0.0, False, 0.1, '-', 'target error of auto'),
-    'substeps': ('int', 0, True, 100000, '-', 'internal steps per control period (0 = adaptive from the tolerance)'),
-}
-# Optional section: how cells (each one DET and its pair of buckled beams, Section 3) are put
-# together. Missing keys take STRUCTURE_DEFAULTS, so scene files without the section (and logs
-# written before it existed) still load as one cell.
-STRUCTURE_SPEC = {
-    'type': ('choice', STRUCTURES, "'single' cell, two cells under a rigid 'plate' (Fig. 7), "
-             "or an 'array' of independent copies"),
-    'dets': ('names', 'DET names = order of the voltage command (default det0, det1, ...; '
-             'left, right for a plate)'),
-    'copies': ('int', 1, True, 100000, '-', 'array: number of independent actuators'),
-    'plate_width': ('float', *_POS, 'm', 'plate: distance w between the two cells'),
-    'plate_mass': ('float', 0.0, True, math.inf, 'kg', 'plate: mass (replaces the cells\' m)'),
-    'plate_inertia': ('float', 0.0, True, math.inf, 'kg m^2',
-                      'plate: rotational inertia J about its centre'),
-    'spread': ('float', 0.0, True, 0.3, '-', 'array: relative standard deviation of the '
-               'spread_keys physics values per copy'),
-    'spread_keys': ('names', 'array: physics keys that get the spread'),
-    'seed': ('int', 0, True, 2 ** 31 - 1, '-', 'array: random seed of the spread'),
-}
-STRUCTURE_DEFAULTS = {'type': 'single', 'dets': [], 'copies': 1, 'plate_width': 0.06,
-                      'plate_mass': 4.0e-3, 'plate_inertia': 1.2e-6, 'spread': 0.0,
-                      'spread_keys': ['Y', 'E_b', 'Rs', 'm'], 'seed': 0}
-TOP_SPEC = {
-    'rate_hz': ('float', 0.0, False, 1.0e6, 'Hz', 'control rate'),
-}
-SECTIONS = {'scene': SCENE_SPEC, 'physics': PHYSICS_SPEC, 'integrator': INTEGRATOR_SPEC}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -187,6 +108,7 @@ class Scene:
 
     @property
     def n_dets(self) -> int:
+        """Number of DETs (one per cell, the voltage command's length)."""
         return len(self.structure['dets'])
 
     def cell_physics(self) -> tuple:
@@ -229,59 +151,6 @@ class Scene:
     def replace(self, **changes) -> 'Scene':
         """Return a validated copy with dotted-key overrides (see :func:`load_scene`)."""
         return load_scene(scene_to_dict(self), overrides=changes)
-
-
-def _fail(key, value, why):
-    raise SceneError(f'scene key {key!r}: {why} (got {value!r})')
-
-
-def _check_value(key, value, spec):
-    kind = spec[0]
-    if kind == 'bool':
-        if not isinstance(value, bool):
-            _fail(key, value, 'must be true or false')
-        return value
-    if kind == 'choice':
-        if value not in spec[1]:
-            _fail(key, value, 'must be one of ' + ', '.join(repr(c) for c in spec[1]))
-        return value
-    if kind == 'names':
-        if (not isinstance(value, (list, tuple))
-                or not all(isinstance(v, str) and v for v in value)):
-            _fail(key, value, 'must be a list of non-empty strings')
-        if len(set(value)) != len(value):
-            _fail(key, value, 'names must be unique')
-        return list(value)
-    if kind == 'str':
-        if not isinstance(value, str) or not value:
-            _fail(key, value, 'must be a non-empty string')
-        return value
-    lower, inclusive, upper, unit = spec[1], spec[2], spec[3], spec[4]
-    if kind == 'int':
-        if isinstance(value, bool) or not isinstance(value, int):
-            if isinstance(value, float) and value.is_integer():
-                value = int(value)
-            else:
-                _fail(key, value, 'must be an integer')
-    else:
-        if isinstance(value, str):
-            hint = ''
-            try:
-                float(value)
-                hint = '; YAML 1.1 reads an exponent without a sign as text: write e.g. 4.0e+9'
-            except ValueError:
-                pass
-            _fail(key, value, f'must be a number in {unit}, not a string{hint}')
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            _fail(key, value, f'must be a number in {unit}')
-        value = float(value)
-    if not math.isfinite(value):
-        _fail(key, value, 'must be finite')
-    low_ok = value >= lower if inclusive else value > lower
-    if not low_ok or value > upper:
-        bracket = '[' if inclusive else '('
-        _fail(key, value, f'out of range {bracket}{lower:g}, {upper:g}] {unit}')
-    return value
 
 
 def find_config(name: str = 'default.yaml') -> str:
@@ -355,38 +224,24 @@ def _apply_override(data, key, value):
     target[leaf] = value
 
 
-def load_scene(source: Any = 'default', overrides: Mapping[str, Any] | None = None) -> Scene:
-    """
-    Load and validate a scene.
-
-    :param source: a path to a scene YAML, an installed scene name ('default'), or a mapping of
-        the same shape (with or without the ``sim_node: ros__parameters:`` wrapper).
-    :param overrides: ``{'physics.Rs': 1.0e3, 'eps_b': 0.25, ...}``; a key without a section is
-        looked up in the section that has it. Values given as strings are parsed as YAML, and
-        text such as '1.0e3' that YAML 1.1 keeps as a string is read as a number.
-    :raises SceneError: one line naming the offending key, value and allowed range.
-    """
-    if isinstance(source, Scene):
-        source = scene_to_dict(source)
-    if isinstance(source, Mapping):
-        data, origin = copy.deepcopy(dict(source)), '<dict>'
-    else:
-        origin = str(source)
-        data = _read_yaml(find_config(origin))
-    data = _unwrap_ros_params(data, origin)
-    for key, value in (overrides or {}).items():
-        if isinstance(value, str):   # command-line text: YAML, and numbers like 1.0e3 too
+def _override_value(value):
+    """An override as given; command-line text is read as YAML, and numbers like 1.0e3 (a
+    string in YAML 1.1) as numbers."""
+    if isinstance(value, str):
+        try:
+            value = yaml.safe_load(value)
+        except yaml.YAMLError:
+            pass
+        if isinstance(value, str):
             try:
-                value = yaml.safe_load(value)
-            except yaml.YAMLError:
+                value = float(value)
+            except ValueError:
                 pass
-            if isinstance(value, str):
-                try:
-                    value = float(value)
-                except ValueError:
-                    pass
-        _apply_override(data, key, value)
+    return value
 
+
+def _checked_values(data):
+    """(section, key) -> checked value of every section key and top-level key ('', key)."""
     unknown = set(data) - set(SECTIONS) - set(TOP_SPEC) - {'node', 'structure', 'dets'}
     if unknown:
         raise SceneError(f'unknown scene key {sorted(unknown)[0]!r}; known sections: '
@@ -408,20 +263,18 @@ def load_scene(source: Any = 'default', overrides: Mapping[str, Any] | None = No
                 continue
             if key not in content:
                 raise SceneError(f'scene key {section}.{key!r}: missing ({key_spec[-1]})')
-            values[(section, key)] = _check_value(f'{section}.{key}', content[key], key_spec)
+            values[(section, key)] = check_value(f'{section}.{key}', content[key], key_spec)
     for key, key_spec in TOP_SPEC.items():
         if key not in data:
             raise SceneError(f'scene key {key!r}: missing ({key_spec[-1]})')
-        values[('', key)] = _check_value(key, data[key], key_spec)
-    node = data.get('node', {})
-    if not isinstance(node, dict):
-        raise SceneError(f"scene key 'node': must be a mapping (got {node!r})")
+        values[('', key)] = check_value(key, data[key], key_spec)
+    return values
 
-    structure, dets = _check_structure(data)
-    physics = Physics(**{k: values[('physics', k)] for k in PHYSICS_SPEC})
-    scene = Scene(**{k: values[('scene', k)] for k in SCENE_SPEC}, physics=physics,
-                  **{k: values[('integrator', k)] for k in INTEGRATOR_SPEC},
-                  rate_hz=values[('', 'rate_hz')], node=node, structure=structure, dets=dets)
+
+def _check_consistency(scene):
+    """Checks that span several keys (the cells' physics after spread, n_ritz against the
+    fidelity, the pre-stretch)."""
+    physics = scene.physics
     for name, cell in zip(scene.det_names, scene.cell_physics()):
         if cell.l0 * (1.0 + scene.eps_b) <= 0.0 or not all(
                 math.isfinite(v) and v >= 0 for k, v in dataclasses.asdict(cell).items()
@@ -434,6 +287,40 @@ def load_scene(source: Any = 'default', overrides: Mapping[str, Any] | None = No
     if lam_pre <= 0.0:
         raise SceneError(f"scene key 'scene.eps_b': pre-stretch lambda = 1 + eps_b must be > 0 "
                          f'(got {scene.eps_b!r})')
+
+
+def load_scene(source: Any = 'default', overrides: Mapping[str, Any] | None = None) -> Scene:
+    """
+    Load and validate a scene.
+
+    :param source: a path to a scene YAML, an installed scene name ('default'), or a mapping of
+        the same shape (with or without the ``sim_node: ros__parameters:`` wrapper).
+    :param overrides: ``{'physics.Rs': 1.0e3, 'eps_b': 0.25, ...}``; a key without a section is
+        looked up in the section that has it. Values given as strings are parsed as YAML, and
+        text such as '1.0e3' that YAML 1.1 keeps as a string is read as a number.
+    :raises SceneError: one line naming the offending key, value and allowed range.
+    """
+    if isinstance(source, Scene):
+        source = scene_to_dict(source)
+    if isinstance(source, Mapping):
+        data, origin = copy.deepcopy(dict(source)), '<dict>'
+    else:
+        origin = str(source)
+        data = _read_yaml(find_config(origin))
+    data = _unwrap_ros_params(data, origin)
+    for key, value in (overrides or {}).items():
+        _apply_override(data, key, _override_value(value))
+    values = _checked_values(data)
+    node = data.get('node', {})
+    if not isinstance(node, dict):
+        raise SceneError(f"scene key 'node': must be a mapping (got {node!r})")
+
+    structure, dets = _check_structure(data)
+    physics = Physics(**{k: values[('physics', k)] for k in PHYSICS_SPEC})
+    scene = Scene(**{k: values[('scene', k)] for k in SCENE_SPEC}, physics=physics,
+                  **{k: values[('integrator', k)] for k in INTEGRATOR_SPEC},
+                  rate_hz=values[('', 'rate_hz')], node=node, structure=structure, dets=dets)
+    _check_consistency(scene)
     return scene
 
 
@@ -446,8 +333,8 @@ def _check_structure(data):
         if key not in STRUCTURE_SPEC:
             raise SceneError(f'unknown scene key structure.{key!r}; allowed: '
                              + ', '.join(STRUCTURE_SPEC))
-    structure = {key: _check_value(f'structure.{key}', content.get(key, default),
-                                   STRUCTURE_SPEC[key])
+    structure = {key: check_value(f'structure.{key}', content.get(key, default),
+                                  STRUCTURE_SPEC[key])
                  for key, default in STRUCTURE_DEFAULTS.items()}
     kind = structure['type']
     count = {'single': 1, 'plate': 2, 'array': structure['copies']}[kind]
@@ -477,7 +364,7 @@ def _check_structure(data):
             if key not in PHYSICS_SPEC:
                 raise SceneError(f'unknown scene key dets.{name}.{key!r}; allowed: '
                                  + ', '.join(PHYSICS_SPEC))
-            checked[name][key] = _check_value(f'dets.{name}.{key}', value, PHYSICS_SPEC[key])
+            checked[name][key] = check_value(f'dets.{name}.{key}', value, PHYSICS_SPEC[key])
     return structure, checked
 
 

@@ -3,10 +3,10 @@ Fixed-step steppers declared as coefficient tables over one compiled stepping co
 
 Each :class:`Method` is data: stage nodes ``c`` and the coefficients a_ij, b_i written as sums of
 ``weight * phi_k(c_arg * h * L)`` (``k = -1``: a constant weight). The compiled core
-(``ds_advance`` in det_sim_ros/core/_csrc/stepping.c) treats x' = L x + N(x) with the stiff diagonal L of the
-charge equation (dq_p/dt = -q_p / (C0 lam^2 Rs||Rp) + v/Rs, linear in q_p for frozen q) exactly
-and everything else explicitly; for states with L = 0 every exponential method reduces to the
-classical Runge-Kutta method with the same table (phi_k(0) = 1/k!).
+(``ds_advance`` in det_sim_ros/core/_csrc/stepping.c) treats x' = L x + N(x) with the stiff
+diagonal L of the charge equation (dq_p/dt = -q_p / (C0 lam^2 Rs||Rp) + v/Rs, linear in q_p for
+frozen q) exactly and everything else explicitly; for states with L = 0 every exponential method
+reduces to the classical Runge-Kutta method with the same table (phi_k(0) = 1/k!).
 
 Why exponential: the electrical time constant Rs C ~ 30 us is 300 times shorter than the beam's
 period, so explicit RK4 at a 1 ms step diverges; an exponential update keeps every step size
@@ -52,6 +52,7 @@ class Method:
 
     @property
     def n_stages(self) -> int:
+        """Stages per step."""
         return len(self.c)
 
     def arrays(self):
@@ -61,7 +62,7 @@ class Method:
 
     @property
     def adaptive(self) -> bool:
-        """Whether the step count can follow an error estimate (the method has an embedded pair)."""
+        """Whether the step count can follow an error estimate (an embedded pair)."""
         return bool(self.embedded)
 
 
@@ -153,12 +154,12 @@ def get_method(name: str) -> Method:
                          + ', '.join(sorted(METHODS)) + ", or 'auto'") from None
 
 
-# Step size that meets a tolerance: a method of order p reaches a relative Delta-y error of
-# about ERROR_CONSTANT * (h / 1 ms)^p on the 'step' scenario. Measured on all six scenes (both
-# beams, eps_b 0.15/0.20/0.25) against Radau/DOP853 rtol 1e-12 references, with the charge
-# transients resolved (fixed_period in _csrc/stepping.c): etdrk4 (RC source) 0.035...0.14, dp5 (ideal source)
-# 0.0013...0.05; the largest, at eps_b = 0.15 where the snap-through is most sensitive, is used
-# so the tolerance holds on every shared scene.
+# Step size that meets a tolerance: a method of order p reaches a relative Delta-y error of about
+# ERROR_CONSTANT * (h / 1 ms)^p on the 'step' scenario. Measured on all six scenes (both beams,
+# eps_b 0.15/0.20/0.25) against Radau/DOP853 rtol 1e-12 references, with the charge transients
+# resolved (fixed_period in _csrc/stepping.c): etdrk4 (RC source) 0.035...0.14, dp5 (ideal source)
+# 0.0013...0.05; the largest, at eps_b = 0.15 where the snap-through is most sensitive, is used so
+# the tolerance holds on every shared scene.
 ERROR_CONSTANT = {'etdrk4': 0.15, 'dp5': 0.06}
 MAX_STEP = 1.0e-3   # s: keeps h * omega_beam < 0.6 (stable for every table here)
 
@@ -185,8 +186,8 @@ def min_substeps(dt: float, beam_rate: float = 0.0) -> int:
     return max(1, int(math.ceil(dt / h_max - 1e-9)))
 
 
-# Adaptive step counts (period_core in _csrc/stepping.c): fixed steps inside each control period, their
-# number chosen per period from the method's embedded error estimate, weighted per Ritz
+# Adaptive step counts (period_core in _csrc/stepping.c): fixed steps inside each control period,
+# their number chosen per period from the method's embedded error estimate, weighted per Ritz
 # coordinate by 1/l (deflection) and dt/l (velocity) with l the cell's beam length. The local
 # tolerance is LOCAL_TOLERANCE[embedded order] times the scene tolerance: the scene tolerance
 # bounds the 'step' error (max over the run of |Delta-y error| / stroke), which accumulates
@@ -220,6 +221,7 @@ class StepControl:
 
     @property
     def adaptive(self) -> bool:
+        """Whether the count adapts per period (a tolerance is set)."""
         return self.tolerance > 0.0
 
 

@@ -1,0 +1,153 @@
+"""
+The scene keys: for each section, each key's kind, range, unit and description, the defaults
+of the optional keys, and the check of one value against its entry. Scene files, overrides and
+the node's parameters are all checked here.
+"""
+
+from __future__ import annotations
+
+import math
+
+__all__ = ['SceneError', 'BEAMS', 'FIDELITIES', 'SOURCES', 'STRUCTURES', 'INITIAL_STATES',
+           'REST_BRANCHES', 'PHYSICS_SPEC', 'SCENE_SPEC', 'INTEGRATOR_SPEC', 'STRUCTURE_SPEC',
+           'STRUCTURE_DEFAULTS', 'SECTION_DEFAULTS', 'TOP_SPEC', 'SECTIONS', 'check_value']
+
+BEAMS = ('simply_supported', 'fixed')
+FIDELITIES = ('paper', 'consistent', 'exact')
+SOURCES = ('rc', 'ideal')
+STRUCTURES = ('single', 'plate', 'array')
+# 'rest': every cell at its stable buckled equilibrium at 0 V (on rest_branch), at rest, no
+# charge, no creep; 'released': the paper's start, q = q0 (nearly straight), released at t = 0
+INITIAL_STATES = ('rest', 'released')
+REST_BRANCHES = ('buckled+', 'buckled-')
+
+
+class SceneError(ValueError):
+    """A scene or parameter value that cannot be simulated; the message names the key."""
+
+
+# name: (kind, lower bound, lower bound inclusive, upper bound, unit, description)
+_POS = (0.0, False, math.inf)
+PHYSICS_SPEC = {
+    'l0': ('float', *_POS, 'm', 'active DET length (stretch direction)'),
+    'A0': ('float', *_POS, 'm^2', 'electrode area per layer'),
+    'd0': ('float', *_POS, 'm', 'layer thickness'),
+    'n': ('int', 1, True, 10000, '-', 'number of DET layers'),
+    'Y': ('float', *_POS, 'Pa', 'Neo-Hooke modulus'),
+    'eps_r': ('float', *_POS, '-', 'relative permittivity'),
+    'E_M': ('float', 0.0, True, math.inf, 'Pa', 'Maxwell (creep) spring modulus'),
+    'eta_M': ('float', *_POS, 'Pa s', 'Maxwell dashpot viscosity'),
+    'eta_v': ('float', 0.0, True, math.inf, 'Pa s', 'DE Kelvin-Voigt viscosity'),
+    'E_b': ('float', *_POS, 'Pa', "beam Young's modulus"),
+    'rho_b': ('float', *_POS, 'kg/m^3', 'beam density'),
+    'b_b': ('float', *_POS, 'm', 'beam width'),
+    't_b': ('float', *_POS, 'm', 'beam thickness'),
+    'eta_b': ('float', 0.0, True, math.inf, 'Pa s', 'beam Kelvin-Voigt viscosity'),
+    'm': ('float', 0.0, True, math.inf, 'kg', 'interface mass'),
+    'Rs': ('float', *_POS, 'Ohm', 'series resistance'),
+    'Rp': ('float', *_POS, 'Ohm', 'parallel (leakage) resistance'),
+    'v_max': ('float', *_POS, 'V', 'maximum voltage'),
+    'q0': ('float', -math.inf, False, math.inf, 'm', 'initial deflection'),
+}
+SCENE_SPEC = {
+    'beam': ('choice', BEAMS, 'mechanical interface'),
+    'eps_b': ('float', -1.0, False, 2.0, '-', 'pre-strain, eq 77 (l = l0 (1 + eps_b) > 0)'),
+    'fidelity': ('choice', FIDELITIES, 'model fidelity'),
+    'n_ritz': ('int', 1, True, 12, '-', 'Ritz terms per beam'),
+    'creep': ('bool', 'Maxwell creep state'),
+    'source': ('choice', SOURCES, 'electrical source model'),
+    'monitor_power': ('bool', 'integrate the power balance'),
+    'initial_state': ('choice', INITIAL_STATES, "initial state: 'rest' (stable buckled "
+                      "equilibrium at 0 V) or 'released' (q = q0, the paper's start)"),
+    'rest_branch': ('choice', REST_BRANCHES, "the rest state's side: 'buckled+' (q > 0) or "
+                    "'buckled-' (q < 0)"),
+}
+# Optional keys and their values when a scene (a file, a mapping, or a log's stored scene) omits
+# them; every other key of SECTIONS must be given.
+SECTION_DEFAULTS = {('scene', 'initial_state'): 'rest', ('scene', 'rest_branch'): 'buckled+'}
+INTEGRATOR_SPEC = {
+    'method': ('str', 'stepper name or auto'),
+    'tolerance': ('float', 0.0, False, 0.1, '-', 'target error of auto'),
+    'substeps': ('int', 0, True, 100000, '-',
+                 'internal steps per control period (0 = adaptive from the tolerance)'),
+}
+# Optional section: how cells (each one DET and its pair of buckled beams, Section 3) are put
+# together. Missing keys take STRUCTURE_DEFAULTS, so a scene without the section (a file or a
+# log's stored scene) loads as one cell.
+STRUCTURE_SPEC = {
+    'type': ('choice', STRUCTURES, "'single' cell, two cells under a rigid 'plate' (Fig. 7), "
+             "or an 'array' of independent copies"),
+    'dets': ('names', 'DET names = order of the voltage command (default det0, det1, ...; '
+             'left, right for a plate)'),
+    'copies': ('int', 1, True, 100000, '-', 'array: number of independent actuators'),
+    'plate_width': ('float', *_POS, 'm', 'plate: distance w between the two cells'),
+    'plate_mass': ('float', 0.0, True, math.inf, 'kg', 'plate: mass (replaces the cells\' m)'),
+    'plate_inertia': ('float', 0.0, True, math.inf, 'kg m^2',
+                      'plate: rotational inertia J about its centre'),
+    'spread': ('float', 0.0, True, 0.3, '-', 'array: relative standard deviation of the '
+               'spread_keys physics values per copy'),
+    'spread_keys': ('names', 'array: physics keys that get the spread'),
+    'seed': ('int', 0, True, 2 ** 31 - 1, '-', 'array: random seed of the spread'),
+}
+STRUCTURE_DEFAULTS = {'type': 'single', 'dets': [], 'copies': 1, 'plate_width': 0.06,
+                      'plate_mass': 4.0e-3, 'plate_inertia': 1.2e-6, 'spread': 0.0,
+                      'spread_keys': ['Y', 'E_b', 'Rs', 'm'], 'seed': 0}
+TOP_SPEC = {
+    'rate_hz': ('float', 0.0, False, 1.0e6, 'Hz', 'control rate'),
+}
+SECTIONS = {'scene': SCENE_SPEC, 'physics': PHYSICS_SPEC, 'integrator': INTEGRATOR_SPEC}
+
+
+def _fail(key, value, why):
+    raise SceneError(f'scene key {key!r}: {why} (got {value!r})')
+
+
+def check_value(key, value, spec):
+    """``value`` checked against its key's ``spec`` (an entry of the tables above), an int
+    read as a float for a float key; :class:`SceneError` naming the key otherwise."""
+    kind = spec[0]
+    if kind == 'bool':
+        if not isinstance(value, bool):
+            _fail(key, value, 'must be true or false')
+        return value
+    if kind == 'choice':
+        if value not in spec[1]:
+            _fail(key, value, 'must be one of ' + ', '.join(repr(c) for c in spec[1]))
+        return value
+    if kind == 'names':
+        if (not isinstance(value, (list, tuple))
+                or not all(isinstance(v, str) and v for v in value)):
+            _fail(key, value, 'must be a list of non-empty strings')
+        if len(set(value)) != len(value):
+            _fail(key, value, 'names must be unique')
+        return list(value)
+    if kind == 'str':
+        if not isinstance(value, str) or not value:
+            _fail(key, value, 'must be a non-empty string')
+        return value
+    lower, inclusive, upper, unit = spec[1], spec[2], spec[3], spec[4]
+    if kind == 'int':
+        if isinstance(value, bool) or not isinstance(value, int):
+            if isinstance(value, float) and value.is_integer():
+                value = int(value)
+            else:
+                _fail(key, value, 'must be an integer')
+    else:
+        if isinstance(value, str):
+            hint = ''
+            try:
+                float(value)
+                hint = '; YAML 1.1 reads an exponent without a sign as text: write e.g. 4.0e+9'
+            except ValueError:
+                pass
+            _fail(key, value, f'must be a number in {unit}, not a string{hint}')
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            _fail(key, value, f'must be a number in {unit}')
+        value = float(value)
+    if not math.isfinite(value):
+        _fail(key, value, 'must be finite')
+    low_ok = value >= lower if inclusive else value > lower
+    if not low_ok or value > upper:
+        bracket = '[' if inclusive else '('
+        _fail(key, value, f'out of range {bracket}{lower:g}, {upper:g}] {unit}')
+    return value

@@ -1,0 +1,56 @@
+"""
+The adaptive step counts, pinned: the internal steps taken per stretch of a fixed voltage
+profile on four scenes at tolerance 1e-6. They follow from the step-size control's constants
+(det_sim_ros.sim.integrators: LOCAL_TOLERANCE, MAX_SUBSTEPS_FACTOR, ERROR_CONSTANT,
+TRANSIENT_FINE, TRANSIENT_CHARGE, MAX_STEP, STABLE_STEP; CTL_SAFETY and the growth rules in
+core/_csrc/stepping.c), so a change to any of them shows here by name rather than only as a
+changed fingerprint in bench/behaviour_hashes.py.
+
+When a deliberate change moves these numbers: check that the accuracy tests still pass
+(test_integrators.py: the tolerance is met on the 'step' scenario), rerun the calibration the
+constant's comment names, then replace the numbers below with the new ones (the failure
+message prints them) and say in the commit message why the step counts moved.
+"""
+
+import pytest
+
+from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.simulator import Simulator
+
+TOLERANCE = 1e-6
+# (volts, periods): settled at 0 V, a 3 kV step (snap-through), down to 1.5 kV
+PROFILE = ((0.0, 50), (3000.0, 130), (1500.0, 120))
+SCENES = {
+    'default': ('default', {}),
+    'plate': ('plate', {}),
+    'exact_n3': ('default', {'scene.fidelity': 'exact', 'scene.n_ritz': 3}),
+    'ideal_dp5': ('default', {'scene.source': 'ideal', 'integrator.method': 'dp5'}),
+}
+# internal steps taken in each stretch of PROFILE
+STEPS = {
+    'default': [85, 2655, 2561],
+    'plate': [85, 2787, 2952],
+    'exact_n3': [223, 3014, 3174],
+    'ideal_dp5': [66, 693, 720],
+}
+
+
+def step_counts(name):
+    source, overrides = SCENES[name]
+    sim = Simulator(load_scene(source, {**overrides, 'integrator.tolerance': TOLERANCE}))
+    assert sim.adaptive
+    counts = []
+    for volts, periods in PROFILE:
+        # the plate's second DET at a third of the first: the two cells differ
+        sim.set_input([volts, volts / 3.0][:sim.model.n_inputs])
+        before = sim.steps_taken
+        for _ in range(periods):
+            sim.step()
+        counts.append(sim.steps_taken - before)
+    assert not sim.fault
+    return counts
+
+
+@pytest.mark.parametrize('name', sorted(SCENES))
+def test_adaptive_step_counts_are_pinned(name):
+    assert step_counts(name) == STEPS[name]
