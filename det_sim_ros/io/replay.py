@@ -26,6 +26,7 @@ import sys
 import time
 from typing import Callable, Iterable, Mapping, Sequence
 
+from .contract import basename as _basename
 from .contract import (COMMAND_TOPIC, COMMAND_TOPICS, CdrError, CommandDecoder,
                        decode_joint_state, encode_float64_multi_array, encode_joint_state,
                        JOINT_COMMAND_TOPIC, OUTPUT_FIELDS, OutputContract, rest_shortening,
@@ -37,10 +38,6 @@ __all__ = ['OUTPUT_FIELDS', 'COMMAND_TOPICS', 'ResimResult', 'resimulate', 'play
 
 # The topic contract (topics, channels, y0, structure outputs, commands) is det_sim_ros.io.contract;
 # a log holds the per-DET y0 as metadata 'y0' (a float for one DET, a list for several).
-
-
-def _basename(topic: str) -> str:
-    return topic.rstrip('/').rsplit('/', 1)[-1]
 
 
 def _logged_y0(text: str | None, n: int) -> list[float] | None:
@@ -360,7 +357,7 @@ def play(log, node=None, rate: float = 1.0, start_offset: float = 0.0, loop: boo
                 publisher = publishers.get(message.topic)
                 if publisher is None:
                     try:
-                        from .mcap_log import _message_class
+                        from .cdr import message_class as _message_class
                         cls = _message_class(message.type_name)
                     except Exception:  # noqa: BLE001 - a type this install does not have
                         publishers[message.topic] = False

@@ -82,7 +82,7 @@ class MarkerFrames:
 
     def __init__(self, model, frame_prefix: str = '', frame_id: str = '', n_points: int = 41):
         from visualization_msgs.msg import Marker, MarkerArray
-        from ..io.mcap_log import serialize
+        from ..io.cdr import serialize
         self.geometry = geo = ActuatorGeometry(model, n_points)
         self.v_max = model.scene.physics.v_max
         names = geo.names
@@ -91,7 +91,6 @@ class MarkerFrames:
         offsets = geo.offsets if common else np.zeros_like(geo.offsets)
         self._offsets = offsets
         tags = iter(range(10 ** 6))
-        slots = []   # (kind, marker index, field tag or tags)
         markers = []
 
         def marker(ns, mid, kind, frame, color, scale):
