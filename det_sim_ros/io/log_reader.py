@@ -4,24 +4,28 @@ and for messages as blocks of records (:meth:`LogReader.blocks`, the column read
 ``det_sim plot`` builds on it), both from finished and unfinished files; :func:`recover` and
 :func:`recover_unfinished` rewrite unfinished files as finished, indexed ones.
 
-mcap's ``StreamReader`` reads the file's records (magic, header, metadata, attachments, CRCs,
-footer) with chunks left whole; a chunk is decompressed, checked against its CRC and walked
-here once (the record lengths only), so its messages are sliced, not parsed record by record.
+The file (memory-mapped) is walked here once, record by record (their lengths only); mcap's
+record classes parse the few records the reader needs (header, schemas, channels, metadata,
+attachments, chunks, footer), indexes and statistics are skipped. A chunk is decompressed,
+checked against its CRC and walked the same way, so its messages are sliced, not parsed.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import io
 import logging
+import mmap
 import os
+import struct
 import zlib
 from typing import Iterable, Iterator
 
 from .cdr import deserialize
-from .mcap_format import (LIBRARY, MESSAGE_FIELDS, MESSAGE_HEAD, MESSAGE_HEAD_LENGTH,
-                          METADATA_NAME, OP_CHANNEL, OP_MESSAGE, OP_SCHEMA, RECORD_HEAD,
-                          SCENE_ATTACHMENT)
+from .mcap_format import (LIBRARY, MAGIC, MESSAGE_FIELDS, MESSAGE_HEAD, METADATA_NAME,
+                          OP_ATTACHMENT, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_HEADER,
+                          OP_MESSAGE, OP_METADATA, OP_SCHEMA, RECORD_HEAD, SCENE_ATTACHMENT)
 from .schemas import qos_profiles_yaml
 
 __all__ = ['LogReader', 'LogMessage', 'RecordBlock', 'log_files', 'recover',
@@ -73,6 +77,50 @@ def log_files(paths) -> list[str]:
 
 def _fully_qualified(topic: str) -> str:
     return topic if topic.startswith('/') else '/' + topic
+
+
+_RECORDS = {OP_HEADER: 'Header', OP_FOOTER: 'Footer', OP_SCHEMA: 'Schema',
+            OP_CHANNEL: 'Channel', OP_METADATA: 'Metadata', OP_ATTACHMENT: 'Attachment'}
+
+
+def _stream(body: bytes):
+    from mcap.data_stream import ReadDataStream
+    return ReadDataStream(io.BytesIO(body))
+
+
+@contextlib.contextmanager
+def _mapped(stream):
+    """The file's bytes (memory-mapped; an empty file is b'')."""
+    if os.fstat(stream.fileno()).st_size == 0:
+        yield b''
+        return
+    with mmap.mmap(stream.fileno(), 0, access=mmap.ACCESS_READ) as buf:
+        yield buf
+
+
+def _top_records(buf) -> Iterator[tuple[int, int, int]]:
+    """(opcode, start, end of the bytes after its length) of each record up to the Footer;
+    the data section's CRC checked at DataEnd.
+
+    :raises ValueError: no magic, a torn record, a CRC mismatch."""
+    if buf[:len(MAGIC)] != MAGIC:
+        raise ValueError('not an MCAP file (no magic)')
+    pos, n, head = len(MAGIC), len(buf), RECORD_HEAD.size
+    while True:
+        if pos + head > n:
+            raise EOFError(f'the file ends inside a record (at byte {pos} of {n})')
+        op, length = RECORD_HEAD.unpack_from(buf, pos)
+        start, end = pos + head, pos + head + length
+        if end > n:
+            raise EOFError(f'the file ends inside a record (at byte {pos} of {n})')
+        if op == OP_DATA_END:
+            (crc,) = struct.unpack_from('<I', buf, start)
+            if crc and zlib.crc32(buf[:pos]) != crc:
+                raise ValueError('data section CRC mismatch (a damaged file)')
+        yield op, start, end
+        if op == OP_FOOTER:
+            return
+        pos = end
 
 
 def _chunk_data(chunk) -> bytes:
@@ -130,7 +178,6 @@ class LogReader:
 
     def _walk_chunk(self, raw: bytes) -> RecordBlock:
         """The chunk's Message records as a block; its schemas and channels read."""
-        from mcap.data_stream import ReadDataStream
         from mcap.records import Channel, Schema
         positions, p, n = [], 0, len(raw)
         unpack, head = RECORD_HEAD.unpack_from, RECORD_HEAD.size
@@ -144,67 +191,60 @@ class LogReader:
             if op == OP_MESSAGE:
                 positions.append(p)
             elif op in (OP_SCHEMA, OP_CHANNEL):
-                stream = ReadDataStream(io.BytesIO(raw[p + head:end]))
+                body = _stream(raw[p + head:end])
                 if op == OP_SCHEMA:
-                    self._schema(Schema.read(stream))
+                    self._schema(Schema.read(body))
                 else:
-                    self._channel(Channel.read(stream))
+                    self._channel(Channel.read(body))
             p = end
         return RecordBlock(raw, positions)
 
-    def _record(self, path: str, record) -> RecordBlock | bool | None:
-        """Take one top-level record: a block of messages, True for the Footer, else None."""
-        from mcap.records import (Attachment, Channel, Chunk, Footer, Header, Message,
-                                  Metadata, Schema)
-        if isinstance(record, Chunk):
-            return self._walk_chunk(_chunk_data(record))
-        if isinstance(record, Message):   # a message outside chunks: a block of one
-            raw = MESSAGE_HEAD.pack(OP_MESSAGE, MESSAGE_HEAD_LENGTH + len(record.data),
-                                    record.channel_id, record.sequence, record.log_time,
-                                    record.publish_time) + record.data
-            return RecordBlock(raw, [0])
-        if isinstance(record, Schema):
+    def _record(self, op: int, body: bytes) -> RecordBlock | bool | None:
+        """Take one top-level record (opcode, bytes after its length): a block of messages,
+        True for the Footer (False: a Footer without summary), else None."""
+        from mcap import records
+        if op == OP_CHUNK:
+            return self._walk_chunk(_chunk_data(records.Chunk.read(_stream(body))))
+        if op == OP_MESSAGE:   # a message outside chunks: a block of one
+            return RecordBlock(RECORD_HEAD.pack(op, len(body)) + body, [0])
+        kind = _RECORDS.get(op)
+        if kind is None:       # indexes, statistics, summary: not needed to read the log
+            return None
+        record = getattr(records, kind).read(_stream(body))
+        if op == OP_SCHEMA:
             self._schema(record)
-        elif isinstance(record, Channel):
+        elif op == OP_CHANNEL:
             self._channel(record)
-        elif isinstance(record, Metadata):
+        elif op == OP_METADATA:
             self.metadata.setdefault(record.name, dict(record.metadata))
-        elif isinstance(record, Attachment):
+        elif op == OP_ATTACHMENT:
             self.attachments.setdefault(record.name, record.data)
-        elif isinstance(record, Header):
+        elif op == OP_HEADER:
             self.profile = record.profile
-        elif isinstance(record, Footer):
-            return True
+        else:   # the footer; no summary: a provisional end (the writer was killed after a flush)
+            return record.summary_start != 0
         return None
 
     def _file_blocks(self, path: str, stop_at_message: bool = False) -> Iterator[RecordBlock]:
         """The message blocks of one file; the other records read into the attributes."""
-        from mcap.stream_reader import StreamReader
         self._schemas, self.channels = {}, {}
         finished = False
-        with open(path, 'rb') as stream:
-            records = StreamReader(stream, emit_chunks=True, validate_crcs=True).records
-            while True:
-                try:
-                    record = next(records)
-                    taken = self._record(path, record)
-                except StopIteration:
-                    finished = True
-                    break
-                except Exception as exc:  # noqa: BLE001 - the end of the readable data
-                    self.errors.append(f'{path}: {type(exc).__name__}: {exc}')
-                    break
-                if isinstance(taken, RecordBlock):
-                    if stop_at_message and taken.positions:
-                        return
-                    yield taken
-                elif taken:
-                    # no summary: a provisional end (the writer was killed after a flush)
-                    finished = record.summary_start != 0
-                    if not finished and not stop_at_message:
-                        self.errors.append(f'{path}: unfinished (no summary: the writer '
-                                           'stopped without closing the file)')
-                    break
+        try:
+            with open(path, 'rb') as stream, _mapped(stream) as buf:
+                for op, start, end in _top_records(buf):
+                    taken = self._record(op, buf[start:end])
+                    if isinstance(taken, RecordBlock):
+                        if stop_at_message and taken.positions:
+                            return
+                        yield taken
+                    elif taken is not None:
+                        finished = taken
+                        if not finished and not stop_at_message:
+                            self.errors.append(f'{path}: unfinished (no summary: the writer '
+                                               'stopped without closing the file)')
+                        break
+        except Exception as exc:  # noqa: BLE001 - the end of the readable data
+            self.errors.append(f'{path}: {type(exc).__name__}: {exc}')
         if not finished and not stop_at_message:
             self.complete = False
 

@@ -11,7 +11,8 @@ import os
 import struct
 
 __all__ = ['MAGIC', 'MESSAGE_HEAD', 'MESSAGE_FIELDS', 'OP_HEADER', 'OP_FOOTER', 'OP_SCHEMA',
-           'OP_CHANNEL', 'OP_MESSAGE', 'OP_CHUNK', 'OP_MESSAGE_INDEX', 'PROVISIONAL_END',
+           'OP_CHANNEL', 'OP_MESSAGE', 'OP_CHUNK', 'OP_MESSAGE_INDEX', 'OP_ATTACHMENT',
+           'OP_METADATA', 'OP_DATA_END', 'RECORD_HEAD', 'PROVISIONAL_END',
            'TailStream', 'is_torn', 'LIBRARY', 'METADATA_NAME', 'END_METADATA_NAME',
            'SCENE_ATTACHMENT']
 
@@ -23,6 +24,7 @@ SCENE_ATTACHMENT = 'scene.yaml'
 MAGIC = b'\x89MCAP0\r\n'
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_MESSAGE_INDEX = \
     0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07
+OP_ATTACHMENT, OP_METADATA, OP_DATA_END = 0x09, 0x0C, 0x0F
 RECORD_HEAD = struct.Struct('<BQ')   # every record: opcode, length of the rest
 
 # A Message record: opcode, length (22 + payload), channel id, sequence, log time, publish time,
@@ -35,8 +37,8 @@ MESSAGE_HEAD_LENGTH = MESSAGE_HEAD.size - RECORD_HEAD.size   # the length field'
 # DataEnd (opcode 0x0f, crc 0 = not computed) + Footer (0x02: summary_start 0 = no summary,
 # summary_offset_start 0, crc 0) + magic: the smallest valid end of an MCAP file
 _FOOTER_HEAD = bytes((OP_FOOTER,)) + (20).to_bytes(8, 'little')
-PROVISIONAL_END = (b'\x0f' + (4).to_bytes(8, 'little') + bytes(4) + _FOOTER_HEAD + bytes(20)
-                   + MAGIC)
+PROVISIONAL_END = (bytes((OP_DATA_END,)) + (4).to_bytes(8, 'little') + bytes(4) + _FOOTER_HEAD
+                   + bytes(20) + MAGIC)
 _FOOTER_SIZE = len(_FOOTER_HEAD) + 20 + len(MAGIC)
 
 
