@@ -34,8 +34,8 @@ class Recorder:
     """
     Record ROS messages of one run to MCAP (see :mod:`det_sim_ros.io.mcap_log`).
 
-    Usable without a ROS graph and without rclpy (messages are serialized by
-    :mod:`det_sim_ros.io.cdr`, or given as CDR bytes).
+    No ROS graph or rclpy needed (messages are given as CDR bytes or serialized by
+    :mod:`det_sim_ros.io.cdr`).
 
     :param path: a ``.mcap`` file (or an existing non-directory such as a device), or a
         directory in which ``<prefix>_<date>-<time>_<pid>.mcap`` is created.
@@ -50,15 +50,14 @@ class Recorder:
     :param max_total_mb: keep this recorder's files in the log directory under this many MiB
         in all (oldest deleted first; 0: no limit).
     :param max_files: keep at most this many of them (0: no limit).
-    :param chunk_size: chunk size limit in bytes (a chunk is also ended by every flush, so at
-        the default flush periods a chunk holds at most 50 ms of sim time; mcap's default size:
-        with 64 KiB, a 100-DET array's samples (9 KB) ended a chunk every 7 and its log cost a
-        third more).
+    :param chunk_size: chunk size limit in bytes (a chunk also ends at every flush: at most
+        50 ms of sim time at the default periods; with mcap's 64 KiB a 100-DET array's log
+        costs a third more).
     :param compression: 'zstd', 'lz4' or 'none'.
     :param split_mb: start a new file when the current one exceeds this many MiB (0: never).
     :param split_s: start a new file every this many seconds of log time (0: never).
-    :param metadata: extra string key/values for the ``det_sim_ros`` metadata record (e.g. the
-        stepper ``method`` and ``substeps``, the ``output_map``).
+    :param metadata: extra string key/values for the ``det_sim_ros`` metadata record (the
+        stepper ``method`` and ``substeps``, the ``output_map``, ...).
     :param on_fault: called once with the fault text when recording stops on an error.
     :param clock: wall clock for the flush period (``time.monotonic``).
     :param namespace: the node namespace that relative topic names are resolved in.
@@ -156,6 +155,11 @@ class Recorder:
         self._packing = packer is not None
         if self._file is not None:
             self._file.packer = packer
+
+    @property
+    def _stream(self):
+        """The current file's stream (None between files; tests close it to play a crash)."""
+        return self._file.stream if self._file is not None else None
 
     # -- files -------------------------------------------------------------------------------
     def _open(self) -> None:
@@ -262,8 +266,7 @@ class Recorder:
             stopped on a fault.
         """
         if self._thread is not None:
-            # (the writer thread owns the file: between two files it is None for a moment,
-            # so queueing depends only on whether recording has stopped)
+            # (the writer thread owns the file, None for a moment between two files)
             if self.fault or not self._thread.running:
                 self.dropped += 1
                 return False
@@ -367,13 +370,10 @@ class Recorder:
             self.record_time_s += self._clock() - start
 
     def _write_sample_run(self, items) -> None:
-        """
-        Consecutive samples from the writer's queue: the bytes _write_sample writes one by one,
-        in runs packed at once. A run stops before a sample that would end the chunk, split
-        the file or come after a due flush, so inside it only the records change and the
-        lookups, checks and counters are done once (10 us per sample one by one; 3.5 us in
-        runs packed in C, the run's end found by bisection).
-        """
+        """Consecutive samples from the writer's queue: the bytes _write_sample writes one by
+        one, in runs packed at once. A run stops before a sample that would end the chunk, split
+        the file or come after a due flush, so the lookups, checks and counters are done once
+        per run (10 us per sample one by one; 3.5 us in runs packed in C)."""
         i, n = 0, len(items)
         while i < n:
             start = self._clock()
@@ -418,8 +418,8 @@ class Recorder:
         (names, channel_ids), sizes, window = found
         given = [int(item[0]) for item in window]
         times = list(itertools.accumulate(given, max, initial=self._last_t))[1:]  # clamped
-        # (_write_sample splits the file before the first one past the span; a flush is due
-        # after the first one past the sim-time period; the wall-time part is not, above)
+        # (the file splits before the first one past its span; a flush is due after the first
+        # one past the sim-time period)
         end = self._flush_policy.run_end(times, self._rotation.run_end(times, len(times)))
         if not end:
             return 0
