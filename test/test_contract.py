@@ -9,9 +9,10 @@ import sys
 import numpy as np
 import pytest
 
-from det_sim_ros.io.contract import (CdrError, Command, CommandDecoder, decode_float64_multi_array,
-                                  decode_joint_state, encode_clock, encode_float64_multi_array,
-                                  encode_joint_state, JOINT_STATE, OUTPUT_FIELDS, OutputContract)
+from det_sim_ros.io.contract import (CdrError, Command, CommandDecoder,
+                                     decode_float64_multi_array, decode_joint_state, encode_clock,
+                                     encode_float64_multi_array, encode_joint_state, JOINT_STATE,
+                                     OUTPUT_FIELDS, OutputContract)
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import Simulator
 from conftest import child_env
@@ -381,3 +382,12 @@ def test_commands_and_clock_read_by_rclpy():
     for t_ns in (0, 1, 5_123_456_789):
         clock = deserialize_message(encode_clock(t_ns), Clock).clock
         assert clock.sec * 10**9 + clock.nanosec == t_ns
+
+
+def test_clock_bytes_are_the_writers_layout():
+    """encode_clock's one pack is the CDR Writer's bytes of a Clock (a header and a stamp)."""
+    from det_sim_ros.io.cdr import Writer
+    for t_ns in (0, 7, 3_000_000_007, 2**31 * 10**9 - 1):
+        w = Writer()
+        w.stamp(t_ns)
+        assert encode_clock(t_ns) == w.to_bytes()

@@ -1,4 +1,5 @@
-"""MCAP run logs: rosbag2 conventions checked by three independent readers, faults, crash safety."""
+"""MCAP run logs: rosbag2 conventions checked by three independent readers, faults, crash
+safety."""
 
 import os
 import pathlib
@@ -14,7 +15,7 @@ import yaml
 
 from det_sim_ros import __version__
 from det_sim_ros.io.mcap_log import (LogReader, message_definition, qos_profiles_yaml, Recorder,
-                                  recover)
+                                     recover)
 from det_sim_ros.io.replay import OUTPUT_FIELDS, simulate_to_log
 from det_sim_ros.scenes.scene import load_scene, scene_to_dict
 from det_sim_ros.sim.simulator import Simulator
@@ -35,7 +36,7 @@ def logged_run(tmp_path_factory):
     sim = Simulator(scene)
     path = str(tmp_path_factory.mktemp('log') / 'run.mcap')
     recorder = Recorder(path, scene, metadata={'method': sim.method.name,
-                                                'substeps': sim.substeps_setting})
+                                               'substeps': sim.substeps_setting})
     simulate_to_log(recorder, sim, _command, N_STEPS)
     recorder.close()
     assert recorder.fault == ''
@@ -57,7 +58,8 @@ def test_message_definition_rosbag2_style():
     assert f'\n{delimiter}\nMSG: builtin_interfaces/Time\n' in text
     assert text.count('MSG: ') == 2
     multi = message_definition('std_msgs/msg/Float64MultiArray')
-    assert 'MSG: std_msgs/MultiArrayLayout' in multi and 'MSG: std_msgs/MultiArrayDimension' in multi
+    assert 'MSG: std_msgs/MultiArrayLayout' in multi
+    assert 'MSG: std_msgs/MultiArrayDimension' in multi
 
     # Both third-party parsers accept the definitions.
     from mcap_ros2._dynamic import generate_dynamic
@@ -366,7 +368,7 @@ def test_log_directory_is_bounded(tmp_path):
     (folder / 'notes.mcap.txt').write_text('not ours')
     made = []
     for run in range(5):
-        rec = Recorder(folder, None, max_files=3, prefix=f'det_sim')
+        rec = Recorder(folder, None, max_files=3, prefix='det_sim')
         for k in range(50):
             rec.record('x', Float64MultiArray(data=[float(k)] * 100), k * 1_000_000)
         rec.new_file()                    # as a reset does
@@ -383,6 +385,8 @@ def test_log_directory_is_bounded(tmp_path):
     assert big.deleted and [p for p in os.listdir(folder) if p.endswith('.mcap')] == \
         [os.path.basename(big.path)]
     big.close()
+
+
 def _write_samples(path, fast, background=False, stress=False):
     """500 samples of four topics and a command every 7th. ``stress``: what ends a run of the
     batched writer, often: log times that step back (clamped), a longer payload every 37th
