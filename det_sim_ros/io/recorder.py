@@ -6,7 +6,8 @@ counters and its fault, and hands the rest to collaborators: :class:`~.log_rotat
 (file names, splits, the bounded directory), :class:`~.log_file.LogFile` (one MCAP file and its
 channels), :class:`~.record_packing.RecordPacker` (the records, packed in C for runs of
 samples), :class:`~.flush_policy.FlushPolicy` (when to flush) and, with ``background=True``,
-:class:`~.writer_thread.WriterThread` (the writer thread and its bounded queue).
+:class:`~.writer_thread.WriterThread` (the writer thread and its bounded queue), reached
+through the recording mode (:mod:`~.write_modes`).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from .flush_policy import FlushPolicy
 from .log_file import file_info, LogFile, package_version, scene_text
 from .log_rotation import LogRotation
 from .schemas import type_name_of
-from .writer_thread import NEW_FILE, WriterThread
+from .write_modes import WriteBehind, WriteNow
 
 __all__ = ['Recorder']
 
@@ -109,11 +110,8 @@ class Recorder:
             self._open()
         except Exception as exc:  # noqa: BLE001 - a logging fault must not stop the simulation
             self._set_fault(exc)
-        self._thread = None
-        if background and self._file is not None:
-            self._thread = WriterThread(self._write, self._write_sample_run, self._new_file_now,
-                                        self.maybe_flush, self._set_fault,
-                                        period_s=drain_period_s, max_queue=max_queue)
+        self._mode = (WriteBehind(self, drain_period_s, max_queue)
+                      if background and self._file is not None else WriteNow(self))
         _open_recorders.add(self)
 
     def _resolve(self, topic: str) -> str:
@@ -138,12 +136,12 @@ class Recorder:
     @property
     def caught_up(self) -> int:
         """Background mode: times the recording thread wrote the writer's queue itself."""
-        return self._thread.caught_up if self._thread is not None else 0
+        return self._mode.caught_up
 
     @property
     def queued(self) -> int:
         """Background mode: items waiting for the writer thread."""
-        return len(self._thread) if self._thread is not None else 0
+        return self._mode.queued
 
     @property
     def _fast(self):
@@ -189,10 +187,7 @@ class Recorder:
 
     def new_file(self) -> None:
         """Finish the current file and continue in a new one (e.g. when sim time restarts)."""
-        if self._thread is not None and self._file is not None:
-            self._thread.put(NEW_FILE)   # in order with what is queued before it
-            return
-        self._new_file_now()
+        self._mode.new_file()
 
     def _new_file_now(self) -> None:
         if self._file is None:
@@ -252,6 +247,10 @@ class Recorder:
             sequence[name] = first + 1
         return firsts
 
+    def type_of(self, topic: str) -> str | None:
+        """The type name recorded on ``topic`` (None before its first message)."""
+        return self._types.get(topic)
+
     def _channel(self, topic: str, msg, type_name: str | None) -> int:
         type_name = type_name or self._types.get(topic) or type_name_of(msg)
         self._types[topic] = type_name
@@ -265,22 +264,7 @@ class Recorder:
         :returns: True if written (queued, in background mode); False when recording has
             stopped on a fault.
         """
-        if self._thread is not None:
-            # (the writer thread owns the file, None for a moment between two files)
-            if self.fault or not self._thread.running:
-                self.dropped += 1
-                return False
-            if isinstance(msg, (bytearray, memoryview)):
-                msg = bytes(msg)
-            elif not isinstance(msg, bytes):   # serialized here: the queue holds bytes only
-                type_name = type_name or self._types.get(topic) or type_name_of(msg)
-                msg = serialize(msg)
-            self._thread.put((topic, msg, log_time_ns, type_name))
-            return True
-        if self._file is None:
-            self.dropped += 1
-            return False
-        return self._write(topic, msg, log_time_ns, type_name)
+        return self._mode.message(topic, msg, log_time_ns, type_name)
 
     def record_sample(self, log_time_ns: int, topics: Sequence[str], data: Sequence[bytes],
                       types: Mapping[str, str]) -> bool:
@@ -288,16 +272,7 @@ class Recorder:
         Write one CDR message per topic, all at ``log_time_ns`` (one sample of the node's
         outputs); ``types`` maps each topic to its type name.
         """
-        if self._thread is not None:
-            if self.fault or not self._thread.running:   # stopped (see record)
-                self.dropped += len(data)
-                return False
-            self._thread.put((log_time_ns, topics, data, types))
-            return True
-        if self._file is None:
-            self.dropped += len(data)
-            return False
-        return self._write_sample(log_time_ns, topics, data, types)
+        return self._mode.sample(log_time_ns, topics, data, types)
 
     def _write(self, topic: str, msg, log_time_ns: int, type_name: str | None,
                flush: bool = True) -> bool:
@@ -475,8 +450,7 @@ class Recorder:
     def close(self) -> None:
         """Write what is queued, finish and index the file (idempotent; never raises)."""
         _open_recorders.discard(self)
-        if self._thread is not None:
-            self._thread.stop()
+        self._mode.stop()
         if self._file is None:
             return
         try:
