@@ -241,12 +241,16 @@ def _field_writer(slot_type) -> Callable:
     d = _rosidl()
     if isinstance(slot_type, d.BasicType):
         packer = struct.Struct('<' + _type_code(slot_type))
-        to_int = packer.format.endswith('B')
+        pack, size, to_int = packer.pack, packer.size, packer.format.endswith('B')
 
-        def write_basic(w, value):
+        def write_basic(w, value):   # (Writer.primitive, inlined: the most frequent field)
             if to_int and isinstance(value, (bytes, str)):
                 value = ord(value)
-            w.primitive(packer, value)
+            buf = w.buf
+            pad = -(len(buf) - 4) % size
+            if pad:
+                buf += _ZEROS[:pad]
+            buf += pack(value)
         return write_basic
     if isinstance(slot_type, (d.UnboundedString, d.BoundedString)):
         return Writer.string
