@@ -103,8 +103,8 @@ try:
     from mcap.records import MessageIndex as _McapMessageIndex
 
     class MessageIndex(_McapMessageIndex):
-        """mcap's MessageIndex, written with one pack instead of two calls per entry (the
-        index of a 50-sample chunk was a quarter of the recorder's cost)."""
+        """mcap's MessageIndex, written with one pack instead of two calls per entry (with
+        those calls, the index of a 50-sample chunk costs a quarter of the recording)."""
 
         def write(self, stream):
             """The record, as mcap writes it."""
