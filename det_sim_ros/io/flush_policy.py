@@ -24,7 +24,7 @@ class FlushPolicy:
         self.period_s = float(period_s)
         self.sim_ns = int(float(sim_s) * 1e9)
         self.clock = clock
-        self._last_wall = clock()
+        self._last_wall = 0.0   # (restart() when a file is opened)
         self._last_t = 0
 
     def restart(self, t: int) -> None:
