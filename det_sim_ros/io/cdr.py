@@ -60,12 +60,12 @@ class Writer:
         self.buf += struct.pack('<i', value)
 
     def primitive(self, packer: struct.Struct, value) -> None:
-        """One primitive value packed by ``packer`` (aligned to its size)."""
+        """Write one value packed by ``packer`` (aligned to its size)."""
         self.align(packer.size)
         self.buf += packer.pack(value)
 
     def string(self, text: str) -> None:
-        """A string (UTF-8, its length counting the NUL)."""
+        """A UTF-8 string, its length counting the NUL."""
         data = text.encode()
         self.u32(len(data) + 1)
         self.buf += data

@@ -27,9 +27,9 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from .cdr import CdrError, HEADER_LE, NS, Reader, Writer
 from ..core.kernel import SampleCodec
 from ..sim.simulator import inputs_within
-from .cdr import CdrError, HEADER_LE, NS, Reader, Writer
 
 __all__ = [
     'OUTPUT_FIELDS', 'OUTPUT_UNITS', 'RELATIVE_TO_Y0', 'STRUCTURE_TOPIC', 'STRUCTURE_NAMES',

@@ -4,7 +4,7 @@ and for messages as blocks of records (:meth:`LogReader.blocks`, the column read
 ``det_sim plot`` builds on it), both from finished and unfinished files; :func:`recover` and
 :func:`recover_unfinished` rewrite unfinished files as finished, indexed ones.
 
-The file (memory-mapped) is walked here once, record by record (their lengths only); mcap's
+The file is read here once, record by record (their lengths only); mcap's
 record classes parse the few records the reader needs (header, schemas, channels, metadata,
 attachments, chunks, footer), indexes and statistics are skipped. A chunk is decompressed,
 checked against its CRC and walked the same way, so its messages are sliced, not parsed.
@@ -12,15 +12,13 @@ checked against its CRC and walked the same way, so its messages are sliced, not
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import io
 import logging
-import mmap
 import os
 import struct
-import zlib
 from typing import Iterable, Iterator
+import zlib
 
 from .cdr import deserialize
 from .mcap_format import (LIBRARY, MAGIC, MESSAGE_FIELDS, MESSAGE_HEAD, METADATA_NAME,
@@ -88,39 +86,29 @@ def _stream(body: bytes):
     return ReadDataStream(io.BytesIO(body))
 
 
-@contextlib.contextmanager
-def _mapped(stream):
-    """The file's bytes (memory-mapped; an empty file is b'')."""
-    if os.fstat(stream.fileno()).st_size == 0:
-        yield b''
-        return
-    with mmap.mmap(stream.fileno(), 0, access=mmap.ACCESS_READ) as buf:
-        yield buf
-
-
-def _top_records(buf) -> Iterator[tuple[int, int, int]]:
-    """(opcode, start, end of the bytes after its length) of each record up to the Footer;
+def _top_records(stream) -> Iterator[tuple[int, bytes]]:
+    """(opcode, the bytes after its length) of each record up to the Footer, read in turn;
     the data section's CRC checked at DataEnd.
 
-    :raises ValueError: no magic, a torn record, a CRC mismatch."""
-    if buf[:len(MAGIC)] != MAGIC:
+    :raises ValueError: no magic, a torn record (EOFError), a CRC mismatch."""
+    if stream.read(len(MAGIC)) != MAGIC:
         raise ValueError('not an MCAP file (no magic)')
-    pos, n, head = len(MAGIC), len(buf), RECORD_HEAD.size
+    crc, at = zlib.crc32(MAGIC), len(MAGIC)
     while True:
-        if pos + head > n:
-            raise EOFError(f'the file ends inside a record (at byte {pos} of {n})')
-        op, length = RECORD_HEAD.unpack_from(buf, pos)
-        start, end = pos + head, pos + head + length
-        if end > n:
-            raise EOFError(f'the file ends inside a record (at byte {pos} of {n})')
+        head = stream.read(RECORD_HEAD.size)
+        op, length = RECORD_HEAD.unpack(head) if len(head) == RECORD_HEAD.size else (0, -1)
+        body = stream.read(length) if length >= 0 else b''
+        if length < 0 or len(body) < length:
+            raise EOFError(f'the file ends inside a record (at byte {at})')
         if op == OP_DATA_END:
-            (crc,) = struct.unpack_from('<I', buf, start)
-            if crc and zlib.crc32(buf[:pos]) != crc:
+            (expected,) = struct.unpack_from('<I', body)
+            if expected and crc != expected:
                 raise ValueError('data section CRC mismatch (a damaged file)')
-        yield op, start, end
+        crc = zlib.crc32(body, zlib.crc32(head, crc))
+        at += len(head) + length
+        yield op, body
         if op == OP_FOOTER:
             return
-        pos = end
 
 
 def _chunk_data(chunk) -> bytes:
@@ -230,9 +218,9 @@ class LogReader:
         self._schemas, self.channels = {}, {}
         finished = False
         try:
-            with open(path, 'rb') as stream, _mapped(stream) as buf:
-                for op, start, end in _top_records(buf):
-                    taken = self._record(op, buf[start:end])
+            with open(path, 'rb') as stream:
+                for op, body in _top_records(stream):
+                    taken = self._record(op, body)
                     if isinstance(taken, RecordBlock):
                         if stop_at_message and taken.positions:
                             return

@@ -71,7 +71,7 @@ class WriterInternals:
         self.chunk_size = getattr(writer, '_Writer__chunk_size')
 
     def buffer(self):
-        """The chunk in progress's record buffer (a BytesIO)."""
+        """The BytesIO that holds the records of the chunk in progress."""
         return self.chunk.record_writer._buffer
 
 

@@ -50,7 +50,7 @@ its collaborators :mod:`~det_sim_ros.io.log_rotation`, :mod:`~det_sim_ros.io.log
 from __future__ import annotations
 
 from .cdr import deserialize, message_class, serialize
-from .log_reader import LogMessage, LogReader, log_files, recover, recover_unfinished
+from .log_reader import log_files, LogMessage, LogReader, recover, recover_unfinished
 from .mcap_format import (END_METADATA_NAME, is_torn, LIBRARY, METADATA_NAME,
                           SCENE_ATTACHMENT)
 from .recorder import Recorder

@@ -10,9 +10,9 @@ writer's private state is reached through :mod:`det_sim_ros.io.mcap_internals` o
 
 from __future__ import annotations
 
-from ..core.kernel import pack_records
 from . import mcap_internals
 from .mcap_format import MESSAGE_HEAD, MESSAGE_HEAD_LENGTH, OP_MESSAGE
+from ..core.kernel import pack_records
 
 __all__ = ['RecordPacker', 'sample_bytes']
 

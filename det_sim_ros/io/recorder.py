@@ -16,8 +16,8 @@ import atexit
 import itertools
 import logging
 import time
-import weakref
 from typing import Callable, Mapping, Sequence
+import weakref
 
 from .cdr import serialize
 from .flush_policy import FlushPolicy

@@ -27,7 +27,7 @@ class WriteNow:
         self._recorder = recorder
 
     def message(self, topic: str, msg, log_time_ns: int, type_name: str | None) -> bool:
-        """One message (see Recorder.record)."""
+        """Write a message: Recorder.record."""
         recorder = self._recorder
         if not recorder.active:
             recorder.dropped += 1
@@ -35,7 +35,7 @@ class WriteNow:
         return recorder._write(topic, msg, log_time_ns, type_name)
 
     def sample(self, log_time_ns: int, topics, data, types) -> bool:
-        """One sample (see Recorder.record_sample)."""
+        """Write a sample: Recorder.record_sample."""
         recorder = self._recorder
         if not recorder.active:
             recorder.dropped += len(data)
@@ -81,7 +81,7 @@ class WriteBehind:
         return False
 
     def message(self, topic: str, msg, log_time_ns: int, type_name: str | None) -> bool:
-        """Queue one message (see Recorder.record)."""
+        """Queue a message: Recorder.record."""
         if self._stopped(1):
             return False
         if isinstance(msg, (bytearray, memoryview)):
@@ -93,7 +93,7 @@ class WriteBehind:
         return True
 
     def sample(self, log_time_ns: int, topics, data, types) -> bool:
-        """Queue one sample (see Recorder.record_sample)."""
+        """Queue a sample: Recorder.record_sample."""
         if self._stopped(len(data)):
             return False
         self._thread.put((log_time_ns, topics, data, types))

@@ -72,6 +72,7 @@ def _sentinel(k: int) -> float:
 
 class _Template(NamedTuple):
     """A frame's bytes with the byte offsets of the fields that move (see MarkerFrames)."""
+
     raw: bytes
     cells: list          # per DET: field -> offset (beam0/1: first point, det_*, ref_pose)
     plate: int | None    # the plate's position
