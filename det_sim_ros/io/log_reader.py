@@ -93,13 +93,13 @@ def _top_records(stream) -> Iterator[tuple[int, bytes]]:
     :raises ValueError: no magic, a torn record (EOFError), a CRC mismatch."""
     if stream.read(len(MAGIC)) != MAGIC:
         raise ValueError('not an MCAP file (no magic)')
-    crc, at = zlib.crc32(MAGIC), len(MAGIC)
+    crc, at, size = zlib.crc32(MAGIC), len(MAGIC), os.fstat(stream.fileno()).st_size
     while True:
         head = stream.read(RECORD_HEAD.size)
         op, length = RECORD_HEAD.unpack(head) if len(head) == RECORD_HEAD.size else (0, -1)
-        body = stream.read(length) if length >= 0 else b''
-        if length < 0 or len(body) < length:
-            raise EOFError(f'the file ends inside a record (at byte {at})')
+        if length < 0 or at + len(head) + length > size:   # (a torn length is not allocated)
+            raise EOFError(f'the file ends inside a record (at byte {at} of {size})')
+        body = stream.read(length)
         if op == OP_DATA_END:
             (expected,) = struct.unpack_from('<I', body)
             if expected and crc != expected:
