@@ -9,9 +9,10 @@ import sys
 import numpy as np
 import pytest
 
-from det_sim_ros.io.contract import (CdrError, Command, CommandDecoder, decode_float64_multi_array,
-                                  decode_joint_state, encode_clock, encode_float64_multi_array,
-                                  encode_joint_state, JOINT_STATE, OUTPUT_FIELDS, OutputContract)
+from det_sim_ros.io.contract import (CdrError, Command, CommandDecoder,
+                                     decode_float64_multi_array, decode_joint_state, encode_clock,
+                                     encode_float64_multi_array, encode_joint_state, JOINT_STATE,
+                                     OUTPUT_FIELDS, OutputContract)
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import Simulator
 from conftest import child_env
@@ -280,3 +281,113 @@ def test_sample_codec_refuses_inconsistent_fields():
         codec.__init__(wire)
     with pytest.raises(TypeError):
         codec.encode([0.0] * 3, 0)   # not a buffer of float64
+
+
+# What each published field carries, stated here from the README's topic table, independently
+# of contract.OUTPUT_FIELDS (the table the encoder is built from): a swapped or misrouted field
+# in that table makes the comparison below fail.
+PUBLISHED = {('deflection', 'position'): 'q', ('deflection', 'velocity'): 'q_dot',
+             ('displacement', 'position'): 'y', ('charge', 'position'): 'q_p',
+             ('current', 'position'): 'i_DE'}
+
+
+def _output(sim, out, name, det):
+    """The simulator's value of output ``name`` of DET ``det``, by its output name."""
+    names = list(sim.model.output_names)
+    key = name if name in names else f'{name}[{det}]'
+    return float(out[names.index(key)])
+
+
+def _independent_mismatches(scene, sim, out, encoder, t_ns):
+    """Fields of the encoder's messages, decoded by rclpy, that differ from the simulator's
+    values (the displacement: y0 - y with y0 from each cell's statics; the plate: the mean
+    and the tilt of the two displacements)."""
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import JointState
+    from det_sim_ros.physics.statics import rest_shortening
+    dets = list(scene.det_names)
+    y0 = [float(rest_shortening(scene.cell_scene(i))) for i in range(len(dets))]
+    dy = [y0[i] - _output(sim, out, 'y', det) for i, det in enumerate(dets)]
+    wrong = []
+    for topic, data in zip(encoder.topics, encoder.encode(out, t_ns)):
+        msg = deserialize_message(data, JointState)
+        if msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec != t_ns:
+            wrong.append((topic, 'stamp'))
+        if topic == 'structure':
+            w = scene.structure['plate_width']
+            want = {'plate_dy': 0.5 * (dy[0] + dy[1]), 'plate_phi': (dy[1] - dy[0]) / w}
+            got = dict(zip(msg.name, msg.position))
+            wrong += [(topic, name) for name in want
+                      if not math.isclose(got.get(name, math.nan), want[name], rel_tol=1e-6,
+                                          abs_tol=1e-12)]
+            continue
+        if list(msg.name) != dets:
+            wrong.append((topic, 'name'))
+        for field in ('position', 'velocity', 'effort'):
+            output = PUBLISHED.get((topic, field))
+            if output is None:
+                want = []
+            elif output == 'y':
+                want = dy
+            else:
+                want = [_output(sim, out, output, det) for det in dets]
+            if list(getattr(msg, field)) != want:
+                wrong.append((topic, field))
+    return wrong
+
+
+@pytest.mark.parametrize('scene_name, overrides', [
+    ('default', {}), ('plate', {}), ('array', {'structure.copies': 3, 'structure.spread': 0.05})])
+def test_samples_read_by_rclpy_are_the_simulator_values(scene_name, overrides):
+    """The encoder's bytes, decoded by rclpy's own deserializer, hold on each topic and field
+    the simulator's output of the README's table, per DET by name."""
+    scene = load_scene(scene_name, overrides)
+    sim, out = _run(scene, [2200.0] * len(scene.cell_physics()), 23)
+    encoder = OutputContract(sim.model).encoder()
+    assert _independent_mismatches(scene, sim, out, encoder, 23_000_000) == []
+
+
+def test_the_independent_check_sees_a_swapped_field(monkeypatch):
+    """The check above fails when the contract's field table routes a field wrongly."""
+    from det_sim_ros.io import contract
+    scene = load_scene('default')
+    sim, out = _run(scene, [2200.0], 23)
+    monkeypatch.setitem(contract.OUTPUT_FIELDS, 'deflection',
+                        {'position': 'q_dot', 'velocity': 'q'})
+    encoder = OutputContract(sim.model).encoder()
+    assert _independent_mismatches(scene, sim, out, encoder, 23_000_000) == [
+        ('deflection', 'position'), ('deflection', 'velocity')]
+
+
+def test_commands_and_clock_read_by_rclpy():
+    """Float64MultiArray, JointState and Clock bytes of the contract, decoded by rclpy, hold
+    the values given to the encoders."""
+    from rclpy.serialization import deserialize_message
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    array = deserialize_message(encode_float64_multi_array([1.0, -2.5, 3e-300],
+                                                           [('volts', 3, 3)], 1),
+                                Float64MultiArray)
+    assert list(array.data) == [1.0, -2.5, 3e-300] and array.layout.data_offset == 1
+    dim = array.layout.dim[0]
+    assert (dim.label, dim.size, dim.stride) == ('volts', 3, 3)
+    joint = deserialize_message(encode_joint_state(['left', 'right'], [10.0, 20.0], [1.5],
+                                                   [-1.0, -2.0], 2**31 * 10**9 - 1, 'f'),
+                                JointState)
+    assert (list(joint.name), list(joint.position), list(joint.velocity),
+            list(joint.effort)) == (['left', 'right'], [10.0, 20.0], [1.5], [-1.0, -2.0])
+    assert (joint.header.stamp.sec, joint.header.stamp.nanosec, joint.header.frame_id) == (
+        2**31 - 1, 999_999_999, 'f')
+    for t_ns in (0, 1, 5_123_456_789):
+        clock = deserialize_message(encode_clock(t_ns), Clock).clock
+        assert clock.sec * 10**9 + clock.nanosec == t_ns
+
+
+def test_clock_bytes_are_the_writers_layout():
+    """encode_clock's one pack is the CDR Writer's bytes of a Clock (a header and a stamp)."""
+    from det_sim_ros.io.cdr import Writer
+    for t_ns in (0, 7, 3_000_000_007, 2**31 * 10**9 - 1):
+        w = Writer()
+        w.stamp(t_ns)
+        assert encode_clock(t_ns) == w.to_bytes()

@@ -139,3 +139,22 @@ def test_cli_plot_bad_input_one_line(tmp_path, capsys, content, message):
     assert main(['plot', str(path)]) != 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
+
+
+def test_a_killed_run_is_read_up_to_its_last_flush_and_marked_unfinished(tmp_path):
+    """A file as a SIGKILL leaves it (records up to the last flush and the provisional end) is
+    read by the same path as LogReader: its samples, and complete False."""
+    import shutil
+    scene = load_scene('default')
+    live = tmp_path / 'live.mcap'
+    rec = Recorder(str(live), scene, flush_sim_s=0.02)
+    simulate_to_log(rec, Simulator(scene), {0: [3000.0]}, 110)
+    killed = tmp_path / 'killed.mcap'
+    shutil.copyfile(live, killed)      # the file on disk before close
+    rec.close()
+    data = logplot.read_log(str(killed))
+    assert not data.complete and 'UNFINISHED' in logplot.summary(data)
+    q = next(c for c in data.channels if c.title == 'deflection q')
+    assert 80 <= len(q.t) < 111    # the samples after the last flush are lost
+    np.testing.assert_allclose(np.diff(q.t), scene.dt)
+    assert logplot.read_log(str(live)).complete

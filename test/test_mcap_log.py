@@ -1,7 +1,9 @@
-"""MCAP run logs: rosbag2 conventions checked by three independent readers, faults, crash safety."""
+"""MCAP run logs: rosbag2 conventions checked by three independent readers, faults, crash
+safety."""
 
 import os
 import pathlib
+import shutil
 import signal
 import struct
 import subprocess
@@ -13,7 +15,7 @@ import yaml
 
 from det_sim_ros import __version__
 from det_sim_ros.io.mcap_log import (LogReader, message_definition, qos_profiles_yaml, Recorder,
-                                  recover)
+                                     recover)
 from det_sim_ros.io.replay import OUTPUT_FIELDS, simulate_to_log
 from det_sim_ros.scenes.scene import load_scene, scene_to_dict
 from det_sim_ros.sim.simulator import Simulator
@@ -34,7 +36,7 @@ def logged_run(tmp_path_factory):
     sim = Simulator(scene)
     path = str(tmp_path_factory.mktemp('log') / 'run.mcap')
     recorder = Recorder(path, scene, metadata={'method': sim.method.name,
-                                                'substeps': sim.substeps_setting})
+                                               'substeps': sim.substeps_setting})
     simulate_to_log(recorder, sim, _command, N_STEPS)
     recorder.close()
     assert recorder.fault == ''
@@ -56,7 +58,8 @@ def test_message_definition_rosbag2_style():
     assert f'\n{delimiter}\nMSG: builtin_interfaces/Time\n' in text
     assert text.count('MSG: ') == 2
     multi = message_definition('std_msgs/msg/Float64MultiArray')
-    assert 'MSG: std_msgs/MultiArrayLayout' in multi and 'MSG: std_msgs/MultiArrayDimension' in multi
+    assert 'MSG: std_msgs/MultiArrayLayout' in multi
+    assert 'MSG: std_msgs/MultiArrayDimension' in multi
 
     # Both third-party parsers accept the definitions.
     from mcap_ros2._dynamic import generate_dynamic
@@ -335,14 +338,15 @@ def test_torn_file_is_recovered_in_place(tmp_path):
     from mcap.reader import make_reader
     from std_msgs.msg import Float64MultiArray
     from det_sim_ros.io.mcap_log import is_torn, recover_unfinished
-    path = tmp_path / 'det_sim_torn.mcap'
-    recorder = Recorder(path, None, flush_sim_s=0.01)
+    live = tmp_path / 'live' / 'run.mcap'
+    recorder = Recorder(live, None, flush_sim_s=0.01)
     for k in range(100):
         recorder.record('x', Float64MultiArray(data=[float(k)]), k * 1_000_000)
-    size = os.path.getsize(path)
-    recorder._stream.close()           # simulate the crash: no finish
+    path = tmp_path / 'det_sim_torn.mcap'    # the file on disk now, as a crash leaves it
+    shutil.copyfile(live, path)
+    recorder.close()
     with open(path, 'r+b') as stream:
-        stream.truncate(size - 20)     # the provisional end cut
+        stream.truncate(os.path.getsize(path) - 20)     # the provisional end cut
     assert is_torn(str(path))
     good = tmp_path / 'det_sim_good.mcap'
     with Recorder(good, None) as other:
@@ -364,7 +368,7 @@ def test_log_directory_is_bounded(tmp_path):
     (folder / 'notes.mcap.txt').write_text('not ours')
     made = []
     for run in range(5):
-        rec = Recorder(folder, None, max_files=3, prefix=f'det_sim')
+        rec = Recorder(folder, None, max_files=3, prefix='det_sim')
         for k in range(50):
             rec.record('x', Float64MultiArray(data=[float(k)] * 100), k * 1_000_000)
         rec.new_file()                    # as a reset does
@@ -381,6 +385,8 @@ def test_log_directory_is_bounded(tmp_path):
     assert big.deleted and [p for p in os.listdir(folder) if p.endswith('.mcap')] == \
         [os.path.basename(big.path)]
     big.close()
+
+
 def _write_samples(path, fast, background=False, stress=False):
     """500 samples of four topics and a command every 7th. ``stress``: what ends a run of the
     batched writer, often: log times that step back (clamped), a longer payload every 37th
@@ -468,7 +474,7 @@ def test_background_queue_stays_bounded_when_the_writer_falls_behind(tmp_path):
     for k in range(3000):
         data = [encode_joint_state(['det0'], [float(k)], stamp_ns=k * 1000)] * len(topics)
         recorder.record_sample(k * 1000, topics, data, TOPIC_TYPES)
-        longest = max(longest, len(recorder._queue))
+        longest = max(longest, recorder.queued)
     recorder.close()
     assert longest <= 8 and recorder.caught_up > 0
     assert recorder.fault == '' and recorder.messages == 6000 and recorder.dropped == 0
@@ -476,21 +482,25 @@ def test_background_queue_stays_bounded_when_the_writer_falls_behind(tmp_path):
     assert times == [k * 1000 for k in range(3000)]
 
 
-def test_background_recording_drops_nothing_while_the_writer_switches_files(tmp_path):
+def test_background_recording_drops_nothing_while_the_writer_switches_files(tmp_path,
+                                                                          monkeypatch):
     """The writer thread owns the MCAP writer (None for a moment between two files): records
     queued meanwhile by the node's thread must all land, none counted as dropped."""
     import threading
     import time as _time
     from std_msgs.msg import Float64MultiArray
-    recorder = Recorder(tmp_path / 'bg.mcap', None, background=True)
+    from det_sim_ros.io import log_file
     switching = threading.Event()
-    inner_open = recorder._open
 
-    def slow_open(path):             # the gap between closing one file and opening the next
-        switching.set()
-        _time.sleep(0.2)
-        inner_open(path)
-    recorder._open = slow_open
+    class SlowToOpen(log_file.TailStream):   # the gap between closing a file and the next
+        def __init__(self, path):
+            if switching.is_set() or not path.endswith('_001.mcap'):
+                return super().__init__(path)
+            switching.set()
+            _time.sleep(0.2)
+            super().__init__(path)
+    monkeypatch.setattr(log_file, 'TailStream', SlowToOpen)
+    recorder = Recorder(tmp_path / 'bg.mcap', None, background=True)
     recorder.record('x', Float64MultiArray(data=[0.0]), 0)
     recorder.new_file()
     assert switching.wait(5.0)

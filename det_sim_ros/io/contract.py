@@ -9,9 +9,10 @@ it (nothing here imports rclpy):
   every per-DET output; the displacement is Δy_i = y0_i − y_i with y0_i the end shortening of
   cell i's stable buckled rest state at 0 V (:func:`rest_shortenings`); the structure topic's
   outputs relative to rest (:func:`structure_channels`);
-- the CDR bytes (XCDR1, the encoding ROS 2 and rosbag2 use) of every output sample, written
-  straight from the simulator's output vector (:class:`SampleEncoder`), of /clock, and of the
-  command types; command decoding and validation (:class:`CommandDecoder`).
+- the CDR bytes (XCDR1, the encoding ROS 2 and rosbag2 use; written and read by
+  :mod:`det_sim_ros.io.cdr`) of every output sample, written straight from the simulator's
+  output vector (:class:`SampleEncoder`), of /clock, and of the command types; command
+  decoding and validation (:class:`CommandDecoder`).
 
 Units are SI throughout: m, m/s, C, A, V, rad, s; times on the wire are ns of sim time.
 """
@@ -26,6 +27,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from .cdr import CdrError, HEADER_LE, NS, Reader, Writer
 from ..core.kernel import SampleCodec
 from ..sim.simulator import inputs_within
 
@@ -36,7 +38,7 @@ __all__ = [
     'rest_shortening', 'rest_shortenings', 'structure_channels', 'OutputContract',
     'SampleEncoder', 'SampleWire', 'Command', 'CommandDecoder', 'CdrError', 'JointStateData',
     'encode_joint_state', 'decode_joint_state', 'encode_float64_multi_array',
-    'decode_float64_multi_array', 'encode_clock', 'stamp_ns', 'MODES',
+    'decode_float64_multi_array', 'encode_clock', 'stamp_ns', 'MODES', 'basename',
 ]
 
 JOINT_STATE = 'sensor_msgs/msg/JointState'
@@ -72,7 +74,12 @@ TOPIC_TYPES = {**{topic: JOINT_STATE for topic in OUTPUT_FIELDS}, STRUCTURE_TOPI
                COMMAND_TOPIC: FLOAT64_MULTI_ARRAY, JOINT_COMMAND_TOPIC: JOINT_STATE,
                CLOCK_TOPIC: CLOCK, DIAGNOSTICS_TOPIC: 'diagnostic_msgs/msg/DiagnosticArray'}
 
-NS = 1_000_000_000
+_LITTLE = sys.byteorder == 'little'
+
+
+def basename(topic: str) -> str:
+    """A topic's last name ('/ns/voltage_command' -> 'voltage_command')."""
+    return topic.rstrip('/').rsplit('/', 1)[-1]
 
 
 def stamp_ns(k: int, dt: float) -> int:
@@ -136,7 +143,8 @@ class OutputContract:
         self.y0 = np.array(rest_shortenings(model.scene) if y0 is None else y0, dtype=float)
         if self.y0.shape != (len(self.det_names),):
             raise ValueError(f'y0: expected {len(self.det_names)} values, got {self.y0.size}')
-        self.fields = {topic: dict(mapping) for topic, mapping in (fields or OUTPUT_FIELDS).items()}
+        self.fields = {topic: dict(mapping)
+                       for topic, mapping in (fields or OUTPUT_FIELDS).items()}
         self.index = {(topic, field): np.array(model.channel(output), dtype=np.intp)
                       for topic, mapping in self.fields.items()
                       for field, output in mapping.items()}
@@ -169,120 +177,7 @@ class OutputContract:
         return SampleEncoder(self)
 
 
-# -- CDR (XCDR1) ---------------------------------------------------------------------------------
-#
-# Layout rules: a 4-byte encapsulation header (0x00 0x01 = little endian, 0x00 0x00 = big endian,
-# then two option bytes), then the fields; a primitive of size s is aligned to a multiple of s
-# counted from the end of the header; a string is a uint32 length (with the NUL) and its bytes;
-# a sequence is a uint32 count and its items. Padding is written as zeros, so equal messages give
-# equal bytes (rclpy's own serializer leaves padding and trailing bytes uninitialised).
-
-_HEADER_LE = b'\x00\x01\x00\x00'
-_LITTLE = sys.byteorder == 'little'
-
-
-class CdrError(ValueError):
-    """Bytes that are not a valid CDR message of the expected type."""
-
-
-class _Writer:
-    def __init__(self):
-        self.buf = bytearray(_HEADER_LE)
-
-    def align(self, size: int) -> None:
-        pad = -(len(self.buf) - 4) % size
-        if pad:
-            self.buf += bytes(pad)
-
-    def u32(self, value: int) -> None:
-        self.align(4)
-        self.buf += struct.pack('<I', value)
-
-    def i32(self, value: int) -> None:
-        self.align(4)
-        self.buf += struct.pack('<i', value)
-
-    def string(self, text: str) -> None:
-        data = text.encode()
-        self.u32(len(data) + 1)
-        self.buf += data + b'\0'
-
-    def strings(self, texts: Sequence[str]) -> None:
-        self.u32(len(texts))
-        for text in texts:
-            self.string(text)
-
-    def doubles(self, values) -> int:
-        """A float64 sequence; returns the offset of its first value (for in-place updates)."""
-        values = np.asarray(values, dtype='<f8').reshape(-1)
-        self.u32(values.size)
-        if values.size:
-            self.align(8)
-        offset = len(self.buf)
-        self.buf += values.tobytes()
-        return offset
-
-    def stamp(self, t_ns: int) -> None:
-        sec, nanosec = divmod(int(t_ns), NS)
-        self.i32(sec)
-        self.u32(nanosec)
-
-
-class _Reader:
-    def __init__(self, data):
-        data = bytes(data)
-        if len(data) < 4 or data[0] != 0 or data[1] not in (0, 1):
-            raise CdrError('not CDR: unknown encapsulation header '
-                           f'{data[:4].hex() if data else "(empty)"}')
-        self.data = data
-        self.order = '<' if data[1] == 1 else '>'
-        self.pos = 4
-
-    def _take(self, size: int, align: int) -> int:
-        self.pos += -(self.pos - 4) % align
-        start = self.pos
-        self.pos += size
-        if self.pos > len(self.data):
-            raise CdrError(f'truncated CDR message ({len(self.data)} bytes)')
-        return start
-
-    def u32(self) -> int:
-        return struct.unpack_from(self.order + 'I', self.data, self._take(4, 4))[0]
-
-    def i32(self) -> int:
-        return struct.unpack_from(self.order + 'i', self.data, self._take(4, 4))[0]
-
-    def count(self, item_size: int) -> int:
-        n = self.u32()
-        if n * max(item_size, 1) > len(self.data) - self.pos:
-            raise CdrError(f'sequence of {n} items does not fit in {len(self.data)} bytes')
-        return n
-
-    def string(self) -> str:
-        n = self.count(1)
-        start = self._take(n, 1)
-        raw = self.data[start:start + n]
-        if n == 0 or raw[-1] != 0:
-            raise CdrError('string without its terminating NUL')
-        try:
-            return raw[:-1].decode()
-        except UnicodeDecodeError as exc:
-            raise CdrError(f'string is not UTF-8: {exc}') from None
-
-    def strings(self) -> list[str]:
-        return [self.string() for _ in range(self.count(5))]
-
-    def doubles(self) -> list[float]:
-        n = self.count(8)
-        if n == 0:
-            return []
-        start = self._take(8 * n, 8)
-        return list(struct.unpack_from(f'{self.order}{n}d', self.data, start))
-
-    def stamp(self) -> int:
-        sec = self.i32()
-        return sec * NS + self.u32()
-
+# -- CDR messages of the contract (the codec: det_sim_ros.io.cdr) --------------------------------
 
 @dataclasses.dataclass
 class JointStateData:
@@ -299,25 +194,25 @@ class JointStateData:
 def encode_joint_state(name=(), position=(), velocity=(), effort=(), stamp_ns: int = 0,
                        frame_id: str = '') -> bytes:
     """CDR bytes of a sensor_msgs/JointState."""
-    w = _Writer()
+    w = Writer()
     w.stamp(stamp_ns)
     w.string(frame_id)
     w.strings(list(name))
     for values in (position, velocity, effort):
         w.doubles(values)
-    return bytes(w.buf)
+    return w.to_bytes()
 
 
 def decode_joint_state(data) -> JointStateData:
     """The fields of a CDR sensor_msgs/JointState. :raises CdrError: malformed bytes."""
-    r = _Reader(data)
+    r = Reader(data)
     return JointStateData(r.stamp(), r.string(), r.strings(), r.doubles(), r.doubles(),
                           r.doubles())
 
 
 def encode_float64_multi_array(data=(), dims: Sequence[tuple] = (), data_offset: int = 0) -> bytes:
     """CDR bytes of a std_msgs/Float64MultiArray (``dims``: (label, size, stride) tuples)."""
-    w = _Writer()
+    w = Writer()
     w.u32(len(dims))
     for label, size, stride in dims:
         w.string(label)
@@ -325,24 +220,26 @@ def encode_float64_multi_array(data=(), dims: Sequence[tuple] = (), data_offset:
         w.u32(stride)
     w.u32(data_offset)
     w.doubles(data)
-    return bytes(w.buf)
+    return w.to_bytes()
 
 
 def decode_float64_multi_array(data) -> tuple[list[float], list[tuple], int]:
     """(data, dims, data_offset) of a CDR std_msgs/Float64MultiArray."""
-    r = _Reader(data)
+    r = Reader(data)
     dims = [(r.string(), r.u32(), r.u32()) for _ in range(r.count(12))]
     offset = r.u32()
     return r.doubles(), dims, offset
 
 
+# a Clock is the header and one stamp: Writer.stamp's layout in one pack (it is published
+# every step of a free run); test_contract holds it to the Writer's bytes
 _CLOCK = struct.Struct('<4siI')
 
 
 def encode_clock(t_ns: int) -> bytes:
     """CDR bytes of a rosgraph_msgs/Clock at sim time ``t_ns``."""
     sec, nanosec = divmod(int(t_ns), NS)
-    return _CLOCK.pack(_HEADER_LE, sec, nanosec)
+    return _CLOCK.pack(HEADER_LE, sec, nanosec)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -390,7 +287,7 @@ class SampleEncoder:
         layouts = []   # per topic: (pack, parts), parts: bytes (constant) or a gather slice
         messages, positions = [], []   # per topic: its bytes; per double: its byte offset
         for topic in self.topics:
-            w = _Writer()
+            w = Writer()
             w.stamp(0)
             w.string('')
             w.strings(contract.names(topic))
@@ -412,7 +309,7 @@ class SampleEncoder:
                 if structure:
                     structure_slot = slice(start, start + n)
                 blocks.append((offset, slice(start, start + n)))
-            raw = bytes(w.buf)
+            raw = w.to_bytes()
             messages.append(raw)
             fmt, parts, at = ['<4siI'], [], 12       # header, stamp (sec, nanosec)
             for offset, block in blocks:
@@ -468,7 +365,7 @@ class SampleEncoder:
         sec, nanosec = divmod(t_ns, NS)
         result = []
         for pack, parts in self._layouts:
-            args = [_HEADER_LE, sec, nanosec]
+            args = [HEADER_LE, sec, nanosec]
             for part in parts:
                 if type(part) is bytes:
                     args.append(part)

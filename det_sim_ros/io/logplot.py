@@ -6,9 +6,9 @@ Single, plate and array logs alike; no ROS graph needed.
 Speed (a 10-minute 1 kHz log holds 2.4 million messages): the CDR payloads of a topic mostly
 share one byte layout (the same DET names, the same array lengths), so they are grouped by
 length, parsed once per group and read as numpy columns at the parsed offsets; a row whose
-fixed bytes differ from its group's first row is decoded one by one (rclpy). Lines longer
-than the plot has pixels are drawn as their min/max envelope per pixel column, which keeps
-every extreme.
+fixed bytes differ from its group's first row is decoded one by one (det_sim_ros.io.cdr).
+Lines longer than the plot has pixels are drawn as their min/max envelope per pixel column,
+which keeps every extreme.
 """
 
 from __future__ import annotations
@@ -19,6 +19,10 @@ import os
 import struct
 
 import numpy as np
+
+from .cdr import CdrError, deserialize, Reader
+from .contract import basename, COMMAND_TOPICS, JOINT_COMMAND_TOPIC
+from .mcap_format import MAGIC, MESSAGE_FIELDS, MESSAGE_HEAD_LENGTH
 
 __all__ = ['LogData', 'Channel', 'read_log', 'summary', 'plot_log', 'LogPlotError',
            'PANELS']
@@ -39,7 +43,6 @@ PANELS = {
 }
 PANELS_STRUCTURE = {'plate_dy': ('plate height Δy', 'mm', 1e3),
                     'plate_phi': ('plate tilt φ − φ0', 'mrad', 1e3)}
-COMMAND_TOPICS = ('voltage_command', 'voltage_command_joint')
 ENVELOPE_COLUMNS = 2000
 
 
@@ -69,59 +72,32 @@ class LogData:
     t_end: float
 
 
-# -- CDR layouts ---------------------------------------------------------------------------------
-
-class _Cursor:
-    """Walks one CDR payload (offsets include the 4-byte encapsulation header)."""
-
-    def __init__(self, data):
-        self.data, self.pos = data, 4
-
-    def align(self, size):
-        self.pos += -(self.pos - 4) % size
-
-    def u32(self):
-        self.align(4)
-        (value,) = struct.unpack_from('<I', self.data, self.pos)
-        self.pos += 4
-        return value
-
-    def string(self):
-        n = self.u32()
-        text = bytes(self.data[self.pos:self.pos + n - 1]).decode()
-        self.pos += n
-        return text
-
-    def doubles(self):
-        """(offset, count) of a float64 sequence, skipped."""
-        n = self.u32()
-        if n:
-            self.align(8)
-        at = self.pos
-        self.pos += 8 * n
-        return at, n
-
+# -- CDR layouts (read by det_sim_ros.io.cdr's Reader) -------------------------------------------
 
 def _joint_state_layout(data):
-    """Offsets of a JointState payload: stamp, names, and (offset, n) of the three arrays."""
-    c = _Cursor(data)
-    stamp = c.pos
-    c.pos += 8
-    c.string()                                   # frame_id
-    names = [c.string() for _ in range(c.u32())]
-    arrays = {field: c.doubles() for field in ('position', 'velocity', 'effort')}
-    return {'stamp': stamp, 'names': names, 'arrays': arrays, 'end': c.pos}
+    """Offsets of a little-endian JointState payload: stamp, names, and (offset, n) of the
+    three arrays (None for big endian: the column reader views the bytes as little endian)."""
+    r = Reader(data)
+    if not r.little:
+        return None
+    stamp = r.take(8, 4)
+    r.string()                                   # frame_id
+    names = r.strings()
+    arrays = {field: r.doubles_at() for field in ('position', 'velocity', 'effort')}
+    return {'stamp': stamp, 'names': names, 'arrays': arrays, 'end': r.pos}
 
 
 def _multiarray_layout(data):
-    """Offsets of a Float64MultiArray payload: (offset, n) of data."""
-    c = _Cursor(data)
-    for _ in range(c.u32()):                     # layout.dim
-        c.string()
-        c.u32()
-        c.u32()
-    c.u32()                                      # data_offset
-    return {'names': None, 'arrays': {'data': c.doubles()}, 'stamp': None, 'end': c.pos}
+    """Offsets of a little-endian Float64MultiArray payload: (offset, n) of data."""
+    r = Reader(data)
+    if not r.little:
+        return None
+    for _ in range(r.count(12)):                 # layout.dim
+        r.string()
+        r.u32()
+        r.u32()
+    r.u32()                                      # data_offset
+    return {'names': None, 'arrays': {'data': r.doubles_at()}, 'stamp': None, 'end': r.pos}
 
 
 def _columns(by_length, layout_of, decode_slow):
@@ -134,7 +110,7 @@ def _columns(by_length, layout_of, decode_slow):
     for length, (order, times, matrix) in by_length.items():
         try:
             layout = layout_of(matrix[0].tobytes())
-        except (struct.error, UnicodeDecodeError, IndexError):
+        except (CdrError, struct.error, UnicodeDecodeError, IndexError):
             layout = None
         if layout is None or layout['end'] != length:
             slow += [(int(o), int(t), decode_slow(row.tobytes()))
@@ -158,134 +134,57 @@ def _doubles(matrix, at, n):
     return np.ascontiguousarray(matrix[:, at:at + 8 * n]).view('<f8').reshape(len(matrix), n)
 
 
-# -- reading -------------------------------------------------------------------------------------
+# -- reading: the columns of LogReader's record blocks ------------------------------------------
 
-_MAGIC = b'\x89MCAP0\r\n'
-_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK, _OP_FOOTER = 0x03, 0x04, 0x05, 0x06, 0x02
 _BYTE = np.arange(8)
-
-
-def _string(buf, pos):
-    (n,) = struct.unpack_from('<I', buf, pos)
-    return bytes(buf[pos + 4:pos + 4 + n]).decode(), pos + 4 + n
-
-
-def _decompress(kind, data, size):
-    if kind == '':
-        return bytes(data)
-    if kind == 'zstd':
-        import zstandard
-        return zstandard.ZstdDecompressor().decompress(bytes(data), max_output_size=size)
-    if kind == 'lz4':
-        import lz4.frame
-        return lz4.frame.decompress(bytes(data))
-    raise LogPlotError(f'unknown chunk compression {kind!r}')
+_LENGTH, _CHANNEL, _LOG_TIME, _PAYLOAD = (MESSAGE_FIELDS[name] for name in
+                                          ('length', 'channel', 'log_time', 'payload'))
 
 
 class _Scan:
     """
-    All messages of MCAP files as per-topic uint8 matrices grouped by payload length.
-
-    The records of a chunk are walked once in Python (only their lengths are read); message
-    headers and payloads are then gathered with numpy. Reading stops quietly at a torn record
-    (a file cut by a crash: ``complete`` False), as LogReader does.
+    All messages of a log as per-topic uint8 matrices grouped by payload length: each record
+    block of :meth:`LogReader.blocks` (a chunk's records, walked once by the reader) is read
+    with numpy at its message offsets. Reading stops quietly at a torn record (a file cut by a
+    crash: ``complete`` False), as the reader does.
     """
 
-    def __init__(self, files):
+    def __init__(self, reader):
         self.topics = {}        # topic -> {'type': str, 'parts': {length: [(order, t, M)]}}
-        self.complete = True
         self._order = 0
-        for path in files:
-            self._file(path)
+        for block in reader.blocks():
+            self._block(block, reader.channels)
+        self.complete = reader.complete
 
-    def _file(self, path):
-        with open(path, 'rb') as stream:
-            buf = stream.read()
-        if buf[:8] != _MAGIC:
-            raise LogPlotError(f'{path}: not an MCAP file')
-        self._channels, self._schemas = {}, {}
-        pos, n = 8, len(buf)
-        while True:
-            if pos + 9 > n:
-                self.complete = False
-                return
-            op = buf[pos]
-            (length,) = struct.unpack_from('<Q', buf, pos + 1)
-            body, end = pos + 9, pos + 9 + length
-            if end > n:
-                self.complete = False
-                return
-            if op == _OP_FOOTER:
-                return
-            if op == _OP_CHUNK:
-                (size,) = struct.unpack_from('<Q', buf, body + 16)
-                kind, p = _string(buf, body + 28)
-                (records_len,) = struct.unpack_from('<Q', buf, p)
-                try:
-                    raw = _decompress(kind, memoryview(buf)[p + 8:p + 8 + records_len], size)
-                except LogPlotError:
-                    raise
-                except Exception:  # noqa: BLE001 - a torn chunk: the end of the readable data
-                    self.complete = False
-                    return
-                self._records(raw)
-            elif op in (_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE):
-                self._records(buf[pos:end])
-            pos = end
-
-    def _records(self, raw):
-        positions = []
-        p, n = 0, len(raw)
-        unpack = struct.unpack_from
-        while p + 9 <= n:
-            positions.append(p)
-            p += 9 + unpack('<Q', raw, p + 1)[0]
-        if p > n:
-            positions.pop()
-        if not positions:
+    def _block(self, block, channels):
+        if not block.positions:
             return
-        arr = np.frombuffer(raw, dtype=np.uint8)
-        pos = np.array(positions)
-        ops = arr[pos]
-        for p in pos[ops != _OP_MESSAGE].tolist():
-            self._meta(raw, raw[p], p + 9)
-        mpos = pos[ops == _OP_MESSAGE]
-        if not mpos.size:
-            return
-        length = arr[mpos[:, None] + 1 + _BYTE].view('<u8').reshape(-1)
-        channel = arr[mpos[:, None] + 9 + _BYTE[:2]].view('<u2').reshape(-1)
-        log_time = arr[mpos[:, None] + 15 + _BYTE].view('<u8').reshape(-1)
-        size = (length - 22).astype(np.int64)
+        arr = np.frombuffer(block.raw, dtype=np.uint8)
+        mpos = np.array(block.positions)
+        length = arr[mpos[:, None] + _LENGTH + _BYTE].view('<u8').reshape(-1)
+        channel = arr[mpos[:, None] + _CHANNEL + _BYTE[:2]].view('<u2').reshape(-1)
+        log_time = arr[mpos[:, None] + _LOG_TIME + _BYTE].view('<u8').reshape(-1)
+        size = (length - MESSAGE_HEAD_LENGTH).astype(np.int64)
         order = self._order + np.arange(len(mpos))
         self._order += len(mpos)
         key = channel.astype(np.int64) * (1 << 32) + size
         for k in np.unique(key):
             sel = key == k
             ch, dl = int(k >> 32), int(k & 0xFFFFFFFF)
-            info = self._channels.get(ch)
+            info = channels.get(ch)
             if info is None:
                 continue
-            start = mpos[sel] + 31
+            start = mpos[sel] + _PAYLOAD
             matrix = arr[start[:, None] + np.arange(dl)] if dl else np.zeros((len(start), 0),
                                                                              np.uint8)
             entry = self.topics.setdefault(info[0], {'type': info[1], 'parts': {}})
             entry['parts'].setdefault(dl, []).append((order[sel], log_time[sel], matrix))
 
-    def _meta(self, raw, op, p):
-        if op == _OP_SCHEMA:
-            (sid,) = struct.unpack_from('<H', raw, p)
-            name, _ = _string(raw, p + 2)
-            self._schemas[sid] = name
-        elif op == _OP_CHANNEL:
-            cid, sid = struct.unpack_from('<HH', raw, p)
-            topic, _ = _string(raw, p + 4)
-            self._channels[cid] = (topic, self._schemas.get(sid, ''))
-
     def by_length(self, topic):
         """length -> (order, log times ns, matrix) of one topic (basename match)."""
         out = {}
         for name, entry in self.topics.items():
-            if _basename(name) != topic:
+            if basename(name) != topic:
                 continue
             for dl, parts in entry['parts'].items():
                 out.setdefault(dl, []).extend(parts)
@@ -293,15 +192,20 @@ class _Scan:
                 for dl, parts in out.items()}
 
     def type_of(self, topic):
-        return next((e['type'] for name, e in self.topics.items() if _basename(name) == topic),
+        """The type name of a topic (basename match), '' if absent."""
+        return next((e['type'] for name, e in self.topics.items() if basename(name) == topic),
                     '')
 
     def basenames(self):
-        return sorted({_basename(name) for name in self.topics})
+        """The topics' last names, sorted."""
+        return sorted({basename(name) for name in self.topics})
 
 
-def _basename(topic):
-    return topic.rstrip('/').rsplit('/', 1)[-1]
+def _check_magic(files):
+    for path in files:
+        with open(path, 'rb') as stream:
+            if stream.read(len(MAGIC)) != MAGIC:
+                raise LogPlotError(f'{path}: not an MCAP file')
 
 
 def _scene(reader):
@@ -315,10 +219,11 @@ def _scene(reader):
 
 def read_log(paths) -> LogData:
     """Read a sim_node log (file, split files or a directory) into arrays (see module doc)."""
-    from .mcap_log import deserialize, LogReader
+    from .log_reader import LogReader
     try:
         reader = LogReader(paths)
-        scan = _Scan(reader.files)
+        _check_magic(reader.files)
+        scan = _Scan(reader)
         reader.scan_info()
     except LogPlotError:
         raise
@@ -408,7 +313,7 @@ def _applied_voltages(scan, det_names, n_det, v_max, deserialize):
         type_name = scan.type_of(topic)
         if not type_name:
             continue
-        joint = topic == 'voltage_command_joint'
+        joint = topic == JOINT_COMMAND_TOPIC
         groups, slow = _columns(scan.by_length(topic),
                                 _joint_state_layout if joint else _multiarray_layout,
                                 lambda d: deserialize(type_name, d))
@@ -451,8 +356,8 @@ def _applied_voltages(scan, det_names, n_det, v_max, deserialize):
 
 def summary(data: LogData) -> str:
     """Plain-text summary: span, commands, and per channel and DET min / max / final."""
-    lines = [f"log: {', '.join(data.files)}" + ('' if data.complete else ' (UNFINISHED: '
-                                                 'the readable part)'),
+    unfinished = '' if data.complete else ' (UNFINISHED: the readable part)'
+    lines = [f"log: {', '.join(data.files)}" + unfinished,
              f'DETs: {", ".join(data.det_names)}; sim time 0 .. {data.t_end:.6g} s; '
              f'{data.commands} commands ({data.refused} refused), '
              f'{len(data.voltage_t) - 1} voltage changes']

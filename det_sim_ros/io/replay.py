@@ -21,6 +21,7 @@ import dataclasses
 import math
 from typing import Callable, Mapping, Sequence
 
+from .contract import basename as _basename
 from .contract import (COMMAND_TOPIC, COMMAND_TOPICS, CdrError, CommandDecoder,
                        decode_joint_state, encode_float64_multi_array, encode_joint_state,
                        JOINT_COMMAND_TOPIC, OUTPUT_FIELDS, OutputContract, rest_shortening,
@@ -33,10 +34,6 @@ __all__ = ['OUTPUT_FIELDS', 'COMMAND_TOPICS', 'ResimResult', 'resimulate', 'simu
 # The topic contract (topics, channels, y0, structure outputs, commands) is
 # det_sim_ros.io.contract; a log holds the per-DET y0 as metadata 'y0' (a float for one DET, a
 # list for several).
-
-
-def _basename(topic: str) -> str:
-    return topic.rstrip('/').rsplit('/', 1)[-1]
 
 
 def _logged_y0(text: str | None, n: int) -> list[float] | None:

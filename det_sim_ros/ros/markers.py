@@ -70,6 +70,95 @@ def _sentinel(k: int) -> float:
     return (k + 1) * 1.0e-300
 
 
+class _Template(NamedTuple):
+    """A frame's bytes with the byte offsets of the fields that move (see MarkerFrames)."""
+
+    raw: bytes
+    cells: list          # per DET: field -> offset (beam0/1: first point, det_*, ref_pose)
+    plate: int | None    # the plate's position
+    stamps: np.ndarray   # each marker's header stamp
+
+
+_STAMP_TAG = 0x5A5A0000   # int32 sentinels of the markers' stamps: this + marker index
+
+
+def _tagged_markers(model, geo, frames, offsets):
+    """The frame's markers, every moving field holding a unique sentinel: (markers, per DET
+    field -> sentinel tag, the plate's tag or None, per DET the float32 colour sentinel)."""
+    from geometry_msgs.msg import Point
+    from visualization_msgs.msg import Marker
+    tags = iter(range(10 ** 6))
+    markers = []
+
+    def marker(ns, mid, kind, frame, color, scale):
+        m = Marker(ns=ns, id=mid, type=kind, action=Marker.ADD)
+        m.header.frame_id = frame
+        m.header.stamp.sec = _STAMP_TAG + len(markers)
+        m.pose.orientation.w = 1.0
+        m.scale.x, m.scale.y, m.scale.z = scale
+        m.color.r, m.color.g, m.color.b, m.color.a = color
+        m.frame_locked = True
+        markers.append(m)
+        return m
+
+    def tag(obj, field='x'):
+        t = next(tags)
+        setattr(obj, field, _sentinel(t))
+        return t
+
+    cells, colors = [], []
+    for i, name in enumerate(geo.names):
+        slot = {}
+        for mid in (0, 1):
+            m = marker(name, mid, Marker.LINE_STRIP, frames[i], BEAM_COLOR,
+                       (BEAM_LINE_WIDTH, 0.0, 0.0))
+            m.pose.position.x, m.pose.position.y, m.pose.position.z = offsets[i]
+            m.points = [Point() for _ in range(geo.n_points)]
+            slot[f'beam{mid}'] = tag(m.points[0])
+        det = marker(name, 2, Marker.CUBE, frames[i], (0.2, 0.3, 1.0, 0.6), (0.0, 0.0, 0.0))
+        slot['det_pose'] = tag(det.pose.position)
+        slot['det_scale'] = tag(det.scale)
+        # colour: four float32 right after scale; located with a float32 sentinel
+        det.color.r = float(np.float32(1.0e-30 * (i + 1)))
+        colors.append(det.color.r)
+        ref = marker(name, 3, Marker.SPHERE, frames[i], REFERENCE_COLOR,
+                     (REFERENCE_DIAMETER,) * 3)
+        slot['ref_pose'] = tag(ref.pose.position)
+        cells.append(slot)
+    plate = None
+    if geo.has_plate:
+        width = model.scene.structure['plate_width']
+        depth = max(ph.A0 / ph.l0 for ph in model.scene.cell_physics())
+        plate = tag(marker('plate', 0, Marker.CUBE, frames[0], PLATE_COLOR,
+                           (depth, width + depth, PLATE_THICKNESS)).pose.position)
+    return markers, cells, plate, colors
+
+
+def _sentinel_template(markers, cells, plate, colors) -> _Template:
+    """The markers' CDR bytes (:mod:`det_sim_ros.io.cdr`, serialized once) and where each
+    sentinel landed in them."""
+    from visualization_msgs.msg import MarkerArray
+    from ..io.cdr import serialize
+    raw = serialize(MarkerArray(markers=markers))
+
+    def find(packed):
+        at = raw.find(packed)
+        if at < 0 or raw.find(packed, at + 1) >= 0:
+            raise RuntimeError('marker layout: a sentinel is missing or not unique')
+        return at
+
+    def f64(t):
+        return find(struct.pack('<d', _sentinel(t)))
+
+    located = []
+    for slot, color in zip(cells, colors):
+        offsets = {key: f64(t) for key, t in slot.items()}
+        offsets['det_color'] = find(struct.pack('<f', color))
+        located.append(offsets)
+    stamps = np.array([find(struct.pack('<i', _STAMP_TAG + k)) for k in range(len(markers))])
+    return _Template(raw, located, None if plate is None else f64(plate), stamps)
+
+
 class MarkerFrames:
     """
     Serialized MarkerArray frames of one model (see the module docstring).
@@ -81,94 +170,19 @@ class MarkerFrames:
     """
 
     def __init__(self, model, frame_prefix: str = '', frame_id: str = '', n_points: int = 41):
-        from visualization_msgs.msg import Marker, MarkerArray
-        from ..io.mcap_log import serialize
         self.geometry = geo = ActuatorGeometry(model, n_points)
         self.v_max = model.scene.physics.v_max
-        names = geo.names
         common = bool(frame_id)
-        self.frames = [frame_id if common else f'{frame_prefix}{name}' for name in names]
+        self.frames = [frame_id if common else f'{frame_prefix}{name}' for name in geo.names]
         offsets = geo.offsets if common else np.zeros_like(geo.offsets)
         self._offsets = offsets
-        tags = iter(range(10 ** 6))
-        slots = []   # (kind, marker index, field tag or tags)
-        markers = []
-
-        def marker(ns, mid, kind, frame, color, scale):
-            m = Marker(ns=ns, id=mid, type=kind, action=Marker.ADD)
-            m.header.frame_id = frame
-            m.pose.orientation.w = 1.0
-            m.scale.x, m.scale.y, m.scale.z = scale
-            m.color.r, m.color.g, m.color.b, m.color.a = color
-            m.frame_locked = True
-            markers.append(m)
-            return m
-
-        def tag_point(p):
-            t = next(tags)
-            p.x, p.y, p.z = _sentinel(t), 0.0, 0.0
-            return t
-
-        self._cell_slots = []
-        n = geo.n_points
-        for i, name in enumerate(names):
-            frame = self.frames[i]
-            slot = {}
-            for mid in (0, 1):
-                m = marker(name, mid, Marker.LINE_STRIP, frame, BEAM_COLOR,
-                           (BEAM_LINE_WIDTH, 0.0, 0.0))
-                m.pose.position.x, m.pose.position.y, m.pose.position.z = offsets[i]
-                from geometry_msgs.msg import Point
-                m.points = [Point() for _ in range(n)]
-                slot[f'beam{mid}'] = tag_point(m.points[0])
-            det = marker(name, 2, Marker.CUBE, frame, (0.2, 0.3, 1.0, 0.6), (0.0, 0.0, 0.0))
-            slot['det_pose'] = tag_point(det.pose.position)
-            t = next(tags)
-            det.scale.x = _sentinel(t)
-            slot['det_scale'] = t
-            slot['det_color'] = len(markers) - 1
-            ref = marker(name, 3, Marker.SPHERE, frame, REFERENCE_COLOR, (REFERENCE_DIAMETER,) * 3)
-            slot['ref_pose'] = tag_point(ref.pose.position)
-            self._cell_slots.append(slot)
-        self._plate_slot = None
-        if geo.has_plate:
-            width = model.scene.structure['plate_width']
-            depth = max(ph.A0 / ph.l0 for ph in model.scene.cell_physics())
-            plate = marker('plate', 0, Marker.CUBE, self.frames[0], PLATE_COLOR,
-                           (depth, width + depth, PLATE_THICKNESS))
-            self._plate_slot = tag_point(plate.pose.position)
+        template = _sentinel_template(*_tagged_markers(model, geo, self.frames, offsets))
+        self._cell_slots, self._plate_slot = template.cells, template.plate
+        if template.plate is not None:
             self._plate_shift = -geo.offsets[0] if not common else np.zeros(3)
-        # colour of each DET: four float32 right after scale; locate with a float32 sentinel
-        color_tags = {}
-        for i, slot in enumerate(self._cell_slots):
-            m = markers[slot['det_color']]
-            value = float(np.float32(1.0e-30 * (i + 1)))
-            m.color.r = value
-            color_tags[i] = value
-        stamp_tag = 0x5A5A0000
-        for k, m in enumerate(markers):
-            m.header.stamp.sec = stamp_tag + k
-        self.n_markers = len(markers)
-        raw = serialize(MarkerArray(markers=markers))
-
-        def find(packed):
-            at = raw.find(packed)
-            if at < 0 or raw.find(packed, at + 1) >= 0:
-                raise RuntimeError('marker layout: a sentinel is missing or not unique')
-            return at
-
-        def f64(t):
-            return find(struct.pack('<d', _sentinel(t)))
-
-        for slot in self._cell_slots:
-            for key in ('beam0', 'beam1', 'det_pose', 'det_scale', 'ref_pose'):
-                slot[key] = f64(slot[key])
-        for i, slot in enumerate(self._cell_slots):
-            slot['det_color'] = find(struct.pack('<f', color_tags[i]))
-        if self._plate_slot is not None:
-            self._plate_slot = f64(self._plate_slot)
-        self._stamps = np.array([find(struct.pack('<i', stamp_tag + k))
-                                 for k in range(len(markers))])
+        self._stamps = template.stamps
+        self.n_markers = len(template.stamps)
+        raw, n = template.raw, geo.n_points
         # every moving field is rewritten in every frame, so one buffer is reused; CDR aligns
         # relative to the 4-byte encapsulation header, so the views start at byte 4
         self._raw = bytearray(raw)

@@ -10,11 +10,11 @@ public names are re-exported here, so that one import gives both halves (the old
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import math
 import time
 from typing import Callable, Iterable
 
+from ..io.cdr import message_class
 from ..io.mcap_log import LogReader
 from ..io.replay import (COMMAND_TOPICS, OUTPUT_FIELDS, OutputContract, ResimResult,
                          rest_shortening, rest_shortenings, resimulate, simulate_to_log)
@@ -62,17 +62,6 @@ def qos_from_yaml(text: str | None):
         reliability=policy(ReliabilityPolicy, first.get('reliability'),
                            ReliabilityPolicy.RELIABLE),
         durability=policy(DurabilityPolicy, first.get('durability'), DurabilityPolicy.VOLATILE))
-
-
-def message_class(type_name: str):
-    """The rclpy message class of a ROS type name (``pkg/msg/Type`` or ``pkg/Type``)."""
-    parts = type_name.split('/')
-    if len(parts) == 2:
-        parts.insert(1, 'msg')
-    if len(parts) != 3:
-        raise ValueError(f'not a ROS type name (pkg/msg/Type): {type_name!r}')
-    package, kind, name = parts
-    return getattr(importlib.import_module(f'{package}.{kind}'), name)
 
 
 def play(log, node=None, rate: float = 1.0, start_offset: float = 0.0, loop: bool = False,

@@ -1,0 +1,111 @@
+"""
+How the recorder's records reach the file: :class:`WriteNow` writes them in the recording
+thread; :class:`WriteBehind` (``background=True``) queues their bytes for the
+:class:`~det_sim_ros.io.writer_thread.WriterThread`.
+
+A mode is given the :class:`~det_sim_ros.io.recorder.Recorder` it serves and uses its writing
+steps (``_write``, ``_write_sample``, ``_write_sample_run``, ``_new_file_now``, ``maybe_flush``,
+``_set_fault``) and its counters.
+"""
+
+from __future__ import annotations
+
+from .cdr import serialize
+from .schemas import type_name_of
+from .writer_thread import NEW_FILE, WriterThread
+
+__all__ = ['WriteNow', 'WriteBehind']
+
+
+class WriteNow:
+    """Records are written in the recording thread, as they come."""
+
+    caught_up = 0
+    queued = 0
+
+    def __init__(self, recorder):
+        self._recorder = recorder
+
+    def message(self, topic: str, msg, log_time_ns: int, type_name: str | None) -> bool:
+        """Write a message: Recorder.record."""
+        recorder = self._recorder
+        if not recorder.active:
+            recorder.dropped += 1
+            return False
+        return recorder._write(topic, msg, log_time_ns, type_name)
+
+    def sample(self, log_time_ns: int, topics, data, types) -> bool:
+        """Write a sample: Recorder.record_sample."""
+        recorder = self._recorder
+        if not recorder.active:
+            recorder.dropped += len(data)
+            return False
+        return recorder._write_sample(log_time_ns, topics, data, types)
+
+    def new_file(self) -> None:
+        """Continue in a new file now."""
+        self._recorder._new_file_now()
+
+    def stop(self) -> None:
+        """Nothing is pending."""
+
+
+class WriteBehind:
+    """
+    Records are queued as bytes (serialized here) and written, compressed and flushed by the
+    writer thread, in order; the thread owns the file (None for a moment between two files),
+    so queueing depends only on whether recording has stopped.
+    """
+
+    def __init__(self, recorder, period_s: float, max_queue: int):
+        self._recorder = recorder
+        self._thread = WriterThread(recorder._write, recorder._write_sample_run,
+                                    recorder._new_file_now, recorder.maybe_flush,
+                                    recorder._set_fault, period_s=period_s, max_queue=max_queue)
+
+    @property
+    def caught_up(self) -> int:
+        """Times the recording thread wrote the queue itself."""
+        return self._thread.caught_up
+
+    @property
+    def queued(self) -> int:
+        """Items waiting for the writer thread."""
+        return len(self._thread)
+
+    def _stopped(self, count: int) -> bool:
+        recorder = self._recorder
+        if recorder.fault or not self._thread.running:
+            recorder.dropped += count
+            return True
+        return False
+
+    def message(self, topic: str, msg, log_time_ns: int, type_name: str | None) -> bool:
+        """Queue a message: Recorder.record."""
+        if self._stopped(1):
+            return False
+        if isinstance(msg, (bytearray, memoryview)):
+            msg = bytes(msg)
+        elif not isinstance(msg, bytes):   # serialized here: the queue holds bytes only
+            type_name = type_name or self._recorder.type_of(topic) or type_name_of(msg)
+            msg = serialize(msg)
+        self._thread.put((topic, msg, log_time_ns, type_name))
+        return True
+
+    def sample(self, log_time_ns: int, topics, data, types) -> bool:
+        """Queue a sample: Recorder.record_sample."""
+        if self._stopped(len(data)):
+            return False
+        self._thread.put((log_time_ns, topics, data, types))
+        return True
+
+    def new_file(self) -> None:
+        """Continue in a new file after what is queued."""
+        if self._recorder.active:
+            self._thread.put(NEW_FILE)
+        else:
+            self._recorder._new_file_now()
+
+    def stop(self) -> None:
+        """Stop the thread after writing what is queued."""
+        self._thread.stop()
