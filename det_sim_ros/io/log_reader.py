@@ -217,8 +217,8 @@ class LogReader:
         """The message blocks of one file; the other records read into the attributes."""
         self._schemas, self.channels = {}, {}
         finished = False
-        try:
-            with open(path, 'rb') as stream:
+        with open(path, 'rb') as stream:   # a missing or unreadable file is the caller's error
+            try:
                 for op, body in _top_records(stream):
                     taken = self._record(op, body)
                     if isinstance(taken, RecordBlock):
@@ -231,8 +231,8 @@ class LogReader:
                             self.errors.append(f'{path}: unfinished (no summary: the writer '
                                                'stopped without closing the file)')
                         break
-        except Exception as exc:  # noqa: BLE001 - the end of the readable data
-            self.errors.append(f'{path}: {type(exc).__name__}: {exc}')
+            except Exception as exc:  # noqa: BLE001 - the end of the readable data
+                self.errors.append(f'{path}: {type(exc).__name__}: {exc}')
         if not finished and not stop_at_message:
             self.complete = False
 
