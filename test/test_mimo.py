@@ -1,13 +1,12 @@
-"""MIMO scenes (issue 7): the two-DET plate, arrays of independent copies, scene validation."""
-
-import numpy as np
-import pytest
-from scipy.integrate import solve_ivp
+"""Test MIMO scenes: the two-DET plate, arrays of independent copies, scene validation."""
 
 from det_sim_ros.physics.model import build_model
 from det_sim_ros.physics.statics import initial_state
 from det_sim_ros.scenes.scene import load_scene, SceneError
 from det_sim_ros.sim.simulator import simulate, Simulator
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
 
 # the paper's start (q = q0, released): these tests exercise the buckling transient
 RELEASED = {'scene.initial_state': 'released'}
@@ -112,7 +111,8 @@ def test_bad_structure_is_refused_with_a_clear_message(overrides, words):
 
 
 def test_yaml_text_numbers_in_det_overrides_are_caught():
-    data = {'sim_node': {'ros__parameters': {**_default_dict(), 'dets': {'det0': {'Rs': '4.0e9'}}}}}
+    data = {'sim_node': {'ros__parameters': {
+        **_default_dict(), 'dets': {'det0': {'Rs': '4.0e9'}}}}}
     with pytest.raises(SceneError, match='4.0e\\+9'):
         load_scene(data)
 
