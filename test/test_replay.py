@@ -1,11 +1,13 @@
-"""Replay of MCAP logs: bit-exact re-simulation, republishing with the recorded timing, CLI
-(``det_sim_replay`` and ``det_sim replay``)."""
+"""
+Test the replay of MCAP logs: bit-exact re-simulation, timed republishing, CLI.
+
+Replay of MCAP logs: bit-exact re-simulation, republishing with the recorded timing, CLI
+(``det_sim_replay`` and ``det_sim replay``).
+"""
 
 import subprocess
 import sys
 import threading
-
-import pytest
 
 from det_sim_ros.cli import main as det_sim
 from det_sim_ros.cli import main_replay as main
@@ -14,6 +16,7 @@ from det_sim_ros.io.replay import OUTPUT_FIELDS, resimulate, simulate_to_log
 from det_sim_ros.ros.play import play
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import Simulator
+import pytest
 
 N_STEPS = 400
 
@@ -150,8 +153,12 @@ def test_ros_args_end_the_line(log_path):
 
 
 def test_old_replay_path_gives_both_halves():
-    """``det_sim_ros.replay`` (the old module path) has the ROS-free re-simulation and the
-    ROS player; ``python -m det_sim_ros.replay`` is the command."""
+    """
+    Check that the flat alias ``det_sim_ros.replay`` gives the re-simulation and the player.
+
+    ``det_sim_ros.replay`` (the flat alias module path) has the ROS-free re-simulation and the
+    ROS player; ``python -m det_sim_ros.replay`` is the command.
+    """
     code = ('import warnings\n'
             'warnings.simplefilter("ignore")\n'
             'import det_sim_ros.replay as old\n'
@@ -292,8 +299,12 @@ def _plate_commands(k):
 
 @pytest.mark.parametrize('joint_commands', [False, True])
 def test_resim_plate_log(tmp_path, joint_commands):
-    """Two DETs: a logged plate run (vector or named joint commands) re-simulates bit-for-bit,
-    every topic names both DETs, and the structure topic is compared too."""
+    """
+    Check that a logged plate run re-simulates bit for bit, structure topic included.
+
+    Two DETs: a logged plate run (vector or named joint commands) re-simulates bit-for-bit,
+    every topic names both DETs, and the structure topic is compared too.
+    """
     scene = load_scene('plate')
     path = _write_log(tmp_path / 'plate.mcap', scene, joint_commands=joint_commands,
                       n_steps=200, commands=_plate_commands)
@@ -314,8 +325,12 @@ def test_resim_plate_log(tmp_path, joint_commands):
 
 
 def test_node_plate_log_resimulates_bit_for_bit(tmp_path, harness):
-    """The node's log of a plate run (vector and joint commands) re-simulates exactly, the
-    per-DET y0 logged as a list."""
+    """
+    Check that the node's log of a plate run re-simulates bit for bit.
+
+    The node's log of a plate run (vector and joint commands) re-simulates exactly, the
+    per-DET y0 logged as a list.
+    """
     h = harness(scene_file='plate', steps_per_tick=5, **{'log.path': str(tmp_path / 'logs')})
     recorder = h.node.recorder
     for volts in ([800.0, 1500.0], [400.0, 3000.0]):
@@ -333,8 +348,12 @@ def test_node_plate_log_resimulates_bit_for_bit(tmp_path, harness):
 
 
 def test_command_decoding_refuses_repeated_and_empty_names():
-    """Resim reads joint commands as the node does (both decode with det_sim_ros.io.contract): a
-    repeated or empty name list is refused."""
+    """
+    Check that command decoding refuses repeated and empty name lists.
+
+    Resim reads joint commands as the node does (both decode with det_sim_ros.io.contract): a
+    repeated or empty name list is refused.
+    """
     from det_sim_ros.io.contract import CommandDecoder, encode_joint_state
     decoder = CommandDecoder(['left', 'right'], 3000.0)
     held = [1.0, 2.0]

@@ -1,11 +1,10 @@
 """Statics (paper Section 4, Fig. 5) at the shared parameter set; no ROS needed."""
 
-import numpy as np
-import pytest
-
 from det_sim_ros.physics import statics
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import simulate
+import numpy as np
+import pytest
 
 BEAMS = ('simply_supported', 'fixed')
 V_MAX = 3000.0
@@ -190,8 +189,12 @@ def test_consistent_three_term_model(beam):
 
 
 def test_brentq_finds_the_roots_scipy_finds():
-    """statics.brentq (written out to keep scipy.optimize out of a node's start) is Brent's
-    method with scipy's steps and stopping rule: the same roots, to the last bit."""
+    """
+    Check that statics.brentq finds the roots scipy's brentq finds, to the last bit.
+
+    statics.brentq (written out to keep scipy.optimize out of a node's start) is Brent's
+    method with scipy's steps and stopping rule: the same roots, to the last bit.
+    """
     from scipy.optimize import brentq as scipy_brentq
     from det_sim_ros.physics.statics import brentq
     cases = [(lambda x: x ** 3 - 2 * x - 5, 2.0, 3.0), (np.cos, 0.0, 3.0),
