@@ -85,7 +85,7 @@ def test_array_copies_are_independent_and_each_has_its_own_physics():
 
 
 def test_array_scene_scales_linearly_in_the_mass_matrix():
-    """1000 copies: the mass matrix is solved per copy (block diagonal), not as 1000 x 1000."""
+    """Check that 1000 copies solve the mass matrix per copy (block diagonal), not 1000 x 1000."""
     scene = load_scene('array', {**RELEASED, 'structure.copies': 1000, 'structure.spread': 0.0})
     model = build_model(scene)
     assert model.arrays.group_q.shape == (1001,)     # one group per copy

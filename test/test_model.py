@@ -97,7 +97,7 @@ def _tight(model, x0, v, t_end, rtol=1e-12):
 
 
 def test_lossless_constant_charge_conserves_energy():
-    """Erratum 1: with the corrected inertia term H is conserved; the printed one drifts."""
+    """Check erratum 1: with the corrected inertia term H is conserved; the printed one drifts."""
     scene = load_scene('default', {**RELEASED,
                                    'eta_b': 0.0, 'eta_v': 0.0, 'E_M': 0.0, 'creep': False,
                                    'Rs': 1e30, 'Rp': 1e30, 'monitor_power': False})

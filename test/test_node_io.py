@@ -164,7 +164,7 @@ def test_lag_is_bounded_by_slipping(harness, tmp_path):
 
 
 def test_small_lag_catches_up_without_slipping(harness, tmp_path):
-    """A late tick within max_lag runs every due period and slips nothing."""
+    """Check that a late tick within max_lag runs every due period and slips nothing."""
     h, wall = _real_time_node(harness, tmp_path)   # default max_lag 50 ms
     node = h.node
     wall.now += 30 * node.dt
@@ -174,7 +174,7 @@ def test_small_lag_catches_up_without_slipping(harness, tmp_path):
 
 @pytest.mark.parametrize('executor', ['events', 'single'])
 def test_services_and_parameters_with_either_executor(harness, executor):
-    """~/pause, ~/step, ~/reset and parameter changes work in both executors."""
+    """Check that ~/pause, ~/step, ~/reset and parameter changes work in both executors."""
     from rclpy.parameter import Parameter
     h = harness(start_paused=True, executor=executor)
     h.command([1000.0])

@@ -383,7 +383,11 @@ def test_every_bad_startup_input_is_one_line_in_process(capfd, tmp_path, route):
 
 
 def test_bad_startup_inputs_as_processes(tmp_path):
-    """The same through real processes (a sample by default): one line, exit 1, no traceback."""
+    """
+    Check that bad start-up inputs give one line and exit 1 in real processes too.
+
+    The same through real processes (a sample by default): one line, exit 1, no traceback.
+    """
     rng = random.Random(23)
     rows = KEYS if FULL else rng.sample(KEYS, 6) + [
         ('integrator.method', 'bogus', 'range'), ('physics.Rs', 'abc', 'type')]
@@ -403,7 +407,11 @@ def test_bad_startup_inputs_as_processes(tmp_path):
 
 
 def test_integer_for_a_double_parameter_is_accepted(capfd):
-    """`-p physics.Rs:=1` (an integer where a double is declared) starts; the node reads 1.0."""
+    """
+    Check that an integer given for a double parameter is accepted as a double.
+
+    `-p physics.Rs:=1` (an integer where a double is declared) starts; the node reads 1.0.
+    """
     import rclpy
     from rclpy.context import Context
     from rclpy.parameter import Parameter
@@ -423,7 +431,11 @@ def test_integer_for_a_double_parameter_is_accepted(capfd):
 
 
 def test_node_repairs_a_torn_log_in_its_directory_at_start(tmp_path, harness):
-    """A log cut inside a write (power loss): the next start in that directory repairs it."""
+    """
+    Check that the node repairs a torn log in its directory when it starts.
+
+    A log cut inside a write (power loss): the next start in that directory repairs it.
+    """
     from std_msgs.msg import Float64MultiArray
 
     from det_sim_ros.io.mcap_log import Recorder

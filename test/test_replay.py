@@ -50,7 +50,11 @@ def log_path(tmp_path_factory, scene):
 
 
 def test_resim_reproduces_the_log_bit_for_bit(log_path):
-    """Same scene + same stepper: every logged output is reproduced exactly (deviation 0.0)."""
+    """
+    Check that re-simulation reproduces the log bit for bit.
+
+    Same scene + same stepper: every logged output is reproduced exactly (deviation 0.0).
+    """
     result = resimulate(log_path)
     assert result.fault == '' and result.skipped == 0 and result.complete
     assert result.steps == N_STEPS and result.commands == N_STEPS // 40 + 1
@@ -89,7 +93,7 @@ def test_resim_cli_exit_codes(log_path, capsys):
 
 
 def test_resim_of_a_cut_log(tmp_path, log_path):
-    """A log cut short (as by SIGKILL) re-simulates exactly up to the cut."""
+    """Check that a log cut short (as by SIGKILL) re-simulates exactly up to the cut."""
     data = open(log_path, 'rb').read()
     cut = tmp_path / 'cut.mcap'
     cut.write_bytes(data[:len(data) // 2])
@@ -114,7 +118,11 @@ def test_info_and_recover_cli(tmp_path, log_path, capsys):
 
 
 def test_det_sim_replay_verb_is_the_same_command(tmp_path, log_path, capsys):
-    """``det_sim replay ...`` and ``det_sim_replay ...`` print the same and exit alike."""
+    """
+    Check that ``det_sim replay`` and ``det_sim_replay`` print the same and exit alike.
+
+    ``det_sim replay ...`` and ``det_sim_replay ...`` print the same and exit alike.
+    """
     other = _other_substeps(log_path)
     for argv in (['info', log_path], ['resim', log_path],
                  ['resim', log_path, '--substeps', other]):
@@ -142,7 +150,11 @@ def test_replay_errors_are_one_line(tmp_path, monkeypatch, capsys, argv, message
 
 
 def test_ros_args_end_the_line(log_path):
-    """``--ros-args ...`` at the end of a replay line is taken whole (the player node's)."""
+    """
+    Check that ``--ros-args`` at the end of a replay line is taken whole, for the player node.
+
+    ``--ros-args ...`` at the end of a replay line is taken whole (the player node's).
+    """
     from det_sim_ros.cli.det_sim import build_parser
     args = build_parser().parse_args(['replay', 'play', log_path, '--rate', '0', '--ros-args',
                                       '-r', '__ns:=/x', '-p', 'use_sim_time:=true'])
@@ -267,7 +279,11 @@ def test_play_preserves_order_stamps_and_rate(tmp_path, scene, ros_context):
 
 
 def test_node_log_resimulates_bit_for_bit(tmp_path, harness):
-    """The node's own log (free-run, commands at arbitrary steps, a reset) re-simulates exactly."""
+    """
+    Check that the node's own log re-simulates bit for bit.
+
+    The node's own log (free-run, commands at arbitrary steps, a reset) re-simulates exactly.
+    """
     h = harness(**{'log.path': str(tmp_path / 'logs'), 'steps_per_tick': 5})
     recorder = h.node.recorder
     assert recorder is not None and recorder.active

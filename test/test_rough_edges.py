@@ -28,7 +28,7 @@ def test_diagnostics_name_the_fully_qualified_node(ros_context):
 
 
 def test_clamp_warning_names_channel_then_value():
-    """The warning the node logs for a clamped command, from the contract's decoding."""
+    """Check the warning the node logs for a clamped command, from the contract's decoding."""
     from det_sim_ros.io.contract import CommandDecoder, encode_float64_multi_array
     for names, volts, expected in (
             (['det0'], [-5.0], 'det0: -5 V clamped to [0, 3000] V (voltage_command)'),

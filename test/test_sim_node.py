@@ -38,7 +38,11 @@ def k_of(t_ns, dt):
 
 @pytest.mark.parametrize('how', ['array', 'joint'])
 def test_step_response_matches_offline_model(harness, how):
-    """A 3 kV command: outputs equal the offline model, settle at its statics, q_p -> C v."""
+    """
+    Check that a step response matches the offline model.
+
+    A 3 kV command: outputs equal the offline model, settle at its statics, q_p -> C v.
+    """
     h = harness(start_paused=True)
     volts = 3000.0
     if how == 'array':
@@ -92,7 +96,11 @@ def test_step_response_matches_offline_model(harness, how):
 
 
 def test_bad_inputs_refused_or_clamped(harness):
-    """NaN/inf/wrong length are refused (last valid voltage held); out-of-range is clamped."""
+    """
+    Check that bad commands are refused or clamped.
+
+    NaN/inf/wrong length are refused (last valid voltage held); out-of-range is clamped.
+    """
     h = harness(start_paused=True)
     u = lambda: h.node.simulator.u.tolist()  # noqa: E731
     h.command([1000.0])
@@ -126,7 +134,7 @@ def test_bad_inputs_refused_or_clamped(harness):
 
 
 def test_invalid_parameters_refused(harness):
-    """Runtime parameter changes are validated; invalid ones are refused with a reason."""
+    """Check that invalid runtime parameter changes are refused with a reason."""
     h = harness()
     node = h.node
     bad = [
@@ -154,7 +162,11 @@ def test_invalid_parameters_refused(harness):
 
 
 def test_pause_step_reset(harness):
-    """~/step advances one control period while paused; ~/reset returns to t = 0 and 0 V."""
+    """
+    Check the ~/pause, ~/step and ~/reset services.
+
+    ~/step advances one control period while paused; ~/reset returns to t = 0 and 0 V.
+    """
     h = harness(start_paused=True)
     h.command([2000.0])
     for k in (1, 2, 3):
@@ -184,7 +196,7 @@ def test_pause_step_reset(harness):
 
 
 def test_clock_advances_in_free_run(harness, ros_context):
-    """/clock follows sim time, and a use_sim_time node sees it."""
+    """Check that /clock follows sim time, and a use_sim_time node sees it."""
     import rclpy
     h = harness()
     follower = rclpy.create_node('follower', context=ros_context, parameter_overrides=[
@@ -200,7 +212,7 @@ def test_clock_advances_in_free_run(harness, ros_context):
 
 
 def test_real_time_mode_publishes_on_the_grid(harness):
-    """Real-time mode: samples arrive on the t = k dt grid, and no /clock is published."""
+    """Check that real-time mode publishes on the t = k dt grid and publishes no /clock."""
     h = harness(real_time=True, real_time_factor=4.0)
     h.spin_until_sim_time(0.2)
     stamps = sorted(h.samples['displacement'])
@@ -210,7 +222,11 @@ def test_real_time_mode_publishes_on_the_grid(harness):
 
 
 def test_fault_stops_integration_and_reset_recovers(harness):
-    """A diverging state: integration stops, /diagnostics reports ERROR, no NaN, reset recovers."""
+    """
+    Check that a fault stops the integration and a reset recovers.
+
+    A diverging state: integration stops, /diagnostics reports ERROR, no NaN, reset recovers.
+    """
     from diagnostic_msgs.msg import DiagnosticStatus
     h = harness(start_paused=True, **{'integrator.method': 'rk4', 'integrator.substeps': 1})
     h.command([3000.0])
@@ -239,7 +255,7 @@ def test_fault_stops_integration_and_reset_recovers(harness):
 
 
 def test_namespaced_node(ros_context):
-    """Relative names: in a namespace, topics and services move with the node."""
+    """Check that in a namespace, topics and services move with the node (relative names)."""
     node = SimNode(context=ros_context, namespace='arm1', parameter_overrides=[
         Parameter('real_time', value=False), Parameter('start_paused', value=True),
         Parameter('log.enabled', value=False)])
@@ -287,7 +303,7 @@ def test_log_compression_refuses_an_unknown_choice(ros_context, tmp_path):
 
 
 def test_malformed_scene_refused_in_process(ros_context, tmp_path):
-    """A bad scene key or node key raises SceneError naming the key."""
+    """Check that a bad scene key or node key raises SceneError naming the key."""
     bad = tmp_path / 'bad.yaml'
     text = open(os.path.join(os.path.dirname(__file__), '..', 'config', 'default.yaml')).read()
     bad.write_text(text.replace('eps_b: 0.20', 'eps_b: 7.0'))
@@ -298,7 +314,7 @@ def test_malformed_scene_refused_in_process(ros_context, tmp_path):
 
 
 def test_malformed_scene_exits_with_one_line(tmp_path):
-    """`sim_node` with a malformed scene exits non-zero with one line naming the key."""
+    """Check that `sim_node` with a malformed scene exits non-zero, one line naming the key."""
     bad = tmp_path / 'bad.yaml'
     text = open(os.path.join(os.path.dirname(__file__), '..', 'config', 'default.yaml')).read()
     bad.write_text(text.replace('Rs: 2.0e+3', 'Rs: -2.0e+3'))
@@ -314,7 +330,7 @@ def test_malformed_scene_exits_with_one_line(tmp_path):
 
 
 def test_scene_loads_by_default():
-    """The default scene: fixed beam, eps_b = 0.20, full model, 1 kHz."""
+    """Check the default scene: fixed beam, eps_b = 0.20, full model, 1 kHz."""
     scene = load_scene('default')
     assert scene.beam == 'fixed' and scene.eps_b == 0.20 and scene.rate_hz == 1000.0
     assert scene.creep and scene.source == 'rc'

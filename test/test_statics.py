@@ -115,7 +115,11 @@ def test_normalized_potential(beam):
 @pytest.mark.parametrize('beam', BEAMS)
 @pytest.mark.parametrize('v', [0.0, V_MAX])
 def test_equilibrium_agrees_with_long_damped_simulation(beam, v):
-    """The full dynamic model (RC source, creep) settles to the stable buckled equilibrium."""
+    """
+    Check that the dynamic model settles to the stable buckled equilibrium.
+
+    The full dynamic model (RC source, creep) settles to the stable buckled equilibrium.
+    """
     scene = scene_for(beam, 0.2)
     eq = by_kind(statics.equilibria(scene, v))['buckled+']
     r = simulate(scene, lambda t: v, 3.0)
