@@ -38,11 +38,7 @@ def k_of(t_ns, dt):
 
 @pytest.mark.parametrize('how', ['array', 'joint'])
 def test_step_response_matches_offline_model(harness, how):
-    """
-    Check that a step response matches the offline model.
-
-    A 3 kV command: outputs equal the offline model, settle at its statics, q_p -> C v.
-    """
+    """Check a 3 kV command: outputs equal the offline model, settle at its statics, q_p -> C v."""
     h = harness(start_paused=True)
     volts = 3000.0
     if how == 'array':
@@ -96,11 +92,7 @@ def test_step_response_matches_offline_model(harness, how):
 
 
 def test_bad_inputs_refused_or_clamped(harness):
-    """
-    Check that bad commands are refused or clamped.
-
-    NaN/inf/wrong length are refused (last valid voltage held); out-of-range is clamped.
-    """
+    """Check that NaN/inf/bad length are refused (last valid voltage held); out of range clamps."""
     h = harness(start_paused=True)
     u = lambda: h.node.simulator.u.tolist()  # noqa: E731
     h.command([1000.0])
@@ -162,11 +154,7 @@ def test_invalid_parameters_refused(harness):
 
 
 def test_pause_step_reset(harness):
-    """
-    Check the ~/pause, ~/step and ~/reset services.
-
-    ~/step advances one control period while paused; ~/reset returns to t = 0 and 0 V.
-    """
+    """Check that ~/step runs one control period while paused; ~/reset returns to t = 0 and 0 V."""
     h = harness(start_paused=True)
     h.command([2000.0])
     for k in (1, 2, 3):
@@ -222,11 +210,7 @@ def test_real_time_mode_publishes_on_the_grid(harness):
 
 
 def test_fault_stops_integration_and_reset_recovers(harness):
-    """
-    Check that a fault stops the integration and a reset recovers.
-
-    A diverging state: integration stops, /diagnostics reports ERROR, no NaN, reset recovers.
-    """
+    """Check a diverging state: integration stops, /diagnostics ERROR, no NaN; reset recovers."""
     from diagnostic_msgs.msg import DiagnosticStatus
     h = harness(start_paused=True, **{'integrator.method': 'rk4', 'integrator.substeps': 1})
     h.command([3000.0])
