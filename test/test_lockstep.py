@@ -1,7 +1,8 @@
 """
-Lockstep mode and the det_sim pytest plugin (issue 16): every period waits for the controller,
-so a closed loop through ROS equals the same loop offline bit for bit, and two runs give the
-same log whatever the host load.
+Test lockstep mode and the det_sim pytest plugin.
+
+In lockstep every period waits for the controller, so a closed loop through ROS equals the same
+loop offline bit for bit, and two runs give the same log whatever the host load.
 """
 
 import os
@@ -9,22 +10,23 @@ import subprocess
 import sys
 import textwrap
 
-import numpy as np
-import pytest
-
+from conftest import child_env
 from det_sim_ros.io.contract import OutputContract
 from det_sim_ros.io.mcap_log import LogReader
 from det_sim_ros.io.replay import resimulate
+# The fixture, as the plugin gives it. pyflakes reads each test's det_sim argument as a
+# redefinition of this import, hence the F811 noqa on those tests.
+from det_sim_ros.ros.testing import det_sim  # noqa: F401
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import Simulator
-from det_sim_ros.ros.testing import det_sim  # noqa: F401 - the fixture, as the plugin gives it
-from conftest import child_env
+import numpy as np
+import pytest
 
 KP, KI, T_STEP, TARGET = 2.0e4, 6.0e6, 0.6, 2.0e-3   # V/m, V/(m s), s, m
 
 
 def pi_volts(state, dy, t, dt, target=TARGET):
-    """The PI law of these tests: 0 V until T_STEP, then PI on the displacement error."""
+    """Return the PI law's voltage, V: 0 V until T_STEP, then PI on the displacement error."""
     if t < T_STEP - 1e-12:
         return 0.0
     error = target - dy
@@ -35,8 +37,10 @@ def pi_volts(state, dy, t, dt, target=TARGET):
 def make_pi(context, name='pi', joint=False, stamp=True, namespace='', target=TARGET,
             until=None, after_match=False):
     """
-    A PI controller node answering every displacement sample (``until``: none after that sim
-    time, s; ``node.done`` is then set, so a lockstep run ends at exactly that sample).
+    Create a PI controller node that answers every displacement sample.
+
+    ``until``: none after that sim time, s; ``node.done`` is then set, so a lockstep run ends
+    at exactly that sample.
 
     ``after_match``: a controller in another process answers only once its command publisher
     has matched the node's subscription (an answer sent before would be lost and the lockstep
@@ -80,7 +84,7 @@ def make_pi(context, name='pi', joint=False, stamp=True, namespace='', target=TA
 
 
 def offline_loop(t_end):
-    """The same closed loop without ROS: sample k -> command -> period k+1."""
+    """Run the same closed loop without ROS: sample k -> command -> period k+1."""
     scene = load_scene('default')
     sim = Simulator(scene)
     contract = OutputContract(sim.model)
@@ -100,9 +104,13 @@ def offline_loop(t_end):
 
 
 @pytest.mark.parametrize('joint', [False, True])
-def test_lockstep_loop_equals_the_offline_loop_and_the_pi_settles(det_sim, joint):
-    """Through ROS in lockstep the PI loop is the offline loop bit for bit (Float64MultiArray
-    or stamped JointState answers), and it brings Δy to 2 mm within 5 % by 0.5 s."""
+def test_lockstep_loop_equals_the_offline_loop_and_the_pi_settles(det_sim, joint):  # noqa: F811
+    """
+    Check that the lockstep PI loop equals the offline loop and settles.
+
+    Through ROS in lockstep the PI loop is the offline loop bit for bit (Float64MultiArray
+    or stamped JointState answers), and it brings Δy to 2 mm within 5 % by 0.5 s.
+    """
     sim = det_sim('default')
     run = sim.run(until=1.2, nodes=[make_pi(sim.context, joint=joint)])
     dys, volts = offline_loop(1.2)
@@ -124,9 +132,14 @@ def _log_records(path):
     return [(m.topic, m.log_time, m.sequence, m.data) for m in LogReader(path).messages()]
 
 
-def test_two_lockstep_runs_give_identical_logs_even_with_every_core_busy(det_sim, tmp_path):
-    """The same scene, controller and initial state: the same log records (every sample and
-    every command at the period it applied to), also when every core is busy; resim agrees."""
+def test_two_lockstep_runs_give_identical_logs_even_with_every_core_busy(
+        det_sim, tmp_path):  # noqa: F811
+    """
+    Check that two lockstep runs give identical logs, even with every core busy.
+
+    The same scene, controller and initial state: the same log records (every sample and
+    every command at the period it applied to), also when every core is busy; resim agrees.
+    """
     paths = []
     for n_busy in (0, os.cpu_count() or 2):
         busy = _busy(n_busy)
@@ -150,9 +163,13 @@ def test_two_lockstep_runs_give_identical_logs_even_with_every_core_busy(det_sim
     assert result.ok(0.0) and result.commands == 800, result.table()
 
 
-def test_two_sources_and_stale_answers(det_sim):
-    """lockstep.sources = 2: the node waits for both; a JointState stamped with an older
-    sample is applied but does not count; an unstamped one answers the latest sample."""
+def test_two_sources_and_stale_answers(det_sim):  # noqa: F811
+    """
+    Check that the node waits for two sources and applies stale answers without counting them.
+
+    lockstep.sources = 2: the node waits for both; a JointState stamped with an older
+    sample is applied but does not count; an unstamped one answers the latest sample.
+    """
     import rclpy
     from sensor_msgs.msg import JointState
     sim = det_sim('plate', params={'lockstep.sources': 2})
@@ -181,9 +198,13 @@ def test_two_sources_and_stale_answers(det_sim):
     assert sim.node.commands.received >= 2 * 50 + 1   # the answers to samples 0..49 + stale
 
 
-def test_timeout_holds_the_voltages_and_counts_missed_deadlines(det_sim):
-    """No controller and lockstep.timeout: each period waits that long, then runs with the
-    held voltages and counts a missed deadline."""
+def test_timeout_holds_the_voltages_and_counts_missed_deadlines(det_sim):  # noqa: F811
+    """
+    Check that a lockstep timeout holds the voltages and counts missed deadlines.
+
+    No controller and lockstep.timeout: each period waits that long, then runs with the
+    held voltages and counts a missed deadline.
+    """
     sim = det_sim('default', params={'lockstep.timeout': 0.005})
     sim.start(wait=False)
     sim.spin_until(lambda: sim.node.simulator.k >= 20, '20 periods')
@@ -206,8 +227,12 @@ def test_timeout_holds_the_voltages_and_counts_missed_deadlines(det_sim):
 
 
 def test_lockstep_pause_step_reset_and_clock(harness, ros_context):
-    """~/pause, ~/step and ~/reset keep working in lockstep; /clock follows the samples and a
-    use_sim_time node follows it."""
+    """
+    Check that pause, step, reset and /clock work in lockstep.
+
+    ~/pause, ~/step and ~/reset keep working in lockstep; /clock follows the samples and a
+    use_sim_time node follows it.
+    """
     import rclpy
     from rclpy.parameter import Parameter
     h = harness(mode='lockstep', start_paused=True)
@@ -235,14 +260,14 @@ def test_lockstep_pause_step_reset_and_clock(harness, ros_context):
 
 
 def test_bad_mode_is_refused(ros_context):
-    from rclpy.parameter import Parameter
-    from det_sim_ros.scenes.scene import SceneError
     from det_sim_ros.ros.node import SimNode
-    with pytest.raises(SceneError, match="mode.*lockstep"):
+    from det_sim_ros.scenes.scene import SceneError
+    from rclpy.parameter import Parameter
+    with pytest.raises(SceneError, match='mode.*lockstep'):
         SimNode(context=ros_context, parameter_overrides=[Parameter('mode', value='fast')])
 
 
-README_EXAMPLE = textwrap.dedent('''
+README_EXAMPLE = textwrap.dedent("""
     import rclpy
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
@@ -262,12 +287,16 @@ README_EXAMPLE = textwrap.dedent('''
         run = sim.run(until=1.2, nodes=[node])
         step = run.step_metrics('dy', target=2e-3, t_step=0.6)
         assert step.settling_time <= 0.5 and abs(step.steady_state_error) <= 0.05 * 2e-3
-''')
+""")
 
 
 def test_readme_example_runs_as_a_plugin(tmp_path):
-    """The README's example, in a file of its own, with the plugin loaded as pytest loads an
-    installed one (the pytest11 entry point, or -p before the package is reinstalled)."""
+    """
+    Check that the README's example runs as a pytest plugin test.
+
+    The README's example, in a file of its own, with the plugin loaded as pytest loads an
+    installed one (the pytest11 entry point, or -p before the package is reinstalled).
+    """
     from importlib.metadata import entry_points
     readme = open(os.path.join(os.path.dirname(__file__), '..', 'README.md')).read()
     assert README_EXAMPLE.strip() in readme   # the tested code is the documented code

@@ -1,13 +1,12 @@
-"""MIMO scenes (issue 7): the two-DET plate, arrays of independent copies, scene validation."""
-
-import numpy as np
-import pytest
-from scipy.integrate import solve_ivp
+"""Test MIMO scenes: the two-DET plate, arrays of independent copies, scene validation."""
 
 from det_sim_ros.physics.model import build_model
 from det_sim_ros.physics.statics import initial_state
 from det_sim_ros.scenes.scene import load_scene, SceneError
 from det_sim_ros.sim.simulator import simulate, Simulator
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
 
 # the paper's start (q = q0, released): these tests exercise the buckling transient
 RELEASED = {'scene.initial_state': 'released'}
@@ -86,7 +85,7 @@ def test_array_copies_are_independent_and_each_has_its_own_physics():
 
 
 def test_array_scene_scales_linearly_in_the_mass_matrix():
-    """1000 copies: the mass matrix is solved per copy (block diagonal), not as 1000 x 1000."""
+    """Check that 1000 copies solve the mass matrix per copy (block diagonal), not 1000 x 1000."""
     scene = load_scene('array', {**RELEASED, 'structure.copies': 1000, 'structure.spread': 0.0})
     model = build_model(scene)
     assert model.arrays.group_q.shape == (1001,)     # one group per copy
@@ -112,7 +111,8 @@ def test_bad_structure_is_refused_with_a_clear_message(overrides, words):
 
 
 def test_yaml_text_numbers_in_det_overrides_are_caught():
-    data = {'sim_node': {'ros__parameters': {**_default_dict(), 'dets': {'det0': {'Rs': '4.0e9'}}}}}
+    data = {'sim_node': {'ros__parameters': {
+        **_default_dict(), 'dets': {'det0': {'Rs': '4.0e9'}}}}}
     with pytest.raises(SceneError, match='4.0e\\+9'):
         load_scene(data)
 

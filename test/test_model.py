@@ -2,14 +2,13 @@
 
 import math
 
+from det_sim_ros.physics.model import build_model, ModelDomainError
+from det_sim_ros.physics.shapes import make_basis, ritz_coefficients
+from det_sim_ros.physics.statics import initial_state
+from det_sim_ros.scenes.scene import EPS0, load_scene, SceneError
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
-
-from det_sim_ros.physics.model import build_model, ModelDomainError
-from det_sim_ros.physics.statics import initial_state
-from det_sim_ros.scenes.scene import EPS0, load_scene, SceneError
-from det_sim_ros.physics.shapes import make_basis, ritz_coefficients
 
 # the paper's start (q = q0, released): these tests exercise the buckling transient
 RELEASED = {'scene.initial_state': 'released'}
@@ -21,12 +20,12 @@ def paper_coefficients(beam, p, length):
     """Eqs 72 (simply supported) and 73 (fixed), typed in: the oracle, not the implementation."""
     l, I, A, rho, E, eta = length, p.I, p.area, p.rho_b, p.E_b, p.eta_b
     if beam == 'simply_supported':
-        return dict(a=59049 / 1600 / l ** 2, b=243 / 40 / l, d=729 / 2 * I * eta / l ** 3,
-                    M=243 / 280 * rho * (A * l + 14 * I / l), c1=729 / 2 * E * I / l ** 3,
-                    c2=243 / 80 / l, c3=708588 / 70 * E * I / l ** 5)
-    return dict(a=262144 / 11025 / l ** 2, b=512 / 105 / l, d=2048 / 5 * I * eta / l ** 3,
-                M=256 / 315 * rho * (A * l + 12 * I / l), c1=2048 / 5 * E * I / l ** 3,
-                c2=256 / 105 / l, c3=2097152 / 1155 * E * I / l ** 5)
+        return {'a': 59049 / 1600 / l ** 2, 'b': 243 / 40 / l, 'd': 729 / 2 * I * eta / l ** 3,
+                'M': 243 / 280 * rho * (A * l + 14 * I / l), 'c1': 729 / 2 * E * I / l ** 3,
+                'c2': 243 / 80 / l, 'c3': 708588 / 70 * E * I / l ** 5}
+    return {'a': 262144 / 11025 / l ** 2, 'b': 512 / 105 / l, 'd': 2048 / 5 * I * eta / l ** 3,
+            'M': 256 / 315 * rho * (A * l + 12 * I / l), 'c1': 2048 / 5 * E * I / l ** 3,
+            'c2': 256 / 105 / l, 'c3': 2097152 / 1155 * E * I / l ** 5}
 
 
 def paper_rhs(scene, x, v):
@@ -98,7 +97,7 @@ def _tight(model, x0, v, t_end, rtol=1e-12):
 
 
 def test_lossless_constant_charge_conserves_energy():
-    """Erratum 1: with the corrected inertia term H is conserved; the printed one drifts."""
+    """Check erratum 1: with the corrected inertia term H is conserved; the printed one drifts."""
     scene = load_scene('default', {**RELEASED,
                                    'eta_b': 0.0, 'eta_v': 0.0, 'E_M': 0.0, 'creep': False,
                                    'Rs': 1e30, 'Rp': 1e30, 'monitor_power': False})

@@ -1,20 +1,20 @@
 """
-sim_node's I/O (issue 15): the published bytes are the simulator's values, commands that arrive
-during a catch-up burst apply from the next period, the lag behind the wall clock is bounded
-(the node slips instead), both executors work.
+Test sim_node's I/O: published bytes, commands in catch-up bursts, bounded lag, executors.
+
+The published bytes are the simulator's values, commands that arrive during a catch-up burst
+apply from the next period, the lag behind the wall clock is bounded (the node slips instead),
+both executors work.
 
 Real-time pacing is driven by a fake wall clock (``node.wall_clock``): no wall-clock thresholds.
 """
 
-import numpy as np
-import pytest
-
+from conftest import WALL_TIMEOUT
 from det_sim_ros.io.contract import decode_joint_state, OUTPUT_FIELDS
 from det_sim_ros.io.mcap_log import LogReader
 from det_sim_ros.io.replay import resimulate
 from det_sim_ros.sim.simulator import Simulator
-
-from conftest import WALL_TIMEOUT
+import numpy as np
+import pytest
 
 
 class FakeWall:
@@ -52,8 +52,12 @@ def _real_time_node(harness, tmp_path, **params):
 
 
 def test_published_bytes_are_the_simulator_values(harness):
-    """What subscribers receive (raw CDR) decodes to the offline simulator's outputs bit for
-    bit; the same bytes are what the log holds."""
+    """
+    Check that the published bytes are the offline simulator's values.
+
+    What subscribers receive (raw CDR) decodes to the offline simulator's outputs bit for
+    bit; the same bytes are what the log holds.
+    """
     from sensor_msgs.msg import JointState
     h = harness(start_paused=True)
     raw = {topic: {} for topic in OUTPUT_FIELDS}
@@ -86,9 +90,13 @@ def test_published_bytes_are_the_simulator_values(harness):
 
 @pytest.mark.parametrize('executor', ['events', 'single'])
 def test_command_during_catch_up_applies_from_the_next_period(harness, tmp_path, executor):
-    """40 periods fall due at once (a burst); a command that arrives after the burst's 5th
+    """
+    Check that a command arriving during a catch-up burst applies from the next period.
+
+    40 periods fall due at once (a burst); a command that arrives after the burst's 5th
     sample is applied to the 6th period, not after the burst. The log says so, and it
-    re-simulates bit for bit."""
+    re-simulates bit for bit.
+    """
     from std_msgs.msg import Float64MultiArray
     h, wall = _real_time_node(harness, tmp_path, executor=executor)
     node = h.node
@@ -113,8 +121,12 @@ def test_command_during_catch_up_applies_from_the_next_period(harness, tmp_path,
 
 
 def test_lag_is_bounded_by_slipping(harness, tmp_path):
-    """10 s of wall time at once: the node runs only max_lag worth of periods, drops the rest
-    of the wall time (counted as slipped), then keeps pace; /diagnostics says so."""
+    """
+    Check that the lag behind the wall clock is bounded by slipping.
+
+    10 s of wall time at once: the node runs only max_lag worth of periods, drops the rest
+    of the wall time (counted as slipped), then keeps pace; /diagnostics says so.
+    """
     from diagnostic_msgs.msg import DiagnosticStatus
     h, wall = _real_time_node(harness, tmp_path, max_lag=0.02)
     node = h.node
@@ -152,7 +164,7 @@ def test_lag_is_bounded_by_slipping(harness, tmp_path):
 
 
 def test_small_lag_catches_up_without_slipping(harness, tmp_path):
-    """A late tick within max_lag runs every due period and slips nothing."""
+    """Check that a late tick within max_lag runs every due period and slips nothing."""
     h, wall = _real_time_node(harness, tmp_path)   # default max_lag 50 ms
     node = h.node
     wall.now += 30 * node.dt
@@ -162,7 +174,7 @@ def test_small_lag_catches_up_without_slipping(harness, tmp_path):
 
 @pytest.mark.parametrize('executor', ['events', 'single'])
 def test_services_and_parameters_with_either_executor(harness, executor):
-    """~/pause, ~/step, ~/reset and parameter changes work in both executors."""
+    """Check that ~/pause, ~/step, ~/reset and parameter changes work in both executors."""
     from rclpy.parameter import Parameter
     h = harness(start_paused=True, executor=executor)
     h.command([1000.0])
@@ -180,10 +192,14 @@ def test_services_and_parameters_with_either_executor(harness, executor):
 
 @pytest.mark.parametrize('outcome', ['granted', 'refused'])
 def test_realtime_priority_is_applied_to_every_thread_or_degrades(harness, monkeypatch, outcome):
-    """realtime_priority puts every thread of the process under SCHED_FIFO (real-time mode),
+    """
+    Check that realtime_priority applies SCHED_FIFO to every thread, or degrades to a warning.
+
+    realtime_priority puts every thread of the process under SCHED_FIFO (real-time mode),
     or, without permission, logs a warning and leaves scheduling as it was; the node runs
     either way. (os.sched_setscheduler is recorded, not called: the test process stays as it
-    is.)"""
+    is.)
+    """
     import os
     calls = []
 

@@ -1,17 +1,18 @@
 """
+Test the node's parameter table, its ROS-free helpers, and the choice of pacing object.
+
 The node's parameter table and its ROS-free helpers (det_sim_ros.ros.params), and the choice
 of the pacing object from the mode parameters (det_sim_ros.ros.pacing).
 """
 
 import math
 
-import pytest
-
 from det_sim_ros.ros.pacing import (FreeRunPacing, LockstepPacing, make_pacing,
                                     RealTimePacing)
-from det_sim_ros.ros.params import (NODE_PARAMS, node_parameter_values, Param,
+from det_sim_ros.ros.params import (node_parameter_values, NODE_PARAMS, Param,
                                     runtime_refusal)
 from det_sim_ros.scenes.scene import SceneError
+import pytest
 
 
 def test_entries_are_named_and_unpack_as_four_tuples():

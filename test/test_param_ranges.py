@@ -1,17 +1,18 @@
 """
+Test both ends of every ranged node parameter: the maximum is accepted, beyond it refused.
+
 Both ends of every ranged node parameter (det_sim_ros.ros.params.NODE_PARAMS): a value just
-above the maximum, inf or NaN is refused with a reason, at run time (the old value stays) and
-at start-up (one SceneError naming the parameter); the maximum itself is accepted.
+above the maximum, inf or NaN is refused with a reason, at run time (the current value stays)
+and at start-up (one SceneError naming the parameter); the maximum itself is accepted.
 """
 
 import math
 
-import pytest
-from rclpy.parameter import Parameter
-
 from det_sim_ros.ros.node import SimNode
 from det_sim_ros.ros.params import NODE_PARAMS
 from det_sim_ros.scenes.scene import SceneError
+import pytest
+from rclpy.parameter import Parameter
 
 QUIET = {'real_time': False, 'info_period': 0.0, 'log.enabled': False}
 
@@ -28,8 +29,12 @@ READ_ONLY = _ranged(runtime=False)
 
 
 def _above(name):
-    """Values just above the maximum (beyond rclpy's 1e-6 relative edge tolerance), plus inf
-    and NaN for a double."""
+    """
+    Return values just above the maximum of the named parameter.
+
+    Just above means beyond rclpy's 1e-6 relative edge tolerance; plus inf and NaN for a
+    double.
+    """
     default, hi = NODE_PARAMS[name][0], NODE_PARAMS[name][3][1]
     if isinstance(default, int):
         return [hi + 1, 2 ** 62]

@@ -1,11 +1,13 @@
 """
-Reliability of the node as a process (issue 17): stops by SIGTERM/SIGINT at any moment, every
-bad start-up input, SIGKILL and the log, no NaN published.
+Test the node's reliability as a process: signals, bad start-up input, SIGKILL, no NaN.
+
+Reliability of the node as a process: stops by SIGTERM/SIGINT at any moment, every bad
+start-up input, SIGKILL and the log, no NaN published.
 
 The process tests start real ``sim_node`` processes (about 2 s each on a shared 2-core host),
 two at a time. The default run samples the stop moments: 6 SIGTERM + 6 SIGINT stops, 4 SIGKILLs
 and 6 of the bad start-up inputs as processes (all of them in-process). Set
-``DET_SIM_RELIABILITY=full`` for the issue's full counts (20 + 20 stops, 10 SIGKILLs, every bad
+``DET_SIM_RELIABILITY=full`` for the full counts (20 + 20 stops, 10 SIGKILLs, every bad
 input as a process too). The moments are drawn from a seeded generator: reproducible.
 """
 
@@ -22,14 +24,13 @@ import textwrap
 import threading
 import time
 
-import pytest
-
+from conftest import child_env
 from det_sim_ros.io.mcap_log import is_torn, LogReader
-from det_sim_ros.scenes.scene import (INTEGRATOR_SPEC, load_scene, PHYSICS_SPEC, SCENE_SPEC,
-                               scene_to_dict, STRUCTURE_SPEC)
 from det_sim_ros.ros.node import main
 from det_sim_ros.ros.params import NODE_PARAMS
-from conftest import child_env
+from det_sim_ros.scenes.scene import (INTEGRATOR_SPEC, load_scene, PHYSICS_SPEC, SCENE_SPEC,
+                                      scene_to_dict, STRUCTURE_SPEC)
+import pytest
 
 FULL = os.environ.get('DET_SIM_RELIABILITY', '') == 'full'
 READY = 'voltage command order'     # the node's last start-up line
@@ -57,9 +58,13 @@ class Run:
             return stream.read()
 
     def wait_handling(self):
-        """Until the process handles SIGTERM itself (/proc/<pid>/status SigCgt): from then on
-        the package's code runs. Before, while the interpreter starts (and the PyPI ROS wheels
-        re-execute it once), the signals' default actions apply: nothing has started yet."""
+        """
+        Wait until the process handles SIGTERM itself (/proc/<pid>/status SigCgt).
+
+        From then on the package's code runs. Before, while the interpreter starts (and the
+        PyPI ROS wheels re-execute it once), the signals' default actions apply: nothing has
+        started yet.
+        """
         deadline = time.monotonic() + WALL_LIMIT
         while True:
             with open(f'/proc/{self.proc.pid}/status') as stream:
@@ -91,7 +96,7 @@ def start_node(tmp, name, *params):
     return Run(proc, out, log_dir, time.time())
 
 
-FLOOD = textwrap.dedent('''
+FLOOD = textwrap.dedent("""
     import math, sys, time
     import rclpy
     from sensor_msgs.msg import JointState
@@ -119,7 +124,7 @@ FLOOD = textwrap.dedent('''
                 time.sleep(delay)
     except KeyboardInterrupt:
         pass
-''')
+""")
 
 
 def start_flood(tmp, name):
@@ -185,9 +190,13 @@ def _cases(n_per_signal):
 
 
 def test_sigterm_and_sigint_at_any_moment_exit_0_with_a_finished_log(tmp_path):
-    """SIGTERM / SIGINT during start-up, while running and under a 10 kHz command flood (with
+    """
+    Check that SIGTERM and SIGINT at any moment exit 0 with a finished log.
+
+    SIGTERM / SIGINT during start-up, while running and under a 10 kHz command flood (with
     NaN, out-of-range, wrong-length and repeated-name commands): exit 0, no traceback, every
-    log file finished and indexed, no non-finite output."""
+    log file finished and indexed, no non-finite output.
+    """
     cases = _cases(20 if FULL else 6)
     with concurrent.futures.ThreadPoolExecutor(2) as pool:
         results = list(pool.map(lambda c: _stop_case(str(tmp_path), c), cases))
@@ -204,10 +213,14 @@ def test_sigterm_and_sigint_at_any_moment_exit_0_with_a_finished_log(tmp_path):
 
 
 def test_sigkill_leaves_a_log_standard_readers_open(tmp_path, ros_context):
-    """SIGKILL at a random moment (real time): mcap's reader and rosbags read the file as it
+    """
+    Check that SIGKILL leaves a log that standard readers open.
+
+    SIGKILL at a random moment (real time): mcap's reader and rosbags read the file as it
     is, and it holds the samples up to at most 100 ms of sim time before the kill. The sim time
     at the kill is the newest sample received here just before it (so the loss measured is a
-    lower bound by the transport latency, ~1 ms)."""
+    lower bound by the transport latency, ~1 ms).
+    """
     from pathlib import Path
 
     import rclpy
@@ -270,7 +283,7 @@ def _bad_values(spec):
         return 7, ['a', 'a']
     if kind == 'str':
         return 7, 'bogus'
-    lower, inclusive, upper = spec[1], spec[2], spec[3]
+    lower, upper = spec[1], spec[3]
     wrong = 'abc' if kind == 'float' else 2.5
     if math.isfinite(upper):
         out = upper * 2 + 1 if kind == 'float' else int(upper) + 1
@@ -340,14 +353,18 @@ def _quiet(key):
 
 @pytest.mark.parametrize('route', ['parameter', 'file'])
 def test_every_bad_startup_input_is_one_line_in_process(capfd, tmp_path, route):
-    """Every scene and node key x {wrong type, out of range}, given with -p and in a scene
-    file: main() returns 1 and prints one line naming the key (in-process: fast)."""
+    """
+    Check that every bad start-up input gives one line naming its key, in process.
+
+    Every scene and node key x {wrong type, out of range}, given with -p and in a scene
+    file: main() returns 1 and prints one line naming the key (in-process: fast).
+    """
     failures = []
     for key, value, what in KEYS:
         if route == 'file' and key == 'scene_file':
             continue
-        arg = _as_parameter(key, value) if route == 'parameter' else _as_file(tmp_path, key,
-                                                                              value)
+        arg = (_as_parameter(key, value) if route == 'parameter'
+               else _as_file(tmp_path, key, value))
         # a value the node wrongly accepts would start it: stop it after 10 s (then exit 0)
         guard = threading.Timer(10.0, os.kill, (os.getpid(), signal.SIGTERM))
         guard.start()
@@ -366,10 +383,14 @@ def test_every_bad_startup_input_is_one_line_in_process(capfd, tmp_path, route):
 
 
 def test_bad_startup_inputs_as_processes(tmp_path):
-    """The same through real processes (a sample by default): one line, exit 1, no traceback."""
+    """
+    Check that bad start-up inputs give one line and exit 1 in real processes too.
+
+    The same through real processes (a sample by default): one line, exit 1, no traceback.
+    """
     rng = random.Random(23)
-    rows = KEYS if FULL else rng.sample(KEYS, 6) + [('integrator.method', 'bogus', 'range'),
-                                                   ('physics.Rs', 'abc', 'type')]
+    rows = KEYS if FULL else rng.sample(KEYS, 6) + [
+        ('integrator.method', 'bogus', 'range'), ('physics.Rs', 'abc', 'type')]
 
     def run(row):
         key, value, _ = row
@@ -386,7 +407,11 @@ def test_bad_startup_inputs_as_processes(tmp_path):
 
 
 def test_integer_for_a_double_parameter_is_accepted(capfd):
-    """`-p physics.Rs:=1` (an integer where a double is declared) starts; the node reads 1.0."""
+    """
+    Check that an integer given for a double parameter is accepted as a double.
+
+    `-p physics.Rs:=1` (an integer where a double is declared) starts; the node reads 1.0.
+    """
     import rclpy
     from rclpy.context import Context
     from rclpy.parameter import Parameter
@@ -406,7 +431,11 @@ def test_integer_for_a_double_parameter_is_accepted(capfd):
 
 
 def test_node_repairs_a_torn_log_in_its_directory_at_start(tmp_path, harness):
-    """A log cut inside a write (power loss): the next start in that directory repairs it."""
+    """
+    Check that the node repairs a torn log in its directory when it starts.
+
+    A log cut inside a write (power loss): the next start in that directory repairs it.
+    """
     from std_msgs.msg import Float64MultiArray
 
     from det_sim_ros.io.mcap_log import Recorder

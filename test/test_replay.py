@@ -1,11 +1,13 @@
-"""Replay of MCAP logs: bit-exact re-simulation, republishing with the recorded timing, CLI
-(``det_sim_replay`` and ``det_sim replay``)."""
+"""
+Test the replay of MCAP logs: bit-exact re-simulation, timed republishing, CLI.
+
+Replay of MCAP logs: bit-exact re-simulation, republishing with the recorded timing, CLI
+(``det_sim_replay`` and ``det_sim replay``).
+"""
 
 import subprocess
 import sys
 import threading
-
-import pytest
 
 from det_sim_ros.cli import main as det_sim
 from det_sim_ros.cli import main_replay as main
@@ -14,6 +16,7 @@ from det_sim_ros.io.replay import OUTPUT_FIELDS, resimulate, simulate_to_log
 from det_sim_ros.ros.play import play
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import Simulator
+import pytest
 
 N_STEPS = 400
 
@@ -47,7 +50,11 @@ def log_path(tmp_path_factory, scene):
 
 
 def test_resim_reproduces_the_log_bit_for_bit(log_path):
-    """Same scene + same stepper: every logged output is reproduced exactly (deviation 0.0)."""
+    """
+    Check that re-simulation reproduces the log bit for bit.
+
+    Same scene + same stepper: every logged output is reproduced exactly (deviation 0.0).
+    """
     result = resimulate(log_path)
     assert result.fault == '' and result.skipped == 0 and result.complete
     assert result.steps == N_STEPS and result.commands == N_STEPS // 40 + 1
@@ -86,7 +93,7 @@ def test_resim_cli_exit_codes(log_path, capsys):
 
 
 def test_resim_of_a_cut_log(tmp_path, log_path):
-    """A log cut short (as by SIGKILL) re-simulates exactly up to the cut."""
+    """Check that a log cut short (as by SIGKILL) re-simulates exactly up to the cut."""
     data = open(log_path, 'rb').read()
     cut = tmp_path / 'cut.mcap'
     cut.write_bytes(data[:len(data) // 2])
@@ -111,7 +118,11 @@ def test_info_and_recover_cli(tmp_path, log_path, capsys):
 
 
 def test_det_sim_replay_verb_is_the_same_command(tmp_path, log_path, capsys):
-    """``det_sim replay ...`` and ``det_sim_replay ...`` print the same and exit alike."""
+    """
+    Check that ``det_sim replay`` and ``det_sim_replay`` print the same and exit alike.
+
+    ``det_sim replay ...`` and ``det_sim_replay ...`` print the same and exit alike.
+    """
     other = _other_substeps(log_path)
     for argv in (['info', log_path], ['resim', log_path],
                  ['resim', log_path, '--substeps', other]):
@@ -139,7 +150,11 @@ def test_replay_errors_are_one_line(tmp_path, monkeypatch, capsys, argv, message
 
 
 def test_ros_args_end_the_line(log_path):
-    """``--ros-args ...`` at the end of a replay line is taken whole (the player node's)."""
+    """
+    Check that ``--ros-args`` at the end of a replay line is taken whole, for the player node.
+
+    ``--ros-args ...`` at the end of a replay line is taken whole (the player node's).
+    """
     from det_sim_ros.cli.det_sim import build_parser
     args = build_parser().parse_args(['replay', 'play', log_path, '--rate', '0', '--ros-args',
                                       '-r', '__ns:=/x', '-p', 'use_sim_time:=true'])
@@ -150,8 +165,12 @@ def test_ros_args_end_the_line(log_path):
 
 
 def test_old_replay_path_gives_both_halves():
-    """``det_sim_ros.replay`` (the old module path) has the ROS-free re-simulation and the
-    ROS player; ``python -m det_sim_ros.replay`` is the command."""
+    """
+    Check that the flat alias ``det_sim_ros.replay`` gives the re-simulation and the player.
+
+    ``det_sim_ros.replay`` (the flat alias module path) has the ROS-free re-simulation and the
+    ROS player; ``python -m det_sim_ros.replay`` is the command.
+    """
     code = ('import warnings\n'
             'warnings.simplefilter("ignore")\n'
             'import det_sim_ros.replay as old\n'
@@ -260,7 +279,11 @@ def test_play_preserves_order_stamps_and_rate(tmp_path, scene, ros_context):
 
 
 def test_node_log_resimulates_bit_for_bit(tmp_path, harness):
-    """The node's own log (free-run, commands at arbitrary steps, a reset) re-simulates exactly."""
+    """
+    Check that the node's own log re-simulates bit for bit.
+
+    The node's own log (free-run, commands at arbitrary steps, a reset) re-simulates exactly.
+    """
     h = harness(**{'log.path': str(tmp_path / 'logs'), 'steps_per_tick': 5})
     recorder = h.node.recorder
     assert recorder is not None and recorder.active
@@ -292,8 +315,12 @@ def _plate_commands(k):
 
 @pytest.mark.parametrize('joint_commands', [False, True])
 def test_resim_plate_log(tmp_path, joint_commands):
-    """Two DETs: a logged plate run (vector or named joint commands) re-simulates bit-for-bit,
-    every topic names both DETs, and the structure topic is compared too."""
+    """
+    Check that a logged plate run re-simulates bit for bit, structure topic included.
+
+    Two DETs: a logged plate run (vector or named joint commands) re-simulates bit-for-bit,
+    every topic names both DETs, and the structure topic is compared too.
+    """
     scene = load_scene('plate')
     path = _write_log(tmp_path / 'plate.mcap', scene, joint_commands=joint_commands,
                       n_steps=200, commands=_plate_commands)
@@ -314,8 +341,12 @@ def test_resim_plate_log(tmp_path, joint_commands):
 
 
 def test_node_plate_log_resimulates_bit_for_bit(tmp_path, harness):
-    """The node's log of a plate run (vector and joint commands) re-simulates exactly, the
-    per-DET y0 logged as a list."""
+    """
+    Check that the node's log of a plate run re-simulates bit for bit.
+
+    The node's log of a plate run (vector and joint commands) re-simulates exactly, the
+    per-DET y0 logged as a list.
+    """
     h = harness(scene_file='plate', steps_per_tick=5, **{'log.path': str(tmp_path / 'logs')})
     recorder = h.node.recorder
     for volts in ([800.0, 1500.0], [400.0, 3000.0]):
@@ -333,8 +364,12 @@ def test_node_plate_log_resimulates_bit_for_bit(tmp_path, harness):
 
 
 def test_command_decoding_refuses_repeated_and_empty_names():
-    """Resim reads joint commands as the node does (both decode with det_sim_ros.io.contract): a
-    repeated or empty name list is refused."""
+    """
+    Check that command decoding refuses repeated and empty name lists.
+
+    Resim reads joint commands as the node does (both decode with det_sim_ros.io.contract): a
+    repeated or empty name list is refused.
+    """
     from det_sim_ros.io.contract import CommandDecoder, encode_joint_state
     decoder = CommandDecoder(['left', 'right'], 3000.0)
     held = [1.0, 2.0]

@@ -1,14 +1,17 @@
-"""Issue 18's rough edges: namespaced nodes on /diagnostics, the clamp warning's wording,
-the test suite's ROS_DOMAIN_ID."""
+"""
+Test the node's names on /diagnostics, the clamp warning's wording and the ROS_DOMAIN_ID.
+
+A namespaced node names itself fully on /diagnostics; the clamp warning names the channel,
+then the value; the test suite respects the user's ROS_DOMAIN_ID.
+"""
 
 import os
-
-import pytest
-from rclpy.parameter import Parameter
 
 from conftest import DOMAIN_ID, pick_domain_id
 from det_sim_ros.io.contract import clamp_message
 from det_sim_ros.ros.node import SimNode
+import pytest
+from rclpy.parameter import Parameter
 
 
 def test_diagnostics_name_the_fully_qualified_node(ros_context):
@@ -25,7 +28,7 @@ def test_diagnostics_name_the_fully_qualified_node(ros_context):
 
 
 def test_clamp_warning_names_channel_then_value():
-    """The warning the node logs for a clamped command, from the contract's decoding."""
+    """Check the warning the node logs for a clamped command, from the contract's decoding."""
     from det_sim_ros.io.contract import CommandDecoder, encode_float64_multi_array
     for names, volts, expected in (
             (['det0'], [-5.0], 'det0: -5 V clamped to [0, 3000] V (voltage_command)'),

@@ -9,14 +9,12 @@ import os
 import subprocess
 import sys
 
-import numpy as np
-import pytest
-from rclpy.parameter import Parameter
-
-from det_sim_ros.scenes.scene import load_scene, SceneError
 from det_sim_ros.io.contract import rest_shortening
 from det_sim_ros.ros.node import SimNode
+from det_sim_ros.scenes.scene import load_scene, SceneError
 from det_sim_ros.sim.simulator import Simulator
+import pytest
+from rclpy.parameter import Parameter
 
 MS = 1_000_000  # ns
 
@@ -40,7 +38,7 @@ def k_of(t_ns, dt):
 
 @pytest.mark.parametrize('how', ['array', 'joint'])
 def test_step_response_matches_offline_model(harness, how):
-    """A 3 kV command: outputs equal the offline model, settle at its statics, q_p -> C v."""
+    """Check a 3 kV command: outputs equal the offline model, settle at its statics, q_p -> C v."""
     h = harness(start_paused=True)
     volts = 3000.0
     if how == 'array':
@@ -94,7 +92,7 @@ def test_step_response_matches_offline_model(harness, how):
 
 
 def test_bad_inputs_refused_or_clamped(harness):
-    """NaN/inf/wrong length are refused (last valid voltage held); out-of-range is clamped."""
+    """Check that NaN/inf/bad length are refused (last valid voltage held); out of range clamps."""
     h = harness(start_paused=True)
     u = lambda: h.node.simulator.u.tolist()  # noqa: E731
     h.command([1000.0])
@@ -128,7 +126,7 @@ def test_bad_inputs_refused_or_clamped(harness):
 
 
 def test_invalid_parameters_refused(harness):
-    """Runtime parameter changes are validated; invalid ones are refused with a reason."""
+    """Check that invalid runtime parameter changes are refused with a reason."""
     h = harness()
     node = h.node
     bad = [
@@ -156,7 +154,7 @@ def test_invalid_parameters_refused(harness):
 
 
 def test_pause_step_reset(harness):
-    """~/step advances one control period while paused; ~/reset returns to t = 0 and 0 V."""
+    """Check that ~/step runs one control period while paused; ~/reset returns to t = 0 and 0 V."""
     h = harness(start_paused=True)
     h.command([2000.0])
     for k in (1, 2, 3):
@@ -186,7 +184,7 @@ def test_pause_step_reset(harness):
 
 
 def test_clock_advances_in_free_run(harness, ros_context):
-    """/clock follows sim time, and a use_sim_time node sees it."""
+    """Check that /clock follows sim time, and a use_sim_time node sees it."""
     import rclpy
     h = harness()
     follower = rclpy.create_node('follower', context=ros_context, parameter_overrides=[
@@ -202,7 +200,7 @@ def test_clock_advances_in_free_run(harness, ros_context):
 
 
 def test_real_time_mode_publishes_on_the_grid(harness):
-    """Real-time mode: samples arrive on the t = k dt grid, and no /clock is published."""
+    """Check that real-time mode publishes on the t = k dt grid and publishes no /clock."""
     h = harness(real_time=True, real_time_factor=4.0)
     h.spin_until_sim_time(0.2)
     stamps = sorted(h.samples['displacement'])
@@ -212,7 +210,7 @@ def test_real_time_mode_publishes_on_the_grid(harness):
 
 
 def test_fault_stops_integration_and_reset_recovers(harness):
-    """A diverging state: integration stops, /diagnostics reports ERROR, no NaN, reset recovers."""
+    """Check a diverging state: integration stops, /diagnostics ERROR, no NaN; reset recovers."""
     from diagnostic_msgs.msg import DiagnosticStatus
     h = harness(start_paused=True, **{'integrator.method': 'rk4', 'integrator.substeps': 1})
     h.command([3000.0])
@@ -241,7 +239,7 @@ def test_fault_stops_integration_and_reset_recovers(harness):
 
 
 def test_namespaced_node(ros_context):
-    """Relative names: in a namespace, topics and services move with the node."""
+    """Check that in a namespace, topics and services move with the node (relative names)."""
     node = SimNode(context=ros_context, namespace='arm1', parameter_overrides=[
         Parameter('real_time', value=False), Parameter('start_paused', value=True),
         Parameter('log.enabled', value=False)])
@@ -259,8 +257,12 @@ def test_namespaced_node(ros_context):
 
 @pytest.mark.parametrize('compression', ['lz4', 'none'])
 def test_log_compression_parameter(harness, tmp_path, compression):
-    """log.compression picks the MCAP chunk compression; the log reads back and re-simulates
-    bit for bit."""
+    """
+    Check that log.compression picks the MCAP chunk compression.
+
+    log.compression picks the MCAP chunk compression; the log reads back and re-simulates
+    bit for bit.
+    """
     from mcap.reader import make_reader
     from det_sim_ros.io.replay import resimulate
     h = harness(steps_per_tick=5, **{'log.path': str(tmp_path / 'run.mcap'),
@@ -271,21 +273,21 @@ def test_log_compression_parameter(harness, tmp_path, compression):
     h.close()
     with open(path, 'rb') as stream:
         chunks = list(make_reader(stream).get_summary().chunk_indexes)
-    assert chunks and {c.compression for c in chunks} == {'' if compression == 'none'
-                                                           else compression}
+    assert chunks and {c.compression for c in chunks} == {
+        '' if compression == 'none' else compression}
     result = resimulate(path)
     assert result.complete and all(v == 0.0 for v in result.max_deviation.values())
 
 
 def test_log_compression_refuses_an_unknown_choice(ros_context, tmp_path):
-    with pytest.raises(SceneError, match="log.compression: one of zstd, lz4, none"):
+    with pytest.raises(SceneError, match='log.compression: one of zstd, lz4, none'):
         SimNode(context=ros_context, parameter_overrides=[
             Parameter('log.compression', value='brotli'),
             Parameter('log.path', value=str(tmp_path / 'x.mcap'))])
 
 
 def test_malformed_scene_refused_in_process(ros_context, tmp_path):
-    """A bad scene key or node key raises SceneError naming the key."""
+    """Check that a bad scene key or node key raises SceneError naming the key."""
     bad = tmp_path / 'bad.yaml'
     text = open(os.path.join(os.path.dirname(__file__), '..', 'config', 'default.yaml')).read()
     bad.write_text(text.replace('eps_b: 0.20', 'eps_b: 7.0'))
@@ -296,7 +298,7 @@ def test_malformed_scene_refused_in_process(ros_context, tmp_path):
 
 
 def test_malformed_scene_exits_with_one_line(tmp_path):
-    """`sim_node` with a malformed scene exits non-zero with one line naming the key."""
+    """Check that `sim_node` with a malformed scene exits non-zero, one line naming the key."""
     bad = tmp_path / 'bad.yaml'
     text = open(os.path.join(os.path.dirname(__file__), '..', 'config', 'default.yaml')).read()
     bad.write_text(text.replace('Rs: 2.0e+3', 'Rs: -2.0e+3'))
@@ -312,13 +314,13 @@ def test_malformed_scene_exits_with_one_line(tmp_path):
 
 
 def test_scene_loads_by_default():
-    """The default scene: fixed beam, eps_b = 0.20, full model, 1 kHz."""
+    """Check the default scene: fixed beam, eps_b = 0.20, full model, 1 kHz."""
     scene = load_scene('default')
     assert scene.beam == 'fixed' and scene.eps_b == 0.20 and scene.rate_hz == 1000.0
     assert scene.creep and scene.source == 'rc'
 
 
-# -- several DETs (issue 7): the two-DET plate ------------------------------------------------
+# -- several DETs: the two-DET plate -----------------------------------------------------------
 
 def last_sample(h, topic):
     return h.samples[topic][h.latest(topic)]
@@ -345,8 +347,12 @@ def run_plate(h, volts, t_end):
 
 
 def test_plate_vector_command_drives_both_outputs(harness):
-    """The plate: a 2-vector command in ['left', 'right'] order; every topic carries both named
-    channels (equal to the offline model), the structure topic plate_dy and plate_phi."""
+    """
+    Check that a plate's vector command drives both named outputs.
+
+    The plate: a 2-vector command in ['left', 'right'] order; every topic carries both named
+    channels (equal to the offline model), the structure topic plate_dy and plate_phi.
+    """
     h = harness(scene_file='plate', start_paused=True)
     node = h.node
     scene = node.scene
@@ -395,8 +401,12 @@ def test_plate_vector_command_drives_both_outputs(harness):
 
 
 def test_array_on_two_threads_publishes_the_one_thread_model_bit_for_bit(harness):
-    """threads: 2 steps an array's copies on two threads per period; what the node publishes
-    is the offline single-thread model's outputs, bit for bit."""
+    """
+    Check that an array stepped on two threads publishes the one-thread model bit for bit.
+
+    threads: 2 steps an array's copies on two threads per period; what the node publishes
+    is the offline single-thread model's outputs, bit for bit.
+    """
     h = harness(scene_file='array', start_paused=True, threads=2,
                 **{'structure.copies': 4, 'structure.spread': 0.1})
     assert h.node.simulator.stepper.threads == 2
@@ -418,8 +428,13 @@ def test_array_on_two_threads_publishes_the_one_thread_model_bit_for_bit(harness
 
 
 def test_plate_bad_inputs_per_channel(harness):
-    """Vector commands: a NaN in one channel is refused naming it (count on /diagnostics),
-    out-of-range channels are clamped, a wrong length is refused, joint commands update by name."""
+    """
+    Check the plate's handling of bad inputs, channel by channel.
+
+    Vector commands: a NaN in one channel is refused naming it (count on /diagnostics),
+    out-of-range channels are clamped, a wrong length is refused, joint commands update by
+    name.
+    """
     h = harness(scene_file='plate', start_paused=True)
     u = lambda: h.node.simulator.u.tolist()  # noqa: E731
     h.command([1000.0, 2000.0])
@@ -444,7 +459,7 @@ def test_plate_bad_inputs_per_channel(harness):
     assert h.node.commands.refused == 5
     h.joint_command(['right', 'left'], [10.0, 20.0])
     assert u() == [20.0, 10.0]
-    # issue 17: a DET named twice is refused (not the last one silently winning); an empty
+    # a DET named twice is refused (not the last one silently winning); an empty
     # JointState says it is empty (not 'unknown DET name(s) []')
     h.joint_command(['left', 'right', 'left'], [1.0, 2.0, 3.0])
     assert u() == [20.0, 10.0] and h.node.commands.refused == 6
@@ -465,8 +480,12 @@ def test_plate_bad_inputs_per_channel(harness):
 
 
 def test_implausible_physics_is_flagged_on_diagnostics(harness):
-    """Issue 17: v_max = 1e5 V driven at 1e5 V: the power-balance residual leaves its bound,
-    /diagnostics says WARN with the cause (not OK); nothing non-finite is published."""
+    """
+    Check that implausible physics is flagged WARN on /diagnostics.
+
+    v_max = 1e5 V driven at 1e5 V: the power-balance residual leaves its bound,
+    /diagnostics says WARN with the cause (not OK); nothing non-finite is published.
+    """
     from diagnostic_msgs.msg import DiagnosticStatus
     from det_sim_ros.sim.simulator import POWER_RESIDUAL_LIMIT
     h = harness(diagnostics_period=0.05, **{'physics.v_max': 1.0e5,

@@ -1,11 +1,10 @@
 """Statics (paper Section 4, Fig. 5) at the shared parameter set; no ROS needed."""
 
-import numpy as np
-import pytest
-
 from det_sim_ros.physics import statics
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import simulate
+import numpy as np
+import pytest
 
 BEAMS = ('simply_supported', 'fixed')
 V_MAX = 3000.0
@@ -116,7 +115,11 @@ def test_normalized_potential(beam):
 @pytest.mark.parametrize('beam', BEAMS)
 @pytest.mark.parametrize('v', [0.0, V_MAX])
 def test_equilibrium_agrees_with_long_damped_simulation(beam, v):
-    """The full dynamic model (RC source, creep) settles to the stable buckled equilibrium."""
+    """
+    Check that the dynamic model settles to the stable buckled equilibrium.
+
+    The full dynamic model (RC source, creep) settles to the stable buckled equilibrium.
+    """
     scene = scene_for(beam, 0.2)
     eq = by_kind(statics.equilibria(scene, v))['buckled+']
     r = simulate(scene, lambda t: v, 3.0)
@@ -190,8 +193,12 @@ def test_consistent_three_term_model(beam):
 
 
 def test_brentq_finds_the_roots_scipy_finds():
-    """statics.brentq (written out to keep scipy.optimize out of a node's start) is Brent's
-    method with scipy's steps and stopping rule: the same roots, to the last bit."""
+    """
+    Check that statics.brentq finds the roots scipy's brentq finds, to the last bit.
+
+    statics.brentq (written out to keep scipy.optimize out of a node's start) is Brent's
+    method with scipy's steps and stopping rule: the same roots, to the last bit.
+    """
     from scipy.optimize import brentq as scipy_brentq
     from det_sim_ros.physics.statics import brentq
     cases = [(lambda x: x ** 3 - 2 * x - 5, 2.0, 3.0), (np.cos, 0.0, 3.0),

@@ -1,4 +1,6 @@
 """
+Pin the adaptive step counts of a fixed voltage profile on four scenes.
+
 The adaptive step counts, pinned: the internal steps taken per stretch of a fixed voltage
 profile on four scenes at tolerance 1e-6. They follow from the step-size control's constants
 (det_sim_ros.sim.integrators: LOCAL_TOLERANCE, MAX_SUBSTEPS_FACTOR, ERROR_CONSTANT,
@@ -12,10 +14,9 @@ constant's comment names, then replace the numbers below with the new ones (the 
 message prints them) and say in the commit message why the step counts moved.
 """
 
-import pytest
-
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import Simulator
+import pytest
 
 TOLERANCE = 1e-6
 # (volts, periods): settled at 0 V, a 3 kV step (snap-through), down to 1.5 kV
