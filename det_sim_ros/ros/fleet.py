@@ -68,11 +68,11 @@ class FleetNode:
 
     @property
     def name(self) -> str:
-        """The namespace as a file name: /lab/cell_a -> lab_cell_a."""
+        """Return the namespace as a file name: /lab/cell_a -> lab_cell_a."""
         return self.namespace.strip('/').replace('/', '_')
 
     def parameters(self) -> dict:
-        """Every ROS parameter this node is started with."""
+        """Return every ROS parameter this node is started with."""
         return {'log.path': self.log_path, **self.params, **self.overrides,
                 'scene_file': self.scene, 'mode': self.mode}
 
@@ -100,7 +100,7 @@ def _mapping(value, where):
 
 
 def _known_keys(mapping: dict, allowed: set, where: str) -> None:
-    """One line naming the first key of ``mapping`` that is not ``allowed``."""
+    """Raise one line naming the first key of ``mapping`` that is not ``allowed``."""
     bad = sorted(set(mapping) - allowed)
     if bad:
         raise FleetError(f'{where}: unknown key {bad[0]!r} (allowed: '
@@ -110,9 +110,11 @@ def _known_keys(mapping: dict, allowed: set, where: str) -> None:
 def load_fleet(path: str, host: str | None = None, log_dir: str | None = None,
                check_scenes: bool = True) -> list:
     """
-    The nodes of the fleet file ``path`` that run on ``host`` (None: every node), checked:
-    unique valid namespaces, known modes, known parameters, loadable scenes (with their
-    overrides). :class:`FleetError` with one line otherwise.
+    Return the checked nodes of the fleet file ``path`` that run on ``host``.
+
+    ``host`` None means every node. The checks: unique valid namespaces, known modes, known
+    parameters, loadable scenes (with their overrides); :class:`FleetError` with one line
+    otherwise.
     """
     try:
         with open(path, encoding='utf-8') as stream:
@@ -190,7 +192,7 @@ def load_fleet(path: str, host: str | None = None, log_dir: str | None = None,
 
 
 def _nest(flat: dict) -> dict:
-    """{'a.b': 1} -> {'a': {'b': 1}} (the params-file form of dotted parameter names)."""
+    """Nest {'a.b': 1} as {'a': {'b': 1}} (the params-file form of dotted parameter names)."""
     nested: dict = {}
     for key, value in flat.items():
         parts = key.split('.')
@@ -202,8 +204,12 @@ def _nest(flat: dict) -> dict:
 
 
 def _die_with_parent():
-    """In the child: SIGTERM when the fleet process dies (even by SIGKILL), so no node is left
-    running on its own; SIGINT as in a terminal (a background job inherits it ignored)."""
+    """
+    In the child: ask for SIGTERM when the fleet process dies, and SIGINT as in a terminal.
+
+    SIGTERM comes even when the fleet process dies by SIGKILL, so no node is left running on
+    its own; SIGINT is reset to its default because a background job inherits it ignored.
+    """
     signal.signal(signal.SIGINT, signal.SIG_DFL)
     try:
         ctypes.CDLL('libc.so.6', use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG
@@ -241,7 +247,7 @@ class Fleet:
                 proc.send_signal(signum)
 
     def ready(self) -> list:
-        """The nodes whose start-up has finished (their log shows the start-up line)."""
+        """Return the nodes whose start-up has finished (their log shows the start-up line)."""
         done = []
         for node in self.nodes:
             try:
@@ -253,8 +259,11 @@ class Fleet:
         return done
 
     def wait(self, stop_timeout: float) -> list:
-        """Wait for every process; those still running ``stop_timeout`` s after the first call
-        are killed. The exit codes, in node order (-9: killed)."""
+        """
+        Wait for every process; return the exit codes, in node order (-9: killed).
+
+        Those still running ``stop_timeout`` s after the first call are killed.
+        """
         deadline = time.monotonic() + stop_timeout
         codes = []
         for proc in self.procs:
@@ -280,8 +289,12 @@ def _last_line(path):
 
 def run_fleet(path: str, host: str | None = None, log_dir: str | None = None,
               stop_timeout: float = 20.0, out=None) -> int:
-    """``det_sim fleet``: start the nodes of ``path`` for ``host``, forward SIGINT/SIGTERM,
-    return 0 when every node stopped with exit code 0, else 1."""
+    """
+    Run ``det_sim fleet``: start the nodes of ``path`` for ``host`` and wait for them.
+
+    SIGINT and SIGTERM are forwarded to every node. Return 0 when every node stopped with exit
+    code 0, else 1.
+    """
     out = sys.stderr if out is None else out
     host = host or socket.gethostname()
     nodes = load_fleet(path, host=host, log_dir=log_dir)
