@@ -116,6 +116,30 @@ def load_fleet(path: str, host: str | None = None, log_dir: str | None = None,
     parameters, loadable scenes (with their overrides); :class:`FleetError` with one line
     otherwise.
     """
+    data = _read_fleet_file(path)
+    nodes = data.get('nodes')
+    if not isinstance(nodes, list) or not nodes:
+        raise FleetError(f'{path}: nodes: must be a non-empty list')
+    base = os.path.dirname(os.path.abspath(path))
+    folder = log_dir or data.get('log_dir') or 'fleet_logs'
+    if not isinstance(folder, str):
+        raise FleetError(f'{path}: log_dir: must be a path')
+    folder = os.path.abspath(folder)     # like sim_node's log.path: relative to the cwd
+    defaults = _mapping(data.get('defaults'), 'defaults')
+    _known_keys(defaults, NODE_KEYS - {'namespace', 'host'}, 'defaults')
+    result, seen = [], set()
+    for i, entry in enumerate(nodes):
+        node = _fleet_node(entry, f'nodes[{i}]', seen, defaults, base, folder, check_scenes)
+        if host is None or node.host is None or node.host == host:
+            result.append(node)
+    names = [n.name for n in result]
+    if len(set(names)) != len(names):
+        raise FleetError('two namespaces give the same log file name (/a/b and /a_b)')
+    return result
+
+
+def _read_fleet_file(path: str) -> dict:
+    """Read the fleet file ``path``: a mapping of known keys; :class:`FleetError` if not."""
     try:
         with open(path, encoding='utf-8') as stream:
             data = yaml.safe_load(stream)
@@ -128,67 +152,58 @@ def load_fleet(path: str, host: str | None = None, log_dir: str | None = None,
     if not isinstance(data, dict):
         raise FleetError(f'{path}: expected a mapping with a nodes: list')
     _known_keys(data, TOP_KEYS, path)
-    nodes = data.get('nodes')
-    if not isinstance(nodes, list) or not nodes:
-        raise FleetError(f'{path}: nodes: must be a non-empty list')
-    base = os.path.dirname(os.path.abspath(path))
-    folder = log_dir or data.get('log_dir') or 'fleet_logs'
-    if not isinstance(folder, str):
-        raise FleetError(f'{path}: log_dir: must be a path')
-    folder = os.path.abspath(folder)     # like sim_node's log.path: relative to the cwd
-    defaults = _mapping(data.get('defaults'), 'defaults')
-    _known_keys(defaults, NODE_KEYS - {'namespace', 'host'}, 'defaults')
+    return data
 
+
+def _fleet_node(entry, where: str, seen: set, defaults: dict, base: str, folder: str,
+                check_scenes: bool) -> FleetNode:
+    """
+    Check one entry of the fleet file's ``nodes:`` list and return its node.
+
+    ``where`` names the entry in errors; ``seen`` holds the namespaces of the entries before
+    it (this one is added); ``base`` is the fleet file's folder, ``folder`` the log folder.
+    """
     from .params import NODE_PARAMS
-    result, seen = [], set()
-    for i, entry in enumerate(nodes):
-        where = f'nodes[{i}]'
-        if not isinstance(entry, dict):
-            raise FleetError(f'{where}: expected a mapping with a namespace:')
-        _known_keys(entry, NODE_KEYS, where)
-        namespace = entry.get('namespace')
-        if not isinstance(namespace, str) or not _NAMESPACE.match(namespace):
-            raise FleetError(f'{where}: namespace: expected /name or /a/b (letters, digits, _), '
-                             f'got {namespace!r}')
-        where = f'node {namespace}'
-        if namespace in seen:
-            raise FleetError(f'{where}: namespace used twice')
-        seen.add(namespace)
-        scene = entry.get('scene', defaults.get('scene', 'default'))
-        if not isinstance(scene, str):
-            raise FleetError(f'{where}: scene: expected a name in config/ or a path')
-        if os.sep in scene or scene.endswith(('.yaml', '.yml')):
-            scene = os.path.join(base, scene)     # relative to the fleet file
-        mode = entry.get('mode', defaults.get('mode', 'real_time'))
-        if mode not in MODES:
-            raise FleetError(f'{where}: mode: one of {", ".join(MODES)} (got {mode!r})')
-        overrides = {**_mapping(defaults.get('overrides'), 'defaults: overrides'),
-                     **_mapping(entry.get('overrides'), f'{where}: overrides')}
-        params = {**_mapping(defaults.get('params'), 'defaults: params'),
-                  **_mapping(entry.get('params'), f'{where}: params')}
-        unknown = sorted(k for k in params if k not in NODE_PARAMS)   # scene_file too
-        if unknown:
-            raise FleetError(f'{where}: params: unknown parameter {unknown[0]!r} (scene keys '
-                             'go in overrides:)')
-        if 'mode' in params or 'real_time' in params:
-            raise FleetError(f'{where}: params: set the mode with mode:, not in params:')
-        node_host = entry.get('host')
-        if node_host is not None and not isinstance(node_host, str):
-            raise FleetError(f'{where}: host: expected a host name')
-        if check_scenes:
-            try:
-                load_scene(scene, overrides=overrides)
-            except SceneError as exc:
-                raise FleetError(f'{where}: {exc}') from None
-        name = namespace.strip('/').replace('/', '_')
-        node = FleetNode(namespace, scene, mode, overrides, params, node_host,
-                         os.path.join(folder, name + '.log'), os.path.join(folder, name))
-        if host is None or node_host is None or node_host == host:
-            result.append(node)
-    names = [n.name for n in result]
-    if len(set(names)) != len(names):
-        raise FleetError('two namespaces give the same log file name (/a/b and /a_b)')
-    return result
+    if not isinstance(entry, dict):
+        raise FleetError(f'{where}: expected a mapping with a namespace:')
+    _known_keys(entry, NODE_KEYS, where)
+    namespace = entry.get('namespace')
+    if not isinstance(namespace, str) or not _NAMESPACE.match(namespace):
+        raise FleetError(f'{where}: namespace: expected /name or /a/b (letters, digits, _), '
+                         f'got {namespace!r}')
+    where = f'node {namespace}'
+    if namespace in seen:
+        raise FleetError(f'{where}: namespace used twice')
+    seen.add(namespace)
+    scene = entry.get('scene', defaults.get('scene', 'default'))
+    if not isinstance(scene, str):
+        raise FleetError(f'{where}: scene: expected a name in config/ or a path')
+    if os.sep in scene or scene.endswith(('.yaml', '.yml')):
+        scene = os.path.join(base, scene)     # relative to the fleet file
+    mode = entry.get('mode', defaults.get('mode', 'real_time'))
+    if mode not in MODES:
+        raise FleetError(f'{where}: mode: one of {", ".join(MODES)} (got {mode!r})')
+    overrides = {**_mapping(defaults.get('overrides'), 'defaults: overrides'),
+                 **_mapping(entry.get('overrides'), f'{where}: overrides')}
+    params = {**_mapping(defaults.get('params'), 'defaults: params'),
+              **_mapping(entry.get('params'), f'{where}: params')}
+    unknown = sorted(k for k in params if k not in NODE_PARAMS)   # scene_file too
+    if unknown:
+        raise FleetError(f'{where}: params: unknown parameter {unknown[0]!r} (scene keys '
+                         'go in overrides:)')
+    if 'mode' in params or 'real_time' in params:
+        raise FleetError(f'{where}: params: set the mode with mode:, not in params:')
+    node_host = entry.get('host')
+    if node_host is not None and not isinstance(node_host, str):
+        raise FleetError(f'{where}: host: expected a host name')
+    if check_scenes:
+        try:
+            load_scene(scene, overrides=overrides)
+        except SceneError as exc:
+            raise FleetError(f'{where}: {exc}') from None
+    name = namespace.strip('/').replace('/', '_')
+    return FleetNode(namespace, scene, mode, overrides, params, node_host,
+                     os.path.join(folder, name + '.log'), os.path.join(folder, name))
 
 
 def _nest(flat: dict) -> dict:
