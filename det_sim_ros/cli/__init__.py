@@ -1,7 +1,9 @@
 """
-Command-line entry points: ``det_sim`` (:func:`main`, one command with its verbs, one module
-each in :mod:`.verbs`), ``det_sim_replay`` (:func:`main_replay`, the ``replay`` verb on its
-own) and ``sim_node`` (:mod:`.sim_node`). Nothing heavy is imported until a command runs.
+Command-line entry points: ``det_sim``, ``det_sim_replay`` and ``sim_node``.
+
+``det_sim`` (:func:`main`) is one command with its verbs, one module each in :mod:`.verbs`;
+``det_sim_replay`` (:func:`main_replay`) is the ``replay`` verb on its own; ``sim_node`` is
+:mod:`.sim_node`. Nothing heavy is imported until a command runs.
 """
 
 

@@ -1,6 +1,8 @@
 """
-What the verbs of ``det_sim`` share: argument types and the scene options, the progress bar,
-output files, the matplotlib loader, and one-line errors with their exit codes.
+What the verbs of ``det_sim`` share.
+
+Argument types and the scene options, the progress bar, output files, the matplotlib loader,
+and one-line errors with their exit codes.
 
 Nothing heavy is imported here at module level: the dispatcher imports every verb to build its
 parser, and a verb imports numpy, the model or rclpy only when it runs.
@@ -15,7 +17,7 @@ import os
 import sys
 import time
 
-PLOTS_HINT = ("matplotlib is not installed: wrote the CSV files only; for the plots install "
+PLOTS_HINT = ('matplotlib is not installed: wrote the CSV files only; for the plots install '
               "the extra: pip install 'det_sim_ros[plots]' (or pip install matplotlib)")
 # set to 1 to see the traceback of an unexpected error (the tools print one line otherwise)
 TRACEBACK_ENV = 'DET_SIM_TRACEBACK'
@@ -67,7 +69,7 @@ class Progress:
 
 # -- argument types ---------------------------------------------------------------------------
 def parse_set(text: str):
-    """``key=value`` -> (key, value read as YAML; numbers such as 1e3 as floats)."""
+    """Split ``key=value`` into (key, value read as YAML; numbers such as 1e3 as floats)."""
     import yaml
     key, sep, value = text.partition('=')
     if not sep or not key.strip():
@@ -85,7 +87,7 @@ def parse_set(text: str):
 
 
 def float_list(text: str) -> list[float]:
-    """Comma-separated finite numbers."""
+    """Parse comma-separated finite numbers."""
     try:
         values = [float(v) for v in text.split(',') if v.strip()]
     except ValueError:
@@ -97,7 +99,7 @@ def float_list(text: str) -> list[float]:
 
 
 def beam_list(text: str) -> list[str]:
-    """Comma-separated beam kinds (det_sim_ros.scenes.scene.BEAMS)."""
+    """Parse comma-separated beam kinds (det_sim_ros.scenes.scene.BEAMS)."""
     from ..scenes.scene import BEAMS
     beams = [b.strip() for b in text.split(',') if b.strip()]
     bad = [b for b in beams if b not in BEAMS]
@@ -108,7 +110,7 @@ def beam_list(text: str) -> list[str]:
 
 
 def eps_range(text: str):
-    """``START:STOP:N`` -> N evenly spaced values (numpy array)."""
+    """Parse ``START:STOP:N`` into N evenly spaced values (numpy array)."""
     import numpy as np
     parts = text.split(':')
     try:
@@ -124,7 +126,7 @@ def eps_range(text: str):
 
 
 def positive(text: str) -> float:
-    """A finite number > 0."""
+    """Parse a finite number > 0."""
     try:
         value = float(text)
     except ValueError:
@@ -135,7 +137,7 @@ def positive(text: str) -> float:
 
 
 def add_scene_arguments(parser: argparse.ArgumentParser) -> None:
-    """The options of the verbs that run a scene: --scene, --set, --out, --dpi, --no-plots."""
+    """Add the options of the verbs that run a scene: --scene, --set, --out, --dpi, --no-plots."""
     parser.add_argument('--scene', default='default',
                         help="scene file path or installed scene name (default: 'default')")
     parser.add_argument('--set', dest='overrides', action='append', type=parse_set, default=[],
@@ -148,25 +150,25 @@ def add_scene_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def base_scene(args):
-    """The scene of --scene with the --set overrides."""
+    """Load the scene of --scene with the --set overrides."""
     from ..scenes.scene import load_scene
     return load_scene(args.scene, overrides=dict(args.overrides))
 
 
 def user_set(args, *keys) -> bool:
-    """True if one of ``keys`` was given with --set."""
+    """Return True if one of ``keys`` was given with --set."""
     return any(k in keys for k, _ in args.overrides)
 
 
 # -- output files -----------------------------------------------------------------------------
 def out_dir(args) -> str:
-    """The --out folder, created if needed."""
+    """Return the --out folder, created if needed."""
     os.makedirs(args.out, exist_ok=True)
     return args.out
 
 
 def write_csv(path: str, header, rows) -> str:
-    """A CSV file (floats with 10 significant digits, booleans as 0/1); returns ``path``."""
+    """Write a CSV file (floats with 10 significant digits, booleans as 0/1); return ``path``."""
     with open(path, 'w', newline='', encoding='utf-8') as stream:
         writer = csv.writer(stream)
         writer.writerow(header)
@@ -185,20 +187,20 @@ def _cell(value):
 
 
 def write_text(path: str, text: str) -> str:
-    """A UTF-8 text file; returns ``path``."""
+    """Write a UTF-8 text file; return ``path``."""
     with open(path, 'w', encoding='utf-8') as stream:
         stream.write(text)
     return path
 
 
 def print_written(paths) -> None:
-    """``wrote PATH`` for each file written, on stdout."""
+    """Print ``wrote PATH`` for each file written, on stdout."""
     for path in paths:
         print(f'wrote {path}')
 
 
 def pyplot(args, prog: str = 'det_sim'):
-    """matplotlib.pyplot with the Agg backend, or None (with a hint) if unavailable/disabled."""
+    """Return matplotlib.pyplot with the Agg backend, or None (with a hint) if unavailable/off."""
     if args.no_plots:
         return None
     try:
@@ -212,7 +214,7 @@ def pyplot(args, prog: str = 'det_sim'):
 
 
 def missing_modules(names) -> list[str]:
-    """Those of the modules ``names`` that cannot be imported."""
+    """Return those of the modules ``names`` that cannot be imported."""
     import importlib
     missing = []
     for name in names:
@@ -225,7 +227,7 @@ def missing_modules(names) -> list[str]:
 
 # -- one-line errors ----------------------------------------------------------------------------
 def _input_errors() -> tuple:
-    """The errors that mean bad input (exit code 2); imported only once an error is raised."""
+    """Return the errors that mean bad input (exit code 2), imported once an error is raised."""
     from ..io.logplot import LogPlotError
     from ..physics.linearize import LinearizationError
     from ..ros.fleet import FleetError
@@ -239,8 +241,12 @@ def _domain_error() -> type:
 
 
 def run(action, args, prog: str) -> int:
-    """``action(args)`` as a command: its exit code, or one line on stderr and the error's code
-    (2 bad input, 1 the model's domain left, a file error or any other failure, 130 Ctrl-C)."""
+    """
+    Run ``action(args)`` as a command and return its exit code.
+
+    The exit code is the action's own, or, after one line on stderr, the error's code (2 bad
+    input, 1 the model's domain left, a file error or any other failure, 130 Ctrl-C).
+    """
     try:
         return int(action(args) or 0)
     except KeyboardInterrupt:

@@ -1,6 +1,8 @@
 """
-``det_sim``: the model offline (no ROS), writing data (CSV, JSON) and plots (PNG), and the
-ROS tools (``fleet``, ``replay play``); one verb per module in det_sim_ros.cli.verbs::
+``det_sim``: the model offline (no ROS) and the ROS tools, one verb per module.
+
+The offline verbs write data (CSV, JSON) and plots (PNG); the ROS tools are ``fleet`` and
+``replay play``. There is one verb per module in det_sim_ros.cli.verbs::
 
     det_sim statics [--beams fixed,simply_supported] [--eps-range 0:0.3:61]
                     [--eps-b 0.15,0.20,0.25]
@@ -40,7 +42,7 @@ VERBS = {'statics': statics, 'step': step, 'bench': bench, 'plot': plot,
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The ``det_sim`` parser: one sub-parser per verb."""
+    """Build the ``det_sim`` parser: one sub-parser per verb."""
     parser = argparse.ArgumentParser(
         prog=PROG, description='Run the DET-buckled-beam model offline (no ROS): statics '
         '(Fig. 5), step responses (Fig. 6), integration benchmark, plots of sim_node logs, '
@@ -81,7 +83,7 @@ def main_replay(argv=None) -> int:
 
 
 def _parse(parser, argv):
-    """The parsed arguments, or argparse's exit code (--help: 0, a bad argument: 2)."""
+    """Return the parsed arguments, or argparse's exit code (--help: 0, a bad argument: 2)."""
     try:
         return parser.parse_args(sys.argv[1:] if argv is None else list(argv))
     except SystemExit as exc:

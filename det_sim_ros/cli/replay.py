@@ -1,6 +1,9 @@
-"""``det_sim_replay``: the ``replay`` verb of ``det_sim`` as a command of its own (the
-console script, ``python -m det_sim_ros.cli.replay``, and the old ``python -m
-det_sim_ros.replay``)."""
+"""
+``det_sim_replay``: the ``replay`` verb of ``det_sim`` as a command of its own.
+
+It runs as the console script, as ``python -m det_sim_ros.cli.replay`` and as the old
+``python -m det_sim_ros.replay``.
+"""
 
 import sys
 

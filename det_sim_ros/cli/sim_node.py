@@ -1,6 +1,8 @@
 """
-The ``sim_node`` entry point (console script, ``ros2 run det_sim_ros sim_node``, ``python -m
-det_sim_ros.cli.sim_node``).
+The ``sim_node`` entry point.
+
+It runs as the console script, as ``ros2 run det_sim_ros sim_node`` and as ``python -m
+det_sim_ros.cli.sim_node``.
 
 SIGINT and SIGTERM while the node's modules are still importing (rclpy, numpy, the kernel;
 before :func:`det_sim_ros.ros.node.main` takes the signals over) exit quietly with code 0

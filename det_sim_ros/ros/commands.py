@@ -1,23 +1,27 @@
 """
-The node's command intake: a voltage command's CDR bytes are decoded and checked by the topic
-contract (det_sim_ros.io.contract), logged at the period they apply to, and held by the
-simulator until the next command; refused and clamped ones are counted and warned about.
+The node's command intake: decode, check, log and hold voltage commands.
+
+A voltage command's CDR bytes are decoded and checked by the topic contract
+(det_sim_ros.io.contract), logged at the period they apply to, and held by the simulator
+until the next command; refused and clamped ones are counted and warned about.
 """
 
 from __future__ import annotations
 
 from typing import Callable
 
-from ..io.contract import clamp_message, CommandDecoder, JOINT_COMMAND_TOPIC, stamp_ns, TOPIC_TYPES
 from .diagnostics import CommandCounts
+from ..io.contract import clamp_message, CommandDecoder, JOINT_COMMAND_TOPIC, stamp_ns, TOPIC_TYPES
 
 __all__ = ['CommandInput']
 
 
 class CommandInput:
     """
-    Applies commands to a simulator; counts them (``received``, ``refused``, ``clamped``,
-    ``last_refused``: the latest refusal's reason).
+    Applies commands to a simulator and counts them.
+
+    The counters: ``received``, ``refused``, ``clamped``, ``last_refused`` (the latest
+    refusal's reason).
 
     :param names: the DETs in command order.
     :param v_max: the largest voltage, V (beyond it a command is clamped).
@@ -39,11 +43,11 @@ class CommandInput:
         self.last_refused = ''
 
     def counts(self) -> CommandCounts:
-        """The counters now."""
+        """Return the counters now."""
         return CommandCounts(self.received, self.refused, self.clamped, self.last_refused)
 
     def apply(self, topic: str, data: bytes) -> None:
-        """A command's CDR bytes: decode, check, log (at the period it applies to), hold."""
+        """Decode, check, log (at the period it applies to) and hold a command's CDR bytes."""
         self.received += 1
         sim = self._sim
         command = self._decoder.decode(topic, data, sim.u)

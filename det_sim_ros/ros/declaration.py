@@ -1,7 +1,8 @@
 """
-The node's parameters declared in ROS from the ROS-free table (det_sim_ros.ros.params): the
-scene's values read-only, the node parameters with their descriptions and ranges, and the
-checks a change at run time must pass.
+The node's parameters declared in ROS from the ROS-free table (det_sim_ros.ros.params).
+
+The scene's values are declared read-only, the node parameters with their descriptions and
+ranges; a change at run time must pass the checks here.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ __all__ = ['declare_parameters', 'descriptor', 'validate_parameters']
 
 
 def descriptor(param: Param) -> ParameterDescriptor:
-    """A node parameter's descriptor: its description, read-only flag and range."""
+    """Build a node parameter's descriptor: its description, read-only flag and range."""
     result = ParameterDescriptor(description=param.description, read_only=param.read_only)
     bounds, default = param.bounds, param.default
     if bounds is not None and isinstance(default, float):
@@ -50,7 +51,7 @@ def declare_parameters(node, scene, overrides: dict) -> None:
 
 
 def validate_parameters(params) -> SetParametersResult:
-    """The on-set-parameters callback: refuse a change that :func:`runtime_refusal` refuses."""
+    """Refuse a change that :func:`runtime_refusal` refuses (the on-set-parameters callback)."""
     for param in params:
         reason = runtime_refusal(param.name, param.value)
         if reason:

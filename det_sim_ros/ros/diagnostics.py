@@ -1,7 +1,9 @@
 """
-What the node reports: the /diagnostics status (level, message, key-value pairs) and the
-periodic INFO line, each built in one place from named inputs. Keys and values: README.md
-(Diagnostics). Wall times in s, rates per wall second.
+What the node reports: the /diagnostics status and the periodic INFO line.
+
+The /diagnostics status (level, message, key-value pairs) and the periodic INFO line are each
+built in one place from named inputs. Keys and values: README.md (Diagnostics). Wall times in
+s, rates per wall second.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ class RateWindow:
         self._start = (time.perf_counter(), steps, late_ticks, slipped_s)
 
     def take(self, steps: int, late_ticks: int, slipped_s: float) -> Window:
-        """The window up to now, given the running totals; the next window starts now."""
+        """Return the window up to now, given the running totals; the next one starts now."""
         now = (time.perf_counter(), steps, late_ticks, slipped_s)
         start, self._start = self._start, now
         wall = now[0] - start[0]
@@ -53,7 +55,7 @@ def diagnostics_message(*, node_name: str, stamp, mode: str, paused: bool, simul
                         slipped_s: float, commands: CommandCounts, distrust: str,
                         recorder) -> DiagnosticArray:
     """
-    One /diagnostics message with the node's one status ``<node_name>: simulation``.
+    Build one /diagnostics message with the node's one status ``<node_name>: simulation``.
 
     :param simulator: the :class:`~det_sim_ros.sim.simulator.Simulator` (sim time, fault,
         voltages, stepper, power residual).
@@ -117,7 +119,11 @@ def _mm(values) -> str:
 
 
 def status_line(*, t: float, volts, q_mm, dy_mm, rtf: float, state: str) -> str:
-    """The periodic INFO line: sim time (s), voltages (V), deflection and displacement (mm),
-    the achieved real-time factor and the state (running, paused, FAULT)."""
+    """
+    Return the periodic INFO line.
+
+    It holds the sim time (s), voltages (V), deflection and displacement (mm), the achieved
+    real-time factor and the state (running, paused, FAULT).
+    """
     v = volts.tolist() if len(volts) <= 4 else f'{volts.min():g}..{volts.max():g}'
     return f't={t:.3f} s v={v} V q={_mm(q_mm)} mm dy={_mm(dy_mm)} mm RTF={rtf:.2f} {state}'

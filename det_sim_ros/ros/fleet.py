@@ -68,11 +68,11 @@ class FleetNode:
 
     @property
     def name(self) -> str:
-        """The namespace as a file name: /lab/cell_a -> lab_cell_a."""
+        """Return the namespace as a file name: /lab/cell_a -> lab_cell_a."""
         return self.namespace.strip('/').replace('/', '_')
 
     def parameters(self) -> dict:
-        """Every ROS parameter this node is started with."""
+        """Return every ROS parameter this node is started with."""
         return {'log.path': self.log_path, **self.params, **self.overrides,
                 'scene_file': self.scene, 'mode': self.mode}
 
@@ -100,7 +100,7 @@ def _mapping(value, where):
 
 
 def _known_keys(mapping: dict, allowed: set, where: str) -> None:
-    """One line naming the first key of ``mapping`` that is not ``allowed``."""
+    """Raise one line naming the first key of ``mapping`` that is not ``allowed``."""
     bad = sorted(set(mapping) - allowed)
     if bad:
         raise FleetError(f'{where}: unknown key {bad[0]!r} (allowed: '
@@ -110,10 +110,36 @@ def _known_keys(mapping: dict, allowed: set, where: str) -> None:
 def load_fleet(path: str, host: str | None = None, log_dir: str | None = None,
                check_scenes: bool = True) -> list:
     """
-    The nodes of the fleet file ``path`` that run on ``host`` (None: every node), checked:
-    unique valid namespaces, known modes, known parameters, loadable scenes (with their
-    overrides). :class:`FleetError` with one line otherwise.
+    Return the checked nodes of the fleet file ``path`` that run on ``host``.
+
+    ``host`` None means every node. The checks: unique valid namespaces, known modes, known
+    parameters, loadable scenes (with their overrides); :class:`FleetError` with one line
+    otherwise.
     """
+    data = _read_fleet_file(path)
+    nodes = data.get('nodes')
+    if not isinstance(nodes, list) or not nodes:
+        raise FleetError(f'{path}: nodes: must be a non-empty list')
+    base = os.path.dirname(os.path.abspath(path))
+    folder = log_dir or data.get('log_dir') or 'fleet_logs'
+    if not isinstance(folder, str):
+        raise FleetError(f'{path}: log_dir: must be a path')
+    folder = os.path.abspath(folder)     # like sim_node's log.path: relative to the cwd
+    defaults = _mapping(data.get('defaults'), 'defaults')
+    _known_keys(defaults, NODE_KEYS - {'namespace', 'host'}, 'defaults')
+    result, seen = [], set()
+    for i, entry in enumerate(nodes):
+        node = _fleet_node(entry, f'nodes[{i}]', seen, defaults, base, folder, check_scenes)
+        if host is None or node.host is None or node.host == host:
+            result.append(node)
+    names = [n.name for n in result]
+    if len(set(names)) != len(names):
+        raise FleetError('two namespaces give the same log file name (/a/b and /a_b)')
+    return result
+
+
+def _read_fleet_file(path: str) -> dict:
+    """Read the fleet file ``path``: a mapping of known keys; :class:`FleetError` if not."""
     try:
         with open(path, encoding='utf-8') as stream:
             data = yaml.safe_load(stream)
@@ -126,71 +152,62 @@ def load_fleet(path: str, host: str | None = None, log_dir: str | None = None,
     if not isinstance(data, dict):
         raise FleetError(f'{path}: expected a mapping with a nodes: list')
     _known_keys(data, TOP_KEYS, path)
-    nodes = data.get('nodes')
-    if not isinstance(nodes, list) or not nodes:
-        raise FleetError(f'{path}: nodes: must be a non-empty list')
-    base = os.path.dirname(os.path.abspath(path))
-    folder = log_dir or data.get('log_dir') or 'fleet_logs'
-    if not isinstance(folder, str):
-        raise FleetError(f'{path}: log_dir: must be a path')
-    folder = os.path.abspath(folder)     # like sim_node's log.path: relative to the cwd
-    defaults = _mapping(data.get('defaults'), 'defaults')
-    _known_keys(defaults, NODE_KEYS - {'namespace', 'host'}, 'defaults')
+    return data
 
+
+def _fleet_node(entry, where: str, seen: set, defaults: dict, base: str, folder: str,
+                check_scenes: bool) -> FleetNode:
+    """
+    Check one entry of the fleet file's ``nodes:`` list and return its node.
+
+    ``where`` names the entry in errors; ``seen`` holds the namespaces of the entries before
+    it (this one is added); ``base`` is the fleet file's folder, ``folder`` the log folder.
+    """
     from .params import NODE_PARAMS
-    result, seen = [], set()
-    for i, entry in enumerate(nodes):
-        where = f'nodes[{i}]'
-        if not isinstance(entry, dict):
-            raise FleetError(f'{where}: expected a mapping with a namespace:')
-        _known_keys(entry, NODE_KEYS, where)
-        namespace = entry.get('namespace')
-        if not isinstance(namespace, str) or not _NAMESPACE.match(namespace):
-            raise FleetError(f'{where}: namespace: expected /name or /a/b (letters, digits, _), '
-                             f'got {namespace!r}')
-        where = f'node {namespace}'
-        if namespace in seen:
-            raise FleetError(f'{where}: namespace used twice')
-        seen.add(namespace)
-        scene = entry.get('scene', defaults.get('scene', 'default'))
-        if not isinstance(scene, str):
-            raise FleetError(f'{where}: scene: expected a name in config/ or a path')
-        if os.sep in scene or scene.endswith(('.yaml', '.yml')):
-            scene = os.path.join(base, scene)     # relative to the fleet file
-        mode = entry.get('mode', defaults.get('mode', 'real_time'))
-        if mode not in MODES:
-            raise FleetError(f'{where}: mode: one of {", ".join(MODES)} (got {mode!r})')
-        overrides = {**_mapping(defaults.get('overrides'), 'defaults: overrides'),
-                     **_mapping(entry.get('overrides'), f'{where}: overrides')}
-        params = {**_mapping(defaults.get('params'), 'defaults: params'),
-                  **_mapping(entry.get('params'), f'{where}: params')}
-        unknown = sorted(k for k in params if k not in NODE_PARAMS)   # scene_file too
-        if unknown:
-            raise FleetError(f'{where}: params: unknown parameter {unknown[0]!r} (scene keys '
-                             'go in overrides:)')
-        if 'mode' in params or 'real_time' in params:
-            raise FleetError(f'{where}: params: set the mode with mode:, not in params:')
-        node_host = entry.get('host')
-        if node_host is not None and not isinstance(node_host, str):
-            raise FleetError(f'{where}: host: expected a host name')
-        if check_scenes:
-            try:
-                load_scene(scene, overrides=overrides)
-            except SceneError as exc:
-                raise FleetError(f'{where}: {exc}') from None
-        name = namespace.strip('/').replace('/', '_')
-        node = FleetNode(namespace, scene, mode, overrides, params, node_host,
-                         os.path.join(folder, name + '.log'), os.path.join(folder, name))
-        if host is None or node_host is None or node_host == host:
-            result.append(node)
-    names = [n.name for n in result]
-    if len(set(names)) != len(names):
-        raise FleetError('two namespaces give the same log file name (/a/b and /a_b)')
-    return result
+    if not isinstance(entry, dict):
+        raise FleetError(f'{where}: expected a mapping with a namespace:')
+    _known_keys(entry, NODE_KEYS, where)
+    namespace = entry.get('namespace')
+    if not isinstance(namespace, str) or not _NAMESPACE.match(namespace):
+        raise FleetError(f'{where}: namespace: expected /name or /a/b (letters, digits, _), '
+                         f'got {namespace!r}')
+    where = f'node {namespace}'
+    if namespace in seen:
+        raise FleetError(f'{where}: namespace used twice')
+    seen.add(namespace)
+    scene = entry.get('scene', defaults.get('scene', 'default'))
+    if not isinstance(scene, str):
+        raise FleetError(f'{where}: scene: expected a name in config/ or a path')
+    if os.sep in scene or scene.endswith(('.yaml', '.yml')):
+        scene = os.path.join(base, scene)     # relative to the fleet file
+    mode = entry.get('mode', defaults.get('mode', 'real_time'))
+    if mode not in MODES:
+        raise FleetError(f'{where}: mode: one of {", ".join(MODES)} (got {mode!r})')
+    overrides = {**_mapping(defaults.get('overrides'), 'defaults: overrides'),
+                 **_mapping(entry.get('overrides'), f'{where}: overrides')}
+    params = {**_mapping(defaults.get('params'), 'defaults: params'),
+              **_mapping(entry.get('params'), f'{where}: params')}
+    unknown = sorted(k for k in params if k not in NODE_PARAMS)   # scene_file too
+    if unknown:
+        raise FleetError(f'{where}: params: unknown parameter {unknown[0]!r} (scene keys '
+                         'go in overrides:)')
+    if 'mode' in params or 'real_time' in params:
+        raise FleetError(f'{where}: params: set the mode with mode:, not in params:')
+    node_host = entry.get('host')
+    if node_host is not None and not isinstance(node_host, str):
+        raise FleetError(f'{where}: host: expected a host name')
+    if check_scenes:
+        try:
+            load_scene(scene, overrides=overrides)
+        except SceneError as exc:
+            raise FleetError(f'{where}: {exc}') from None
+    name = namespace.strip('/').replace('/', '_')
+    return FleetNode(namespace, scene, mode, overrides, params, node_host,
+                     os.path.join(folder, name + '.log'), os.path.join(folder, name))
 
 
 def _nest(flat: dict) -> dict:
-    """{'a.b': 1} -> {'a': {'b': 1}} (the params-file form of dotted parameter names)."""
+    """Nest {'a.b': 1} as {'a': {'b': 1}} (the params-file form of dotted parameter names)."""
     nested: dict = {}
     for key, value in flat.items():
         parts = key.split('.')
@@ -202,8 +219,12 @@ def _nest(flat: dict) -> dict:
 
 
 def _die_with_parent():
-    """In the child: SIGTERM when the fleet process dies (even by SIGKILL), so no node is left
-    running on its own; SIGINT as in a terminal (a background job inherits it ignored)."""
+    """
+    In the child: ask for SIGTERM when the fleet process dies, and SIGINT as in a terminal.
+
+    SIGTERM comes even when the fleet process dies by SIGKILL, so no node is left running on
+    its own; SIGINT is reset to its default because a background job inherits it ignored.
+    """
     signal.signal(signal.SIGINT, signal.SIG_DFL)
     try:
         ctypes.CDLL('libc.so.6', use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG
@@ -241,7 +262,7 @@ class Fleet:
                 proc.send_signal(signum)
 
     def ready(self) -> list:
-        """The nodes whose start-up has finished (their log shows the start-up line)."""
+        """Return the nodes whose start-up has finished (their log shows the start-up line)."""
         done = []
         for node in self.nodes:
             try:
@@ -253,8 +274,11 @@ class Fleet:
         return done
 
     def wait(self, stop_timeout: float) -> list:
-        """Wait for every process; those still running ``stop_timeout`` s after the first call
-        are killed. The exit codes, in node order (-9: killed)."""
+        """
+        Wait for every process; return the exit codes, in node order (-9: killed).
+
+        Those still running ``stop_timeout`` s after the first call are killed.
+        """
         deadline = time.monotonic() + stop_timeout
         codes = []
         for proc in self.procs:
@@ -280,8 +304,12 @@ def _last_line(path):
 
 def run_fleet(path: str, host: str | None = None, log_dir: str | None = None,
               stop_timeout: float = 20.0, out=None) -> int:
-    """``det_sim fleet``: start the nodes of ``path`` for ``host``, forward SIGINT/SIGTERM,
-    return 0 when every node stopped with exit code 0, else 1."""
+    """
+    Run ``det_sim fleet``: start the nodes of ``path`` for ``host`` and wait for them.
+
+    SIGINT and SIGTERM are forwarded to every node. Return 0 when every node stopped with exit
+    code 0, else 1.
+    """
     out = sys.stderr if out is None else out
     host = host or socket.gethostname()
     nodes = load_fleet(path, host=host, log_dir=log_dir)

@@ -38,7 +38,7 @@ class NetnsError(RuntimeError):
 
 
 def can_make_namespaces() -> str:
-    """'' when this process can make network namespaces and TAP devices, else why not."""
+    """Return '' when this process can make network namespaces and TAP devices, else why not."""
     if sys.platform != 'linux':
         return 'network namespaces need Linux'
     if os.geteuid() != 0:
@@ -169,8 +169,12 @@ class NetnsHosts:
         return self
 
     def _relay_link(self, i):
-        """Host i's eth0 and the bridge port are TAP devices of a relay process (in the bridge
-        namespace) that copies frames between them with a delay and random loss."""
+        """
+        Join host i to the bridge through a relay process (in the bridge namespace).
+
+        Host i's eth0 and the bridge port are TAP devices of the relay, which copies frames
+        between them with a delay and random loss.
+        """
         delay, loss = self.lossy[i]
         proc = subprocess.Popen(
             ['ip', 'netns', 'exec', self.bridge, sys.executable, '-m', 'det_sim_ros.ros.netns',
@@ -203,14 +207,14 @@ class NetnsHosts:
 
     # -- running things on a host --------------------------------------------------------------
     def ros_env(self, base: dict | None = None, **extra) -> dict:
-        """Unicast discovery with every host as a static peer, UDP only."""
+        """Return an environment: unicast discovery with every host as a static peer, UDP only."""
         return dict(base if base is not None else os.environ,
                     ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                     ROS_STATIC_PEERS=';'.join(self.addresses),
                     FASTDDS_BUILTIN_TRANSPORTS='UDPv4', **extra)
 
     def packets_received(self, host: int) -> int:
-        """Packets host ``host`` has received on its link (eth0) so far."""
+        """Return the packets host ``host`` has received on its link (eth0) so far."""
         text = _ip('-n', self.hosts[host], '-s', '-o', 'link', 'show', 'eth0')
         return int(text.split('RX:')[1].split('\\')[1].split()[1])
 
@@ -237,10 +241,11 @@ def _tap(name):
 
 def relay(name_a: str, name_b: str, delay: float, loss: float, seed: int = 1) -> None:
     """
-    Make TAP devices ``name_a`` and ``name_b`` in this namespace and copy every Ethernet frame
-    between them, each direction delayed by ``delay`` s (frames keep their order) and dropped
-    with probability ``loss`` (a seeded generator). Prints 'ready' once both exist; runs until
-    killed.
+    Make TAP devices ``name_a`` and ``name_b`` and copy every Ethernet frame between them.
+
+    The devices are made in this namespace. Each direction is delayed by ``delay`` s (frames
+    keep their order) and dropped with probability ``loss`` (a seeded generator). Prints
+    'ready' once both exist; runs until killed.
     """
     rng = random.Random(seed)
     fds = [_tap(name_a), _tap(name_b)]

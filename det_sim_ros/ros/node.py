@@ -29,15 +29,15 @@ from std_srvs.srv import SetBool, Trigger
 from .commands import CommandInput
 from .declaration import declare_parameters, validate_parameters
 from .diagnostics import diagnostics_message, RateWindow, status_line
-from ..io.contract import (CLOCK_TOPIC, COMMAND_TOPIC, DIAGNOSTICS_TOPIC, encode_clock,
-                           JOINT_COMMAND_TOPIC, OUTPUT_FIELDS, OutputContract, rest_shortenings,
-                           STRUCTURE_TOPIC, stamp_ns, structure_channels, TOPIC_TYPES)
 from .markers import attach_markers
 from .pacing import make_pacing
 from .params import SCENE_SECTIONS
-from ..physics.model import ModelDomainError
 from .recording import open_recorder
 from .spinning import make_executor, spin, spin_until_stopped, StopRequested, StopSignals
+from ..io.contract import (CLOCK_TOPIC, COMMAND_TOPIC, DIAGNOSTICS_TOPIC, encode_clock,
+                           JOINT_COMMAND_TOPIC, OUTPUT_FIELDS, OutputContract, rest_shortenings,
+                           stamp_ns, structure_channels, STRUCTURE_TOPIC, TOPIC_TYPES)
+from ..physics.model import ModelDomainError
 from ..scenes.scene import load_scene, SceneError
 from ..sim.simulator import Simulator
 
@@ -96,11 +96,14 @@ class SimNode(Node):
         self._start(scene_file)
 
     def _load_scene(self) -> str:
-        """Load the scene (``scene_file`` with the scene keys given as overrides) and declare
-        every parameter; the scene file's name."""
+        """
+        Load the scene and declare every parameter; return the scene file's name.
+
+        The scene is ``scene_file`` with the scene keys given as overrides.
+        """
         overrides = dict(getattr(self, '_parameter_overrides', {}) or {})
         if 'scene_file' in overrides and not isinstance(overrides['scene_file'].value, str):
-            raise SceneError(f"parameter scene_file: must be a string (a name in config/ or a "
+            raise SceneError(f'parameter scene_file: must be a string (a name in config/ or a '
                              f"path; got {overrides['scene_file'].value!r})")
         scene_file = self.declare_parameter('scene_file', 'default', ParameterDescriptor(
             description='scene file: a name in config/ or a path', read_only=True)).value
@@ -117,7 +120,7 @@ class SimNode(Node):
         return scene_file
 
     def _start(self, scene_file):
-        """Endpoints, timers and the recorder; then sample 0 and the start-up line."""
+        """Create the endpoints, timers and the recorder; then sample 0 and the start-up line."""
         if self._p('qos_sensor_data') and self._p('qos_keep_all'):
             raise SceneError('parameters qos_sensor_data and qos_keep_all: choose one')
         keep_all = QoSProfile(history=HistoryPolicy.KEEP_ALL)
@@ -198,15 +201,15 @@ class SimNode(Node):
 
     @property
     def running(self) -> bool:
-        """Neither paused nor stopped by a fault."""
+        """Return True if neither paused nor stopped by a fault."""
         return not self.paused and not self._sim.fault
 
     def current_outputs(self) -> np.ndarray:
-        """The simulator's output vector now."""
+        """Return the simulator's output vector now."""
         return np.array(list(self._sim.outputs().values()))
 
     def subscriptions_matched(self) -> int:
-        """Subscriptions matched by the output publishers, summed."""
+        """Return the subscriptions matched by the output publishers, summed."""
         return sum(pub.get_subscription_count() for pub in self._output_pubs.values())
 
     def destroy_node(self):
@@ -217,8 +220,11 @@ class SimNode(Node):
 
     # -- stepping ---------------------------------------------------------------------------
     def run_period(self, batch=None) -> bool:
-        """Run one control period and publish it (or add its messages to ``batch``, see
-        :meth:`send`); False (and fault) if the model diverged."""
+        """
+        Run one control period and publish it; False (and fault) if the model diverged.
+
+        With ``batch`` its messages are added to the batch instead (see :meth:`send`).
+        """
         # the commands that have arrived since the last period, also in a catch-up burst or a
         # free-run tick (the executor would deliver them only after the whole tick)
         for topic, sub in self._command_subs.items():
@@ -233,8 +239,12 @@ class SimNode(Node):
         return self._publish_sample(out, batch)
 
     def send(self, batch) -> bool:
-        """Publish (t_ns, samples, marker frame or None) in order, /clock before each
-        sample's outputs; False if the context has shut down meanwhile."""
+        """
+        Publish a batch of (t_ns, samples, marker frame or None) in order.
+
+        /clock goes before each sample's outputs. Return False if the context has shut down
+        meanwhile.
+        """
         try:
             publish_clock, publishers = self._publish_clock, self._publish_raw
             for t_ns, samples, frame in batch:
@@ -282,7 +292,7 @@ class SimNode(Node):
 
     # -- services ---------------------------------------------------------------------------
     def set_paused(self, paused: bool) -> str:
-        """Pause or resume (as ~/pause does); the service's answer."""
+        """Pause or resume (as ~/pause does); return the service's answer."""
         self.paused = bool(paused)
         self._pacing.run(self.running)
         return f"{'paused' if self.paused else 'running'} at t = {self._sim.t:.6g} s"
@@ -327,7 +337,7 @@ class SimNode(Node):
 
     # -- reporting --------------------------------------------------------------------------
     def publish_diagnostics(self):
-        """Publish the /diagnostics status for the window since the last one; the message."""
+        """Publish the /diagnostics status for the window since the last one; return it."""
         pacing = self._pacing
         window = self._diag_window.take(self.steps_total, pacing.late_ticks, pacing.slipped_s)
         self.achieved_rtf = window.rate_hz * self._sim.dt
@@ -360,8 +370,10 @@ class SimNode(Node):
 
 def main(args=None):
     """
-    Run the simulator node until SIGINT or SIGTERM (exit 0, log finished); exit 1 with one
-    line for a start-up input that cannot be used (scene, parameter, initial state).
+    Run the simulator node until SIGINT or SIGTERM; return the exit code.
+
+    A stop exits 0 with the log finished; a start-up input that cannot be used (scene,
+    parameter, initial state) exits 1 with one line.
     """
     from rclpy.signals import SignalHandlerOptions
     node = None

@@ -37,8 +37,10 @@ class PacingReport(NamedTuple):
 
 class Pacing:
     """
-    The common interface; the base class also holds what most modes share (one timer that
-    runs while the node runs, no wall-clock reference, nothing to add to diagnostics).
+    The interface of every pacing, with what most modes share.
+
+    The base class holds the common interface and what most modes share: one timer that runs
+    while the node runs, no wall-clock reference, nothing to add to diagnostics.
 
     What a pacing uses of its node: ``dt``, ``simulator``, ``running``, ``paused``,
     ``wall_clock``, ``steady_clock``, ``run_period``, ``send``, ``subscriptions_matched``,
@@ -59,7 +61,7 @@ class Pacing:
         self.parameters_changed(get, self.PARAMETERS)
 
     def label(self) -> str:
-        """The mode as the start-up INFO line names it."""
+        """Return the mode as the start-up INFO line names it."""
         return self.mode.replace('_', '-')
 
     def start(self, node) -> None:
@@ -88,7 +90,7 @@ class Pacing:
         """Restart the wall-clock reference (real time): no catch-up for time not running."""
 
     def run(self, running: bool) -> None:
-        """The node starts (resumes, is reset) or stops running."""
+        """Follow the node as it starts (resumes, is reset) or stops running."""
         if running:
             self.resync()
             self._timer.reset()
@@ -100,17 +102,21 @@ class Pacing:
         self._timer.cancel()
 
     def sample_ready(self, k: int, samples) -> None:
-        """Sample k (its CDR bytes per output topic) is about to be published."""
+        """Prepare for sample k (its CDR bytes per output topic), about to be published."""
 
     def command_received(self, command) -> None:
-        """A command (decoded, applied or refused) has arrived."""
+        """Count a command that has arrived (decoded, applied or refused)."""
 
     def reset(self) -> None:
-        """The simulation is back at t = 0."""
+        """Follow the simulation back to t = 0."""
 
     def report(self, rate_hz: float, slipped_s: float, wall_s: float) -> PacingReport:
-        """This mode's diagnostics for a window of ``wall_s`` in which ``rate_hz`` periods
-        per second ran and ``slipped_s`` of wall time was dropped."""
+        """
+        Return this mode's diagnostics for a window of ``wall_s``.
+
+        In the window ``rate_hz`` periods per second ran and ``slipped_s`` of wall time was
+        dropped.
+        """
         return PacingReport(0, 0, '', {})
 
     def apply_priority(self, priority: int, logger) -> bool:
@@ -122,9 +128,10 @@ class Pacing:
 
 class RealTimePacing(Pacing):
     """
-    Sim time follows the wall clock times real_time_factor. Each tick runs the periods due; a
-    lag beyond max_lag is dropped from the wall clock (a slip: sim time then runs below real
-    time), never from the sim steps.
+    Sim time follows the wall clock times real_time_factor.
+
+    Each tick runs the periods due; a lag beyond max_lag is dropped from the wall clock (a
+    slip: sim time then runs below real time), never from the sim steps.
     """
 
     mode = 'real_time'
@@ -158,7 +165,7 @@ class RealTimePacing(Pacing):
         self._k0 = self.node.simulator.k
 
     def steps_due(self, now: float) -> int:
-        """Control periods the wall clock (at ``now``) is ahead of sim time."""
+        """Return the control periods the wall clock (at ``now``) is ahead of sim time."""
         # + 1e-6: a period is due at its boundary despite round-off (0.003 / 0.001 < 3)
         return (self._k0 + int((now - self._wall0) * self.real_time_factor / self.node.dt
                                + 1e-6) - self.node.simulator.k)
@@ -214,11 +221,12 @@ class RealTimePacing(Pacing):
 
 class FreeRunPacing(Pacing):
     """
-    As fast as possible: each tick runs steps_per_tick periods, then publishes their samples
-    back to back. DDS spends about half the CPU per message on a burst that it spends on the
-    same messages ~0.1 ms apart (it wakes its own and the subscribers' threads per message
-    then; measured on the 2-core test host), and free run has no wall-clock deadline to keep.
-    Commands are still taken before every period.
+    As fast as possible: each tick runs steps_per_tick periods, then publishes them.
+
+    The samples go out back to back: DDS spends about half the CPU per message on a burst that
+    it spends on the same messages ~0.1 ms apart (it wakes its own and the subscribers'
+    threads per message then; measured on the 2-core test host), and free run has no
+    wall-clock deadline to keep. Commands are still taken before every period.
     """
 
     mode = 'free_run'
@@ -245,10 +253,12 @@ class FreeRunPacing(Pacing):
 
 class LockstepPacing(Pacing):
     """
-    The next period runs once every expected source (lockstep.sources) has answered the
-    latest sample. A JointState command answers the sample its header stamp names (an unset
-    stamp, 0, the latest); a Float64MultiArray the latest sample. A refused command answers too
-    (the voltages are held). Answers to older samples are applied but do not count.
+    The next period runs once every expected source has answered the latest sample.
+
+    The expected sources are lockstep.sources. A JointState command answers the sample its
+    header stamp names (an unset stamp, 0, the latest); a Float64MultiArray the latest sample.
+    A refused command answers too (the voltages are held). Answers to older samples are
+    applied but do not count.
     """
 
     mode = 'lockstep'
@@ -291,7 +301,7 @@ class LockstepPacing(Pacing):
             self._timer.cancel()
 
     def sample_ready(self, k: int, samples) -> None:
-        """A new sample: wait for its answers (until the deadline)."""
+        """Wait for the answers to a new sample (until the deadline)."""
         self.answers = 0
         self._published_wall = time.perf_counter()
         if self.timeout and not self.node.paused:
@@ -323,7 +333,7 @@ class LockstepPacing(Pacing):
         self._run_period()
 
     def _deadline(self) -> None:
-        """The answers did not come in time: hold the voltages and go on."""
+        """Hold the voltages and go on: the answers did not come in time."""
         node = self.node
         if not node.running:
             return
@@ -345,9 +355,11 @@ class LockstepPacing(Pacing):
 
     def _resend(self) -> None:
         """
+        Re-send sample 0 (not logged) to subscriptions matched since, until it is answered.
+
         At t = 0 (also after ~/reset) a controller discovered after sample 0 was published
-        never saw it, and both would wait forever: re-send sample 0 (not logged) when new
-        subscriptions have matched since, until it is answered.
+        never saw it, and both would wait forever: sample 0 is re-sent when new subscriptions
+        have matched since, until it is answered.
         """
         node = self.node
         if node.simulator.k != 0 or self.answers >= self.sources or not self._last_sample:
@@ -375,7 +387,7 @@ assert set(PACINGS) == set(MODES)
 
 
 def make_pacing(get: Callable) -> Pacing:
-    """The pacing the parameters ``mode`` and ``real_time`` (its alias) ask for."""
+    """Return the pacing the parameters ``mode`` and ``real_time`` (its alias) ask for."""
     mode = get('mode') or ('real_time' if get('real_time') else 'free_run')
     if mode not in PACINGS:
         raise SceneError(f"parameter 'mode': one of {', '.join(MODES)} (got {mode!r})")
@@ -384,9 +396,10 @@ def make_pacing(get: Callable) -> Pacing:
 
 def set_fifo_priority(priority: int) -> tuple[int, str]:
     """
-    SCHED_FIFO at ``priority`` for every thread of this process (the executor's, DDS's, the
-    log writer's; threads started later inherit it), all or nothing: (threads changed, the
-    reason it was refused or '').
+    Set SCHED_FIFO at ``priority`` for every thread of this process, all or nothing.
+
+    The threads are the executor's, DDS's and the log writer's; threads started later inherit
+    the priority. Return (threads changed, the reason it was refused or '').
     """
     changed, refused = 0, ''
     for tid in sorted(int(t) for t in os.listdir('/proc/self/task')):

@@ -1,6 +1,8 @@
 """
-The node's parameters, as one ROS-free table: the node declares them from it, the fleet loader
-checks fleet files against it, and the parameter reference in docs/ is generated from it.
+The node's parameters, as one ROS-free table.
+
+The node declares them from it, the fleet loader checks fleet files against it, and the
+parameter reference in docs/ is generated from it.
 
 ``NODE_PARAMS``: name -> :class:`Param` (default, description, read_only, bounds). The type of
 the default is the parameter's type (an integer is accepted for a double); ``bounds`` is a
@@ -24,8 +26,12 @@ SCENE_PARAM_DESCRIPTION = 'scene value (read-only; set in the scene file or with
 
 
 class Param(NamedTuple):
-    """One node parameter: its default (whose type is the parameter's), what it does, whether
-    it is fixed at start, and its range (lo, hi), allowed strings or None."""
+    """
+    One node parameter: default, description, read-only flag and bounds.
+
+    Its default (whose type is the parameter's), what it does, whether it is fixed at start,
+    and its range (lo, hi), allowed strings or None.
+    """
 
     default: Any
     description: str
@@ -97,7 +103,7 @@ NODE_PARAMS = {
 
 
 def flatten(data: dict, prefix: str = '') -> Iterator[tuple[str, Any]]:
-    """Nested mappings as (dotted name, value) pairs: {'a': {'b': 1}} -> ('a.b', 1)."""
+    """Yield nested mappings as (dotted name, value) pairs: {'a': {'b': 1}} -> ('a.b', 1)."""
     for key, value in data.items():
         if isinstance(value, dict):
             yield from flatten(value, f'{prefix}{key}.')
@@ -106,16 +112,23 @@ def flatten(data: dict, prefix: str = '') -> Iterator[tuple[str, Any]]:
 
 
 def scene_parameters(scene) -> Iterator[tuple[str, Any]]:
-    """The loaded scene's values as (parameter name, value), its ``node:`` section left out
-    (those are the node parameters)."""
+    """
+    Yield the loaded scene's values as (parameter name, value).
+
+    Its ``node:`` section is left out (those are the node parameters).
+    """
     for name, value in flatten(scene_to_dict(scene)):
         if not name.startswith('node.'):
             yield name, value
 
 
 def check_node_value(name: str, value, where: str = 'scene key node.'):
-    """A node parameter's value checked against its type and range (an integer is accepted
-    for a double); :class:`SceneError` naming the key otherwise."""
+    """
+    Return a node parameter's value checked against its type and range.
+
+    An integer is accepted for a double; a value that does not fit raises :class:`SceneError`
+    naming the key.
+    """
     default, bounds = NODE_PARAMS[name].default, NODE_PARAMS[name].bounds
     if isinstance(default, bool):
         ok = isinstance(value, bool)
@@ -129,7 +142,7 @@ def check_node_value(name: str, value, where: str = 'scene key node.'):
     kind = {bool: 'true or false', int: 'an integer', str: 'a string',
             float: 'a number'}[type(default)]
     if not ok:
-        raise SceneError(f"{where}{name}: must be {kind} (got {value!r})")
+        raise SceneError(f'{where}{name}: must be {kind} (got {value!r})')
     if isinstance(default, str) and bounds is not None:
         if value not in bounds:
             raise SceneError(f"{where}{name}: one of {', '.join(bounds)} (got {value!r})")
@@ -141,10 +154,12 @@ def check_node_value(name: str, value, where: str = 'scene key node.'):
 
 def node_parameter_values(scene_node: dict, overrides: dict) -> dict:
     """
-    Every node parameter's checked start value, in table order: a ``-p name:=value`` override
-    (``overrides``: name -> value) wins over the scene file's ``node:`` section
-    (``scene_node``, nested or dotted; ``-p node.name:=value`` overrides it too), which wins
-    over the default. :class:`SceneError` for an unknown key or a value that does not fit.
+    Return every node parameter's checked start value, in table order.
+
+    A ``-p name:=value`` override (``overrides``: name -> value) wins over the scene file's
+    ``node:`` section (``scene_node``, nested or dotted; ``-p node.name:=value`` overrides it
+    too), which wins over the default. Raise :class:`SceneError` for an unknown key or a value
+    that does not fit.
     """
     node_section = dict(flatten(scene_node))       # node: {log: {enabled: ...}} too
     for name, value in overrides.items():
@@ -164,8 +179,12 @@ def node_parameter_values(scene_node: dict, overrides: dict) -> dict:
 
 
 def runtime_refusal(name: str, value) -> str:
-    """Why a change of parameter ``name`` to ``value`` while running is refused ('' if it is
-    not): the checks beyond the declared type and range (finite, positive, ...)."""
+    """
+    Return why a change of parameter ``name`` to ``value`` while running is refused.
+
+    The answer is '' if it is not refused. These are the checks beyond the declared type and
+    range (finite, positive, ...).
+    """
     if name == 'real_time_factor':
         ok, need = isinstance(value, float) and math.isfinite(value) and value > 0.0, '> 0'
     elif name in ('steps_per_tick', 'max_catchup_steps', 'lockstep.sources'):

@@ -1,6 +1,8 @@
 """
-Republishing MCAP run logs on a ROS graph with their recorded timing (``det_sim replay play``,
-``det_sim_replay play``): a controller can be tested against a recorded run.
+Republishing MCAP run logs on a ROS graph with their recorded timing.
+
+This is ``det_sim replay play`` and ``det_sim_replay play``: a controller can be tested
+against a recorded run.
 
 The offline half of replay (re-simulation, offline recording) is det_sim_ros.io.replay; its
 public names are re-exported here, so that one import gives both halves (the old path
@@ -17,7 +19,7 @@ from typing import Callable, Iterable
 from ..io.cdr import message_class
 from ..io.mcap_log import LogReader
 from ..io.replay import (COMMAND_TOPICS, OUTPUT_FIELDS, OutputContract, ResimResult,
-                         rest_shortening, rest_shortenings, resimulate, simulate_to_log)
+                         resimulate, rest_shortening, rest_shortenings, simulate_to_log)
 
 __all__ = ['play', 'PlayStats', 'qos_from_yaml', 'message_class',
            # re-exported from det_sim_ros.io.replay
@@ -40,7 +42,7 @@ class PlayStats:
 
 
 def qos_from_yaml(text: str | None):
-    """An rclpy QoSProfile from ``offered_qos_profiles`` YAML (reliable, depth 10 if empty)."""
+    """Build an rclpy QoSProfile from ``offered_qos_profiles`` YAML (empty: reliable, depth 10)."""
     import yaml
     from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
     profiles = yaml.safe_load(text) if text else None
@@ -94,8 +96,12 @@ def play(log, node=None, rate: float = 1.0, start_offset: float = 0.0, loop: boo
 
 
 class _Player:
-    """Publishes one log pass after another through one node: a publisher per topic (made on
-    first use with the logged QoS), /clock from the log time, the recorded timing."""
+    """
+    Publishes one log pass after another through one node.
+
+    It keeps a publisher per topic (made on first use with the logged QoS), publishes /clock
+    from the log time, and keeps the recorded timing.
+    """
 
     def __init__(self, node, rate, start_offset, clock, topics, sleep, now):
         from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -164,7 +170,7 @@ class _Player:
         self.stats.clock += 1
 
     def _publisher(self, message, reader):
-        """The topic's publisher; None for a type this install does not have."""
+        """Return the topic's publisher; None for a type this install does not have."""
         publisher = self._publishers.get(message.topic)
         if publisher is None:
             try:

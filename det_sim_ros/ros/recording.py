@@ -1,6 +1,7 @@
 """
-The node's MCAP recorder (det_sim_ros.io.mcap_log), opened from the ``log.*`` parameters: on
-unless ``log.enabled`` is false. Its writer thread owns the file and flushes it.
+The node's MCAP recorder (det_sim_ros.io.mcap_log), opened from the ``log.*`` parameters.
+
+It is on unless ``log.enabled`` is false. Its writer thread owns the file and flushes it.
 """
 
 from __future__ import annotations
@@ -14,9 +15,11 @@ __all__ = ['open_recorder']
 def open_recorder(get: Callable, scene, qos_by_topic: dict, metadata: dict, namespace: str,
                   logger):
     """
-    A background :class:`~det_sim_ros.io.mcap_log.Recorder` fed the node's bytes, or None
-    when logging is off. Logs where it writes and its limits; a log directory's unfinished
-    logs (cut by a crash: power loss, SIGKILL inside a flush) are repaired first.
+    Open a background recorder fed the node's bytes; None when logging is off.
+
+    The recorder is a :class:`~det_sim_ros.io.mcap_log.Recorder`. Logs where it writes and its
+    limits; a log directory's unfinished logs (cut by a crash: power loss, SIGKILL inside a
+    flush) are repaired first.
 
     :param get: a parameter's value by name.
     """

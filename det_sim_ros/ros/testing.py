@@ -1,6 +1,8 @@
 """
-pytest plugin for deterministic controller tests against sim_node (registered as ``det_sim``
-through the ``pytest11`` entry point, so installing det_sim_ros makes the fixture available).
+pytest plugin for deterministic controller tests against sim_node.
+
+It is registered as ``det_sim`` through the ``pytest11`` entry point, so installing
+det_sim_ros makes the fixture available.
 
 The fixture ``det_sim`` makes :class:`LockstepSim` objects: sim_node in-process, in lockstep
 (``mode: lockstep``), in a ROS context of its own on a domain picked from the pid with
@@ -56,19 +58,21 @@ class SimRun:
     current: np.ndarray
 
     def signal(self, name: str, det: int | str = 0) -> np.ndarray:
-        """One column: ``name`` in voltage, q, dy, charge, current; ``det`` index or name."""
+        """Return one column: ``name`` in voltage, q, dy, charge, current; ``det``: index, name."""
         column = self.det_names.index(det) if isinstance(det, str) else det
         return getattr(self, name)[:, column]
 
     def at(self, t: float, name: str, det: int | str = 0) -> float:
-        """The value of a signal at the sample nearest sim time t."""
+        """Return the value of a signal at the sample nearest sim time t."""
         return float(self.signal(name, det)[int(np.argmin(np.abs(self.t - t)))])
 
     def step_metrics(self, name: str = 'dy', target: float = 0.0, t_step: float = 0.0,
                      det: int | str = 0, band: float = 0.05) -> StepMetrics:
         """
+        Return the step-response figures of a set-point step to ``target`` at ``t_step``.
+
         Rise time (10-90 %), overshoot, settling time (into ``band`` of the step size) and
-        steady-state error of a response to a set-point step to ``target`` at ``t_step``.
+        steady-state error of the response.
         """
         x = self.signal(name, det)
         after = self.t >= t_step - 1e-12
@@ -126,9 +130,12 @@ class LockstepSim:
 
     # -- set-up ----------------------------------------------------------------------------
     def start(self, nodes: Iterable = (), wait: bool = True) -> 'LockstepSim':
-        """Create sim_node (paused), spin it with ``nodes``, wait until the controllers'
-        command publishers are matched (``lockstep.sources`` of them; ``wait=False``: not),
-        then let the lockstep run."""
+        """
+        Create sim_node (paused), spin it with ``nodes`` and let the lockstep run.
+
+        Before the lockstep runs it waits until the controllers' command publishers are matched
+        (``lockstep.sources`` of them; ``wait=False``: it does not wait).
+        """
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.parameter import Parameter
         from .node import make_executor, SimNode
@@ -176,7 +183,11 @@ class LockstepSim:
             self.executor.spin_once(timeout_sec=0.01)
 
     def run(self, until: float, nodes: Sequence = ()) -> SimRun:
-        """Run (starting if needed) until the sample at sim time ``until`` (s); the run so far."""
+        """
+        Run until the sample at sim time ``until`` (s); return the run so far.
+
+        The lockstep starts first if needed.
+        """
         self.start(nodes)
         simulator = self.node.simulator
         k_end = int(round(until / self.node.dt))
@@ -186,7 +197,7 @@ class LockstepSim:
         return self.result()
 
     def result(self) -> SimRun:
-        """The samples recorded so far (the t = 0 sample first)."""
+        """Return the samples recorded so far (the t = 0 sample first)."""
         rows = self._rows
         dt = self.node.dt
 
@@ -212,8 +223,11 @@ def _fixture():
 
     @pytest.fixture
     def det_sim():
-        """Make :class:`LockstepSim` objects (``det_sim(scene, overrides, params)``); closed
-        after the test."""
+        """
+        Make :class:`LockstepSim` objects, closed after the test.
+
+        Call it as ``det_sim(scene, overrides, params)``.
+        """
         made = []
 
         def make(scene='default', overrides=None, params=None, **kwargs):

@@ -1,2 +1,6 @@
-"""The verbs of ``det_sim``, one module each: ``HELP``, optionally ``DESCRIPTION``,
-``add_arguments(parser)`` and ``main(args) -> exit code`` (det_sim_ros.cli.det_sim lists them)."""
+"""
+The verbs of ``det_sim``, one module each.
+
+A verb module has ``HELP``, optionally ``DESCRIPTION``, ``add_arguments(parser)`` and
+``main(args) -> exit code`` (det_sim_ros.cli.det_sim lists them).
+"""

@@ -1,6 +1,10 @@
-"""``det_sim bench``: the work-precision benchmark (det_sim_ros.analysis.benchmark) on the
-'step' scenario, written as CSV, markdown and a PNG diagram. It needs the ``bench`` extra:
-sympy (the analytic Jacobian; required), python-control and matplotlib (skipped without)."""
+"""
+``det_sim bench``: the work-precision benchmark on the 'step' scenario.
+
+The benchmark (det_sim_ros.analysis.benchmark) is written as CSV, markdown and a PNG diagram.
+It needs the ``bench`` extra: sympy (the analytic Jacobian; required), python-control and
+matplotlib (skipped without).
+"""
 
 from __future__ import annotations
 
@@ -13,7 +17,7 @@ from .. import common
 HELP = 'work-precision diagram of the integration benchmark'
 DESCRIPTION = ('Work-precision benchmark on the step scenario: error against CPU time of the '
                "project's steppers, scipy's solve_ivp and python-control (about 10 min per "
-               "scene; --quick: one scene, fewer points). Needs: pip install "
+               'scene; --quick: one scene, fewer points). Needs: pip install '
                "'det_sim_ros[bench]'.")
 EXTRA_HINT = "pip install 'det_sim_ros[bench]'"
 REQUIRED = ('sympy',)
@@ -21,7 +25,7 @@ OPTIONAL = {'control': 'no python-control runs', 'matplotlib': 'no work_precisio
 
 
 def add_arguments(parser) -> None:
-    """--out, --quick, --beams, --eps-b, --repeats, --reference-dir."""
+    """Add --out, --quick, --beams, --eps-b, --repeats, --reference-dir."""
     parser.add_argument('--out', default='bench/out', help='output folder (default: %(default)s)')
     parser.add_argument('--quick', action='store_true',
                         help='one scene (the first beam, eps_b 0.20), fewer points')
@@ -66,7 +70,7 @@ def main(args) -> int:
 
 
 def _benchmark():
-    """det_sim_ros.analysis.benchmark, or None (with one line) if this install lacks it."""
+    """Import det_sim_ros.analysis.benchmark; None (with one line) if this install lacks it."""
     try:
         return importlib.import_module('det_sim_ros.analysis.benchmark')
     except ModuleNotFoundError as exc:
@@ -78,7 +82,7 @@ def _benchmark():
 
 
 def _plot(rows, out) -> None:
-    """work_precision.png: each solver's runs, error against CPU per simulated second."""
+    """Draw work_precision.png: each solver's runs, error against CPU per simulated second."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt

@@ -1,5 +1,8 @@
-"""``det_sim fleet``: the sim_node processes a fleet file lists for this host
-(det_sim_ros.ros.fleet describes the file)."""
+"""
+``det_sim fleet``: the sim_node processes a fleet file lists for this host.
+
+det_sim_ros.ros.fleet describes the file.
+"""
 
 from __future__ import annotations
 
@@ -15,7 +18,7 @@ DESCRIPTION = ('Start the sim_node processes a fleet YAML file lists for this ho
 
 
 def add_arguments(parser) -> None:
-    """The fleet file, --host, --log-dir, --stop-timeout."""
+    """Add the fleet file, --host, --log-dir, --stop-timeout."""
     parser.add_argument('file', help='fleet YAML file')
     parser.add_argument('--host', default=None,
                         help="start the nodes for this host name (default: this machine's)")
@@ -26,7 +29,7 @@ def add_arguments(parser) -> None:
 
 
 def main(args) -> int:
-    """Run the fleet until every node stopped; its exit code."""
+    """Run the fleet until every node stopped; return its exit code."""
     from ...ros.fleet import run_fleet
     return run_fleet(args.file, host=args.host, log_dir=args.log_dir,
                      stop_timeout=args.stop_timeout)

@@ -1,5 +1,8 @@
-"""``det_sim linearize``: the linear model (A, B, C, D) at an equilibrium: poles, damping,
-natural frequencies, DC gains (JSON and text) and a Bode plot."""
+"""
+``det_sim linearize``: the linear model (A, B, C, D) at an equilibrium.
+
+Poles, damping, natural frequencies, DC gains (JSON and text) and a Bode plot.
+"""
 
 from __future__ import annotations
 
@@ -14,7 +17,7 @@ HELP = ('linear model (A, B, C, D) at an equilibrium: poles, damping, natural fr
 
 
 def add_arguments(parser) -> None:
-    """The scene options, --voltage, --branch, --json."""
+    """Add the scene options, --voltage, --branch, --json."""
     common.add_scene_arguments(parser)
     parser.add_argument('--voltage', type=common.float_list, default=[0.0],
                         help='DET voltage(s), V: one for all DETs or one per DET (default: 0)')
@@ -82,7 +85,7 @@ def _print_table(scene_name, lin, poles) -> None:
 
 
 def _plot_bode(plt, lin, poles, args, out):
-    """|G| and phase of dy_i/V_i and q_i/V_i (each DET's own input; at most 6 DETs)."""
+    """Plot |G| and phase of dy_i/V_i and q_i/V_i (each DET's own input; at most 6 DETs)."""
     import numpy as np
     rates = np.abs(poles[np.abs(poles) > 0])
     lo = max(rates.min() / 10.0 if rates.size else 0.1, 1e-2)

@@ -1,5 +1,8 @@
-"""``det_sim plot``: every channel of a sim_node MCAP log against sim time (PNG) and a text
-summary (det_sim_ros.io.logplot reads and draws the log)."""
+"""
+``det_sim plot``: every channel of a sim_node MCAP log against sim time, and a summary.
+
+The plot is a PNG, the summary text; det_sim_ros.io.logplot reads and draws the log.
+"""
 
 from __future__ import annotations
 
@@ -12,7 +15,7 @@ HELP = 'PNG of every channel of a sim_node MCAP log against sim time, and a text
 
 
 def add_arguments(parser) -> None:
-    """The log file(s), --out, --dpi."""
+    """Add the log file(s), --out, --dpi."""
     parser.add_argument('log', nargs='+', help='MCAP file(s) or a directory of split files')
     parser.add_argument('--out', default=None,
                         help='output folder (default: the folder of the log)')

@@ -1,6 +1,10 @@
-"""``det_sim replay`` (also the ``det_sim_replay`` command): re-simulate a logged run and
-compare (``resim``), republish a log with its recorded timing (``play``), summarize a log
-(``info``), rewrite an unfinished log as a finished file (``recover``)."""
+"""
+``det_sim replay`` (also the ``det_sim_replay`` command): tools for sim_node logs.
+
+Re-simulate a logged run and compare (``resim``), republish a log with its recorded timing
+(``play``), summarize a log (``info``), rewrite an unfinished log as a finished file
+(``recover``).
+"""
 
 from __future__ import annotations
 
@@ -12,8 +16,12 @@ PROG = 'det_sim_replay'
 
 
 def add_arguments(parser) -> None:
-    """The subcommands resim, play, info, recover and their options (each takes ``--ros-args
-    ...`` at the end of the line; only ``play`` passes them on, to its node)."""
+    """
+    Add the subcommands resim, play, info, recover and their options.
+
+    Each takes ``--ros-args ...`` at the end of the line; only ``play`` passes them on, to its
+    node.
+    """
     sub = parser.add_subparsers(dest='command', required=True)
     resim = sub.add_parser('resim', help='re-simulate a log and compare with its outputs')
     resim.add_argument('log', nargs='+', help='MCAP file(s) or a directory of split files')
@@ -45,7 +53,7 @@ def add_arguments(parser) -> None:
 
 
 def main(args) -> int:
-    """Run the chosen subcommand; its exit code."""
+    """Run the chosen subcommand; return its exit code."""
     return args.action(args)
 
 

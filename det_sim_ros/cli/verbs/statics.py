@@ -1,5 +1,9 @@
-"""``det_sim statics``: equilibrium branches against pre-strain, the potential (eq 82) and
-delta-y, at 0 V and v_max (the paper's Fig. 5); CSV files and one PNG per beam."""
+"""
+``det_sim statics``: equilibrium branches, potential and delta-y against pre-strain.
+
+The equilibrium branches against pre-strain, the potential (eq 82) and delta-y, at 0 V and
+v_max (the paper's Fig. 5); CSV files and one PNG per beam.
+"""
 
 from __future__ import annotations
 
@@ -14,7 +18,7 @@ POT_COLORS = ('tab:green', 'tab:purple', 'tab:orange', 'tab:brown', 'tab:olive',
 
 
 def add_arguments(parser) -> None:
-    """The scene options, --beams, --eps-range, --eps-b, --n-q."""
+    """Add the scene options, --beams, --eps-range, --eps-b, --n-q."""
     common.add_scene_arguments(parser)
     parser.add_argument('--beams', type=common.beam_list, default=None,
                         help="comma-separated beams (default: the scene's beam)")
@@ -61,8 +65,12 @@ def main(args) -> int:
 
 
 class _Sweep:
-    """The statics of one beam after another: the rows of the three CSV files, and per beam
-    the critical pre-strains, branches and normalized potentials the plot draws."""
+    """
+    The statics of one beam after another.
+
+    It collects the rows of the three CSV files, and per beam the critical pre-strains,
+    branches and normalized potentials the plot draws.
+    """
 
     def __init__(self, args, voltages):
         import numpy as np
@@ -73,12 +81,12 @@ class _Sweep:
         self.branch_rows, self.pot_rows, self.crit_rows = [], [], []
 
     def count(self, n_beams: int) -> int:
-        """Progress items of ``n_beams`` beams."""
+        """Return the progress items of ``n_beams`` beams."""
         n_v = len(self.voltages)
         return n_beams * (n_v * (len(self.eps_grid) + 1) + len(self.eps_b) * n_v)
 
     def beam(self, scene, bar) -> dict:
-        """Critical pre-strains, branches and potentials of one beam's scene."""
+        """Compute the critical pre-strains, branches and potentials of one beam's scene."""
         from ...physics import statics
         beam = scene.beam
         res = {'crit': {}, 'branches': {}, 'pot': {}}
@@ -156,7 +164,7 @@ def _plot(plt, beam, res, voltages, args, out):
 
 
 def _plot_branches(ax_q, ax_dy, pts, e_min, color) -> None:
-    """q and delta-y of each branch at one voltage (dashed where unstable)."""
+    """Draw q and delta-y of each branch at one voltage (dashed where unstable)."""
     import numpy as np
     for name in sorted({p.branch for p in pts}):
         sel = [p for p in pts if p.branch == name]

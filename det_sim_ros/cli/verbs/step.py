@@ -1,5 +1,9 @@
-"""``det_sim step``: the paper's 'step' scenario (0 V, v_max from 1.5 s to 3 s, 0 V; Fig. 6)
-per beam and pre-strain; the time series, a comparison with the paper, and a PNG."""
+"""
+``det_sim step``: the paper's 'step' scenario per beam and pre-strain.
+
+The scenario is 0 V, v_max from 1.5 s to 3 s, 0 V (Fig. 6); the verb writes the time series,
+a comparison with the paper, and a PNG.
+"""
 
 from __future__ import annotations
 
@@ -15,7 +19,7 @@ PAPER_EPS_Y = {'simply_supported': 0.065, 'fixed': 0.08}
 
 
 def add_arguments(parser) -> None:
-    """The scene options, --beams, --eps-b, --t-end."""
+    """Add the scene options, --beams, --eps-b, --t-end."""
     common.add_scene_arguments(parser)
     parser.add_argument('--beams', type=common.beam_list, default='fixed,simply_supported',
                         help='comma-separated beams (default: fixed,simply_supported)')
@@ -59,8 +63,11 @@ def main(args) -> int:
 
 
 def _run_all(base, args):
-    """Simulate each beam and pre-strain: {(beam, eps_b): (t, q, dy, eps_y, info)} and the
-    rows of step.csv."""
+    """
+    Simulate each beam and pre-strain.
+
+    Return {(beam, eps_b): (t, q, dy, eps_y, info)} and the rows of step.csv.
+    """
     from ...analysis.scenarios import step_voltage
     from ...sim.simulator import simulate
     runs, rows = {}, []
@@ -82,7 +89,7 @@ def _run_all(base, args):
 
 
 def _metrics(t, q, y, l_beam, scene):
-    """y0, delta_y, eps_y and the comparison numbers of one 'step' run."""
+    """Return y0, delta_y, eps_y and the comparison numbers of one 'step' run."""
     import numpy as np
     from ...analysis.scenarios import STEP_SWITCH_TIMES
     from ...physics import statics
@@ -128,8 +135,8 @@ def _plot(plt, runs, args, out):
     for col, beam in enumerate(beams):
         for k, eps in enumerate(args.eps_b):
             t, q, dy, eps_y, _ = runs[beam, eps]
-            kw = dict(color=f'C{k}', lw=1.0, label=rf'$\varepsilon_b$ = {eps:g}',
-                      zorder=len(args.eps_b) - k + 1)       # smaller pre-strains on top
+            kw = {'color': f'C{k}', 'lw': 1.0, 'label': rf'$\varepsilon_b$ = {eps:g}',
+                  'zorder': len(args.eps_b) - k + 1}       # smaller pre-strains on top
             axes[0, col].plot(t, q * 1e3, **kw)
             axes[1, col].plot(t, dy * 1e3, **kw)
             axes[2, col].plot(t, eps_y * 100, **kw)
@@ -142,7 +149,7 @@ def _plot(plt, runs, args, out):
             ax.axvspan(1.5, min(3.0, t[-1]), color='0.9', zorder=0)
             ax.grid(alpha=0.3)
         axes[0, col].legend(fontsize=8, loc='upper right')
-    fig.suptitle("step scenario: 0 V, v_max from 1.5 s to 3 s (shaded), 0 V")
+    fig.suptitle('step scenario: 0 V, v_max from 1.5 s to 3 s (shaded), 0 V')
     fig.tight_layout()
     path = os.path.join(out, 'step.png')
     fig.savefig(path, dpi=args.dpi)
