@@ -23,14 +23,22 @@ os.environ.setdefault('PYTHONSAFEPATH', '1')
 
 
 def child_env(**extra):
-    """The environment for a Python child process of a test: it imports what this process
-    imports (its sys.path: the installed package, or whatever PYTHONPATH a developer gave)."""
+    """
+    Return the environment for a Python child process of a test.
+
+    The child imports what this process imports (its sys.path: the installed package, or
+    whatever PYTHONPATH a developer gave).
+    """
     return dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path), **extra)
 
 
 def pick_domain_id(environ, pid) -> int:
-    """The user's ROS_DOMAIN_ID when set (a number in 0..232), else 1 + pid % 101 (avoids the
-    default domain 0, so a running ROS system is not disturbed)."""
+    """
+    Return the ROS domain id for the tests.
+
+    The user's ROS_DOMAIN_ID when set (a number in 0..232), else 1 + pid % 101 (avoids the
+    default domain 0, so a running ROS system is not disturbed).
+    """
     text = environ.get('ROS_DOMAIN_ID', '').strip()
     if text:
         if not text.isdigit() or int(text) > 232:

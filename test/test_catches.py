@@ -1,25 +1,26 @@
 """
-Checks against something independent of the code they check: a re-simulation that starts from
-a logged initial state other than the scene's, the steppers' orders against scipy's DOP853
-(not against one of the package's own methods, which would share a fault of the stepping
-core), the rest state against scipy's root finder on the compiled right-hand side, every
-ranged scene key just above its maximum, and numbers that YAML 1.1 reads as text.
-"""
+Checks against something independent of the code they check.
 
-import numpy as np
-import pytest
+A re-simulation that starts from a logged initial state other than the scene's, the steppers'
+orders against scipy's DOP853 (not against one of the package's own methods, which would share
+a fault of the stepping core), the rest state against scipy's root finder on the compiled
+right-hand side, every ranged scene key just above its maximum, and numbers that YAML 1.1 reads
+as text.
+"""
 
 from det_sim_ros.io import replay
 from det_sim_ros.io.mcap_log import Recorder
 from det_sim_ros.scenes.scene import load_scene, SceneError
 from det_sim_ros.sim.simulator import Simulator
+import numpy as np
+import pytest
 
 COMMANDS = {0: [0.0], 40: [2500.0], 90: [1200.0]}
 N_STEPS = 150
 
 
 def _record_from(tmp_path, x0):
-    """A run of the default scene started from ``x0``, logged as the node logs it."""
+    """Run the default scene from ``x0`` and log it as the node logs it; return the path."""
     sim = Simulator(load_scene('default'))
     sim.x0 = np.array(x0, dtype=float)
     sim.reset()
@@ -32,7 +33,7 @@ def _record_from(tmp_path, x0):
 
 
 def _moved_start():
-    """The scene's initial state with the deflection, its rate and the charge moved."""
+    """Return the scene's initial state with the deflection, its rate and the charge moved."""
     sim = Simulator(load_scene('default'))
     scene_x0 = sim.x0
     x0 = scene_x0.copy()
@@ -52,8 +53,11 @@ def test_resimulation_starts_from_the_logged_initial_state(tmp_path):
 
 
 def test_ignoring_the_logged_initial_state_would_be_seen(tmp_path, monkeypatch):
-    """The check above can fail: the same log re-simulated from the scene's own initial
-    state deviates."""
+    """
+    Check that the check above can fail.
+
+    The same log re-simulated from the scene's own initial state deviates.
+    """
     path = _record_from(tmp_path, _moved_start())
     monkeypatch.setattr(replay, '_logged_x0', lambda text, n: None)
     result = replay.resimulate(path)
@@ -64,7 +68,7 @@ def test_ignoring_the_logged_initial_state_would_be_seen(tmp_path, monkeypatch):
 # -- the steppers' orders against scipy's DOP853 (not against one of the package's own methods) --
 
 def _small_oscillation():
-    """The ideal-source scene without creep at 100 Hz: a non-stiff two-state system."""
+    """Return the ideal-source scene without creep at 100 Hz: a non-stiff two-state system."""
     from det_sim_ros.physics.model import build_model
     from det_sim_ros.physics.statics import initial_state
     scene = load_scene('default', {'scene.initial_state': 'released', 'source': 'ideal',
@@ -113,9 +117,13 @@ def test_stepper_order_against_scipy_dop853(name, order):
     {'scene.fidelity': 'exact', 'scene.n_ritz': 3},
 ])
 def test_rest_state_is_the_root_scipy_finds(overrides):
-    """scipy.optimize.root (MINPACK's Levenberg-Marquardt) on the compiled accelerations at
-    zero velocity and 0 V, started 5 % off, lands on the rest state the statics give (the
-    buckled+ side) to round-off."""
+    """
+    Check that the rest state is the root scipy finds.
+
+    scipy.optimize.root (MINPACK's Levenberg-Marquardt) on the compiled accelerations at zero
+    velocity and 0 V, started 5 % off, lands on the rest state the statics give (the buckled+
+    side) to round-off.
+    """
     from scipy.optimize import root
     from det_sim_ros.physics.model import build_model
     from det_sim_ros.physics.statics import initial_state
@@ -161,8 +169,12 @@ def test_scene_value_just_above_its_maximum_is_refused(key):
 
 @pytest.mark.parametrize('text', ['4.0e9', '4e9'])
 def test_yaml_11_exponent_text_in_a_mapping_is_refused_with_the_fix(text):
-    """A mapping (as a parsed YAML 1.1 file gives it) holding '4.0e9' as text: refused, with
-    the advice to write the exponent's sign; the same text as an override is a number."""
+    """
+    Check that YAML 1.1 exponent text in a mapping is refused with the fix.
+
+    A mapping (as a parsed YAML 1.1 file gives it) holding '4.0e9' as text: refused, with the
+    advice to write the exponent's sign; the same text as an override is a number.
+    """
     from det_sim_ros.scenes.scene import scene_to_dict
     data = scene_to_dict(load_scene('default'))
     data['physics']['E_b'] = text

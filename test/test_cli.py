@@ -6,14 +6,13 @@ import os
 import sys
 import types
 
-import numpy as np
-import pytest
-import yaml
-
 from det_sim_ros.cli import det_sim as cli
 from det_sim_ros.cli.common import Progress
 from det_sim_ros.physics import statics
 from det_sim_ros.scenes.scene import load_scene, scene_to_dict
+import numpy as np
+import pytest
+import yaml
 
 
 def read_csv(path):
@@ -199,7 +198,11 @@ def test_bench_missing_module(monkeypatch, capsys):
 
 
 def test_bench_without_sympy_says_which_extra_in_one_line(monkeypatch, capsys):
-    """Checked before anything runs (the benchmark needs sympy minutes into its run)."""
+    """
+    Check that a missing sympy is reported, with its extra, before anything runs.
+
+    The check comes first because the benchmark needs sympy minutes into its run.
+    """
     ran = []
     fake = types.ModuleType('det_sim_ros.analysis.benchmark')
     fake.run = lambda *a, **k: ran.append(a) or iter(())
@@ -208,15 +211,16 @@ def test_bench_without_sympy_says_which_extra_in_one_line(monkeypatch, capsys):
     assert cli.main(['bench', '--quick']) == 1
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and 'Traceback' not in err
-    assert 'sympy' in err and "det_sim_ros[bench]" in err
+    assert 'sympy' in err and 'det_sim_ros[bench]' in err
     assert not ran
 
 
 def _fake_benchmark(monkeypatch, tmp_path):
     seen = {}
     fake = types.ModuleType('det_sim_ros.analysis.benchmark')
-    row = dict(beam='fixed', eps_b=0.2, solver='auto', setting='tol 1e-06', cpu_per_sim_s=0.01,
-               err_dy=1e-6, err_qp=1e-6, realtime_factor=100.0, steps_per_period=1.0)
+    row = {'beam': 'fixed', 'eps_b': 0.2, 'solver': 'auto', 'setting': 'tol 1e-06',
+           'cpu_per_sim_s': 0.01, 'err_dy': 1e-6, 'err_qp': 1e-6, 'realtime_factor': 100.0,
+           'steps_per_period': 1.0}
 
     def run(beams, eps_values, quick, repeats, reference_dir=None, log=print):
         seen.update(beams=beams, eps=eps_values, quick=quick, repeats=repeats)

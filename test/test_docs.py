@@ -1,6 +1,8 @@
 """
-The documentation: the parameter reference is the node's table, the README stays a short
-user guide, and every relative link in README.md and docs/ points at a file that exists.
+Checks on the documentation.
+
+The parameter reference is the node's table, the README stays a short user guide, and every
+relative link in README.md and docs/ points at a file that exists.
 """
 
 import collections
@@ -33,8 +35,12 @@ def _pages():
 
 
 def test_parameter_page_is_generated_from_the_node_table():
-    """docs/parameters.md is what the generator makes of NODE_PARAMS today: a changed default,
-    range or description without a regenerated page fails here."""
+    """
+    Check that docs/parameters.md is what the generator makes of the node's table.
+
+    The page must equal the generator's rendering of the current NODE_PARAMS: a changed
+    default, range or description without a regenerated page fails here.
+    """
     generator = _generator()
     assert _read(generator.PAGE) == generator.render(), (
         'docs/parameters.md is out of date: run python docs/generate_parameters.py')
@@ -50,8 +56,12 @@ def test_every_node_parameter_has_a_row_with_its_default():
 
 
 def test_named_tuple_entries_render_like_plain_tuples():
-    """Entries are read by unpacking, so a table of named tuples with the same four fields in
-    the same order gives the same page."""
+    """
+    Check that a table of named tuples renders like one of plain tuples.
+
+    Entries are read by unpacking, so a table of named tuples with the same four fields in the
+    same order gives the same page.
+    """
     from det_sim_ros.ros.params import NODE_PARAMS
     Entry = collections.namedtuple('Entry', 'default description read_only bounds')
     named = {name: Entry(*entry) for name, entry in NODE_PARAMS.items()}

@@ -1,22 +1,24 @@
 """
-Model fidelity against exact solutions (issue 6): the Euler critical loads, the exact elastica,
-and the multi-term Ritz model with consistent (fourth-order) kinematics.
+Model fidelity against exact solutions.
 
-Oracles: det_sim_ros.analysis.elastica (tan mu = mu and 4 pi^2; the elastica by shooting and, for the
-clamped-clamped beam, in closed form by elliptic integrals). The Ritz statics
-(det_sim_ros.analysis.fidelity) use the model's own basis and are checked against the model's outputs.
+The Euler critical loads, the exact elastica, and the multi-term Ritz model with consistent
+(fourth-order) kinematics.
+
+Oracles: det_sim_ros.analysis.elastica (tan mu = mu and 4 pi^2; the elastica by shooting and,
+for the clamped-clamped beam, in closed form by elliptic integrals). The Ritz statics
+(det_sim_ros.analysis.fidelity) use the model's own basis and are checked against the model's
+outputs.
 """
 
 import math
-
-import numpy as np
-import pytest
 
 from det_sim_ros.analysis import elastica as E
 from det_sim_ros.analysis import fidelity as F
 from det_sim_ros.analysis.scenarios import step_scene, step_voltage
 from det_sim_ros.physics.model import ModelDomainError
 from det_sim_ros.sim.simulator import simulate, Simulator
+import numpy as np
+import pytest
 
 BEAMS = ('simply_supported', 'fixed')
 Y_PATH = np.linspace(0.01, 0.15, 15)          # y/l up to 0.15
@@ -48,7 +50,11 @@ def test_elastica_fixed_matches_elliptic_closed_form(exact):
 
 @pytest.mark.parametrize('beam', BEAMS)
 def test_elastica_small_deflection_limit(beam):
-    """Euler limit, Koiter's initial post-buckling slope, and the linear mode's deflection."""
+    """
+    Check the elastica's small-deflection limit.
+
+    The Euler limit, Koiter's initial post-buckling slope, and the linear mode's deflection.
+    """
     ys = np.array([1e-4, 2e-4, 4e-4])
     path = E.elastica(beam, ys)
     p_cr = E.euler_load(beam)
@@ -68,8 +74,8 @@ def test_elastica_small_deflection_limit(beam):
 
 # -- one source of truth ------------------------------------------------------------------------
 @pytest.mark.parametrize('beam', BEAMS)
-@pytest.mark.parametrize('fidelity,n', [('paper', 1), ('consistent', 1), ('consistent', 4),
-                                         ('exact', 1), ('exact', 5)])
+@pytest.mark.parametrize('fidelity,n', [
+    ('paper', 1), ('consistent', 1), ('consistent', 4), ('exact', 1), ('exact', 5)])
 def test_ritz_statics_are_the_models_energy(beam, fidelity, n):
     ritz, model = F.beam_ritz(beam, fidelity, n)
     rng = np.random.default_rng(3)
@@ -115,8 +121,12 @@ def test_consistent_post_buckling_matches_elastica(beam, exact):
 
 @pytest.mark.parametrize('beam', BEAMS)
 def test_exact_kinematics_converge_to_the_elastica(beam, exact):
-    """'exact' fidelity (y = int 1 - cos theta, curvature w''/cos theta): the Ritz model
-    converges to the elastica itself, so the error is the basis' alone."""
+    """
+    Check that the 'exact' fidelity converges to the elastica as Ritz terms are added.
+
+    'exact' fidelity (y = int 1 - cos theta, curvature w''/cos theta): the Ritz model converges
+    to the elastica itself, so the error is the basis' alone.
+    """
     el = exact[beam]
     errors = []
     for n in (5, 7, 9):   # measured: 6.0e-3 / 4.8e-4 / 1.0e-4 (ss), 1.7e-2 / 2.9e-3 / 4.2e-4
@@ -140,17 +150,25 @@ def test_step_scenario_exact_fidelity_runs(beam):
 
 
 def test_exact_kinematics_name_their_limit():
-    """w' = sin(theta) cannot pass 90 degrees: the simply supported beam's dynamic buckling at
-    eps_b = 0.25 reaches it within 10 ms, and the domain error says so (not 'ends met')."""
+    """
+    Check that the exact kinematics' domain error names the slope limit.
+
+    w' = sin(theta) cannot pass 90 degrees: the simply supported beam's dynamic buckling at
+    eps_b = 0.25 reaches it within 10 ms, and the domain error says so (not 'ends met').
+    """
     scene = step_scene('simply_supported', 0.25, **{'scene.fidelity': 'exact', 'scene.n_ritz': 3})
-    with pytest.raises(ModelDomainError, match="slope"):
+    with pytest.raises(ModelDomainError, match='slope'):
         simulate(scene, step_voltage(scene.physics.v_max), 0.05, substeps=100)
 
 
 @pytest.mark.parametrize('beam', BEAMS)
 def test_paper_kinematics_are_not_within_tolerance(beam, exact):
-    """The one-term 'paper' model (eq 65) misses both the load and the deflection by > 3 %: the
-    fidelity tests above would catch a regression to paper kinematics."""
+    """
+    Check that the one-term 'paper' model fails the fidelity tolerances.
+
+    The one-term 'paper' model (eq 65) misses both the load and the deflection by > 3 %: the
+    fidelity tests above would fail on paper kinematics.
+    """
     el = exact[beam]
     path = F.beam_ritz(beam, 'paper', 1)[0].path(Y_PATH)
     assert np.max(np.abs(path.load / el.load - 1.0)) > 0.2
@@ -182,7 +200,11 @@ def test_step_scenario_consistent_runs_and_publishes_reference_deflection(beam, 
 
 
 def test_step_scenario_many_terms_default_substeps():
-    """The automatic substeps respect the fastest beam mode (Model.fastest_beam_rate)."""
+    """
+    Check that the automatic substeps respect the fastest beam mode.
+
+    The fastest beam mode is Model.fastest_beam_rate.
+    """
     scene = step_scene('simply_supported', 0.2,
                        **{'scene.fidelity': 'consistent', 'scene.n_ritz': 6})
     sim = Simulator(scene)

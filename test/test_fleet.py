@@ -1,6 +1,8 @@
 """
-Fleets (issue 20): ``det_sim fleet FILE`` starts one sim_node process per namespace, forwards
-SIGINT/SIGTERM and exits 0 once all stopped cleanly; bad fleet files are one line.
+Fleets: ``det_sim fleet FILE`` and the nodes it starts.
+
+``det_sim fleet FILE`` starts one sim_node process per namespace, forwards SIGINT/SIGTERM and
+exits 0 once all stopped cleanly; bad fleet files are one line.
 """
 
 import os
@@ -9,13 +11,12 @@ import subprocess
 import sys
 import time
 
-import pytest
-import yaml
-
+from conftest import child_env
 from det_sim_ros.ros.fleet import FleetError, load_fleet
 from det_sim_ros.scenes.scene import load_scene, scene_to_dict
-from conftest import child_env
+import pytest
 from test_reliability import finished_logs
+import yaml
 
 WALL_LIMIT = 120.0     # s, a safety net only
 
@@ -26,7 +27,7 @@ def write_fleet(path, nodes, **top):
 
 
 def start_fleet(fleet_file, *args, env=None):
-    """``det_sim fleet`` as a process (its own stdout/stderr file beside the fleet file)."""
+    """Start ``det_sim fleet`` as a process (its stdout/stderr file beside the fleet file)."""
     out = fleet_file + '.out'
     with open(out, 'w') as stream:
         proc = subprocess.Popen([sys.executable, '-m', 'det_sim_ros.cli', 'fleet', fleet_file,
@@ -52,8 +53,12 @@ def wait_for_text(proc, needle, count=1):
 
 @pytest.mark.parametrize('stop', [signal.SIGINT, signal.SIGTERM])
 def test_fleet_starts_its_nodes_and_forwards_the_stop(tmp_path, stop):
-    """Two nodes (real-time and lockstep, scene override): both run in their namespaces with
-    their own log file; the signal to the fleet stops both, exit 0, MCAP logs finished."""
+    """
+    Check that the fleet starts its nodes and forwards the stop signal to them.
+
+    Two nodes (real-time and lockstep, scene override): both run in their namespaces with their
+    own log file; the signal to the fleet stops both, exit 0, MCAP logs finished.
+    """
     fleet_file = write_fleet(tmp_path / 'fleet.yaml', [
         {'namespace': '/a', 'overrides': {'physics.Rs': '1e3'}},
         {'namespace': '/lab/b', 'mode': 'lockstep', 'scene': 'plate'},
@@ -82,7 +87,7 @@ def test_fleet_starts_its_nodes_and_forwards_the_stop(tmp_path, stop):
 
 
 def _running(pid):
-    """Whether process pid exists and is not a zombie (exited, not yet reaped)."""
+    """Return whether process pid exists and is not a zombie (exited, not yet reaped)."""
     try:
         with open(f'/proc/{pid}/stat') as stream:
             return stream.read().rsplit(')', 1)[1].split()[0] != 'Z'
@@ -91,8 +96,12 @@ def _running(pid):
 
 
 def test_nodes_stop_cleanly_when_the_fleet_process_is_killed(tmp_path):
-    """SIGKILL to the fleet process: its nodes get SIGTERM (parent-death signal) and stop with
-    a finished log; none is left running."""
+    """
+    Check that the nodes stop cleanly when the fleet process is killed.
+
+    SIGKILL to the fleet process: its nodes get SIGTERM (parent-death signal) and stop with a
+    finished log; none is left running.
+    """
     import re
     fleet_file = write_fleet(tmp_path / 'fleet.yaml', [{'namespace': '/orphan'}],
                              defaults={'params': {'info_period': 0.0}}, log_dir='logs')
@@ -114,8 +123,12 @@ def test_nodes_stop_cleanly_when_the_fleet_process_is_killed(tmp_path):
 
 
 def test_a_node_that_cannot_start_stops_the_fleet(tmp_path):
-    """A node refusing its parameters (one line, exit 1) stops the others: the fleet exits 1
-    and names the node and its reason."""
+    """
+    Check that a node that cannot start stops the fleet.
+
+    A node refusing its parameters (one line, exit 1) stops the others: the fleet exits 1 and
+    names the node and its reason.
+    """
     fleet_file = write_fleet(tmp_path / 'fleet.yaml', [
         {'namespace': '/good', 'params': {'info_period': 0.0}},
         {'namespace': '/bad', 'params': {'diagnostics_period': -1.0}},
@@ -134,7 +147,7 @@ def test_a_node_that_cannot_start_stops_the_fleet(tmp_path):
 
 BAD_FLEETS = [
     ({'nodes': []}, 'nodes: must be a non-empty list'),
-    ({'nodes': [{'namespace': 'a'}]}, "namespace: expected /name"),
+    ({'nodes': [{'namespace': 'a'}]}, 'namespace: expected /name'),
     ({'nodes': [{'namespace': '/a'}, {'namespace': '/a'}]}, 'namespace used twice'),
     ({'nodes': [{'namespace': '/a', 'mode': 'fast'}]}, 'mode: one of'),
     ({'nodes': [{'namespace': '/a', 'params': {'physics.Rs': 1.0}}]},
@@ -159,8 +172,12 @@ def test_bad_fleet_file_is_one_line_and_starts_nothing(tmp_path, capsys, fleet, 
 
 
 def test_host_filter_and_relative_paths(tmp_path, monkeypatch):
-    """The same file on every host: a node with host: starts only there; a relative scene
-    path is relative to the fleet file, log_dir to the working directory."""
+    """
+    Check the host filter and how relative paths resolve.
+
+    The same file on every host: a node with host: starts only there; a relative scene path is
+    relative to the fleet file, log_dir to the working directory.
+    """
     monkeypatch.chdir(tmp_path / '..')
     (tmp_path / 'my_scene.yaml').write_text(yaml.safe_dump(scene_to_dict(load_scene('default'))))
     path = write_fleet(tmp_path / 'fleet.yaml', [
@@ -187,7 +204,7 @@ def test_shipped_fleet_example_loads():
 # -- across hosts: network namespaces ------------------------------------------------------------
 # The PI of test_lockstep, in a process of its own on a host: answers every displacement sample of
 # the node in its namespace until sim time UNTIL, then exits 0.
-PI_PROCESS = '''
+PI_PROCESS = """
 import sys
 import rclpy
 sys.path.insert(0, sys.argv[1])
@@ -198,22 +215,30 @@ node = make_pi(None, joint=True, namespace=namespace, target=target, until=until
                after_match=True)
 while not node.done:
     rclpy.spin_once(node, timeout_sec=0.1)
-'''
+"""
 TARGETS = (2.0e-3, 2.2e-3, 2.4e-3)    # m, Δy set point of loop i (from T_STEP = 0.6 s)
 UNTIL = 1.2                           # s of sim time: the lockstep runs end at this sample
 STEP_LIMIT = 120.0                    # s of wall time for any one step: bounds a hang only
 
 
 def _fleet_nodes(hosts):
-    """Loop i: sim_node /loop<i> in lockstep, started paused? no: lockstep waits anyway."""
+    """
+    Return the fleet's nodes: loop i is sim_node /loop<i> in lockstep.
+
+    They are not started paused: a lockstep node waits for its commands anyway.
+    """
     return [{'namespace': f'/loop{i}', 'mode': 'lockstep', 'params': {'info_period': 0.0},
              **({'host': f'h{host}'} if host is not None else {})}
             for i, host in enumerate(hosts)]
 
 
 def _run_loops(net, tmp, node_hosts, controller_hosts, env):
-    """Start the fleet (``det_sim fleet`` once per host, the same file), one PI per loop on
-    its controller host; wait until every PI is done, stop the fleets; the nodes' log dirs."""
+    """
+    Run the lockstep loops and return the nodes' log dirs.
+
+    Start the fleet (``det_sim fleet`` once per host, the same file), one PI per loop on its
+    controller host; wait until every PI is done, stop the fleets; return the nodes' log dirs.
+    """
     here = os.path.dirname(os.path.abspath(__file__))
     per_host = len(set(node_hosts)) > 1
     fleet_file = write_fleet(tmp / 'fleet.yaml',
@@ -269,6 +294,8 @@ def _namespaces():
 
 def test_fleet_across_three_namespace_hosts(tmp_path):
     """
+    Check a fleet across three hosts against the same fleet on one host.
+
     Three hosts (network namespaces on a bridge of their own, private subnet, unicast discovery
     over UDP only): sim_node /loop<i> on host i, started by ``det_sim fleet`` with the same file
     on every host, its PI controller on host i + 1. Every loop brings Δy to its target within
@@ -302,8 +329,12 @@ def test_fleet_across_three_namespace_hosts(tmp_path):
 
 
 def test_qos_keep_all_for_lossy_links(harness, tmp_path, ros_context):
-    """qos_keep_all: outputs, /clock and the command subscriptions are reliable KEEP_ALL (the
-    log records it); with qos_sensor_data it is refused with one line."""
+    """
+    Check that qos_keep_all makes every endpoint reliable KEEP_ALL for lossy links.
+
+    qos_keep_all: outputs, /clock and the command subscriptions are reliable KEEP_ALL (the log
+    records it); with qos_sensor_data it is refused with one line.
+    """
     from rclpy.parameter import Parameter
     from rclpy.qos import HistoryPolicy, ReliabilityPolicy
     from det_sim_ros.io.mcap_log import LogReader
@@ -336,8 +367,12 @@ def _needs_namespaces():
 
 
 def test_namespaces_left_by_a_killed_run_are_removed(tmp_path):
-    """A run SIGKILLed with its hosts up leaves namespaces behind; the next run removes them
-    (and only those of dead processes)."""
+    """
+    Check that namespaces left by a killed run are removed by the next run.
+
+    A run SIGKILLed with its hosts up leaves namespaces behind; the next run removes them (and
+    only those of dead processes).
+    """
     _needs_namespaces()
     from det_sim_ros.ros.netns import NetnsHosts
     code = ('import sys, time\nfrom det_sim_ros.ros.netns import NetnsHosts\n'
@@ -356,7 +391,7 @@ def test_namespaces_left_by_a_killed_run_are_removed(tmp_path):
         assert not set(names) & left and net.hosts[0] in left
 
 
-ECHO = '''
+ECHO = """
 import socket, sys, time
 if sys.argv[1] == 'server':
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -379,13 +414,17 @@ try:
 except socket.timeout:
     pass
 print(len(rtts), min(rtts.values()))
-'''
+"""
 
 
 def test_relay_link_delays_and_drops_frames():
-    """Host 1 behind the relay (5 ms each way, 20 % of the frames dropped each way): no round
-    trip takes less than 10 ms, and some of 200 datagrams are not answered (~36 %); the
-    direct host answers all."""
+    """
+    Check that the relay link delays and drops frames.
+
+    Host 1 behind the relay (5 ms each way, 20 % of the frames dropped each way): no round trip
+    takes less than 10 ms, and some of 200 datagrams are not answered (~36 %); the direct host
+    answers all.
+    """
     _needs_namespaces()
     from det_sim_ros.ros.netns import NetnsHosts
     with NetnsHosts(3, lossy={1: (0.005, 0.2)}) as net:

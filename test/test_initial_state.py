@@ -1,18 +1,19 @@
 """
-The initial state (issue 19): 'rest' (the stable buckled equilibrium at 0 V, the default) and
-'released' (the paper's start from q0, bit for bit as before).
+The initial state: 'rest' and 'released'.
+
+'rest' is the stable buckled equilibrium at 0 V (the default); 'released' is the paper's start
+from q0, bit for bit against reference trajectories.
 """
 
+from det_sim_ros.analysis.scenarios import step_scene
+from det_sim_ros.physics.statics import equilibria, rest_coords, RestStateError
+from det_sim_ros.ros.node import rest_shortenings
+from det_sim_ros.scenes.scene import load_scene, SceneError
+from det_sim_ros.sim.simulator import simulate, Simulator
 import numpy as np
 import pytest
 
-from det_sim_ros.scenes.scene import load_scene, SceneError
-from det_sim_ros.analysis.scenarios import step_scene
-from det_sim_ros.ros.node import rest_shortenings
-from det_sim_ros.sim.simulator import simulate, Simulator
-from det_sim_ros.physics.statics import equilibria, rest_coords, RestStateError
-
-TOL = 1e-9   # m: the issue's stationarity bound on Delta-y and q - q_B
+TOL = 1e-9   # m: the required stationarity bound on Delta-y and q - q_B
 
 FIDELITIES = [('paper', 1), ('consistent', 3), ('exact', 3)]
 
@@ -26,8 +27,12 @@ def _rest_run(scene, t_end=0.1):
 @pytest.mark.parametrize('fidelity, n_ritz', FIDELITIES)
 @pytest.mark.parametrize('beam', ['fixed', 'simply_supported'])
 def test_rest_is_stationary_for_100_ms(beam, fidelity, n_ritz):
-    """At rest and 0 V every sample of the first 100 ms: |Delta-y| <= 1e-9 m and
-    |q - q_B| <= 1e-9 m (q_B: the statics' buckled+ equilibrium), q_dot ~ 0."""
+    """
+    Check that the rest state is stationary for 100 ms at 0 V.
+
+    At rest and 0 V every sample of the first 100 ms: |Delta-y| <= 1e-9 m and
+    |q - q_B| <= 1e-9 m (q_B: the statics' buckled+ equilibrium), q_dot ~ 0.
+    """
     scene = load_scene('default', {'scene.beam': beam, 'scene.fidelity': fidelity,
                                    'scene.n_ritz': n_ritz})
     assert scene.initial_state == 'rest' and scene.rest_branch == 'buckled+'
@@ -52,7 +57,7 @@ def test_buckled_minus_branch_is_the_mirror_state():
 
 
 def test_plate_cells_each_at_their_own_rest():
-    """Plate with different right-cell physics: both cells stationary, plate outputs at rest."""
+    """Check a plate with different right-cell physics: both cells and the plate stay at rest."""
     scene = load_scene('plate', {'dets.right.E_b': 3.0e9})
     r = _rest_run(scene)
     y0 = rest_shortenings(scene)
@@ -77,12 +82,12 @@ def test_below_the_critical_prestrain_rest_is_straight():
     assert np.all(_rest_run(scene, 0.02)['q'] == 0.0)
 
 
-# released: the paper's start as before issue 19 (values printed by main's kernel, the C one of
-# issue 14, at the commit before the initial_state key existed; 3 kV from t = 0.2 s). Bit for
-# bit on the machine that printed them; elsewhere the multi-term models differ in the last
-# digits (seen: 4e-14 relative after the snap-through, on an AMD EPYC against those values),
-# because the model's assembly runs through numpy/BLAS, whose kernels are chosen per CPU. A
-# change to the released path itself moves these values by far more than the tolerance.
+# released: the paper's start from q0 (reference values printed by the C kernel; 3 kV from
+# t = 0.2 s). Bit for bit on the machine that printed them; elsewhere the multi-term models
+# differ in the last digits (seen: 4e-14 relative after the snap-through, on an AMD EPYC against
+# those values), because the model's assembly runs through numpy/BLAS, whose kernels are chosen
+# per CPU. A change to the released path itself moves these values by far more than the
+# tolerance.
 GOLDEN_RTOL = 1e-11
 GOLDEN = {
     ('default', ()): {'q': (0.015707308425827318, -0.009846252500990783),
@@ -97,6 +102,7 @@ GOLDEN = {
 
 @pytest.mark.parametrize('name, overrides', list(GOLDEN))
 def test_released_gives_the_old_trajectories(name, overrides):
+    """Check that 'released' reproduces the reference trajectories in GOLDEN."""
     scene = load_scene(name, {**dict(overrides), 'scene.initial_state': 'released'})
     r = simulate(scene, lambda t: [3000.0 * (t >= 0.2)] * scene.n_dets, 0.3)
     for key, values in GOLDEN[name, overrides].items():
@@ -122,10 +128,13 @@ def test_reset_returns_to_the_configured_initial_state():
 
 
 def test_exact_simply_supported_025_rest_runs_without_fault():
-    """Issue 17: exact, simply supported, eps_b 0.25 faulted at t = 0.008 s at 0 V. Its rest
-    state is inside the exact level's range (max |w'| ~ 0.9 < 1): from rest there is no fault.
-    Released from q0, the dynamic buckling overshoots to w' = 1 (n_ritz 5): the documented
-    domain error, naming the slope."""
+    """
+    Check that the exact simply supported beam at eps_b 0.25 runs from rest without a fault.
+
+    Exact, simply supported, eps_b 0.25 at 0 V: its rest state is inside the exact level's range
+    (max |w'| ~ 0.9 < 1): from rest there is no fault. Released from q0, the dynamic buckling
+    overshoots to w' = 1 (n_ritz 5): the documented domain error, naming the slope.
+    """
     over = {'scene.beam': 'simply_supported', 'scene.eps_b': 0.25,
             'scene.fidelity': 'exact', 'scene.n_ritz': 5}
     scene = load_scene('default', over)
@@ -148,7 +157,11 @@ def test_bad_initial_state_keys_are_one_line_errors():
 
 
 def test_missing_rest_state_is_refused_with_a_reason(monkeypatch):
-    """No stable state on the branch: a one-line RestStateError (a SceneError)."""
+    """
+    Check that a branch without a stable state is refused with a reason.
+
+    No stable state on the branch: a one-line RestStateError (a SceneError).
+    """
     import det_sim_ros.physics.statics as statics
     scene = load_scene('default', {'scene.eps_b': 0.21})
     real = statics._Statics.equilibria
@@ -169,9 +182,13 @@ MS = 1_000_000  # ns
 @pytest.mark.parametrize('initial_state', ['rest', 'released'])
 def test_node_starts_and_resets_to_the_initial_state_and_logs_it(tmp_path, harness,
                                                                  initial_state):
-    """What the node published (its MCAP log holds every sample): the first 100 ms at 0 V are
-    stationary at rest; ~/reset returns to the same initial state (the same samples again);
-    the log records it and re-simulates bit for bit."""
+    """
+    Check that the node starts and resets to the initial state, and logs it.
+
+    What the node published (its MCAP log holds every sample): the first 100 ms at 0 V are
+    stationary at rest; ~/reset returns to the same initial state (the same samples again); the
+    log records it and re-simulates bit for bit.
+    """
     from det_sim_ros.io.mcap_log import LogReader
     from det_sim_ros.io.replay import resimulate
     h = harness(steps_per_tick=5, **{'log.path': str(tmp_path / 'logs'),
@@ -203,7 +220,12 @@ def test_node_starts_and_resets_to_the_initial_state_and_logs_it(tmp_path, harne
 
 
 def test_log_without_the_key_replays_as_released(tmp_path):
-    """Logs written before scene.initial_state existed started released from q0."""
+    """
+    Check that a log without the scene.initial_state key replays as released.
+
+    A log whose scene has neither scene.initial_state nor scene.rest_branch started released
+    from q0.
+    """
     from det_sim_ros.io.mcap_log import Recorder
     from det_sim_ros.io.replay import resimulate, simulate_to_log
     from det_sim_ros.scenes.scene import scene_to_dict
@@ -221,8 +243,12 @@ def test_log_without_the_key_replays_as_released(tmp_path):
 
 
 def test_rest_state_outside_the_exact_range_is_refused_at_start():
-    """Simply supported, eps_b 0.4, 'exact': the rest state needs |w'| >= 1, outside that
-    level's range: refused with one line naming the slope limit (not a fault at t > 0)."""
+    """
+    Check that a rest state outside the exact level's range is refused at the start.
+
+    Simply supported, eps_b 0.4, 'exact': the rest state needs |w'| >= 1, outside that level's
+    range: refused with one line naming the slope limit (not a fault at t > 0).
+    """
     scene = load_scene('default', {'scene.beam': 'simply_supported', 'scene.eps_b': 0.4,
                                    'scene.fidelity': 'exact', 'scene.n_ritz': 3})
     with pytest.raises(RestStateError, match="slope.*'exact'") as info:

@@ -2,14 +2,13 @@
 
 import dataclasses
 
-import numpy as np
-import pytest
-
-from det_sim_ros.sim import integrators
 from det_sim_ros.physics.model import build_model, ModelDomainError
 from det_sim_ros.physics.statics import initial_state
 from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim import integrators
 from det_sim_ros.sim.simulator import simulate, Simulator
+import numpy as np
+import pytest
 
 # the paper's start (q = q0, released): these tests exercise the buckling transient
 RELEASED = {'scene.initial_state': 'released'}
@@ -32,7 +31,7 @@ def test_every_method_is_declared_with_its_order():
 
 
 def test_dormand_prince_table_is_scipys():
-    """The written-out DP5 table equals scipy's RK45 coefficients to the last bit."""
+    """Check that the written-out DP5 table equals scipy's RK45 coefficients to the last bit."""
     from scipy.integrate import RK45
     dp5 = integrators.get_method('dp5')
     c, terms = dp5.arrays()
@@ -49,7 +48,7 @@ def test_dormand_prince_table_is_scipys():
 
 
 def _linear_charge_error(method, n_steps):
-    """Small oscillation of the ideal-source model: compare with a much finer run."""
+    """Return the error of a small oscillation of the ideal-source model against a finer run."""
     scene = load_scene('default', {**RELEASED,
                                    'source': 'ideal', 'creep': False, 'monitor_power': False,
                                    'eps_b': 0.2, 'rate_hz': 100.0})
@@ -69,7 +68,11 @@ def _linear_charge_error(method, n_steps):
 
 @pytest.mark.parametrize('name', sorted(ORDERS))
 def test_convergence_order_on_the_non_stiff_model(name):
-    """On a non-stiff scene every method (exponential ones reduce to RK) shows its order."""
+    """
+    Check that every method shows its order on a non-stiff scene.
+
+    On a non-stiff scene the exponential methods reduce to RK.
+    """
     e1, e2 = _linear_charge_error(name, 60), _linear_charge_error(name, 120)
     observed = np.log2(e1 / e2)
     assert ORDERS[name] - 0.3 <= observed <= ORDERS[name] + 0.8   # pre-asymptotic: above
@@ -77,7 +80,11 @@ def test_convergence_order_on_the_non_stiff_model(name):
 
 @pytest.mark.parametrize('name', ['exp_euler', 'etd2', 'etdrk4', 'lawson4', 'lawson5'])
 def test_exponential_methods_solve_pure_charge_relaxation_exactly(name):
-    """Frozen beam (huge mass): q_p follows the exact RC charging curve for any step size."""
+    """
+    Check that exponential methods solve pure charge relaxation exactly.
+
+    Frozen beam (huge mass): q_p follows the exact RC charging curve for any step size.
+    """
     scene = load_scene('default', {**RELEASED, 'm': 1e6, 'rho_b': 1e9, 'creep': False,
                                    'monitor_power': False})
     model = build_model(scene)
@@ -94,7 +101,11 @@ def test_exponential_methods_solve_pure_charge_relaxation_exactly(name):
 
 
 def test_explicit_rk4_diverges_where_the_exponential_core_is_stable():
-    """The reason for the exponential core: the charge pole Rs C ~ 30 us."""
+    """
+    Check that explicit RK4 diverges where the exponential core is stable.
+
+    The reason for the exponential core: the charge pole Rs C ~ 30 us.
+    """
     scene = load_scene('default', RELEASED)
     with pytest.raises(ModelDomainError):
         simulate(scene, lambda t: 3000.0, 0.05, method='rk4', substeps=1)
@@ -125,8 +136,12 @@ def test_zero_order_hold_and_time_grid():
 
 
 def test_auto_step_meets_its_tolerance_on_the_step_scenario():
-    """The default (adaptive) stepper's error on a 0.5 s piece of the step scenario against a
-    fixed run 4x finer than the tolerance's fixed count, in fewer steps than that count."""
+    """
+    Check that the adaptive stepper meets its tolerance on the step scenario.
+
+    The default (adaptive) stepper's error on a 0.5 s piece of the step scenario against a
+    fixed run 4x finer than the tolerance's fixed count, in fewer steps than that count.
+    """
     scene = load_scene('default', {**RELEASED, 'integrator.tolerance': 1e-6})
     sim = Simulator(scene)
     assert sim.adaptive
@@ -154,7 +169,11 @@ def _steps_per_period(sim, volts, n):
 
 
 def test_adaptive_step_count_follows_the_dynamics():
-    """Many steps while the beam snaps after the 3 kV step, few once it has settled."""
+    """
+    Check that the adaptive step count follows the dynamics.
+
+    Many steps while the beam snaps after the 3 kV step, few once it has settled.
+    """
     sim = Simulator(load_scene('default', RELEASED))
     counts = _steps_per_period(sim, lambda t: 3000.0 * (t >= 0.5), 1500)
     settled = counts[1300:].mean()
@@ -164,7 +183,7 @@ def test_adaptive_step_count_follows_the_dynamics():
 
 
 def test_adaptive_step_repeats_a_period_over_its_tolerance():
-    """A period started with too few steps is repeated with more."""
+    """Check that a period started with too few steps is repeated with more."""
     scene = load_scene('default', {**RELEASED, 'integrator.tolerance': 1e-7})
     sim = Simulator(scene)
     sim.set_input([3000.0])
@@ -178,11 +197,14 @@ def test_adaptive_step_repeats_a_period_over_its_tolerance():
     assert sim.substeps > n_min
 
 
-
 @pytest.mark.parametrize('source', ['rc', 'ideal'])
 def test_stepping_equals_one_call_bit_for_bit(source):
-    """Simulator.set_input/step per period (the node's path, with set_input's fast path for
-    one float) and simulate() in one compiled call give the same states, energy book included."""
+    """
+    Check that stepping period by period equals one compiled call, bit for bit.
+
+    Simulator.set_input/step per period (the node's path, with set_input's fast path for one
+    float) and simulate() in one compiled call give the same states, energy book included.
+    """
     scene = load_scene('default', {**RELEASED,
                                    'integrator.tolerance': 1e-7, 'scene.source': source})
     stepped = Simulator(scene)
@@ -195,8 +217,12 @@ def test_stepping_equals_one_call_bit_for_bit(source):
 
 @pytest.mark.parametrize('name', ['etdrk4', 'rk4', 'dp5'])
 def test_embedded_error_estimate_has_the_order_of_its_pair(name):
-    """The estimate h sum e_j N_j is the local error of the embedded solution: it scales as
-    h^(p+1) with p the embedded order (RK4(3) FSAL pair: h^4; Dormand-Prince 5(4): h^5)."""
+    """
+    Check that the embedded error estimate scales with the order of its pair.
+
+    The estimate h sum e_j N_j is the local error of the embedded solution: it scales as
+    h^(p+1) with p the embedded order (RK4(3) FSAL pair: h^4; Dormand-Prince 5(4): h^5).
+    """
     sim = Simulator(load_scene('default', {**RELEASED, 'scene.source': 'ideal'}), method=name)
     method = sim.method
     x0 = initial_state(sim.model)
@@ -224,7 +250,7 @@ def _run_checked(scene, volts, t_end, **kw):
 @pytest.mark.parametrize('Rs', [1.0, 1e2, 2e3, 1e5, 1e6])
 @pytest.mark.parametrize('rate_hz', [100.0, 1000.0, 1e5])
 def test_stress_series_resistance_and_control_period(Rs, rate_hz):
-    """Rs from 1 Ohm to 1 MOhm, dt from 10 ms to 10 us: finite, bounded power residual."""
+    """Check Rs from 1 Ohm to 1 MOhm, dt from 10 ms to 10 us: finite, bounded power residual."""
     scene = load_scene('default', {**RELEASED,
                                    'Rs': Rs, 'rate_hz': rate_hz, 'integrator.tolerance': 1e-4})
     sim = Simulator(scene)
@@ -239,7 +265,7 @@ def test_stress_series_resistance_and_control_period(Rs, rate_hz):
 @pytest.mark.parametrize('eps_b', [0.0, 0.05, 0.1, 0.2, 0.3, 0.4])
 @pytest.mark.parametrize('beam', ['simply_supported', 'fixed'])
 def test_stress_prestrain_sweep_square_wave_near_resonance(beam, eps_b):
-    """A 0..v_max square wave at the beam's ~90 Hz resonance, across pre-strains."""
+    """Check a 0..v_max square wave at the beam's ~90 Hz resonance, across pre-strains."""
     scene = load_scene('default', {**RELEASED,
                                    'beam': beam, 'eps_b': eps_b, 'integrator.tolerance': 1e-5})
     sim = Simulator(scene)
@@ -258,11 +284,16 @@ def test_stress_voltage_steps(v):
 
 @pytest.mark.parametrize('scene_name', ['default', 'plate'])
 def test_supplied_energy_is_exact_under_a_new_voltage_every_period(scene_name):
-    """A controller's new voltage every period (a 1 V per period ramp, a 2 kV drop every 2 s)
-    at the default tolerance: the supplied energy W_in matches a tight run to 1e-8 and the
-    power balance stays near its ~1e-5 norm. (The stages integrate W_in - v q_p, whose rate is
-    smooth; integrating v i, the quadrature of every jump's charging current had put 1.4e-3
-    into the balance after 3 s, and the node flagged a run whose outputs were right.)"""
+    """
+    Check that the supplied energy is exact under a new voltage every period.
+
+    A controller's new voltage every period (a 1 V per period ramp, a 2 kV drop every 2 s) at
+    the default tolerance: the supplied energy W_in matches a tight run to 1e-8 and the power
+    balance stays near its ~1e-5 norm. (The stages integrate W_in - v q_p, whose rate is
+    smooth; integrating v i instead would put every jump's charging current through the
+    quadrature, ~1.4e-3 into the balance after 3 s, and the node would flag a run whose outputs
+    are right.)
+    """
     def run(tolerance):
         sim = Simulator(load_scene(scene_name, {'integrator.tolerance': tolerance}))
         for k in range(2500):
@@ -275,10 +306,14 @@ def test_supplied_energy_is_exact_under_a_new_voltage_every_period(scene_name):
 
 
 def test_small_input_jumps_start_their_graded_steps_longer():
-    """A controller's 1 V change per period: the charge transient's first step is sized by
-    the jump (fine * (v_max / du)^(1/5); the 'step' scenes' v_max jumps keep fine): half the
-    steps of sizing every jump like a v_max jump, and the error stays well under the
-    tolerance (against the same drive at 1e-10)."""
+    """
+    Check that small input jumps start their graded steps longer.
+
+    A controller's 1 V change per period: the charge transient's first step is sized by the
+    jump (fine * (v_max / du)^(1/5); the 'step' scenes' v_max jumps keep fine): half the steps
+    of sizing every jump like a v_max jump, and the error stays well under the tolerance
+    (against the same drive at 1e-10).
+    """
     def run(tolerance, same_first_step=False):
         sim = Simulator(load_scene('default', {'integrator.tolerance': tolerance}))
         if same_first_step:
@@ -300,17 +335,21 @@ def test_small_input_jumps_start_their_graded_steps_longer():
 
 
 def test_stress_long_run_million_steps():
-    """10^6 internal steps (100 s at 1 kHz, 10 substeps, through the same compiled periods as
-    Simulator.step) with a 0.1 Hz square wave: stays finite and the energy balance closes."""
+    """
+    Check a run of a million internal steps.
+
+    10^6 internal steps (100 s at 1 kHz, 10 substeps, through the same compiled periods as
+    Simulator.step) with a 0.1 Hz square wave: stays finite and the energy balance closes.
+    """
     scene = load_scene('default', {**RELEASED, 'integrator.substeps': 10, 'rate_hz': 1000.0})
     sim = Simulator(scene)
     r = simulate(sim, lambda t: 3000.0 * (int(t / 5.0) % 2), 100.0)
     assert sim.k == 100_000
     for name, values in r.outputs.items():
         assert np.all(np.isfinite(values)), name
-    # the charging transients after each of the 20 switches are resolved (fixed_period in _csrc/stepping.c)
+    # the charging transients after each of the 20 switches are resolved (fixed_period in
+    # _csrc/stepping.c)
     assert abs(sim.power_residual()) < 1e-3
-
 
 
 def test_leaving_the_domain_faults_cleanly_and_reset_recovers():

@@ -1,19 +1,22 @@
-"""The compiled kernel against the numpy reference (det_sim_ros/physics/reference.py), to round-off, on
-random states of every scene kind; batch stepping per coupled group; named-record input."""
+"""
+The compiled kernel against the numpy reference, to round-off.
+
+The reference is det_sim_ros/physics/reference.py; the checks run on random states of every
+scene kind. Also: batch stepping per coupled group; named-record input.
+"""
 
 import dataclasses
 import math
 
-import numpy as np
-import pytest
-
 from det_sim_ros.core import kernel
 from det_sim_ros.physics import reference
-from det_sim_ros.sim.integrators import get_method, make_stepper, METHODS, StepControl
 from det_sim_ros.physics.model import build_model
 from det_sim_ros.physics.statics import initial_state
 from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.integrators import get_method, make_stepper, METHODS, StepControl
 from det_sim_ros.sim.simulator import simulate, Simulator
+import numpy as np
+import pytest
 
 SCENES = {
     'single paper rc creep': ('default', {}),
@@ -36,8 +39,12 @@ SCENES = {
 
 
 def _random_state(model, rng):
-    """A buckled beam in motion: q near the rest deflection with every mode excited, a
-    velocity, creep strain and a charge near C0 v."""
+    """
+    Return a random state and input: a buckled beam in motion.
+
+    q near the rest deflection with every mode excited, a velocity, creep strain and a charge
+    near C0 v.
+    """
     a = model.arrays
     x = initial_state(model)
     for c in range(a.n_cells):
@@ -91,8 +98,12 @@ def test_rhs_and_outputs_match_the_reference(model):
 
 @pytest.mark.parametrize('name', sorted(METHODS))
 def test_one_step_of_every_method_matches_the_reference(model, name):
-    """One step of each method: the compiled core (period() with one fixed step, so arrays
-    step group by group) against the reference step on the whole model."""
+    """
+    Check that one step of every method matches the reference.
+
+    One step of each method: the compiled core (period() with one fixed step, so arrays step
+    group by group) against the reference step on the whole model.
+    """
     method = get_method(name)
     rng = np.random.default_rng(11)
     x, u = _random_state(model, rng)
@@ -110,22 +121,31 @@ def test_one_step_of_every_method_matches_the_reference(model, name):
 
 
 def test_reference_phi_functions_reach_round_off():
-    """The reference's phi_k (matrix exponential) against the series (small |z|) and the closed
-    form (e^z - sum_{m<k} z^m/m!) / z^k (large |z|, where it does not cancel)."""
+    """
+    Check that the reference's phi functions reach round-off.
+
+    The reference's phi_k (matrix exponential) against the series (small |z|) and the closed
+    form (e^z - sum_{m<k} z^m/m!) / z^k (large |z|, where it does not cancel).
+    """
     for z in (-1e-8, -1e-3, -0.3, -0.49, -0.51, -2.0, -40.0, 0.2):
         for k in range(5):
             if abs(z) < 1.0:
                 expected = sum(z ** m / math.factorial(m + k) for m in range(30))
             else:
-                expected = (math.exp(z) - sum(z ** m / math.factorial(m) for m in range(k))) / z ** k
+                expected = ((math.exp(z) - sum(z ** m / math.factorial(m) for m in range(k)))
+                            / z ** k)
             assert reference.phi(k, z) == pytest.approx(expected, rel=1e-12), (k, z)
 
 
 @pytest.mark.parametrize('name', ['exp_euler', 'etd2', 'etdrk4', 'lawson4'])
 @pytest.mark.parametrize('h', [1e-7, 2e-5, 2e-4, 1e-3])
 def test_exponential_steps_match_the_reference_at_every_stiffness(name, h):
-    """h L from -0.004 to -35 on the charge: the kernel's phi_k branches (series with the
-    downward recurrence below |z| = 0.5, the upward recurrence above) in a real step."""
+    """
+    Check that exponential steps match the reference at every stiffness.
+
+    h L from -0.004 to -35 on the charge: the kernel's phi_k branches (series with the downward
+    recurrence below |z| = 0.5, the upward recurrence above) in a real step.
+    """
     model = build_model(load_scene('default'))
     x, u = _random_state(model, np.random.default_rng(5))
     stepper = make_stepper(model, get_method(name), StepControl(1), h)
@@ -135,7 +155,7 @@ def test_exponential_steps_match_the_reference_at_every_stiffness(name, h):
 
 
 def test_stepping_is_deterministic():
-    """Same inputs, same bits: two simulators, and one reset, repeat a run exactly."""
+    """Check that two simulators, and one reset, repeat a run exactly: same inputs, same bits."""
     scene = load_scene('default')
     volts = lambda t: 3000.0 * (0.1 <= t < 0.3)  # noqa: E731
     a = simulate(scene, volts, 0.4)
@@ -149,8 +169,12 @@ def test_stepping_is_deterministic():
 
 
 def test_array_copies_keep_their_own_step_counts():
-    """One snapping copy does not force its step count on the others: each coupled group
-    adapts alone, so every copy of an array steps exactly like that copy alone."""
+    """
+    Check that the copies of an array keep their own step counts.
+
+    One snapping copy does not force its step count on the others: each coupled group adapts
+    alone, so every copy of an array steps exactly like that copy alone.
+    """
     copies = 4
     scene = load_scene('array', {'structure.copies': copies, 'structure.spread': 0.0})
     settle, snap = 1500, 20          # periods: settle at 0 V, then det0 alone switches to 3 kV
@@ -173,8 +197,12 @@ def test_array_copies_keep_their_own_step_counts():
 @pytest.mark.parametrize('source', ['rc', 'ideal'])
 @pytest.mark.parametrize('periods', [200, 45])   # whole chunks of 32 periods, and a part one
 def test_batch_results_do_not_depend_on_threads(source, periods):
-    """States, outputs and the energy book (input-jump bookkeeping included) are bit-identical
-    whether the copies step on one thread (per period) or on two (chunks of periods)."""
+    """
+    Check that batch results do not depend on the number of threads.
+
+    States, outputs and the energy book (input-jump bookkeeping included) are bit-identical
+    whether the copies step on one thread (per period) or on two (chunks of periods).
+    """
     scene = load_scene('array', {'structure.copies': 6, 'scene.source': source})
     rng = np.random.default_rng(3)
     volts = np.repeat(rng.uniform(0, 3000, (5, 6)), 40, axis=0)[:periods]
@@ -210,8 +238,12 @@ def test_kernel_reads_named_fields_and_checks_them():
 @pytest.mark.parametrize('overrides', [{}, {'scene.source': 'ideal'},
                                        {'integrator.substeps': 4}])
 def test_a_failing_period_leaves_the_last_good_state(overrides):
-    """Simulator.step() steps x in place; a period that leaves the domain (here the beam ends
-    meet, lambda <= 0, within the period) must leave x exactly at the period's start."""
+    """
+    Check that a failing period leaves the last good state.
+
+    Simulator.step() steps x in place; a period that leaves the domain (here the beam ends
+    meet, lambda <= 0, within the period) must leave x exactly at the period's start.
+    """
     from det_sim_ros.physics.model import ModelDomainError
     sim = Simulator(load_scene('default', overrides))
     a = sim.model.arrays

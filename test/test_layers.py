@@ -1,8 +1,10 @@
 """
-The package's layers, checked on every module's imports (top-level and inside functions, read
-from the source with ast, nothing imported): each layer imports only the layers below it, no
-module imports rclpy below the ros layer, and no two modules import each other, directly or
-round a loop. The old flat module paths still import, as aliases that warn once.
+The package's layers, checked on every module's imports.
+
+The imports are read from the source with ast (top-level and inside functions, nothing
+imported): each layer imports only the layers below it, no module imports rclpy below the ros
+layer, and no two modules import each other, directly or round a loop. The deprecated flat
+module paths (det_sim_ros._moved) import as aliases that warn once.
 """
 
 import ast
@@ -10,10 +12,9 @@ import os
 import subprocess
 import sys
 
-import pytest
-
 import det_sim_ros
 from det_sim_ros._moved import MOVED
+import pytest
 
 PACKAGE_DIR = os.path.dirname(det_sim_ros.__file__)
 # rank of each layer: a module may import its own layer and any layer of a lower rank
@@ -33,7 +34,7 @@ def _modules():
 
 
 def _imports(module, path):
-    """(imported absolute name, line) for every import statement in the file."""
+    """Yield (imported absolute name, line) for every import statement in the file."""
     tree = ast.parse(open(path, encoding='utf-8').read(), path)
     package = module if path.endswith('__init__.py') else module.rpartition('.')[0]
     for node in ast.walk(tree):
@@ -125,8 +126,12 @@ def test_no_import_cycles():
 
 
 def test_the_layer_check_sees_a_planted_upward_import(tmp_path):
-    """The checks above read what they claim to: an upward import in a copy of a module is
-    found by the same functions."""
+    """
+    Check that the layer check sees a planted upward import.
+
+    The checks above read what they claim to: an upward import in a copy of a module is found
+    by the same functions.
+    """
     path = os.path.join(PACKAGE_DIR, 'physics', 'shapes.py')
     planted = tmp_path / 'shapes.py'
     planted.write_text(open(path, encoding='utf-8').read()
@@ -136,7 +141,7 @@ def test_the_layer_check_sees_a_planted_upward_import(tmp_path):
 
 
 def test_importing_the_package_has_no_side_effects():
-    """No signal handlers, no rclpy, no numpy: ``import det_sim_ros`` is cheap and inert."""
+    """Check that ``import det_sim_ros`` is cheap and inert: no signal handlers, rclpy, numpy."""
     code = ('import signal, sys\n'
             'before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}\n'
             'import det_sim_ros\n'
@@ -150,6 +155,7 @@ def test_importing_the_package_has_no_side_effects():
 
 @pytest.mark.parametrize('old', sorted(MOVED))
 def test_old_module_paths_are_aliases_that_warn_once(old):
+    """Check that a deprecated flat module path is an alias of its module that warns once."""
     new = f'det_sim_ros.{MOVED[old]}'
     code = ('import importlib, warnings\n'
             'with warnings.catch_warnings(record=True) as caught:\n'

@@ -1,27 +1,32 @@
 """
-Linearization: the equilibrium, A/B against independent finite differences of the compiled
-model, the poles against a finite-difference Jacobian's eigenvalues, the linear step response
-against the nonlinear simulation (first order), python-control, and `det_sim linearize`.
+Linearization, checked against independent computations.
+
+The equilibrium, A/B against independent finite differences of the compiled model, the poles
+against a finite-difference Jacobian's eigenvalues, the linear step response against the
+nonlinear simulation (first order), python-control, and `det_sim linearize`.
 """
 
 import json
 import math
 
+from det_sim_ros.cli.det_sim import main
+from det_sim_ros.physics.linearize import LinearizationError, linearize
+from det_sim_ros.physics.statics import rest_shortening
+from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.simulator import Simulator
 import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from det_sim_ros.cli.det_sim import main
-from det_sim_ros.physics.linearize import LinearizationError, linearize
-from det_sim_ros.scenes.scene import load_scene
-from det_sim_ros.sim.simulator import Simulator
-from det_sim_ros.physics.statics import rest_shortening
-
 
 def richardson_jacobian(func, x, scales):
-    """Central differences of func at x, Richardson-extrapolated (error O(h^4)); column j uses
+    """
+    Return the Jacobian of func at x by Richardson-extrapolated central differences.
+
+    Central differences of func at x, Richardson-extrapolated (error O(h^4)); column j uses
     h_j = 1e-3 scales_j. Independent of the complex-step code (another implementation of the
-    physics too: the compiled kernel through Model.f)."""
+    physics too: the compiled kernel through Model.f).
+    """
     x = np.asarray(x, dtype=float)
     cols = []
     for j in range(x.size):
@@ -35,8 +40,12 @@ def richardson_jacobian(func, x, scales):
 
 
 def state_scales(lin):
-    """A typical size per state: coordinates ~ the deflection, rates ~ omega x deflection,
-    creep strain ~ 1e-3, charge ~ C0 v_max."""
+    """
+    Return a typical size per state.
+
+    Coordinates ~ the deflection, rates ~ omega x deflection, creep strain ~ 1e-3,
+    charge ~ C0 v_max.
+    """
     model = lin.model
     a = model.arrays
     q_scale = max(np.max(np.abs(lin.x0[:a.n_q])), 1e-3)
@@ -83,6 +92,7 @@ def test_equilibrium_and_jacobians_match_finite_differences(name, overrides, vol
         scale = np.max(np.abs(fd), axis=0, keepdims=True)     # per column
         scale[scale == 0.0] = 1.0
         assert np.max(np.abs(exact - fd) / scale) < 1e-7
+
     # C: Delta-y and q of the outputs, by differences of the published quantities
     def published(x):
         out = model.output_vector(x, lin.u0)
@@ -94,8 +104,12 @@ def test_equilibrium_and_jacobians_match_finite_differences(name, overrides, vol
 
 
 def test_poles_of_the_default_scene_at_0V_match_fd_eigenvalues():
-    """Issue 18's target: the poles equal the eigenvalues of a finite-difference Jacobian of
-    the nonlinear model to 1e-6 relative."""
+    """
+    Check that the poles at 0 V match the eigenvalues of a finite-difference Jacobian.
+
+    The poles equal the eigenvalues of a finite-difference Jacobian of the nonlinear model to
+    1e-6 relative.
+    """
     lin = linearize(load_scene('default'), 0.0)
     A_fd, _ = fd_jacobians(lin)
     poles = lin.poles()
@@ -113,7 +127,7 @@ def test_poles_of_the_default_scene_at_0V_match_fd_eigenvalues():
 
 
 def zoh_response(lin, du, dt, n):
-    """The linear model's outputs at t = dt .. n dt for a step du at t = 0 (exact ZOH)."""
+    """Return the linear model's outputs at t = dt .. n dt for a step du at t = 0 (exact ZOH)."""
     N = lin.A.shape[0]
     M = np.zeros((N + len(du), N + len(du)))
     M[:N, :N], M[:N, N:] = lin.A * dt, lin.B * dt
@@ -140,8 +154,12 @@ def nonlinear_response(scene, lin, du, n):
 
 
 def test_linear_step_response_matches_the_nonlinear_one_to_first_order():
-    """A small voltage step from the 1500 V equilibrium: the nonlinear response minus the
-    linear one is second order in the step (relative error ~ proportional to it)."""
+    """
+    Check that the linear step response matches the nonlinear one to first order.
+
+    A small voltage step from the 1500 V equilibrium: the nonlinear response minus the linear
+    one is second order in the step (relative error ~ proportional to it).
+    """
     scene = load_scene('default', {'scene.monitor_power': False, 'integrator.tolerance': 1e-9})
     lin = linearize(scene, 1500.0)
     n = 200   # 0.2 s: the beam's ringing (85 Hz) and most of its decay

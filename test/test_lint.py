@@ -49,7 +49,7 @@ PEP257_PLANTED = {'D400', 'D415', 'D213'}
 
 
 def _with_source(report_lines):
-    """Each report line followed by the source line it points at."""
+    """Return each report line followed by the source line it points at."""
     shown = []
     for entry in report_lines:
         shown.append(entry)
@@ -63,14 +63,14 @@ def _with_source(report_lines):
 
 
 def flake8_errors(paths):
-    """ament_flake8's errors on ``paths`` (relative to the working directory)."""
+    """Return ament_flake8's errors on ``paths`` (relative to the working directory)."""
     from ament_flake8.main import main_with_errors
     _, errors = main_with_errors(argv=list(paths))
     return errors
 
 
 def pep257_errors(paths, capsys):
-    """ament_pep257's errors on ``paths`` (it reports them on stderr)."""
+    """Return ament_pep257's errors on ``paths`` (it reports them on stderr)."""
     from ament_pep257.main import main
     capsys.readouterr()
     main(argv=list(paths))
