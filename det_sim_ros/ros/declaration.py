@@ -12,9 +12,36 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
 from rclpy.parameter import Parameter
 
 from .params import (node_parameter_values, NODE_PARAMS, Param, runtime_refusal,
-                     SCENE_PARAM_DESCRIPTION, scene_parameters)
+                     SCENE_PARAM_DESCRIPTION, scene_parameters, SCENE_SECTIONS)
+from ..scenes.scene import load_scene, SceneError
 
-__all__ = ['declare_parameters', 'descriptor', 'validate_parameters']
+__all__ = ['declare_parameters', 'descriptor', 'load_node_scene', 'validate_parameters']
+
+
+def load_node_scene(node):
+    """
+    Load the node's scene and declare every parameter; return (scene, scene file name).
+
+    The scene is the ``scene_file`` parameter with the scene keys given as overrides (``-p
+    physics.Rs:=...``); the integration method is checked here, before the long preparation.
+    """
+    overrides = dict(getattr(node, '_parameter_overrides', {}) or {})
+    if 'scene_file' in overrides and not isinstance(overrides['scene_file'].value, str):
+        raise SceneError(f'parameter scene_file: must be a string (a name in config/ or a '
+                         f"path; got {overrides['scene_file'].value!r})")
+    scene_file = node.declare_parameter('scene_file', 'default', ParameterDescriptor(
+        description='scene file: a name in config/ or a path', read_only=True)).value
+    scene = load_scene(scene_file, overrides={
+        name: p.value for name, p in overrides.items()
+        if name.split('.')[0] in SCENE_SECTIONS or name == 'rate_hz'})
+    if scene.method != 'auto':
+        from ..sim.integrators import get_method
+        try:
+            get_method(scene.method)
+        except ValueError as exc:
+            raise SceneError(f"scene key 'integrator.method': {exc}") from None
+    declare_parameters(node, scene, {name: p.value for name, p in overrides.items()})
+    return scene, scene_file
 
 
 def descriptor(param: Param) -> ParameterDescriptor:

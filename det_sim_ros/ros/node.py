@@ -3,7 +3,7 @@ ROS 2 node: voltage commands in, the actuator's state out, on a fixed sim-time g
 
 The node only does I/O: all physics is in :class:`det_sim_ros.sim.simulator.Simulator`; when
 periods run is its pacing's (det_sim_ros.ros.pacing), what it reports is built by
-det_sim_ros.ros.diagnostics. Topic, parameter and service contract: see README.md.
+det_sim_ros.ros.diagnostics. Topic, parameter and service contract: docs/topics.md.
 """
 
 from __future__ import annotations
@@ -13,7 +13,6 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
-from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.clock import Clock, ClockType
@@ -27,18 +26,17 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from .commands import CommandInput
-from .declaration import declare_parameters, validate_parameters
+from .declaration import load_node_scene, validate_parameters
 from .diagnostics import diagnostics_message, RateWindow, status_line
 from .markers import attach_markers
 from .pacing import make_pacing
-from .params import SCENE_SECTIONS
 from .recording import open_recorder
 from .spinning import make_executor, spin, spin_until_stopped, StopRequested, StopSignals
 from ..io.contract import (CLOCK_TOPIC, COMMAND_TOPIC, DIAGNOSTICS_TOPIC, encode_clock,
                            JOINT_COMMAND_TOPIC, OUTPUT_FIELDS, OutputContract, rest_shortenings,
                            stamp_ns, structure_channels, STRUCTURE_TOPIC, TOPIC_TYPES)
 from ..physics.model import ModelDomainError
-from ..scenes.scene import load_scene, SceneError
+from ..scenes.scene import SceneError
 from ..sim.simulator import Simulator
 
 __all__ = ['SimNode', 'main', 'OUTPUT_TOPICS', 'STRUCTURE_TOPIC', 'rest_shortenings',
@@ -51,7 +49,7 @@ OUTPUT_TOPICS = {topic: mapping['position'] for topic, mapping in OUTPUT_FIELDS.
 
 class SimNode(Node):
     """
-    The simulator as a ROS 2 node (see README.md for the topic contract).
+    The simulator as a ROS 2 node (docs/topics.md has the topic contract).
 
     Per control period the node takes the commands that have arrived, steps the simulator,
     writes the CDR bytes of every output straight from the output vector
@@ -68,7 +66,7 @@ class SimNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        scene_file = self._load_scene()
+        self.scene, scene_file = load_node_scene(self)
         self._pacing = make_pacing(self._p)
         started = time.perf_counter()
         self._sim = Simulator(self.scene, threads=self._p('threads'))
@@ -94,30 +92,6 @@ class SimNode(Node):
         self._fault_reported = self._distrust_reported = ''
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._start(scene_file)
-
-    def _load_scene(self) -> str:
-        """
-        Load the scene and declare every parameter; return the scene file's name.
-
-        The scene is ``scene_file`` with the scene keys given as overrides.
-        """
-        overrides = dict(getattr(self, '_parameter_overrides', {}) or {})
-        if 'scene_file' in overrides and not isinstance(overrides['scene_file'].value, str):
-            raise SceneError(f'parameter scene_file: must be a string (a name in config/ or a '
-                             f"path; got {overrides['scene_file'].value!r})")
-        scene_file = self.declare_parameter('scene_file', 'default', ParameterDescriptor(
-            description='scene file: a name in config/ or a path', read_only=True)).value
-        self.scene = load_scene(scene_file, overrides={
-            name: p.value for name, p in overrides.items()
-            if name.split('.')[0] in SCENE_SECTIONS or name == 'rate_hz'})
-        if self.scene.method != 'auto':      # checked here, before the (long) preparation
-            from ..sim.integrators import get_method
-            try:
-                get_method(self.scene.method)
-            except ValueError as exc:
-                raise SceneError(f"scene key 'integrator.method': {exc}") from None
-        declare_parameters(self, self.scene, {name: p.value for name, p in overrides.items()})
-        return scene_file
 
     def _start(self, scene_file):
         """Create the endpoints, timers and the recorder; then sample 0 and the start-up line."""
