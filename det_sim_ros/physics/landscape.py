@@ -1,8 +1,10 @@
 """
-The potential landscape of one scene's structure: U_pot and its derivatives from the model's
-energy output, the search range, the equilibria at a polymer voltage and the rest shortening.
-:mod:`det_sim_ros.physics.statics` builds its public functions on it; :func:`landscape` caches
-one per beam, pre-strain, fidelity and physics. Units: m, V, J, N/m.
+The potential landscape of one scene's structure.
+
+U_pot and its derivatives from the model's energy output, the search range, the equilibria at a
+polymer voltage and the rest shortening. :mod:`det_sim_ros.physics.statics` builds its public
+functions on it; :func:`landscape` caches one per beam, pre-strain, fidelity and physics.
+Units: m, V, J, N/m.
 """
 
 from __future__ import annotations
@@ -12,9 +14,9 @@ import math
 
 import numpy as np
 
-from ..core import kernel
 from .brent import brentq
 from .model import build_model, check, ModelDomainError
+from ..core import kernel
 from ..scenes.scene import Scene
 
 __all__ = ['Landscape', 'landscape', 'cache_key', 'CACHE_SIZE']
@@ -25,8 +27,12 @@ CACHE_SIZE = 256        # landscapes (and rest states) kept, least recently used
 
 
 class Landscape:
-    """U_pot of one scene's structure and its equilibria (the model built with an ideal source,
-    no creep and no power monitor: at q_dot = 0 its energy output is H of the statics)."""
+    """
+    U_pot of one scene's structure and its equilibria.
+
+    The model is built with an ideal source, no creep and no power monitor: at q_dot = 0 its
+    energy output is H of the statics.
+    """
 
     def __init__(self, scene: Scene):
         self.scene = scene
@@ -63,9 +69,13 @@ class Landscape:
         return float(out[self._iH] - out[self._iC] * vp * vp)
 
     def acceleration(self, q: float, vp: float) -> float:
-        """One coordinate: q_ddot at q_dot = 0 (the sign of the generalized force -dU/dq).
-        Model.f's compiled rhs, called directly: the root scans call this ~800 times per
-        distinct cell, and Model.f's argument checks were 90 % of an array's build time."""
+        """
+        Return q_ddot at q_dot = 0 for one coordinate.
+
+        Its sign is that of the generalized force -dU/dq. Model.f's compiled rhs, called
+        directly: the root scans call this ~800 times per distinct cell, and Model.f's argument
+        checks were 90 % of an array's build time.
+        """
         if not math.isfinite(q):
             check(kernel.NON_FINITE)
         self._x[0] = q
@@ -79,7 +89,7 @@ class Landscape:
         return float(self._eval(coords, vp)[self._iy])
 
     def q_ref(self, coords) -> float:
-        """Reference deflection of ``coords``, m."""
+        """Return the reference deflection of ``coords``, m."""
         return float(np.dot(self.ref, coords))
 
     def gradient(self, coords, vp) -> np.ndarray:
@@ -166,9 +176,11 @@ class Landscape:
 
     def minimize(self, x, vp, N=None, iters=60):
         """
-        Local minimum of U_pot from x by Newton's method with the Hessian made positive
-        definite (eigenvalues floored at their magnitude) and a backtracking line search; with
-        N, only x + N z is searched (a constrained minimum).
+        Return a local minimum of U_pot from x by Newton's method.
+
+        The Hessian is made positive definite (eigenvalues floored at their magnitude) and the
+        step has a backtracking line search; with N, only x + N z is searched (a constrained
+        minimum).
         """
         x = np.array(x, dtype=float)
         N = np.eye(self.nq) if N is None else N
@@ -195,9 +207,11 @@ class Landscape:
 
     def buckled_roots_nd(self, vp):
         """
-        Several coordinates: the stable buckled state, minimized from the one-term solution of
-        the same scene (q1*, 0, ..., 0), else from the softest mode at q = 0 with the largest
-        reference deflection. Only minima are returned for several coordinates.
+        Return the stable buckled states of several coordinates.
+
+        Each is minimized from the one-term solution of the same scene (q1*, 0, ..., 0), else
+        from the softest mode at q = 0 with the largest reference deflection. Only minima are
+        returned for several coordinates.
         """
         one = landscape(self.scene.replace(**{'scene.n_ritz': 1}))
         guesses = [np.r_[c[0], np.zeros(self.nq - 1)] for kind, c, k, *_ in
@@ -220,8 +234,11 @@ class Landscape:
         return roots
 
     def equilibria(self, vp, v):
-        """Rows (kind, coords, stiffness, y, U_pot) of the straight and buckled equilibria at
-        polymer voltage ``vp`` (cached per ``vp``)."""
+        """
+        Return the straight and buckled equilibria at polymer voltage ``vp``.
+
+        Rows (kind, coords, stiffness, y, U_pot), cached per ``vp``.
+        """
         key = float(vp)
         if key in self._eq:
             return self._eq[key]
@@ -260,12 +277,12 @@ _landscapes: 'collections.OrderedDict[tuple, Landscape]' = collections.OrderedDi
 
 
 def cache_key(scene: Scene) -> tuple:
-    """What a landscape depends on: beam, pre-strain, fidelity, n_ritz and physics."""
+    """Return what a landscape depends on: beam, pre-strain, fidelity, n_ritz and physics."""
     return (scene.beam, float(scene.eps_b), scene.fidelity, scene.n_ritz, scene.physics)
 
 
 def landscape(scene: Scene) -> Landscape:
-    """The cached :class:`Landscape` of ``scene``'s structure."""
+    """Return the cached :class:`Landscape` of ``scene``'s structure."""
     key = cache_key(scene)
     st = _landscapes.get(key)
     if st is None:
