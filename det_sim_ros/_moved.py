@@ -65,7 +65,11 @@ class _MovedPath(importlib.abc.MetaPathFinder, importlib.abc.Loader):
         module.__spec__ = self._spec
 
     def get_code(self, fullname):
-        """``python -m det_sim_ros.<old>``: run the new module as the main program."""
+        """
+        Return the code that ``python -m det_sim_ros.<old>`` runs.
+
+        It runs the new module as the main program.
+        """
         old = fullname.rpartition('.')[2]
         target = f'{_ROOT}.{_RUN_AS_MAIN.get(old, MOVED[old])}'
         return compile(f'import runpy\nrunpy.run_module({target!r}, run_name="__main__", '

@@ -64,7 +64,11 @@ class Landscape:
         return self._out
 
     def energy(self, coords, vp) -> float:
-        """U_pot = H - C v_p^2 at Ritz coordinates ``coords`` and polymer voltage ``vp``, J."""
+        """
+        Return U_pot = H - C v_p^2 at ``coords`` and polymer voltage ``vp``, J.
+
+        ``coords`` are Ritz coordinates.
+        """
         out = self._eval(coords, vp)
         return float(out[self._iH] - out[self._iC] * vp * vp)
 
@@ -85,7 +89,7 @@ class Landscape:
         return float(self._dx[1])
 
     def y_of(self, coords, vp=0.0) -> float:
-        """End shortening at ``coords``, m."""
+        """Return the end shortening at ``coords``, m."""
         return float(self._eval(coords, vp)[self._iy])
 
     def q_ref(self, coords) -> float:
@@ -93,7 +97,7 @@ class Landscape:
         return float(np.dot(self.ref, coords))
 
     def gradient(self, coords, vp) -> np.ndarray:
-        """dU_pot/dcoords by central differences."""
+        """Return dU_pot/dcoords by central differences."""
         g = np.empty(self.nq)
         for j in range(self.nq):
             e = np.zeros(self.nq)
@@ -102,7 +106,7 @@ class Landscape:
         return g
 
     def hessian(self, coords, vp) -> np.ndarray:
-        """d^2 U_pot/dcoords^2 by central differences."""
+        """Return d^2 U_pot/dcoords^2 by central differences."""
         n = self.nq
         Hm = np.empty((n, n))
         u0 = self.energy(coords, vp)
@@ -122,7 +126,7 @@ class Landscape:
         return Hm
 
     def stiffness(self, coords, vp) -> float:
-        """d^2 U_pot/dq^2 (one coordinate) or the smallest Hessian eigenvalue, N/m."""
+        """Return d^2 U_pot/dq^2 (one coordinate) or the smallest Hessian eigenvalue, N/m."""
         coords = np.atleast_1d(np.asarray(coords, dtype=float))
         if self.nq == 1:
             return float(self.hessian(coords, vp)[0, 0])
@@ -130,7 +134,11 @@ class Landscape:
 
     # -- search range ---------------------------------------------------------------------------
     def q_limit(self) -> float:
-        """Deflection (along the first shape) where the DET stretch falls to _LAMBDA_MIN."""
+        """
+        Return the deflection where the DET stretch falls to _LAMBDA_MIN.
+
+        The deflection is along the first shape.
+        """
         if self._q_lim is None:
             l0 = self.scene.physics.l0
             y_max = self.length - _LAMBDA_MIN * l0
@@ -154,7 +162,7 @@ class Landscape:
 
     # -- equilibria -----------------------------------------------------------------------------
     def buckled_roots_1d(self, vp, sign):
-        """Roots of the force on one side of q = 0 (one coordinate)."""
+        """Return the roots of the force on one side of q = 0 (one coordinate)."""
         q_lim = self.q_limit()
         grid = sign * q_lim * np.linspace(1e-6, 1.0, _N_GRID) ** 1.0
         vals = np.array([self.acceleration(q, vp) * sign for q in grid])
@@ -168,7 +176,7 @@ class Landscape:
         return [np.array([r]) for r in roots]
 
     def safe_energy(self, coords, vp) -> float:
-        """U_pot, or inf outside the model's domain."""
+        """Return U_pot, or inf outside the model's domain."""
         try:
             return self.energy(coords, vp)
         except ModelDomainError:
@@ -262,7 +270,11 @@ class Landscape:
         return rows
 
     def rest_shortening(self) -> float:
-        """y0: the shortening of the stable buckled state at 0 V (0.0 if straight is stable)."""
+        """
+        Return y0: the shortening of the stable buckled state at 0 V.
+
+        0.0 if straight is stable.
+        """
         if self._rest is None:
             rows = self.equilibria(0.0, 0.0)
             stable = [r for r in rows if r[2] > 0.0]

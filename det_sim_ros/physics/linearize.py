@@ -63,13 +63,13 @@ class LinearModel:
     model: Model
 
     def poles(self) -> np.ndarray:
-        """Eigenvalues of A (1/s), sorted by real part, slowest first (closest to 0)."""
+        """Return the eigenvalues of A (1/s), sorted by real part, slowest first (closest to 0)."""
         poles = np.linalg.eigvals(self.A)
         return poles[np.lexsort((poles.imag, -poles.real))]
 
     @staticmethod
     def natural_frequency(poles) -> np.ndarray:
-        """|p| (rad/s)."""
+        """Return the natural frequencies |p| (rad/s)."""
         return np.abs(poles)
 
     @staticmethod
@@ -84,14 +84,14 @@ class LinearModel:
         return np.where(wn > 0, -poles.real / np.where(wn > 0, wn, 1.0), -1.0)
 
     def dc_gain(self) -> np.ndarray:
-        """G(0) = D - C A^-1 B (outputs x inputs; m/V); inf where A is singular."""
+        """Return G(0) = D - C A^-1 B (outputs x inputs; m/V); inf where A is singular."""
         try:
             return self.D - self.C @ np.linalg.solve(self.A, self.B)
         except np.linalg.LinAlgError:
             return np.full(self.D.shape, math.inf)
 
     def frequency_response(self, omega) -> np.ndarray:
-        """G(j omega) for each omega (rad/s): array (n_omega, outputs, inputs)."""
+        """Return G(j omega) for each omega (rad/s): array (n_omega, outputs, inputs)."""
         n = self.A.shape[0]
         eye = np.eye(n)
         return np.array([self.C @ np.linalg.solve(1j * w * eye - self.A, self.B) + self.D
@@ -124,7 +124,11 @@ def _linear_scene(scene: Scene) -> Scene:
 
 
 def _branch_coords(scene: Scene, branch: str) -> np.ndarray:
-    """Ritz coordinates of every cell's 0 V equilibrium on the branch (cells in DET order)."""
+    """
+    Return the Ritz coordinates of every cell's 0 V equilibrium on the branch.
+
+    Cells in DET order.
+    """
     from .statics import equilibria
     coords = []
     for c, name in enumerate(scene.det_names):

@@ -135,11 +135,11 @@ class ModelArrays:
 
     @property
     def n_groups(self) -> int:
-        """Independent coupled groups of cells (the copies of an array)."""
+        """Return the number of independent coupled groups of cells (the copies of an array)."""
         return len(self.group_q) - 1
 
     def cell_slice(self, c: int) -> slice:
-        """Coordinates of cell ``c`` in q."""
+        """Return the coordinates of cell ``c`` in q."""
         return slice(int(self.cell_q[c]), int(self.cell_q[c + 1]))
 
 
@@ -187,7 +187,7 @@ class Model:
 
     @property
     def n_states(self) -> int:
-        """Length of x, including the two energy-monitor states when enabled."""
+        """Return the length of x, including the two energy-monitor states when enabled."""
         return len(self.state_names)
 
     def released_state(self) -> np.ndarray:
@@ -205,7 +205,7 @@ class Model:
         return x
 
     def f(self, t, x, u, params=None) -> np.ndarray:  # noqa: ARG002 - nlsys signature
-        """dx/dt at (x, u); python-control's ``updfcn(t, x, u, params)`` signature."""
+        """Return dx/dt at (x, u); python-control's ``updfcn(t, x, u, params)`` signature."""
         del t, params
         dx = np.empty(self.n_states)
         x = np.ascontiguousarray(x, dtype=float)
@@ -221,7 +221,7 @@ class Model:
         return out
 
     def outputs(self, x, u) -> dict:
-        """Named outputs at one state (see ``output_names``)."""
+        """Return the named outputs at one state (see ``output_names``)."""
         return dict(zip(self.output_names, self.output_vector(x, u)))
 
     def apply_input_jump(self, x, u_old, u_new) -> None:
@@ -261,7 +261,11 @@ class Model:
         return rate
 
     def stiff_rates(self, x) -> np.ndarray:
-        """Diagonal of the stiff linear part (1/s): -1/(C Rs||Rp) at the charge states."""
+        """
+        Return the diagonal of the stiff linear part (1/s).
+
+        -1/(C Rs||Rp) at the charge states.
+        """
         L = np.empty(self.n_states)
         check(self.kernel.stiff_rates(np.ascontiguousarray(x, dtype=float), L))
         return L
@@ -373,7 +377,11 @@ def _cell_arrays(scene, cells, det_physics):
 
 
 def _state_names(scene, nq, nc):
-    """q[j], q_dot[j], then eps_E[i] (creep), q_p[i] (RC source), W_in, W_diss (power)."""
+    """
+    Return the state names.
+
+    q[j], q_dot[j], then eps_E[i] (creep), q_p[i] (RC source), W_in, W_diss (power).
+    """
     names = [f'q[{j}]' for j in range(nq)] + [f'q_dot[{j}]' for j in range(nq)]
     if scene.creep:
         names += [f'eps_E[{i}]' for i in range(nc)]

@@ -44,7 +44,11 @@ class Kinematics:
 
 
 def kinematics(a, x) -> Kinematics:
-    """Kinematics of every cell at the state x (see model.py: y, curvature, eqs 51, 65)."""
+    """
+    Return the kinematics of every cell at the state x.
+
+    See model.py: y, curvature, eqs 51, 65.
+    """
     nq = a.n_q
     q, qd = x[:nq], x[nq:2 * nq]
     kind = np.result_type(x, float)            # complex for complex-step differentiation
@@ -86,7 +90,7 @@ def _blocks(a, M):
 
 
 def _interface_mass(a):
-    """MI (n_cells x n_cells): the interface/plate mass acting on the end shortenings."""
+    """Return MI (n_cells x n_cells): the interface/plate mass acting on the end shortenings."""
     MI = np.zeros((a.n_cells, a.n_cells))
     MI[a.mi_row, a.mi_col] = a.mi_val
     return MI
@@ -175,7 +179,11 @@ def rhs(a, x, u, quasi_static: bool = False):
 
 
 def stiff_rates(a, x) -> np.ndarray:
-    """Diagonal stiff part (1/s): -1/(C (Rs || Rp)) at the charge states, 0 elsewhere."""
+    """
+    Return the diagonal stiff part (1/s).
+
+    -1/(C (Rs || Rp)) at the charge states, 0 elsewhere.
+    """
     L = np.zeros(a.n_state)
     if a.rc_source:
         i_qp = _index(a)[1]

@@ -54,7 +54,11 @@ class RitzBasis:
         return max(len(c) - 1 for c in self.coefficients)
 
     def values(self, x, derivative: int = 0) -> np.ndarray:
-        """Matrix [S_j^(derivative)(x_k)] with x in metres: rows are points, columns are S_j."""
+        """
+        Return the matrix [S_j^(derivative)(x_k)] with x in metres.
+
+        Rows are points, columns are S_j.
+        """
         xi = np.asarray(x, dtype=float) / self.length
         scale = self.length ** -derivative
         columns = [P.polyval(xi, P.polyder(c, derivative)) * scale if derivative else
@@ -110,7 +114,11 @@ def make_basis(beam: str, length: float, fidelity: str = 'paper', n_ritz: int = 
 
 
 def _orthogonalize(coefficients, length):
-    """Gram-Schmidt in the bending inner product <f, g> = int f'' g'' dx; keeps S_1 unchanged."""
+    """
+    Orthogonalize by Gram-Schmidt in the bending inner product <f, g> = int f'' g'' dx.
+
+    S_1 is kept unchanged.
+    """
     basis = RitzBasis('fixed', length, tuple(coefficients))
     x, w = basis.quadrature()
     out = []

@@ -88,7 +88,11 @@ class BranchPoint:
 
 
 def polymer_voltage(scene: Scene, v: float) -> float:
-    """Steady-state polymer voltage v_p (eq 81): v R_p/(R_p + R_s) for 'rc', v for 'ideal'."""
+    """
+    Return the steady-state polymer voltage v_p (eq 81).
+
+    v R_p/(R_p + R_s) for 'rc', v for 'ideal'.
+    """
     if scene.source == 'ideal':
         return float(v)
     p = scene.physics
@@ -97,7 +101,11 @@ def polymer_voltage(scene: Scene, v: float) -> float:
 
 # -- public API -----------------------------------------------------------------------------------
 def potential_coords(scene: Scene, coords, v: float) -> np.ndarray:
-    """U_pot (J) at Ritz coordinate vector(s) ``coords`` (last axis n_q) and voltage v (V)."""
+    """
+    Return U_pot (J) at Ritz coordinate vector(s) ``coords`` and voltage v (V).
+
+    The last axis of ``coords`` is n_q.
+    """
     st = landscape(scene)
     vp = polymer_voltage(scene, v)
     c = np.asarray(coords, dtype=float)
@@ -157,7 +165,11 @@ def equilibria(scene: Scene, v: float = 0.0) -> list:
 
 
 def stiffness_at_straight(scene: Scene, v: float = 0.0) -> float:
-    """d^2 U_pot/dq^2 at q = 0 (smallest Hessian eigenvalue for several coordinates), N/m."""
+    """
+    Return d^2 U_pot/dq^2 at q = 0, N/m.
+
+    The smallest Hessian eigenvalue for several coordinates.
+    """
     st = landscape(scene)
     return st.stiffness(np.zeros(st.nq), polymer_voltage(scene, v))
 
@@ -190,7 +202,7 @@ def critical_prestrain(scene: Scene, v: float = 0.0, xtol: float = 1e-9) -> floa
 
 
 def normalized_potential(scene: Scene, q, v: float = 0.0) -> np.ndarray:
-    """Eq 82: (U_pot - U_min)/(U_max - U_min) over the given q range (m)."""
+    """Return eq 82: (U_pot - U_min)/(U_max - U_min) over the given q range (m)."""
     u = potential(scene, q, v)
     lo, hi = np.min(u), np.max(u)
     return (u - lo) / (hi - lo) if hi > lo else np.zeros_like(u)
@@ -208,7 +220,7 @@ def rest_shortening(scene: Scene) -> float:
 
 def branches(scene: Scene, eps_grid: Sequence[float], v: float = 0.0, progress=None) -> list:
     """
-    Equilibrium branches versus pre-strain (the Fig. 5 analogue) at voltage v (V).
+    Return the equilibrium branches versus pre-strain (the Fig. 5 analogue) at voltage v (V).
 
     Returns a list of :class:`BranchPoint` rows (one per equilibrium and pre-strain); delta_y is
     relative to the rest shortening at 0 V at the same pre-strain. ``progress(k)`` is called
