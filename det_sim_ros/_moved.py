@@ -1,9 +1,10 @@
 """
-The flat module paths of earlier releases (``det_sim_ros.scene``, ``det_sim_ros.sim_node``,
-...) as aliases of the modules' homes in the layer subpackages. Importing an old path gives the
-new module itself (the same objects, so ``isinstance`` and monkeypatching keep working) and
-warns once with a DeprecationWarning that names the new path. ``python -m`` on an old path
-runs the new module.
+Alias the flat module paths of earlier releases to the modules' homes in the layer subpackages.
+
+The flat paths (``det_sim_ros.scene``, ``det_sim_ros.sim_node``, ...) are aliases. Importing an
+old path gives the new module itself (the same objects, so ``isinstance`` and monkeypatching
+keep working) and warns once with a DeprecationWarning that names the new path. ``python -m`` on
+an old path runs the new module.
 """
 
 from __future__ import annotations
@@ -64,7 +65,11 @@ class _MovedPath(importlib.abc.MetaPathFinder, importlib.abc.Loader):
         module.__spec__ = self._spec
 
     def get_code(self, fullname):
-        """``python -m det_sim_ros.<old>``: run the new module as the main program."""
+        """
+        Return the code that ``python -m det_sim_ros.<old>`` runs.
+
+        It runs the new module as the main program.
+        """
         old = fullname.rpartition('.')[2]
         target = f'{_ROOT}.{_RUN_AS_MAIN.get(old, MOVED[old])}'
         return compile(f'import runpy\nrunpy.run_module({target!r}, run_name="__main__", '

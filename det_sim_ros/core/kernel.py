@@ -1,5 +1,6 @@
 """
 The compiled kernel's one Python facade (C, built at install time from det_sim_ros/core/_csrc).
+
 Nothing else in the package imports ``_ckernel``.
 
 Physics and stepping:

@@ -1,2 +1,6 @@
-"""The physics: Ritz shapes, energies -> model, statics, linearization, geometry and the numpy
-reference of the compiled right-hand side."""
+"""
+The physics of the buckled-beam actuators.
+
+Ritz shapes, energies -> model, statics, linearization, geometry and the numpy reference of the
+compiled right-hand side.
+"""

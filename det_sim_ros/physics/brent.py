@@ -7,7 +7,9 @@ __all__ = ['brentq']
 
 def brentq(f, a, b, args=(), xtol=2e-12, rtol=8.9e-16, maxiter=100):
     """
-    A root of f in [a, b] (f(a), f(b) of opposite signs) by Brent's method (Brent 1973,
+    Return a root of f in [a, b] by Brent's method.
+
+    f(a) and f(b) must have opposite signs. Brent's method (Brent 1973,
     'Algorithms for minimization without derivatives', ch. 4): inverse quadratic or secant steps
     kept inside the bracket, bisection when they would not shrink it fast enough; stops when the
     bracket is below xtol + rtol |x|. The same algorithm and stopping rule as scipy.optimize's

@@ -1,6 +1,8 @@
 """
-The actuator's shape in 3D from the model state (no ROS): both beams' deflected centre lines,
-the DET between them and, for plate scenes, the plate. Used by the node's markers (markers.py).
+The actuator's shape in 3D from the model state (no ROS).
+
+Both beams' deflected centre lines, the DET between them and, for plate scenes, the plate. Used
+by the node's markers (markers.py).
 
 Each cell stands upright in its own frame (SI units, m): the fixed beam ends at the origin, the
 beam axis along +z, so the moving end (where the DET and the plate pull) is at height
@@ -32,8 +34,11 @@ DET_WIDTH_MIN = 1.0e-3    # m: the drawn DET is at least this thick (0.6 mm real
 
 @dataclasses.dataclass
 class CellShape:
-    """One cell's shape in its own frame (m): beams A/B as (n, 3) points, the DET box and the
-    reference point on beam A."""
+    """
+    One cell's shape in its own frame (m).
+
+    Beams A/B as (n, 3) points, the DET box and the reference point on beam A.
+    """
 
     beam_a: np.ndarray
     beam_b: np.ndarray
@@ -53,8 +58,12 @@ class PlateShape:
 
 
 def layout_offsets(model) -> np.ndarray:
-    """(n_dets, 3) base positions of the cells in a common frame (m): the plate's cells at
-    y = -w/2 and +w/2, an array's copies side by side along y, one cell at the origin."""
+    """
+    Return the (n_dets, 3) base positions of the cells in a common frame (m).
+
+    The plate's cells at y = -w/2 and +w/2, an array's copies side by side along y, one cell at
+    the origin.
+    """
     scene = model.scene
     n = model.n_inputs
     offsets = np.zeros((n, 3))
@@ -94,8 +103,11 @@ class _CellSampler:
         self.length = length
 
     def profile(self, coords):
-        """(w, z) at the samples: deflection and height of beam A, m (few numpy calls: this
-        runs for every marker frame)."""
+        """
+        Return (w, z) at the samples: deflection and height of beam A, m.
+
+        Few numpy calls: this runs for every marker frame.
+        """
         both = self.S_B1 @ coords
         w, wp = both[:self.n_samples], both[self.n_samples:]
         wp2 = wp * wp
@@ -108,7 +120,7 @@ class _CellSampler:
         return w, self.s - self.cumulative @ e
 
     def det_thickness(self, height: float) -> float:
-        """Drawn DET thickness n d0 / lambda at the cell height l - y (m)."""
+        """Return the drawn DET thickness n d0 / lambda at the cell height l - y (m)."""
         ph = self.physics
         return max(ph.n * ph.d0 * ph.l0 / height, DET_WIDTH_MIN)
 
@@ -144,11 +156,11 @@ class ActuatorGeometry:
         self.samplers = self._cells
 
     def cells(self, x) -> list:
-        """One :class:`CellShape` per DET (DET order), each in its own frame."""
+        """Return one :class:`CellShape` per DET (DET order), each in its own frame."""
         return [cell.shape(x[s]) for s, cell in zip(self.slices, self._cells)]
 
     def plate(self, cells) -> PlateShape | None:
-        """The plate on the cells' moving ends (common frame), or None without a plate."""
+        """Return the plate on the cells' moving ends (common frame), or None without a plate."""
         if not self.has_plate:
             return None
         heights = np.array([c.height for c in cells])

@@ -1,8 +1,10 @@
 """
-The potential landscape of one scene's structure: U_pot and its derivatives from the model's
-energy output, the search range, the equilibria at a polymer voltage and the rest shortening.
-:mod:`det_sim_ros.physics.statics` builds its public functions on it; :func:`landscape` caches
-one per beam, pre-strain, fidelity and physics. Units: m, V, J, N/m.
+The potential landscape of one scene's structure.
+
+U_pot and its derivatives from the model's energy output, the search range, the equilibria at a
+polymer voltage and the rest shortening. :mod:`det_sim_ros.physics.statics` builds its public
+functions on it; :func:`landscape` caches one per beam, pre-strain, fidelity and physics.
+Units: m, V, J, N/m.
 """
 
 from __future__ import annotations
@@ -12,9 +14,9 @@ import math
 
 import numpy as np
 
-from ..core import kernel
 from .brent import brentq
 from .model import build_model, check, ModelDomainError
+from ..core import kernel
 from ..scenes.scene import Scene
 
 __all__ = ['Landscape', 'landscape', 'cache_key', 'CACHE_SIZE']
@@ -25,8 +27,12 @@ CACHE_SIZE = 256        # landscapes (and rest states) kept, least recently used
 
 
 class Landscape:
-    """U_pot of one scene's structure and its equilibria (the model built with an ideal source,
-    no creep and no power monitor: at q_dot = 0 its energy output is H of the statics)."""
+    """
+    U_pot of one scene's structure and its equilibria.
+
+    The model is built with an ideal source, no creep and no power monitor: at q_dot = 0 its
+    energy output is H of the statics.
+    """
 
     def __init__(self, scene: Scene):
         self.scene = scene
@@ -58,14 +64,22 @@ class Landscape:
         return self._out
 
     def energy(self, coords, vp) -> float:
-        """U_pot = H - C v_p^2 at Ritz coordinates ``coords`` and polymer voltage ``vp``, J."""
+        """
+        Return U_pot = H - C v_p^2 at ``coords`` and polymer voltage ``vp``, J.
+
+        ``coords`` are Ritz coordinates.
+        """
         out = self._eval(coords, vp)
         return float(out[self._iH] - out[self._iC] * vp * vp)
 
     def acceleration(self, q: float, vp: float) -> float:
-        """One coordinate: q_ddot at q_dot = 0 (the sign of the generalized force -dU/dq).
-        Model.f's compiled rhs, called directly: the root scans call this ~800 times per
-        distinct cell, and Model.f's argument checks were 90 % of an array's build time."""
+        """
+        Return q_ddot at q_dot = 0 for one coordinate.
+
+        Its sign is that of the generalized force -dU/dq. Model.f's compiled rhs, called
+        directly: the root scans call this ~800 times per distinct cell, and Model.f's argument
+        checks were 90 % of an array's build time.
+        """
         if not math.isfinite(q):
             check(kernel.NON_FINITE)
         self._x[0] = q
@@ -75,15 +89,15 @@ class Landscape:
         return float(self._dx[1])
 
     def y_of(self, coords, vp=0.0) -> float:
-        """End shortening at ``coords``, m."""
+        """Return the end shortening at ``coords``, m."""
         return float(self._eval(coords, vp)[self._iy])
 
     def q_ref(self, coords) -> float:
-        """Reference deflection of ``coords``, m."""
+        """Return the reference deflection of ``coords``, m."""
         return float(np.dot(self.ref, coords))
 
     def gradient(self, coords, vp) -> np.ndarray:
-        """dU_pot/dcoords by central differences."""
+        """Return dU_pot/dcoords by central differences."""
         g = np.empty(self.nq)
         for j in range(self.nq):
             e = np.zeros(self.nq)
@@ -92,7 +106,7 @@ class Landscape:
         return g
 
     def hessian(self, coords, vp) -> np.ndarray:
-        """d^2 U_pot/dcoords^2 by central differences."""
+        """Return d^2 U_pot/dcoords^2 by central differences."""
         n = self.nq
         Hm = np.empty((n, n))
         u0 = self.energy(coords, vp)
@@ -112,7 +126,7 @@ class Landscape:
         return Hm
 
     def stiffness(self, coords, vp) -> float:
-        """d^2 U_pot/dq^2 (one coordinate) or the smallest Hessian eigenvalue, N/m."""
+        """Return d^2 U_pot/dq^2 (one coordinate) or the smallest Hessian eigenvalue, N/m."""
         coords = np.atleast_1d(np.asarray(coords, dtype=float))
         if self.nq == 1:
             return float(self.hessian(coords, vp)[0, 0])
@@ -120,7 +134,11 @@ class Landscape:
 
     # -- search range ---------------------------------------------------------------------------
     def q_limit(self) -> float:
-        """Deflection (along the first shape) where the DET stretch falls to _LAMBDA_MIN."""
+        """
+        Return the deflection where the DET stretch falls to _LAMBDA_MIN.
+
+        The deflection is along the first shape.
+        """
         if self._q_lim is None:
             l0 = self.scene.physics.l0
             y_max = self.length - _LAMBDA_MIN * l0
@@ -144,7 +162,7 @@ class Landscape:
 
     # -- equilibria -----------------------------------------------------------------------------
     def buckled_roots_1d(self, vp, sign):
-        """Roots of the force on one side of q = 0 (one coordinate)."""
+        """Return the roots of the force on one side of q = 0 (one coordinate)."""
         q_lim = self.q_limit()
         grid = sign * q_lim * np.linspace(1e-6, 1.0, _N_GRID) ** 1.0
         vals = np.array([self.acceleration(q, vp) * sign for q in grid])
@@ -158,7 +176,7 @@ class Landscape:
         return [np.array([r]) for r in roots]
 
     def safe_energy(self, coords, vp) -> float:
-        """U_pot, or inf outside the model's domain."""
+        """Return U_pot, or inf outside the model's domain."""
         try:
             return self.energy(coords, vp)
         except ModelDomainError:
@@ -166,9 +184,11 @@ class Landscape:
 
     def minimize(self, x, vp, N=None, iters=60):
         """
-        Local minimum of U_pot from x by Newton's method with the Hessian made positive
-        definite (eigenvalues floored at their magnitude) and a backtracking line search; with
-        N, only x + N z is searched (a constrained minimum).
+        Return a local minimum of U_pot from x by Newton's method.
+
+        The Hessian is made positive definite (eigenvalues floored at their magnitude) and the
+        step has a backtracking line search; with N, only x + N z is searched (a constrained
+        minimum).
         """
         x = np.array(x, dtype=float)
         N = np.eye(self.nq) if N is None else N
@@ -195,9 +215,11 @@ class Landscape:
 
     def buckled_roots_nd(self, vp):
         """
-        Several coordinates: the stable buckled state, minimized from the one-term solution of
-        the same scene (q1*, 0, ..., 0), else from the softest mode at q = 0 with the largest
-        reference deflection. Only minima are returned for several coordinates.
+        Return the stable buckled states of several coordinates.
+
+        Each is minimized from the one-term solution of the same scene (q1*, 0, ..., 0), else
+        from the softest mode at q = 0 with the largest reference deflection. Only minima are
+        returned for several coordinates.
         """
         one = landscape(self.scene.replace(**{'scene.n_ritz': 1}))
         guesses = [np.r_[c[0], np.zeros(self.nq - 1)] for kind, c, k, *_ in
@@ -220,8 +242,11 @@ class Landscape:
         return roots
 
     def equilibria(self, vp, v):
-        """Rows (kind, coords, stiffness, y, U_pot) of the straight and buckled equilibria at
-        polymer voltage ``vp`` (cached per ``vp``)."""
+        """
+        Return the straight and buckled equilibria at polymer voltage ``vp``.
+
+        Rows (kind, coords, stiffness, y, U_pot), cached per ``vp``.
+        """
         key = float(vp)
         if key in self._eq:
             return self._eq[key]
@@ -245,7 +270,11 @@ class Landscape:
         return rows
 
     def rest_shortening(self) -> float:
-        """y0: the shortening of the stable buckled state at 0 V (0.0 if straight is stable)."""
+        """
+        Return y0: the shortening of the stable buckled state at 0 V.
+
+        0.0 if straight is stable.
+        """
         if self._rest is None:
             rows = self.equilibria(0.0, 0.0)
             stable = [r for r in rows if r[2] > 0.0]
@@ -260,12 +289,12 @@ _landscapes: 'collections.OrderedDict[tuple, Landscape]' = collections.OrderedDi
 
 
 def cache_key(scene: Scene) -> tuple:
-    """What a landscape depends on: beam, pre-strain, fidelity, n_ritz and physics."""
+    """Return what a landscape depends on: beam, pre-strain, fidelity, n_ritz and physics."""
     return (scene.beam, float(scene.eps_b), scene.fidelity, scene.n_ritz, scene.physics)
 
 
 def landscape(scene: Scene) -> Landscape:
-    """The cached :class:`Landscape` of ``scene``'s structure."""
+    """Return the cached :class:`Landscape` of ``scene``'s structure."""
     key = cache_key(scene)
     st = _landscapes.get(key)
     if st is None:

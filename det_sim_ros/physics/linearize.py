@@ -63,49 +63,53 @@ class LinearModel:
     model: Model
 
     def poles(self) -> np.ndarray:
-        """Eigenvalues of A (1/s), sorted by real part, slowest first (closest to 0)."""
+        """Return the eigenvalues of A (1/s), sorted by real part, slowest first (closest to 0)."""
         poles = np.linalg.eigvals(self.A)
         return poles[np.lexsort((poles.imag, -poles.real))]
 
     @staticmethod
     def natural_frequency(poles) -> np.ndarray:
-        """|p| (rad/s)."""
+        """Return the natural frequencies |p| (rad/s)."""
         return np.abs(poles)
 
     @staticmethod
     def damping(poles) -> np.ndarray:
-        """zeta = -Re p / |p| (1 for a real stable pole, < 0 for an unstable one)."""
+        """
+        Return the damping ratio zeta = -Re p / |p|.
+
+        1 for a real stable pole, < 0 for an unstable one.
+        """
         poles = np.asarray(poles)
         wn = np.abs(poles)
         return np.where(wn > 0, -poles.real / np.where(wn > 0, wn, 1.0), -1.0)
 
     def dc_gain(self) -> np.ndarray:
-        """G(0) = D - C A^-1 B (outputs x inputs; m/V); inf where A is singular."""
+        """Return G(0) = D - C A^-1 B (outputs x inputs; m/V); inf where A is singular."""
         try:
             return self.D - self.C @ np.linalg.solve(self.A, self.B)
         except np.linalg.LinAlgError:
             return np.full(self.D.shape, math.inf)
 
     def frequency_response(self, omega) -> np.ndarray:
-        """G(j omega) for each omega (rad/s): array (n_omega, outputs, inputs)."""
+        """Return G(j omega) for each omega (rad/s): array (n_omega, outputs, inputs)."""
         n = self.A.shape[0]
         eye = np.eye(n)
         return np.array([self.C @ np.linalg.solve(1j * w * eye - self.A, self.B) + self.D
                          for w in np.atleast_1d(omega)])
 
     def to_statespace(self):
-        """The model as a python-control ``StateSpace`` (needs ``pip install control``)."""
+        """Return the model as a python-control ``StateSpace`` (needs ``pip install control``)."""
         try:
             import control
         except ImportError:
-            raise ImportError("python-control is not installed: pip install control "
+            raise ImportError('python-control is not installed: pip install control '
                               "(or the 'test' extra)") from None
         return control.ss(self.A, self.B, self.C, self.D, states=list(self.state_names),
                           inputs=list(self.input_names), outputs=list(self.output_names))
 
 
 def complex_step_jacobian(func, x, h: float = _STEP) -> np.ndarray:
-    """d func / dx (columns per x entry) by complex steps: Im f(x + i h e_j) / h."""
+    """Return d func / dx (columns per x entry) by complex steps: Im f(x + i h e_j) / h."""
     x = np.asarray(x, dtype=float)
     cols = []
     for j in range(x.size):
@@ -120,7 +124,11 @@ def _linear_scene(scene: Scene) -> Scene:
 
 
 def _branch_coords(scene: Scene, branch: str) -> np.ndarray:
-    """Ritz coordinates of every cell's 0 V equilibrium on the branch (cells in DET order)."""
+    """
+    Return the Ritz coordinates of every cell's 0 V equilibrium on the branch.
+
+    Cells in DET order.
+    """
     from .statics import equilibria
     coords = []
     for c, name in enumerate(scene.det_names):
@@ -134,7 +142,11 @@ def _branch_coords(scene: Scene, branch: str) -> np.ndarray:
 
 
 def _static_x(a, q, u):
-    """The state with coordinates q, qdot = 0, eps_E = 0 and the charge at its RC equilibrium."""
+    """
+    Return the static state of the coordinates q.
+
+    qdot = 0, eps_E = 0 and the charge at its RC equilibrium.
+    """
     x = np.zeros(a.n_state, dtype=np.result_type(q, float))
     x[:a.n_q] = q
     if a.rc_source:
@@ -144,7 +156,11 @@ def _static_x(a, q, u):
 
 
 def _acceleration(a, q, u):
-    """qddot at the static state of q: zero exactly at an equilibrium (M is positive definite)."""
+    """
+    Return qddot at the static state of q.
+
+    It is zero exactly at an equilibrium (M is positive definite).
+    """
     return reference.rhs(a, _static_x(a, q, u), u)[0][a.n_q:2 * a.n_q]
 
 
@@ -167,9 +183,11 @@ def _newton(a, q, u, scale):
 def equilibrium_state(scene: Scene, voltage, branch: str = 'buckled+',
                       model: Model | None = None) -> np.ndarray:
     """
-    The equilibrium state at DET voltages ``voltage`` (a number for all DETs or one per DET, V)
-    on ``branch`` (see the module docstring); state layout of ``model`` (default: the scene's
-    model without the power monitor).
+    Return the equilibrium state at DET voltages ``voltage`` on ``branch``.
+
+    ``voltage`` is a number for all DETs or one per DET, V; ``branch`` as in the module
+    docstring. The state has the layout of ``model`` (default: the scene's model without the
+    power monitor).
     """
     if branch not in BRANCHES:
         raise LinearizationError(f"unknown branch {branch!r}; choose from {', '.join(BRANCHES)}")
@@ -181,7 +199,7 @@ def equilibrium_state(scene: Scene, voltage, branch: str = 'buckled+',
     sign = {'buckled+': 1.0, 'buckled-': -1.0}.get(branch, 0.0)
 
     def on_branch(coords):
-        """A buckled branch keeps its side: Newton past its end would find the straight beam."""
+        """Check that a buckled branch keeps its side (Newton past its end finds the straight)."""
         if coords is None or not sign:
             return coords is not None
         q_ref = np.array([a.ref[a.cell_slice(c)] @ coords[a.cell_slice(c)]
@@ -224,7 +242,11 @@ def _voltages(model: Model, voltage) -> np.ndarray:
 
 
 def linearize(scene: Scene, voltage=0.0, branch: str = 'buckled+') -> LinearModel:
-    """A, B, C, D of ``scene`` at its equilibrium at ``voltage`` on ``branch`` (module doc)."""
+    """
+    Return A, B, C, D of ``scene`` at its equilibrium at ``voltage`` on ``branch``.
+
+    The module docstring describes the equilibrium, the inputs and the outputs.
+    """
     from .statics import rest_shortening
     model = build_model(_linear_scene(scene))
     a = model.arrays

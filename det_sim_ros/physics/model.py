@@ -44,9 +44,9 @@ import dataclasses
 
 import numpy as np
 
+from .shapes import make_basis
 from ..core import kernel
 from ..scenes.scene import Scene
-from .shapes import make_basis
 
 __all__ = ['Model', 'ModelArrays', 'ModelDomainError', 'build_model', 'CELL_OUTPUTS',
            'GLOBAL_OUTPUTS']
@@ -82,8 +82,10 @@ KINEMATICS = {'paper': 0, 'consistent': 1, 'exact': 2}
 @dataclasses.dataclass(frozen=True, eq=False)
 class ModelArrays:
     """
-    Everything the compiled kernel reads, by name (core/_csrc/model_type.c reads these fields
-    one attribute at a time; no positional tuple). SI units. Built by :func:`build_model`.
+    Everything the compiled kernel reads, by name.
+
+    core/_csrc/model_type.c reads these fields one attribute at a time; no positional tuple. SI
+    units. Built by :func:`build_model`.
 
     The state is q (n_q Ritz coordinates, cell by cell), qdot (n_q), eps_E (n_cells, if
     ``creep``), q_p (n_cells, if ``rc_source``), then W_in, W_diss (if ``power_monitor``).
@@ -117,9 +119,9 @@ class ModelArrays:
     # per cell (beam pair)
     length: np.ndarray         # beam length l, m
     EI: np.ndarray             # bending stiffness, N m^2
-    c2: np.ndarray             # one-term closed forms: 1/2 int S'^2, 1/8 int S'^4,
-    c4: np.ndarray             #   EI int S''^2 S'^2 (quadrature skipped for one-term cells)
-    e4: np.ndarray
+    c2: np.ndarray             # one-term closed forms: 1/2 int S'^2,
+    c4: np.ndarray             # 1/8 int S'^4,
+    e4: np.ndarray             # EI int S''^2 S'^2 (quadrature skipped for one-term cells)
     # per DET (eqs 53-57, 66-67)
     l0: np.ndarray             # DET length at rest, m
     VY: np.ndarray             # volume * Young's modulus, N m
@@ -133,11 +135,11 @@ class ModelArrays:
 
     @property
     def n_groups(self) -> int:
-        """Independent coupled groups of cells (the copies of an array)."""
+        """Return the number of independent coupled groups of cells (the copies of an array)."""
         return len(self.group_q) - 1
 
     def cell_slice(self, c: int) -> slice:
-        """Coordinates of cell ``c`` in q."""
+        """Return the coordinates of cell ``c`` in q."""
         return slice(int(self.cell_q[c]), int(self.cell_q[c + 1]))
 
 
@@ -166,26 +168,35 @@ class Model:
 
     @property
     def structure_map(self) -> np.ndarray:
-        """P (n_structure_outputs x n_cells): structure outputs = P @ y (the cells' end
-        shortenings)."""
+        """
+        Return P (n_structure_outputs x n_cells), the map to the structure outputs.
+
+        Structure outputs = P @ y (the cells' end shortenings).
+        """
         return self.arrays.P
 
     def channel(self, base: str) -> list:
-        """Indices in ``output_names`` of a per-DET output ('q', 'y', 'q_p', ...), DET order."""
+        """
+        Return the indices in ``output_names`` of a per-DET output, in DET order.
+
+        ``base`` names the output: 'q', 'y', 'q_p', ...
+        """
         if self.n_inputs == 1:
             return [self.output_names.index(base)]
         return [self.output_names.index(f'{base}[{d}]') for d in self.input_names]
 
     @property
     def n_states(self) -> int:
-        """Length of x, including the two energy-monitor states when enabled."""
+        """Return the length of x, including the two energy-monitor states when enabled."""
         return len(self.state_names)
 
     def released_state(self) -> np.ndarray:
         """
-        The 'released' initial state: q = q0 at the first Ritz coordinate of each cell,
-        everything else 0. :func:`det_sim_ros.physics.statics.initial_state` gives the scene's
-        own (rest or released).
+        Return the 'released' initial state.
+
+        q = q0 at the first Ritz coordinate of each cell, everything else 0.
+        :func:`det_sim_ros.physics.statics.initial_state` gives the scene's own (rest or
+        released).
         """
         x = np.zeros(self.n_states)
         cell_q = self.arrays.cell_q
@@ -194,7 +205,7 @@ class Model:
         return x
 
     def f(self, t, x, u, params=None) -> np.ndarray:  # noqa: ARG002 - nlsys signature
-        """dx/dt at (x, u); python-control's ``updfcn(t, x, u, params)`` signature."""
+        """Return dx/dt at (x, u); python-control's ``updfcn(t, x, u, params)`` signature."""
         del t, params
         dx = np.empty(self.n_states)
         x = np.ascontiguousarray(x, dtype=float)
@@ -204,19 +215,22 @@ class Model:
         return dx
 
     def output_vector(self, x, u) -> np.ndarray:
-        """Outputs as one vector in ``output_names`` order."""
+        """Return the outputs as one vector in ``output_names`` order."""
         out = np.empty(len(self.output_names))
         check(self.kernel.outputs(np.ascontiguousarray(x, dtype=float), self._u(u), out))
         return out
 
     def outputs(self, x, u) -> dict:
-        """Named outputs at one state (see ``output_names``)."""
+        """Return the named outputs at one state (see ``output_names``)."""
         return dict(zip(self.output_names, self.output_vector(x, u)))
 
     def apply_input_jump(self, x, u_old, u_new) -> None:
-        """Ideal source: book an instantaneous recharge in the power monitor (in place; see
-        ds_book_input_jump in _csrc/physics.c). Nothing to book for an RC source, without the
-        monitor, or without a change."""
+        """
+        Book an instantaneous recharge of an ideal source in the power monitor.
+
+        In place; see ds_book_input_jump in _csrc/physics.c. Nothing to book for an RC source,
+        without the monitor, or without a change.
+        """
         if self.scene.source != 'ideal' or not self.scene.monitor_power:
             return
         u_old, u_new = self._u(u_old), self._u(u_new)
@@ -226,8 +240,10 @@ class Model:
 
     def fastest_beam_rate(self) -> float:
         """
-        Fastest rate (1/s) of the beams' linear modes: the largest undamped frequency of
-        (K, Mb) or Kelvin-Voigt decay rate of (D, Mb) over the cells. With many Ritz terms the
+        Return the fastest rate (1/s) of the beams' linear modes.
+
+        The largest undamped frequency of (K, Mb) or Kelvin-Voigt decay rate of (D, Mb) over the
+        cells. With many Ritz terms the
         decay rate ~ omega^2 eta_b / E_b of the highest mode (4e5...1e6 1/s at n_r = 6...7)
         bounds the explicit stages' step size, not the tolerance.
         """
@@ -245,7 +261,11 @@ class Model:
         return rate
 
     def stiff_rates(self, x) -> np.ndarray:
-        """Diagonal of the stiff linear part (1/s): -1/(C Rs||Rp) at the charge states."""
+        """
+        Return the diagonal of the stiff linear part (1/s).
+
+        -1/(C Rs||Rp) at the charge states.
+        """
         L = np.empty(self.n_states)
         check(self.kernel.stiff_rates(np.ascontiguousarray(x, dtype=float), L))
         return L
@@ -292,7 +312,7 @@ def build_model(scene: Scene) -> Model:
 
 
 def _groups(MI):
-    """Connected groups of cells under MI (cells of a group must be contiguous)."""
+    """Return the connected groups of cells under MI (cells of a group must be contiguous)."""
     n = MI.shape[0]
     group = np.arange(n)
     for i in range(n):           # union of coupled cells; coupling is local in practice
@@ -307,9 +327,12 @@ def _groups(MI):
 
 
 def _cell_arrays(scene, cells, det_physics):
-    """The per-cell blocks (see ModelArrays): quadrature rows B1, B2, W by cell_g, the mass,
-    stiffness and damping blocks by cell_q, the reference rows, and the cells' beam and DET
-    constants (name -> one value per cell)."""
+    """
+    Return the per-cell blocks (see ModelArrays).
+
+    Quadrature rows B1, B2, W by cell_g, the mass, stiffness and damping blocks by cell_q, the
+    reference rows, and the cells' beam and DET constants (name -> one value per cell).
+    """
     nc = len(cells)
     r = [b.n_ritz for b in cells]
     nq = int(sum(r))
@@ -341,19 +364,24 @@ def _cell_arrays(scene, cells, det_physics):
         K[s, :basis.n_ritz] = 2.0 * EI * S2.T @ (w[:, None] * S2)
         D[s, :basis.n_ritz] = 2.0 * ph.eta_b * ph.I * S2.T @ (w[:, None] * S2)
         ref[s] = basis.reference_row()
-        values = dict(length=basis.length, EI=EI, c2=0.5 * w @ S1[:, 0] ** 2,   # closed forms:
-                      c4=0.125 * w @ S1[:, 0] ** 4,                            # used when
-                      e4=EI * w @ (S2[:, 0] * S1[:, 0]) ** 2)                  # n_ritz == 1
+        values = {'length': basis.length, 'EI': EI,
+                  'c2': 0.5 * w @ S1[:, 0] ** 2,                 # closed forms:
+                  'c4': 0.125 * w @ S1[:, 0] ** 4,               # used when
+                  'e4': EI * w @ (S2[:, 0] * S1[:, 0]) ** 2}     # n_ritz == 1
         values.update(l0=ph.l0, VY=ph.volume * ph.Y, C0=ph.C0, volume=ph.volume, E_M=ph.E_M,
                       eta_M=ph.eta_M, eta_v=ph.eta_v, Rs=ph.Rs, Rp=ph.Rp)
         for key, value in values.items():
             (cell if key in cell else det)[key][c] = value
-    return dict(nq=nq, r_max=r_max, cell_q=cell_q, cell_g=cell_g, B1=B1, B2=B2, W=W, Mb=Mb,
-                K=K, D=D, ref=ref, cell=cell, det=det)
+    return {'nq': nq, 'r_max': r_max, 'cell_q': cell_q, 'cell_g': cell_g, 'B1': B1, 'B2': B2,
+            'W': W, 'Mb': Mb, 'K': K, 'D': D, 'ref': ref, 'cell': cell, 'det': det}
 
 
 def _state_names(scene, nq, nc):
-    """q[j], q_dot[j], then eps_E[i] (creep), q_p[i] (RC source), W_in, W_diss (power)."""
+    """
+    Return the state names.
+
+    q[j], q_dot[j], then eps_E[i] (creep), q_p[i] (RC source), W_in, W_diss (power).
+    """
     names = [f'q[{j}]' for j in range(nq)] + [f'q_dot[{j}]' for j in range(nq)]
     if scene.creep:
         names += [f'eps_E[{i}]' for i in range(nc)]
@@ -365,8 +393,12 @@ def _state_names(scene, nq, nc):
 
 
 def _assemble(scene, cells, MI, det_physics, P, structure_names):
-    """The :class:`Model` of ``cells`` (one Ritz basis per cell) coupled by the structure's
-    inverse-mass map MI, with the structure outputs P @ y."""
+    """
+    Return the :class:`Model` of ``cells`` (one Ritz basis per cell).
+
+    The cells are coupled by the structure's inverse-mass map MI, with the structure outputs
+    P @ y.
+    """
     nc = len(cells)
     blocks = _cell_arrays(scene, cells, det_physics)
     nq, cell_q = blocks['nq'], blocks['cell_q']

@@ -1,6 +1,8 @@
 """
-The DET-beam physics and one step of every method in plain numpy: the readable reference that
-the compiled kernel (det_sim_ros/core/_csrc) is held to, to round-off, by test/test_kernel.py.
+The DET-beam physics and one step of every method in plain numpy.
+
+This is the readable reference that the compiled kernel (det_sim_ros/core/_csrc) is held to, to
+round-off, by test/test_kernel.py.
 
 Nothing here is fast or used by the simulator. It is written to be checked by eye against
 model.py's derivation: every beam integral by quadrature (the kernel uses closed forms for
@@ -27,8 +29,12 @@ EXACT = 2
 
 @dataclasses.dataclass
 class Kinematics:
-    """Per cell: end shortening y, qd' H_y qd (h) and the bending energy beyond EI int w''^2
-    (U4); per coordinate: J = dy/dq and the gradient of U4."""
+    """
+    The kinematics of every cell at one state.
+
+    Per cell: end shortening y, qd' H_y qd (h) and the bending energy beyond EI int w''^2 (U4);
+    per coordinate: J = dy/dq and the gradient of U4.
+    """
 
     y: np.ndarray
     h: np.ndarray
@@ -38,7 +44,11 @@ class Kinematics:
 
 
 def kinematics(a, x) -> Kinematics:
-    """Kinematics of every cell at the state x (see model.py: y, curvature, eqs 51, 65)."""
+    """
+    Return the kinematics of every cell at the state x.
+
+    See model.py: y, curvature, eqs 51, 65.
+    """
     nq = a.n_q
     q, qd = x[:nq], x[nq:2 * nq]
     kind = np.result_type(x, float)            # complex for complex-step differentiation
@@ -71,7 +81,7 @@ def kinematics(a, x) -> Kinematics:
 
 
 def _blocks(a, M):
-    """The full n_q x n_q matrix of a block-row-by-cell array (Mb, K, D)."""
+    """Return the full n_q x n_q matrix of a block-row-by-cell array (Mb, K, D)."""
     full = np.zeros((a.n_q, a.n_q))
     for c in range(a.n_cells):
         s = a.cell_slice(c)
@@ -80,15 +90,19 @@ def _blocks(a, M):
 
 
 def _interface_mass(a):
-    """MI (n_cells x n_cells): the interface/plate mass acting on the end shortenings."""
+    """Return MI (n_cells x n_cells): the interface/plate mass acting on the end shortenings."""
     MI = np.zeros((a.n_cells, a.n_cells))
     MI[a.mi_row, a.mi_col] = a.mi_val
     return MI
 
 
 def _charge_offset(a, x, u):
-    """C(q) v_inf per DET: the charge the circuit relaxes to for frozen q (quasi-static
-    coordinates z = q_p - C v_inf, used by the exponential methods on RC scenes)."""
+    """
+    Return C(q) v_inf per DET: the charge the circuit relaxes to for frozen q.
+
+    The quasi-static coordinates z = q_p - C v_inf are used by the exponential methods on RC
+    scenes.
+    """
     lam = (a.length - kinematics(a, x).y) / a.l0
     return a.C0 * lam ** 2 * u * a.Rp / (a.Rs + a.Rp)
 
@@ -100,14 +114,16 @@ def _index(a):
 
 
 def _numbers(v):
-    """v as a float array, or complex if it is complex."""
+    """Return v as a float array, or complex if it is complex."""
     v = np.asarray(v)
     return v if np.iscomplexobj(v) else v.astype(float)
 
 
 def rhs(a, x, u, quasi_static: bool = False):
     """
-    (dx/dt, P_in, P_diss) at (x, u): Lagrange's equations of model.py,
+    Return (dx/dt, P_in, P_diss) at (x, u).
+
+    Lagrange's equations of model.py,
     (Mb + J' MI J) qdd = -K q - D qd - dU4/dq - J' MI (qd' H_y qd) + J/l0 [dU_DE/dlambda]
     - V (E_M eps + eta_v dlz/dt) dlz/dq, with the creep and circuit equations.
     ``quasi_static``: the charge slots hold z = q_p - C(q) v_inf and receive dz/dt, and the
@@ -163,7 +179,11 @@ def rhs(a, x, u, quasi_static: bool = False):
 
 
 def stiff_rates(a, x) -> np.ndarray:
-    """Diagonal stiff part (1/s): -1/(C (Rs || Rp)) at the charge states, 0 elsewhere."""
+    """
+    Return the diagonal stiff part (1/s).
+
+    -1/(C (Rs || Rp)) at the charge states, 0 elsewhere.
+    """
     L = np.zeros(a.n_state)
     if a.rc_source:
         i_qp = _index(a)[1]
@@ -173,8 +193,12 @@ def stiff_rates(a, x) -> np.ndarray:
 
 
 def outputs(a, x, u) -> np.ndarray:
-    """Outputs in det_sim_ros.physics.model output order: per cell q_ref, qdot_ref, y, lambda, q_p,
-    v_p, i_DE, C, eps_E; the structure outputs P y; the energy H, P_in, P_diss."""
+    """
+    Return the outputs in det_sim_ros.physics.model output order.
+
+    Per cell q_ref, qdot_ref, y, lambda, q_p, v_p, i_DE, C, eps_E; the structure outputs P y;
+    the energy H, P_in, P_diss.
+    """
     x = np.asarray(x, dtype=float)
     u = np.asarray(u, dtype=float)
     nq, nc = a.n_q, a.n_cells
@@ -206,8 +230,12 @@ def outputs(a, x, u) -> np.ndarray:
 
 
 def phi(k: int, z: float) -> float:
-    """phi_k(z) = sum_m z^m / (m + k)!: the first row of exp of the (k+1) x (k+1) matrix with z
-    at (0, 0) and ones above the diagonal (Higham, Functions of Matrices, thm 10.34 form)."""
+    """
+    Return phi_k(z) = sum_m z^m / (m + k)!.
+
+    It is the first row of exp of the (k+1) x (k+1) matrix with z at (0, 0) and ones above the
+    diagonal (Higham, Functions of Matrices, thm 10.34 form).
+    """
     A = np.diag(np.ones(k), 1)
     A[0, 0] = z
     return float(expm(A)[0, k])
@@ -215,7 +243,9 @@ def phi(k: int, z: float) -> float:
 
 def step(a, method, x, u, h: float) -> np.ndarray:
     """
-    One step of size h of a :class:`det_sim_ros.sim.integrators.Method` from x with u held:
+    Return one step of size h of a :class:`det_sim_ros.sim.integrators.Method`.
+
+    The step goes from x with u held:
 
         X_i = exp(c_i h L) x + h sum_j a_ij(hL) N(X_j),   x+ = exp(h L) x + h sum_j b_j(hL) N(X_j)
 

@@ -45,16 +45,20 @@ class RitzBasis:
 
     @property
     def n_ritz(self) -> int:
-        """Number of shape functions."""
+        """Return the number of shape functions."""
         return len(self.coefficients)
 
     @property
     def degree(self) -> int:
-        """Highest polynomial degree among the shape functions."""
+        """Return the highest polynomial degree among the shape functions."""
         return max(len(c) - 1 for c in self.coefficients)
 
     def values(self, x, derivative: int = 0) -> np.ndarray:
-        """Matrix [S_j^(derivative)(x_k)] with x in metres: rows are points, columns are S_j."""
+        """
+        Return the matrix [S_j^(derivative)(x_k)] with x in metres.
+
+        Rows are points, columns are S_j.
+        """
         xi = np.asarray(x, dtype=float) / self.length
         scale = self.length ** -derivative
         columns = [P.polyval(xi, P.polyder(c, derivative)) * scale if derivative else
@@ -63,9 +67,11 @@ class RitzBasis:
 
     def quadrature(self, nonpolynomial: bool = False):
         """
-        Gauss-Legendre nodes x (m) and weights (m) exact for every polynomial energy integrand;
-        with ``nonpolynomial`` (the 'exact' fidelity: sqrt(1 - w'^2), 1/(1 - w'^2)) twice as many
-        plus 8, which resolve those smooth integrands to round-off for slopes up to ~0.7.
+        Return Gauss-Legendre nodes x (m) and weights (m) for the energy integrands.
+
+        They are exact for every polynomial energy integrand; with ``nonpolynomial`` (the
+        'exact' fidelity: sqrt(1 - w'^2), 1/(1 - w'^2)) twice as many plus 8, which resolve
+        those smooth integrands to round-off for slopes up to ~0.7.
         """
         n_nodes = 2 * self.degree - 1   # exact up to degree 4 deg - 3 >= 4 deg - 4
         if nonpolynomial:
@@ -75,14 +81,18 @@ class RitzBasis:
         return x, 0.5 * self.length * w
 
     def reference_row(self) -> np.ndarray:
-        """S_j at the paper's reference point: q_ref = row @ q is the published deflection."""
+        """Return S_j at the reference point: q_ref = row @ q is the published deflection."""
         return self.values(np.array([REFERENCE_POINT[self.beam] * self.length]))[0]
 
 
 @functools.lru_cache(maxsize=None)
 def _gauss_legendre(n_nodes: int):
-    """numpy's Gauss-Legendre rule on [-1, 1], computed once per size (an array scene builds
-    one model per distinct copy; leggauss costs ~0.6 ms a call). Read-only: shared."""
+    """
+    Return numpy's Gauss-Legendre rule on [-1, 1], computed once per size.
+
+    An array scene builds one model per distinct copy; leggauss costs ~0.6 ms a call. Read-only:
+    shared.
+    """
     xi, w = np.polynomial.legendre.leggauss(n_nodes)
     xi.flags.writeable = False
     w.flags.writeable = False
@@ -104,7 +114,11 @@ def make_basis(beam: str, length: float, fidelity: str = 'paper', n_ritz: int = 
 
 
 def _orthogonalize(coefficients, length):
-    """Gram-Schmidt in the bending inner product <f, g> = int f'' g'' dx; keeps S_1 unchanged."""
+    """
+    Orthogonalize by Gram-Schmidt in the bending inner product <f, g> = int f'' g'' dx.
+
+    S_1 is kept unchanged.
+    """
     basis = RitzBasis('fixed', length, tuple(coefficients))
     x, w = basis.quadrature()
     out = []
@@ -124,7 +138,7 @@ def _orthogonalize(coefficients, length):
 def ritz_coefficients(basis: RitzBasis, rho: float, area: float, inertia: float,
                       modulus: float, viscosity: float) -> dict:
     """
-    The paper's one-term integrals for the beam pair (eqs 70-73), from the shape function.
+    Return the paper's one-term integrals for the beam pair (eqs 70-73), from the shape function.
 
     Returns M = 2 int rho (I S'^2 + A S^2), c1 = 2 EI int S''^2, c2 = 1/2 int S'^2,
     c3 = 4 EI int (S'' S')^2, d = 2 eta I int S''^2, a = 4 c2^2, b = 2 c2, and c4 = 1/8 int S'^4

@@ -1,6 +1,8 @@
 """
-Statics of the DET-buckled-beam actuator (paper Section 4, Fig. 5): equilibria, their stability,
-the critical pre-strain and the equilibrium branches versus pre-strain.
+Statics of the DET-buckled-beam actuator (paper Section 4, Fig. 5).
+
+Equilibria, their stability, the critical pre-strain and the equilibrium branches versus
+pre-strain.
 
 Everything is derived from the dynamic model (:func:`det_sim_ros.physics.model.build_model`), so
 there is one source of truth for the physics (the landscape of U_pot and the search for its
@@ -86,7 +88,11 @@ class BranchPoint:
 
 
 def polymer_voltage(scene: Scene, v: float) -> float:
-    """Steady-state polymer voltage v_p (eq 81): v R_p/(R_p + R_s) for 'rc', v for 'ideal'."""
+    """
+    Return the steady-state polymer voltage v_p (eq 81).
+
+    v R_p/(R_p + R_s) for 'rc', v for 'ideal'.
+    """
     if scene.source == 'ideal':
         return float(v)
     p = scene.physics
@@ -95,7 +101,11 @@ def polymer_voltage(scene: Scene, v: float) -> float:
 
 # -- public API -----------------------------------------------------------------------------------
 def potential_coords(scene: Scene, coords, v: float) -> np.ndarray:
-    """U_pot (J) at Ritz coordinate vector(s) ``coords`` (last axis n_q) and voltage v (V)."""
+    """
+    Return U_pot (J) at Ritz coordinate vector(s) ``coords`` and voltage v (V).
+
+    The last axis of ``coords`` is n_q.
+    """
     st = landscape(scene)
     vp = polymer_voltage(scene, v)
     c = np.asarray(coords, dtype=float)
@@ -109,11 +119,12 @@ def potential_coords(scene: Scene, coords, v: float) -> np.ndarray:
 
 def potential(scene: Scene, q, v: float) -> np.ndarray:
     """
-    The voltage-controlled potential U_pot(q, v_p) of eq 79 (J) at reference deflection(s) q (m).
+    Return the voltage-controlled potential U_pot(q, v_p) of eq 79 (J) at deflection(s) q (m).
 
-    For one Ritz coordinate this is U_s + U_DE,m - 1/2 C v_p^2 at q. For several coordinates it
-    is the reduced potential: U_pot minimized over the other coordinates at the given reference
-    deflection (it equals U_pot at every equilibrium and has the same stability along the path).
+    q is the reference deflection. For one Ritz coordinate this is U_s + U_DE,m - 1/2 C v_p^2
+    at q. For several coordinates it is the reduced potential: U_pot minimized over the other
+    coordinates at the given reference deflection (it equals U_pot at every equilibrium and has
+    the same stability along the path).
     """
     st = landscape(scene)
     vp = polymer_voltage(scene, v)
@@ -124,8 +135,12 @@ def potential(scene: Scene, q, v: float) -> np.ndarray:
 
 
 def _reduced_energy(st: Landscape, q: float, vp: float) -> float:
-    """min U over the coordinates with ref . coords = q (minimized in the constraint's null
-    space, started from the one-term shape, the first coordinate)."""
+    """
+    Return min U over the coordinates with ref . coords = q.
+
+    Minimized in the constraint's null space, started from the one-term shape, the first
+    coordinate.
+    """
     r = st.ref
     _, _, Vt = np.linalg.svd(r[None, :])
     N = Vt[1:].T                                     # null space of the constraint
@@ -136,8 +151,10 @@ def _reduced_energy(st: Landscape, q: float, vp: float) -> float:
 
 def equilibria(scene: Scene, v: float = 0.0) -> list:
     """
-    All equilibria at the scene's pre-strain and voltage v (V): the straight configuration
-    q = 0 and the mirror-symmetric buckled pair(s) +-q*, each an :class:`Equilibrium`.
+    Return all equilibria at the scene's pre-strain and voltage v (V).
+
+    The straight configuration q = 0 and the mirror-symmetric buckled pair(s) +-q*, each an
+    :class:`Equilibrium`.
     """
     st = landscape(scene)
     vp = polymer_voltage(scene, v)
@@ -148,15 +165,21 @@ def equilibria(scene: Scene, v: float = 0.0) -> list:
 
 
 def stiffness_at_straight(scene: Scene, v: float = 0.0) -> float:
-    """d^2 U_pot/dq^2 at q = 0 (smallest Hessian eigenvalue for several coordinates), N/m."""
+    """
+    Return d^2 U_pot/dq^2 at q = 0, N/m.
+
+    The smallest Hessian eigenvalue for several coordinates.
+    """
     st = landscape(scene)
     return st.stiffness(np.zeros(st.nq), polymer_voltage(scene, v))
 
 
 def critical_prestrain(scene: Scene, v: float = 0.0, xtol: float = 1e-9) -> float:
     """
-    eps_b,min(v): the pre-strain where the straight beam loses stability (d^2 U_pot/dq^2 at
-    q = 0 crosses zero), by root bracketing in eps_b. NaN if no crossing in (-0.9, 2].
+    Return eps_b,min(v): the pre-strain where the straight beam loses stability.
+
+    There d^2 U_pot/dq^2 at q = 0 crosses zero; found by root bracketing in eps_b. NaN if no
+    crossing in (-0.9, 2].
     """
     def k0(e):
         sc = scene.replace(**{'scene.eps_b': float(e)})
@@ -179,7 +202,7 @@ def critical_prestrain(scene: Scene, v: float = 0.0, xtol: float = 1e-9) -> floa
 
 
 def normalized_potential(scene: Scene, q, v: float = 0.0) -> np.ndarray:
-    """Eq 82: (U_pot - U_min)/(U_max - U_min) over the given q range (m)."""
+    """Return eq 82: (U_pot - U_min)/(U_max - U_min) over the given q range (m)."""
     u = potential(scene, q, v)
     lo, hi = np.min(u), np.max(u)
     return (u - lo) / (hi - lo) if hi > lo else np.zeros_like(u)
@@ -187,15 +210,17 @@ def normalized_potential(scene: Scene, q, v: float = 0.0) -> np.ndarray:
 
 def rest_shortening(scene: Scene) -> float:
     """
-    y0 (m): the end shortening of the stable buckled equilibrium at 0 V (0.0 if the straight
-    beam is stable). Cached per scene structure and physics; fast after the first call.
+    Return y0 (m): the end shortening of the stable buckled equilibrium at 0 V.
+
+    0.0 if the straight beam is stable. Cached per scene structure and physics; fast after the
+    first call.
     """
     return landscape(scene).rest_shortening()
 
 
 def branches(scene: Scene, eps_grid: Sequence[float], v: float = 0.0, progress=None) -> list:
     """
-    Equilibrium branches versus pre-strain (the Fig. 5 analogue) at voltage v (V).
+    Return the equilibrium branches versus pre-strain (the Fig. 5 analogue) at voltage v (V).
 
     Returns a list of :class:`BranchPoint` rows (one per equilibrium and pre-strain); delta_y is
     relative to the rest shortening at 0 V at the same pre-strain. ``progress(k)`` is called
@@ -217,7 +242,7 @@ _rest_cache: 'collections.OrderedDict[tuple, np.ndarray]' = collections.OrderedD
 
 
 def _static_residual(model, coords):
-    """The accelerations at (coords, q_dot = 0, eps_E = 0, q_p = 0), 0 V: zero at rest."""
+    """Return the accelerations at (coords, q_dot = 0, eps_E = 0, q_p = 0), 0 V: zero at rest."""
     nq = len(coords)
     x = np.zeros(model.n_states)
     x[:nq] = coords
@@ -226,10 +251,12 @@ def _static_residual(model, coords):
 
 def _polish(model, coords, length):
     """
-    Newton on the model's own static residual (Model.f at zero velocity, 0 V) from ``coords``
-    (a statics solution), to round-off: the Jacobian by central differences, the iterate with
-    the smallest residual kept. Equilibria of Model.f are exactly the stationary states of the
-    dynamic model (q_dot = 0 and eps_E = 0, q_p = 0 are the other states' equilibria at 0 V).
+    Polish ``coords`` by Newton's method on the model's own static residual.
+
+    The residual is Model.f at zero velocity, 0 V; ``coords`` is a statics solution, polished
+    to round-off: the Jacobian by central differences, the iterate with the smallest residual
+    kept. Equilibria of Model.f are exactly the stationary states of the dynamic model
+    (q_dot = 0 and eps_E = 0, q_p = 0 are the other states' equilibria at 0 V).
     """
     x = np.array(coords, dtype=float)
     nq = len(x)
@@ -257,9 +284,10 @@ def _polish(model, coords, length):
 
 def rest_coords(scene: Scene, branch: str = 'buckled+') -> np.ndarray:
     """
-    Ritz coordinates of a single-cell scene's stable equilibrium at 0 V on ``branch``
-    ('buckled+': reference deflection q > 0, 'buckled-': q < 0; the straight beam q = 0 when it
-    is the stable state), solved to round-off in the scene's own dynamic model (its fidelity and
+    Return the Ritz coordinates of a single-cell scene's stable equilibrium at 0 V on ``branch``.
+
+    'buckled+': reference deflection q > 0, 'buckled-': q < 0; the straight beam q = 0 when it
+    is the stable state. Solved to round-off in the scene's own dynamic model (its fidelity and
     n_ritz). Cached per beam, pre-strain, fidelity, physics and model switches.
 
     :raises RestStateError: no stable state on that branch, or one outside the model's domain.
@@ -283,7 +311,7 @@ def rest_coords(scene: Scene, branch: str = 'buckled+') -> np.ndarray:
         match = [c for kind, c, *_ in stable if kind == branch]
         if not match:
             raise RestStateError(f'no stable {branch} equilibrium at 0 V ({where}); use '
-                                 "scene.initial_state: released")
+                                 'scene.initial_state: released')
         guess = np.asarray(match[0], dtype=float)
     model = build_model(scene)
     try:
@@ -294,7 +322,7 @@ def rest_coords(scene: Scene, branch: str = 'buckled+') -> np.ndarray:
         residual = np.max(np.abs(_static_residual(model, coords)))
     except ModelDomainError as exc:
         raise RestStateError(f'the {branch} rest state at 0 V ({where}) is outside the '
-                             f'model\'s domain: {exc}') from None
+                             f"model's domain: {exc}") from None
     if not math.isfinite(residual):
         raise RestStateError(f'the {branch} rest state at 0 V ({where}) is not finite')
     _rest_cache[key] = coords.copy()
@@ -305,9 +333,11 @@ def rest_coords(scene: Scene, branch: str = 'buckled+') -> np.ndarray:
 
 def rest_state(model) -> np.ndarray:
     """
-    The state vector of ``model`` with every cell at its own rest state (:func:`rest_coords`
-    of the cell alone, on ``scene.rest_branch``), q_dot = 0, eps_E = 0, q_p = 0 and the energy
-    book at 0: stationary at 0 V. Cells with identical physics share one solve.
+    Return the state vector of ``model`` with every cell at its own rest state.
+
+    Each cell's rest state is :func:`rest_coords` of the cell alone, on ``scene.rest_branch``;
+    q_dot = 0, eps_E = 0, q_p = 0 and the energy book at 0: stationary at 0 V. Cells with
+    identical physics share one solve.
     """
     scene = model.scene
     template = scene.cell_scene(0)
@@ -325,9 +355,10 @@ def rest_state(model) -> np.ndarray:
 
 def initial_state(model) -> np.ndarray:
     """
-    The scene's initial state (``scene.initial_state``): 'rest' = every cell at its stable
-    buckled equilibrium at 0 V, stationary (:func:`rest_state`); 'released' =
-    :meth:`~det_sim_ros.physics.model.Model.released_state`.
+    Return the scene's initial state (``scene.initial_state``).
+
+    'rest' = every cell at its stable buckled equilibrium at 0 V, stationary
+    (:func:`rest_state`); 'released' = :meth:`~det_sim_ros.physics.model.Model.released_state`.
     """
     if model.scene.initial_state == 'rest':
         return rest_state(model)

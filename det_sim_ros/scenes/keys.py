@@ -1,7 +1,9 @@
 """
-The scene keys: for each section, each key's kind, range, unit and description, the defaults
-of the optional keys, and the check of one value against its entry. Scene files, overrides and
-the node's parameters are all checked here.
+The scene keys, their defaults and the check of one value against its entry.
+
+For each section: each key's kind, range, unit and description, the defaults of the optional
+keys, and the check of one value against its entry. Scene files, overrides and the node's
+parameters are all checked here.
 """
 
 from __future__ import annotations
@@ -81,7 +83,7 @@ STRUCTURE_SPEC = {
              'left, right for a plate)'),
     'copies': ('int', 1, True, 100000, '-', 'array: number of independent actuators'),
     'plate_width': ('float', *_POS, 'm', 'plate: distance w between the two cells'),
-    'plate_mass': ('float', 0.0, True, math.inf, 'kg', 'plate: mass (replaces the cells\' m)'),
+    'plate_mass': ('float', 0.0, True, math.inf, 'kg', "plate: mass (replaces the cells' m)"),
     'plate_inertia': ('float', 0.0, True, math.inf, 'kg m^2',
                       'plate: rotational inertia J about its centre'),
     'spread': ('float', 0.0, True, 0.3, '-', 'array: relative standard deviation of the '
@@ -103,8 +105,11 @@ def _fail(key, value, why):
 
 
 def check_value(key, value, spec):
-    """``value`` checked against its key's ``spec`` (an entry of the tables above), an int
-    read as a float for a float key; :class:`SceneError` naming the key otherwise."""
+    """
+    Return ``value`` checked against its key's ``spec`` (an entry of the tables above).
+
+    An int is read as a float for a float key; :class:`SceneError` naming the key otherwise.
+    """
     kind = spec[0]
     if kind == 'bool':
         if not isinstance(value, bool):

@@ -59,22 +59,22 @@ class Physics:
     # Derived quantities (not parameters): named once here so every module agrees.
     @property
     def volume(self) -> float:
-        """DET volume V = n A0 d0 (eq 46), m^3."""
+        """Return the DET volume V = n A0 d0 (eq 46), m^3."""
         return self.n * self.A0 * self.d0
 
     @property
     def C0(self) -> float:
-        """Capacitance of the undeformed DET, C0 = eps0 eps_r n A0 / d0 (eq 80), F."""
+        """Return the capacitance of the undeformed DET, C0 = eps0 eps_r n A0 / d0 (eq 80), F."""
         return EPS0 * self.eps_r * self.n * self.A0 / self.d0
 
     @property
     def I(self) -> float:  # noqa: E743 - the paper's symbol for the second moment of area
-        """Second moment of area of one beam, b t^3 / 12, m^4."""
+        """Return the second moment of area of one beam, b t^3 / 12, m^4."""
         return self.b_b * self.t_b ** 3 / 12.0
 
     @property
     def area(self) -> float:
-        """Cross-section area of one beam, m^2."""
+        """Return the cross-section area of one beam, m^2."""
         return self.b_b * self.t_b
 
 
@@ -103,19 +103,20 @@ class Scene:
 
     @property
     def det_names(self) -> tuple:
-        """DET names in voltage-command order (one cell per DET)."""
+        """Return the DET names in voltage-command order (one cell per DET)."""
         return tuple(self.structure['dets'])
 
     @property
     def n_dets(self) -> int:
-        """Number of DETs (one per cell, the voltage command's length)."""
+        """Return the number of DETs (one per cell, the voltage command's length)."""
         return len(self.structure['dets'])
 
     def cell_physics(self) -> tuple:
         """
-        The physics of each cell: ``physics`` with the ``dets.<name>`` overrides and, for an
-        array, the seeded spread (each spread_key times 1 + spread N(0, 1), clipped to +-3
-        sigma); deterministic for a given scene.
+        Return the physics of each cell, deterministic for a given scene.
+
+        ``physics`` with the ``dets.<name>`` overrides and, for an array, the seeded spread (each
+        spread_key times 1 + spread N(0, 1), clipped to +-3 sigma).
         """
         base = dataclasses.asdict(self.physics)
         spread = self.structure['spread']
@@ -133,19 +134,19 @@ class Scene:
         return tuple(cells)
 
     def cell_scene(self, index: int) -> 'Scene':
-        """Cell ``index`` alone as a single-cell scene (its physics; for statics)."""
+        """Return cell ``index`` alone as a single-cell scene (its physics; for statics)."""
         physics = self.cell_physics()[index]
         return dataclasses.replace(self, physics=physics, dets={},
                                    structure=dict(STRUCTURE_DEFAULTS, dets=['det0']))
 
     @property
     def dt(self) -> float:
-        """Control period, s."""
+        """Return the control period, s."""
         return 1.0 / self.rate_hz
 
     @property
     def beam_length(self) -> float:
-        """Beam length l = l0 (1 + eps_b) (eq 77), m."""
+        """Return the beam length l = l0 (1 + eps_b) (eq 77), m."""
         return self.physics.l0 * (1.0 + self.eps_b)
 
     def replace(self, **changes) -> 'Scene':
@@ -225,8 +226,11 @@ def _apply_override(data, key, value):
 
 
 def _override_value(value):
-    """An override as given; command-line text is read as YAML, and numbers like 1.0e3 (a
-    string in YAML 1.1) as numbers."""
+    """
+    Return an override as given, command-line text read as YAML.
+
+    Numbers like 1.0e3 (a string in YAML 1.1) are read as numbers.
+    """
     if isinstance(value, str):
         try:
             value = yaml.safe_load(value)
@@ -241,7 +245,7 @@ def _override_value(value):
 
 
 def _checked_values(data):
-    """(section, key) -> checked value of every section key and top-level key ('', key)."""
+    """Return (section, key) -> checked value of every section key and top-level key ('', key)."""
     unknown = set(data) - set(SECTIONS) - set(TOP_SPEC) - {'node', 'structure', 'dets'}
     if unknown:
         raise SceneError(f'unknown scene key {sorted(unknown)[0]!r}; known sections: '
@@ -272,8 +276,11 @@ def _checked_values(data):
 
 
 def _check_consistency(scene):
-    """Checks that span several keys (the cells' physics after spread, n_ritz against the
-    fidelity, the pre-stretch)."""
+    """
+    Check what spans several keys.
+
+    The cells' physics after spread, n_ritz against the fidelity, the pre-stretch.
+    """
     physics = scene.physics
     for name, cell in zip(scene.det_names, scene.cell_physics()):
         if cell.l0 * (1.0 + scene.eps_b) <= 0.0 or not all(
@@ -325,7 +332,7 @@ def load_scene(source: Any = 'default', overrides: Mapping[str, Any] | None = No
 
 
 def _check_structure(data):
-    """The optional 'structure' and 'dets' sections, validated, with names filled in."""
+    """Return the optional 'structure' and 'dets' sections, validated, with names filled in."""
     content = data.get('structure', {})
     if not isinstance(content, dict):
         raise SceneError(f"scene key 'structure': must be a mapping (got {content!r})")

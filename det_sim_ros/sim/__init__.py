@@ -1,2 +1,6 @@
-"""Time stepping: the simulator on the grid t = k dt with inputs held per period, and the
-integration methods as coefficient tables (:mod:`.integrators`)."""
+"""
+Time stepping: the simulator and the integration methods.
+
+The simulator steps on the grid t = k dt with inputs held per period; the integration methods
+are coefficient tables (:mod:`.integrators`).
+"""

@@ -3,7 +3,7 @@ Fixed-step steppers declared as coefficient tables over one compiled stepping co
 
 Each :class:`Method` is data: stage nodes ``c`` and the coefficients a_ij, b_i written as sums of
 ``weight * phi_k(c_arg * h * L)`` (``k = -1``: a constant weight). The compiled core
-(``ds_advance`` in det_sim_ros/core/_csrc/stepping.c) treats x' = L x + N(x) with the stiff
+(``ds_advance`` in det_sim_ros/core/_csrc/stages.c) treats x' = L x + N(x) with the stiff
 diagonal L of the charge equation (dq_p/dt = -q_p / (C0 lam^2 Rs||Rp) + v/Rs, linear in q_p for
 frozen q) exactly and everything else explicitly; for states with L = 0 every exponential method
 reduces to the classical Runge-Kutta method with the same table (phi_k(0) = 1/k!).
@@ -52,17 +52,17 @@ class Method:
 
     @property
     def n_stages(self) -> int:
-        """Stages per step."""
+        """Return the number of stages per step."""
         return len(self.c)
 
     def arrays(self):
-        """The table as the float arrays the compiled core reads (terms sorted by stage row)."""
+        """Return the table as the float arrays the compiled core reads (terms by stage row)."""
         terms = sorted(self.terms, key=lambda term: term[0])
         return np.asarray(self.c, dtype=float), np.asarray(terms, dtype=float)
 
     @property
     def adaptive(self) -> bool:
-        """Whether the step count can follow an error estimate (an embedded pair)."""
+        """Return whether the step count can follow an error estimate (an embedded pair)."""
         return bool(self.embedded)
 
 
@@ -74,8 +74,10 @@ def _explicit(name, order, a, b, c, description):
 
 def _lawson(name, base, description):
     """
-    Lawson (integrating-factor) form of an explicit table: a_ij -> a_ij exp((c_i - c_j) h L),
-    b_j -> b_j exp((1 - c_j) h L). Needs non-decreasing nodes c (else exp grows for stiff L).
+    Return the Lawson (integrating-factor) form of an explicit table.
+
+    a_ij -> a_ij exp((c_i - c_j) h L), b_j -> b_j exp((1 - c_j) h L). Needs non-decreasing
+    nodes c (else exp grows for stiff L).
     """
     c = base.c
     if any(b < a for a, b in zip(c, c[1:])):
@@ -87,9 +89,12 @@ def _lawson(name, base, description):
 
 
 def _dormand_prince():
-    """Dormand-Prince 5(4) (Dormand & Prince 1980; the table of scipy's RK45, checked equal by
-    test_integrators.py). Written out so that importing the simulator does not import
-    scipy.integrate (0.4 s of a node's start)."""
+    """
+    Return Dormand-Prince 5(4) (Dormand & Prince 1980) with its embedded error estimate.
+
+    The table of scipy's RK45, checked equal by test_integrators.py. Written out so that
+    importing the simulator does not import scipy.integrate (0.4 s of a node's start).
+    """
     a = [[0, 0, 0, 0, 0, 0],
          [1 / 5, 0, 0, 0, 0, 0],
          [3 / 40, 9 / 40, 0, 0, 0, 0],
@@ -169,9 +174,11 @@ STABLE_STEP = 2.0   # h * fastest beam rate: inside every table's stability regi
 
 def choose_substeps(method: Method, dt: float, tolerance: float, beam_rate: float = 0.0) -> int:
     """
-    Internal steps per control period so that the expected error is below ``tolerance`` and the
-    explicit stages stay stable for the fastest beam mode (``beam_rate``, 1/s; see
-    Model.fastest_beam_rate: it decides from about 6 Ritz terms on).
+    Return the internal steps per control period for ``tolerance`` and the fastest beam mode.
+
+    The expected error is then below ``tolerance`` and the explicit stages stay stable for the
+    fastest beam mode (``beam_rate``, 1/s; see Model.fastest_beam_rate: it decides from about 6
+    Ritz terms on).
     """
     const = ERROR_CONSTANT.get(method.name)
     if const is None:
@@ -181,14 +188,14 @@ def choose_substeps(method: Method, dt: float, tolerance: float, beam_rate: floa
 
 
 def min_substeps(dt: float, beam_rate: float = 0.0) -> int:
-    """The fewest steps per period: h <= MAX_STEP and h * beam_rate <= STABLE_STEP."""
+    """Return the fewest steps per period: h <= MAX_STEP and h * beam_rate <= STABLE_STEP."""
     h_max = MAX_STEP if beam_rate <= 0.0 else min(MAX_STEP, STABLE_STEP / beam_rate)
     return max(1, int(math.ceil(dt / h_max - 1e-9)))
 
 
-# Adaptive step counts (period_core in _csrc/stepping.c): fixed steps inside each control period,
-# their number chosen per period from the method's embedded error estimate, weighted per Ritz
-# coordinate by 1/l (deflection) and dt/l (velocity) with l the cell's beam length. The local
+# Adaptive step counts (ds_period_core in _csrc/stepping.c): fixed steps inside each control
+# period, their number chosen per period from the method's embedded error estimate, weighted per
+# Ritz coordinate by 1/l (deflection) and dt/l (velocity) with l the cell's beam length. The local
 # tolerance is LOCAL_TOLERANCE[embedded order] times the scene tolerance: the scene tolerance
 # bounds the 'step' error (max over the run of |Delta-y error| / stroke), which accumulates
 # local errors and amplifies them through snap-through. Calibrated on all six 'step' scenes
@@ -209,9 +216,12 @@ MAX_SUBSTEPS_FACTOR = 2
 
 @dataclasses.dataclass(frozen=True)
 class StepControl:
-    """The per-period step-count controller's settings (period_core in _csrc/stepping.c):
-    fixed at ``substeps`` when ``tolerance`` is 0, else adaptive between ``min_substeps`` and
-    ``max_substeps`` from the embedded estimate (which scales as n^-``exponent``)."""
+    """
+    The per-period step-count controller's settings (ds_period_core in _csrc/stepping.c).
+
+    Fixed at ``substeps`` when ``tolerance`` is 0, else adaptive between ``min_substeps`` and
+    ``max_substeps`` from the embedded estimate (which scales as n^-``exponent``).
+    """
 
     substeps: int
     tolerance: float = 0.0
@@ -221,14 +231,16 @@ class StepControl:
 
     @property
     def adaptive(self) -> bool:
-        """Whether the count adapts per period (a tolerance is set)."""
+        """Return whether the count adapts per period (a tolerance is set)."""
         return self.tolerance > 0.0
 
 
 def step_control(method: Method, model, substeps: int = 0) -> StepControl:
     """
-    The step-count controller's settings: adaptive when ``substeps`` is 0 and the method has
-    an embedded estimate, else fixed at ``substeps`` (0: :func:`choose_substeps`).
+    Return the step-count controller's settings.
+
+    Adaptive when ``substeps`` is 0 and the method has an embedded estimate, else fixed at
+    ``substeps`` (0: :func:`choose_substeps`).
     """
     scene = model.scene
     beam_rate = model.fastest_beam_rate()
@@ -243,8 +255,11 @@ def step_control(method: Method, model, substeps: int = 0) -> StepControl:
 
 def make_stepper(model, method: Method, control: StepControl, dt: float,
                  transient: 'TransientSettings | None' = None):
-    """The compiled stepper (det_sim_ros.core.kernel.Stepper) of ``method`` for ``model``
-    (``transient``: how charge transients are resolved; None: not at all)."""
+    """
+    Return the compiled stepper (det_sim_ros.core.kernel.Stepper) of ``method`` for ``model``.
+
+    ``transient``: how charge transients are resolved; None: not at all.
+    """
     transient = transient or TransientSettings()
     c, terms = method.arrays()
     return kernel.Stepper(model.kernel, c, np.ascontiguousarray(terms.reshape(-1, 5)),
@@ -259,8 +274,12 @@ def make_stepper(model, method: Method, control: StepControl, dt: float,
 
 
 def error_weights(model) -> np.ndarray:
-    """1 / scale of each state in the embedded error norm: q_j by its cell's beam length l,
-    qdot_j by l / dt; the other states are not in the norm (0)."""
+    """
+    Return 1 / scale of each state in the embedded error norm.
+
+    q_j is scaled by its cell's beam length l, qdot_j by l / dt; the other states are not in the
+    norm (0).
+    """
     a = model.arrays
     w = np.zeros(a.n_state)
     for c in range(a.n_cells):
@@ -282,11 +301,14 @@ TRANSIENT_CHARGE = 1.0
 
 @dataclasses.dataclass(frozen=True)
 class TransientSettings:
-    """How the stepper resolves the charge transient after an input jump (fixed_period in
-    _csrc/stepping.c): while the charge lag exceeds ``z_tol`` (C; 0: never), graded steps
-    from ``fine`` * tau, ``fine`` sized for jumps of ``jump_ref`` (V); a smaller jump du starts
-    at fine * (jump_ref / du)^(1/5), the same local error for its smaller lag (0: every jump
-    at ``fine``)."""
+    """
+    How the stepper resolves the charge transient after an input jump.
+
+    See fixed_period in _csrc/stepping.c: while the charge lag exceeds ``z_tol`` (C; 0: never),
+    graded steps from ``fine`` * tau, ``fine`` sized for jumps of ``jump_ref`` (V); a smaller
+    jump du starts at fine * (jump_ref / du)^(1/5), the same local error for its smaller lag
+    (0: every jump at ``fine``).
+    """
 
     z_tol: float = 0.0
     fine: float = 1.0
@@ -294,11 +316,13 @@ class TransientSettings:
 
 
 def transient_settings(method: Method, scene) -> TransientSettings:
-    """The stepper's :class:`TransientSettings` for ``scene``: off unless the method is
-    exponential and the scene has an RC source (explicit methods must step below the charge
-    time constant anyway, and an ideal source has no charge transient). ``fine`` follows
-    the tolerance and was calibrated on the 'step' scenes, whose jumps are v_max: so
-    ``jump_ref`` = v_max.
+    """
+    Return the stepper's :class:`TransientSettings` for ``scene``.
+
+    Off unless the method is exponential and the scene has an RC source (explicit methods must
+    step below the charge time constant anyway, and an ideal source has no charge transient).
+    ``fine`` follows the tolerance and was calibrated on the 'step' scenes, whose jumps are
+    v_max: so ``jump_ref`` = v_max.
     """
     fine = min(1.0, max(0.05, TRANSIENT_FINE * (scene.tolerance / 3e-6) ** 0.25))
     if not method.exponential or scene.source != 'rc':
@@ -309,7 +333,11 @@ def transient_settings(method: Method, scene) -> TransientSettings:
 
 
 def advance(x, u, model, method: Method, h: float, n_steps: int) -> int:
-    """Advance ``x`` in place by ``n_steps`` steps of ``h`` with ``u`` held; returns a kernel
-    status (x is unchanged on failure). Builds a stepper per call: for tests and one-offs."""
+    """
+    Advance ``x`` in place by ``n_steps`` steps of ``h`` with ``u`` held.
+
+    Return a kernel status (x is unchanged on failure). Builds a stepper per call: for tests and
+    one-offs.
+    """
     stepper = make_stepper(model, method, StepControl(max(1, n_steps)), max(h, 1e-300))
     return stepper.advance(x, np.asarray(u, dtype=float), float(h), int(n_steps))

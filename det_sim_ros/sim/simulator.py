@@ -4,7 +4,7 @@ The simulator: state, the sim-time grid t = k dt, and inputs held between comman
 :class:`Simulator` advances exactly one control period dt per :meth:`Simulator.step` with the input
 held constant (zero-order hold), in fixed internal steps of the chosen method. With
 ``integrator.substeps: 0`` and a method that has an embedded error estimate (the default) their
-number adapts from period to period to the scene's tolerance (period_core in _csrc/stepping.c);
+number adapts from period to period to the scene's tolerance (ds_period_core in _csrc/stepping.c);
 else it is fixed. Independent coupled groups (the copies of an array) each keep their own count.
 Time is always ``k * dt`` (never accumulated), and the same inputs give bit-identical outputs: the
 step count depends only on the state and the inputs. A state that leaves the model's domain puts
@@ -22,8 +22,8 @@ from typing import Callable
 
 import numpy as np
 
-from ..core import kernel
 from .integrators import get_method, make_stepper, Method, step_control, transient_settings
+from ..core import kernel
 from ..physics.model import build_model, Model, ModelDomainError
 from ..physics.statics import initial_state
 from ..scenes.scene import load_scene, Scene, SceneError
@@ -52,10 +52,13 @@ _FLOAT_ONLY = {float}
 
 
 def inputs_within(values: list, v_max: float) -> bool:
-    """Every value of a non-empty list of floats in [0, v_max], none NaN: the answer of
-    ``all(0.0 <= v <= v_max for v in values)`` in three C loops instead of a generator (100
-    DETs: ~3 against ~12 us per check, two per command). A NaN makes the sum NaN; without one,
-    min and max are exact."""
+    """
+    Check that every value of a non-empty list of floats is in [0, v_max], none NaN.
+
+    The answer of ``all(0.0 <= v <= v_max for v in values)`` in three C loops instead of a
+    generator (100 DETs: ~3 against ~12 us per check, two per command). A NaN makes the sum NaN;
+    without one, min and max are exact.
+    """
     total = sum(values)
     return total == total and min(values) >= 0.0 and max(values) <= v_max
 
@@ -112,7 +115,7 @@ class Simulator:
 
     # -- state ----------------------------------------------------------------------------
     def reset(self, x0=None) -> None:
-        """Back to t = 0, the scene's initial state (or ``x0``), 0 V input, no fault."""
+        """Go back to t = 0, the scene's initial state (or ``x0``), 0 V input, no fault."""
         self.k = 0
         self.stepper.reset_control()   # the step count starts over: runs repeat exactly
         self.x = self.x0.copy() if x0 is None else np.array(x0, dtype=float)
@@ -128,35 +131,49 @@ class Simulator:
 
     @property
     def t(self) -> float:
-        """Simulated time k * dt, s."""
+        """Return the simulated time k * dt, s."""
         return self.k * self.dt
 
     @property
     def substeps(self) -> int:
-        """Internal steps the next control period starts with (fixed unless ``adaptive``; the
-        largest over the coupled groups)."""
+        """
+        Return the internal steps the next control period starts with.
+
+        Fixed unless ``adaptive``; the largest over the coupled groups.
+        """
         return self.stepper.substeps
 
     @property
     def h(self) -> float:
-        """Internal step size of the next control period, s."""
+        """Return the internal step size of the next control period, s."""
         return self.dt / self.substeps
 
     @property
     def steps_taken(self) -> int:
-        """Internal steps taken since construction (all periods, repeated ones included; summed
-        over the coupled groups)."""
+        """
+        Return the internal steps taken since construction.
+
+        All periods, repeated ones included; summed over the coupled groups.
+        """
         return int(self.stepper.steps_taken)
 
     @property
     def substeps_setting(self) -> int:
-        """The step count as a setting: 0 = adaptive, else the fixed count (logs record this,
-        so a re-simulation uses the same stepping and reproduces the run exactly)."""
+        """
+        Return the step count as a setting: 0 = adaptive, else the fixed count.
+
+        Logs record this, so a re-simulation uses the same stepping and reproduces the run
+        exactly.
+        """
         return 0 if self.adaptive else self.substeps
 
     def describe_stepper(self) -> str:
-        """'etdrk4 x20' or 'etdrk4 adaptive (now x12)' (', 2 threads' when stepping on more
-        than one), for logs and diagnostics."""
+        """
+        Describe the stepping in one phrase, for logs and diagnostics.
+
+        'etdrk4 x20' or 'etdrk4 adaptive (now x12)' (', 2 threads' when stepping on more than
+        one).
+        """
         threads = self.stepper.threads
         on = f', {threads} threads' if threads > 1 else ''
         if self.adaptive:
@@ -221,15 +238,19 @@ class Simulator:
         return self._out
 
     def outputs(self) -> dict:
-        """Named outputs at the current state and input."""
+        """Return the named outputs at the current state and input."""
         status = self.model.kernel.outputs(self.x, self.u, self._out)
         if status != kernel.OK:
             raise ModelDomainError(status)
         return dict(zip(self.output_names, self._out.tolist()))
 
     def trust_issue(self) -> str:
-        """'' while the run can be vouched for, else why not (one line): the power-balance
-        residual beyond :data:`POWER_RESIDUAL_LIMIT` (only with ``monitor_power``)."""
+        """
+        Return '' while the run can be vouched for, else why not (one line).
+
+        A run is not vouched for with the power-balance residual beyond
+        :data:`POWER_RESIDUAL_LIMIT` (only with ``monitor_power``).
+        """
         if self.fault:
             return ''
         residual = self.power_residual()
@@ -242,9 +263,10 @@ class Simulator:
 
     def power_residual(self) -> float:
         """
-        Energy-balance residual H(t) - H(0) - (W_in - W_diss), relative to the energy scale.
+        Return the energy-balance residual H(t) - H(0) - (W_in - W_diss), relative.
 
-        NaN when the scene does not monitor power. The scale is max(H(0), W_in, 1 uJ).
+        Relative to the energy scale max(H(0), W_in, 1 uJ); NaN when the scene does not monitor
+        power.
         """
         if not self.scene.monitor_power:
             return math.nan
