@@ -1,5 +1,5 @@
 """
-Batch benchmark (issue 7): N independent SISO actuators stepped together at a 1 kHz control rate.
+Batch benchmark: N independent SISO actuators stepped together at a 1 kHz control rate.
 
 An 'array' scene (config/array.yaml) holds N copies of the default cell with spread parameters;
 the simulator steps all of them in one compiled call per control period, so the fixed cost of a
@@ -8,16 +8,18 @@ period (Python, dispatch, outputs) is shared. Measured side by side in one run:
 - ``array step``: one Simulator.step() per 1 ms period for all N (what sim_node does);
 - ``array run``: the offline path, simulate() with the whole input record (one call);
 - ``N x SISO step``: N separate single-cell Simulators stepped one after another (the baseline
-  the array replaces), for N up to --max-separate.
+  the array is compared with), for N up to --max-separate.
 
-Inputs: each actuator gets its own 0 / v_max square wave (period 0.2 s), either staggered (phases
-spread over N, so charge transients and snaps start at different periods) or synchronized (all
-switch together). Every copy is its own coupled group with its own adaptive step count, so one
-copy snapping does not make the others take its steps. ``array run`` is also timed on
-``--threads`` threads (groups spread over them; results are identical). Cost: process CPU
-seconds per simulated second, median of --repeats; RTF = wall-clock real-time factor (for
-threads > 1, wall time is what a user waits). The simulators are built outside the timing (reset() between runs): building a 1000-copy
-array takes ~5 s, mostly its copies' rest-state solves. Run: ``python bench/batch.py``.
+Inputs (--commands): each actuator gets its own 0 / v_max square wave (period 0.2 s: 'square') or
+one v_max step of 0.3 s ('step'), either staggered (phases or switch times spread over N, so charge
+transients and snaps start at different periods) or synchronized (all switch together). Every copy
+is its own coupled group with its own adaptive step count, so one copy snapping does not make the
+others take its steps. ``array run`` is also timed on ``--threads`` threads (groups spread over
+them; results are identical). Cost: process CPU seconds per simulated second, median of --repeats;
+RTF = wall-clock real-time factor (for threads > 1, wall time is what a user waits); the figure of
+merit is CPU us per actuator and period (1000 actuators at 1x real time on two cores need <= 2 us
+with perfect scaling). The simulators are built outside the timing (reset() between runs): building
+a 1000-copy array takes ~5 s, mostly its copies' rest-state solves. Run: ``python bench/batch.py``.
 """
 
 import argparse
@@ -25,17 +27,20 @@ import statistics
 import sys
 import time
 
-import numpy as np
-
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import simulate, Simulator
+import numpy as np
 
 
 def _commands(n, periods, dt, v_max, synchronized=False, kind='square'):
-    """Per-period voltages (periods x n). 'square': a 0 / v_max square wave of period 0.2 s per
-    copy (a snap every 0.1 s: the hard case); 'step': the 'step' profile per copy, v_max for
-    0.3 s from a switch-on time (what a controller test does), spread over the first half of
-    the run. Staggered: phases / switch times spread over the copies; synchronized: all equal."""
+    """
+    Return the per-period voltages (periods x n).
+
+    'square': a 0 / v_max square wave of period 0.2 s per copy (a snap every 0.1 s: the hard
+    case); 'step': the 'step' profile per copy, v_max for 0.3 s from a switch-on time (what a
+    controller test does), spread over the first half of the run. Staggered: phases / switch
+    times spread over the copies; synchronized: all equal.
+    """
     t = np.arange(periods)[:, None] * dt
     if kind == 'step':
         on = np.full(n, 0.1) if synchronized else 0.1 + 0.5 * periods * dt * np.arange(n) / n
@@ -72,7 +77,8 @@ def main(argv=None) -> int:
     parser.add_argument('--max-separate', type=int, default=100)
     parser.add_argument('--tolerance', type=float, default=1e-6)
     parser.add_argument('--threads', default='1,2', help='thread counts for the array run')
-    parser.add_argument('--substeps', type=int, default=0, help='fixed steps per period (0: adaptive)')
+    parser.add_argument('--substeps', type=int, default=0,
+                        help='fixed steps per period (0: adaptive)')
     parser.add_argument('--initial-state', default='rest', choices=('rest', 'released'),
                         help="the scene's start: 'rest' (config/array.yaml's) or 'released' "
                              '(every copy buckles from q0 first)')

@@ -1,6 +1,8 @@
 #!/usr/bin/env python3
 """
-Benchmark fleets of sim_nodes (issue 20; a script, not a test). Run each part under the CPU lock.
+Benchmark fleets of sim_nodes: nodes per host, lockstep loops per host, QoS across hosts.
+
+A script, not a test. Run each part under the CPU lock.
 
 capacity  N default-scene nodes in real time at 1 kHz on this host (det_sim_ros.ros.fleet), one
           listener process subscribed (reliable, depth 1000) to every node's displacement:
@@ -41,8 +43,8 @@ sys.path.insert(0, HERE)
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 101))
 
-from node_rate import command_latency, CONTROLLER  # noqa: E402
 from det_sim_ros.ros.fleet import Fleet, FleetNode  # noqa: E402
+from node_rate import command_latency, CONTROLLER  # noqa: E402
 
 DT_NS = 1_000_000          # the default scene's period (1 kHz)
 STARTUP_LIMIT = 120.0      # s: bounds a start that hangs (never part of a measurement)
@@ -50,7 +52,7 @@ SETTLE = 2.0               # s after every node runs before the window opens
 
 # Subscribes to /n<i>/displacement for i < N (reliable, depth 1000, raw bytes) and records each
 # sample's stamp and arrival time (CLOCK_MONOTONIC); writes them as JSON at SIGINT.
-LISTENER = '''
+LISTENER = """
 import json, sys, time, rclpy
 from rclpy.experimental import EventsExecutor
 from sensor_msgs.msg import JointState
@@ -74,7 +76,7 @@ except BaseException:
 finally:
     with open(out_path, 'w') as stream:
         json.dump(got, stream)
-'''
+"""
 
 
 def child_env(**extra):
@@ -125,7 +127,7 @@ def wait_ready(fleet):
 
 
 def window_stats(samples, t0, t1):
-    """Samples lost and sim s per wall s of one topic's (stamp, arrival) list in [t0, t1]."""
+    """Return samples lost and sim s per wall s of a topic's (stamp, arrival) list in [t0, t1]."""
     inside = [(s, r) for s, r in samples if t0 <= r <= t1]
     if len(inside) < 2:
         return {'received': len(inside), 'lost': None, 'rtf': 0.0}
@@ -136,7 +138,7 @@ def window_stats(samples, t0, t1):
 
 
 def node_rtf(log_file):
-    """The real-time factors of a node's INFO lines (every 5 s), the start-up one left out."""
+    """Return the real-time factors of a node's INFO lines (every 5 s) but the start-up one."""
     import re
     with open(log_file, encoding='utf-8', errors='replace') as stream:
         return [float(x) for x in re.findall(r'RTF=([0-9.]+)', stream.read())][1:]

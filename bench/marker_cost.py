@@ -1,6 +1,5 @@
 """
-CPU cost of the shape markers (issue 18 target: 30 Hz markers add <= 5 % to the node's CPU per
-simulated second).
+CPU cost of the shape markers (target: 30 Hz markers add <= 5 % to the node's CPU per sim s).
 
 One sim_node runs in this process (free run by default, the node's cheapest mode per simulated
 second, so the markers' largest share; --real-time: the node's default mode, the one a user
@@ -33,7 +32,7 @@ import subprocess
 import sys
 import time
 
-SUBSCRIBER = '''
+SUBSCRIBER = """
 import rclpy, sys
 from visualization_msgs.msg import MarkerArray
 rclpy.init()
@@ -49,7 +48,7 @@ try:
     rclpy.spin(node)
 except BaseException:
     pass
-'''
+"""
 
 
 def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1, real_time=False,
@@ -153,8 +152,8 @@ def main():
                         help='the viewer takes the frames as bytes (as RViz and the Foxglove '
                         'bridge, both C++, do) instead of building Python MarkerArray objects')
     parser.add_argument('--subscribe', choices=('markers', 'all'), default='all',
-                        help="the other process subscribes to /markers only, or to the outputs "
-                        "too (a controller and a viewer; default)")
+                        help='the other process subscribes to /markers only, or to the outputs '
+                        'too (a controller and a viewer; default)')
     args = parser.parse_args()
     os.environ.setdefault('ROS_DOMAIN_ID', str(150 + os.getpid() % 50))
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')

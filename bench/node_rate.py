@@ -1,12 +1,15 @@
 #!/usr/bin/env python3
 """
-Benchmark sim_node's I/O (issue 15; a script, not a test). Every figure of one scene is measured
-in the same run, side by side, so compare ratios; absolute times depend on the host.
+Benchmark sim_node's I/O: free-run CPU against a plain publishing node, and real time.
+
+A script, not a test. Every figure of one scene is measured in the same run, side by side, so
+compare ratios; absolute times depend on the host. Targets: in free run with the MCAP log, the
+node costs at most 1.5x the floor (markers off); in real time with a controller answering every
+sample, command-to-effect p99 <= 2 ms with no sample lost and the lag not growing.
 
 1. Free-run CPU per control period, all outputs + /clock + /diagnostics + MCAP logging, one
-   subscriber process on every output topic (markers off: the issue-15 target; a run with the
-   default 30 Hz markers per round too, a rough figure: bench/marker_cost.py measures their
-   share, issue 18). Measured next to:
+   subscriber process on every output topic (markers off; a run with the default 30 Hz markers
+   per round too, a rough figure: bench/marker_cost.py measures their share). Measured next to:
    - the floor: a plain node publishing the same pre-serialized bytes (one sample's CDR) and
      /clock on the same topics to the same subscribers, per period. It runs as the node runs:
      an EventsExecutor timer callback publishing steps_per_tick (10) periods' messages per call,
@@ -15,12 +18,14 @@ in the same run, side by side, so compare ratios; absolute times depend on the h
      subscriber's wake per message when messages come apart), and the node in free run
      publishes each tick's samples as one burst; a floor publishing one period per callback
      would be higher, and the node's own figure no better. A tight publish loop without an
-     executor is reported too (``publish_loop``, the lowest possible figure; the old floor);
+     executor is reported too (``publish_loop``, the lowest possible figure);
    - the physics alone: Simulator.step() per period;
    - the node under the SingleThreadedExecutor (the node uses the EventsExecutor; once).
    CPU is the process's CPU time (all threads: the DDS threads and the MCAP writer thread too)
    per period. The host is shared, so --rounds repeats floor, node and node with markers
    interleaved; medians of each and of the per-round ratios are reported, with min..max.
+   --paired N measures node and floor in N randomly ordered pairs of blocks in one process
+   instead: the precise node/floor ratio.
 2. Real time at the scene rate for --rt-seconds, an outside controller process answering every
    displacement sample with a command, another process keeping one core busy: samples lost at
    the controller's reliable subscriber, command-to-effect latency (controller publishes the
@@ -43,22 +48,20 @@ import sys
 import tempfile
 import time
 
-import numpy as np
-
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 101))
-
-import rclpy  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.qos import QoSProfile  # noqa: E402
 
 from det_sim_ros.io.contract import decode_float64_multi_array, encode_clock  # noqa: E402
 from det_sim_ros.io.mcap_log import LogReader  # noqa: E402
 from det_sim_ros.ros.node import make_executor, SimNode  # noqa: E402
 from det_sim_ros.sim.simulator import Simulator  # noqa: E402
+import numpy as np  # noqa: E402
+import rclpy  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import QoSProfile  # noqa: E402
 
-SUBSCRIBER = '''
+SUBSCRIBER = """
 import sys, rclpy
 from sensor_msgs.msg import JointState
 rclpy.init()
@@ -71,11 +74,11 @@ try:
     rclpy.spin(node)
 except BaseException:
     pass
-'''
+"""
 
 # Answers every displacement sample with a voltage command; records when it published each
 # command and when each sample arrived (CLOCK_MONOTONIC is shared by all processes).
-CONTROLLER = '''
+CONTROLLER = """
 import json, sys, time, rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile
@@ -106,7 +109,7 @@ except BaseException:
 finally:
     with open(out_path, 'w') as stream:
         json.dump({'sent': sent, 'received': received}, stream)
-'''
+"""
 
 BUSY = 'while True: pass'
 
@@ -168,9 +171,12 @@ def floor(scene_name, topics, samples, n, with_clock):
 
 
 def _make_floor_node(context, name, topics, samples, burst):
-    """A plain node publishing pre-serialized bytes (one sample's outputs and /clock per
-    period) from a timer, ``burst`` periods per callback: (node, its publishers, a list whose
-    one item counts the periods published)."""
+    """
+    Build a plain node publishing pre-serialized bytes from a timer.
+
+    It publishes one sample's outputs and /clock per period, ``burst`` periods per callback.
+    Returns (node, its publishers, a list whose one item counts the periods published).
+    """
     from sensor_msgs.msg import JointState
     from rosgraph_msgs.msg import Clock
     node = rclpy.create_node(name, context=context)
@@ -191,8 +197,12 @@ def _make_floor_node(context, name, topics, samples, burst):
 
 
 def floor_node(topics, samples, n, burst):
-    """CPU per period of a plain node publishing pre-serialized bytes (one sample's outputs and
-    /clock per period) from an EventsExecutor timer, ``burst`` periods per callback."""
+    """
+    Return the CPU per period of a plain node publishing pre-serialized bytes.
+
+    It publishes one sample's outputs and /clock per period from an EventsExecutor timer,
+    ``burst`` periods per callback.
+    """
     context = rclpy.context.Context()
     rclpy.init(context=context)
     node, pubs, done = _make_floor_node(context, 'bench_floor_node', topics, samples, burst)
@@ -214,13 +224,13 @@ def floor_node(topics, samples, n, burst):
 def paired_node_floor(scene_name, topics, samples, pairs, block_s, folder, seed=1, log=True,
                       compression='zstd'):
     """
-    Node and floor in one process, in ``pairs`` randomly ordered pairs of ``block_s`` wall
-    seconds each (only one of the two is spun at a time): the host's drift hits both alike,
-    which separate runs of a few seconds could not resolve (their rounds spread by +-30 %).
-    The node runs free with the MCAP log (unless ``log`` is false), markers off; the floor is
-    floor_node's timer.
-    Returns the CPU per period of each (totals over all blocks), the ratio of the totals and
-    the mean of the per-pair ratios with its standard error.
+    Measure node and floor in one process, in ``pairs`` randomly ordered pairs of blocks.
+
+    Each block is ``block_s`` wall seconds (only one of the two is spun at a time): the host's
+    drift hits both alike, which separate runs of a few seconds could not resolve (their rounds
+    spread by +-30 %). The node runs free with the MCAP log (unless ``log`` is false), markers off;
+    the floor is floor_node's timer. Returns the CPU per period of each (totals over all blocks),
+    the ratio of the totals and the mean of the per-pair ratios with its standard error.
     """
     import random
     contexts = [rclpy.context.Context(), rclpy.context.Context()]
@@ -374,8 +384,11 @@ def command_latency(log_path, controller_file, dt, topic='voltage_command'):
 
 
 def lockstep_in_process(scene_name, sim_seconds):
-    """Lockstep with an in-process P controller answering every sample (one executor):
-    sim seconds per wall second."""
+    """
+    Run lockstep with an in-process P controller answering every sample (one executor).
+
+    Returns sim seconds per wall second, CPU per period and the missed deadlines.
+    """
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
     from det_sim_ros.io.contract import decode_joint_state, encode_float64_multi_array
@@ -514,7 +527,7 @@ def main():
                         help="real-time run: the node's realtime_priority (SCHED_FIFO; 0 = off)")
     parser.add_argument('--controller-priority', type=int, default=0,
                         help="real-time run: the controller process's SCHED_FIFO priority "
-                        "(set right after it starts: its threads inherit it)")
+                        '(set right after it starts: its threads inherit it)')
     parser.add_argument('--rt-no-log', action='store_true', help='real-time run without the '
                         'MCAP log (then no command-to-effect figures)')
     parser.add_argument('--paired', type=int, default=0,
@@ -524,7 +537,7 @@ def main():
     parser.add_argument('--log-compression', default='zstd', choices=('zstd', 'lz4', 'none'),
                         help="the node's log.compression in the paired and real-time runs")
     parser.add_argument('--paired-no-log', action='store_true',
-                        help='a second paired run with the log off (the log\'s share)')
+                        help="a second paired run with the log off (the log's share)")
     parser.add_argument('--json', help='write the numbers to this file')
     args = parser.parse_args()
     report = {'cpus': os.cpu_count(), 'load_avg_at_start': os.getloadavg()}
