@@ -67,7 +67,7 @@ def _wall(fn, repeats):
     return statistics.median(times)
 
 
-def main(argv=None) -> int:
+def _parse(argv):
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--sizes', default='1,10,100,1000')
     parser.add_argument('--sim-time', type=float, default=1.0, help='simulated seconds per run')
@@ -82,7 +82,54 @@ def main(argv=None) -> int:
     parser.add_argument('--initial-state', default='rest', choices=('rest', 'released'),
                         help="the scene's start: 'rest' (config/array.yaml's) or 'released' "
                              '(every copy buckles from q0 first)')
-    args = parser.parse_args(argv)
+    return parser.parse_args(argv)
+
+
+def _row(scene, sim, n, kind, synchronized, threads, args):
+    """Measure one workload on an N-copy array and print its table row."""
+    periods = int(round(args.sim_time / sim.dt))
+    U = _commands(n, periods, sim.dt, scene.physics.v_max, synchronized, kind)
+    sim.stepper.threads = 1
+    steps0 = sim.steps_taken
+    sim.reset()
+    simulate(sim, U, args.sim_time)
+    steps = (sim.steps_taken - steps0) / (n * periods)
+
+    def stepping():
+        sim.reset()
+        for k in range(periods):
+            sim.set_input(U[k])
+            sim.step()
+    per = 1e6 / (n * periods)     # seconds per run -> us per actuator and period
+    cost_step = _cpu(stepping, args.repeats) * per
+
+    def offline(threads):
+        sim.stepper.threads = threads
+        sim.reset()
+        simulate(sim, U, args.sim_time)
+    runs = [_wall(lambda: offline(t), args.repeats) * per for t in threads]
+    sim.stepper.threads = 1
+    cost_sep = float('nan')
+    if n <= args.max_separate:
+        singles = [Simulator(scene.cell_scene(i)) for i in range(n)]
+
+        def separate():
+            for s in singles:
+                s.reset()
+            for k in range(periods):
+                for i, s in enumerate(singles):
+                    s.set_input([U[k, i]])
+                    s.step()
+        cost_sep = _cpu(separate, args.repeats) * per
+    rtf = lambda us: 1e3 / (us * n)  # noqa: E731 - 1 ms of sim time per period
+    print(f"| {n} | {kind}, {'synchronized' if synchronized else 'staggered'} | "
+          f'{steps:.1f} | {cost_step:.3g} | {rtf(cost_step):.3g} | '
+          + ' | '.join(f'{r:.3g} | {rtf(r):.3g}' for r in runs)
+          + f' | {cost_sep:.3g} |', flush=True)
+
+
+def main(argv=None) -> int:
+    args = _parse(argv)
     threads = [int(t) for t in args.threads.split(',')]
     print('| N | commands | steps / period | array step(): µs CPU per actuator and period | RTF | '
           + ' | '.join(f'simulate() {t} thread(s): µs wall per actuator and period | RTF'
@@ -94,47 +141,9 @@ def main(argv=None) -> int:
                                      'integrator.substeps': args.substeps,
                                      'scene.initial_state': args.initial_state})
         sim = Simulator(scene)   # built once: a 1000-copy array takes ~5 s (rest states)
-        periods = int(round(args.sim_time / sim.dt))
         for kind, synchronized in ((k, sync) for k in args.commands.split(',')
                                    for sync in (False, True)):
-            U = _commands(n, periods, sim.dt, scene.physics.v_max, synchronized, kind)
-            sim.stepper.threads = 1
-            steps0 = sim.steps_taken
-            sim.reset()
-            simulate(sim, U, args.sim_time)
-            steps = (sim.steps_taken - steps0) / (n * periods)
-
-            def stepping():
-                sim.reset()
-                for k in range(periods):
-                    sim.set_input(U[k])
-                    sim.step()
-            per = 1e6 / (n * periods)     # seconds per run -> us per actuator and period
-            cost_step = _cpu(stepping, args.repeats) * per
-
-            def offline(threads):
-                sim.stepper.threads = threads
-                sim.reset()
-                simulate(sim, U, args.sim_time)
-            runs = [_wall(lambda: offline(t), args.repeats) * per for t in threads]
-            sim.stepper.threads = 1
-            cost_sep = float('nan')
-            if n <= args.max_separate:
-                singles = [Simulator(scene.cell_scene(i)) for i in range(n)]
-
-                def separate():
-                    for s in singles:
-                        s.reset()
-                    for k in range(periods):
-                        for i, s in enumerate(singles):
-                            s.set_input([U[k, i]])
-                            s.step()
-                cost_sep = _cpu(separate, args.repeats) * per
-            rtf = lambda us: 1e3 / (us * n)  # noqa: E731 - 1 ms of sim time per period
-            print(f"| {n} | {kind}, {'synchronized' if synchronized else 'staggered'} | "
-                  f'{steps:.1f} | {cost_step:.3g} | {rtf(cost_step):.3g} | '
-                  + ' | '.join(f'{r:.3g} | {rtf(r):.3g}' for r in runs)
-                  + f' | {cost_sep:.3g} |', flush=True)
+            _row(scene, sim, n, kind, synchronized, threads, args)
     return 0
 
 

@@ -10,15 +10,16 @@ capacity  N default-scene nodes in real time at 1 kHz on this host (det_sim_ros.
           CPU (s per wall s, all N together); the nodes' own real-time factor (their INFO
           lines, every 5 s). A host "holds" N when every node lost 0 samples and kept real
           time (>= 0.995).
-lockstep  N lockstep nodes, each answered by its own controller process (bench/node_rate.py's
-          CONTROLLER): aggregate simulated seconds per wall second (sum over nodes).
+lockstep  N lockstep nodes, each answered by its own controller process
+          (bench/peer_processes.py's CONTROLLER): aggregate simulated seconds per wall second
+          (sum over nodes).
 hosts     One node at 1 kHz in real time (lockstep_* cases: lockstep, sim s per wall s) on
-          namespace host h0 (det_sim_ros.ros.netns), its controller
-          (node_rate CONTROLLER: answers every displacement sample) on host h1, unicast discovery
-          over UDP: command-to-effect latency p50/p99 (controller publishes a command -> it
-          receives the first sample that shows it) and samples lost at the controller; the h1
-          link direct (veth) or through the TAP relay with delay / loss, default QoS (reliable
-          depth 10) or qos_keep_all, with or without config/dds_lossy.xml.
+          namespace host h0 (det_sim_ros.ros.netns), its controller (CONTROLLER: answers every
+          displacement sample) on host h1, unicast discovery over UDP: command-to-effect
+          latency p50/p99 (controller publishes a command -> it receives the first sample that
+          shows it) and samples lost at the controller; the h1 link direct (veth) or through
+          the TAP relay with delay / loss, default QoS (reliable depth 10) or qos_keep_all,
+          with or without config/dds_lossy.xml.
 
 Usage (root for hosts):
     flock /tmp/det_cpu.lock python bench/fleet.py capacity --nodes 1,2,4 --seconds 15
@@ -44,7 +45,7 @@ os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 101))
 
 from det_sim_ros.ros.fleet import Fleet, FleetNode  # noqa: E402
-from node_rate import command_latency, CONTROLLER  # noqa: E402
+from peer_processes import command_latency, CONTROLLER  # noqa: E402
 
 DT_NS = 1_000_000          # the default scene's period (1 kHz)
 STARTUP_LIMIT = 120.0      # s: bounds a start that hangs (never part of a measurement)

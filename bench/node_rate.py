@@ -43,90 +43,20 @@ Usage: python bench/node_rate.py [--scenes default,array] [--rt-seconds 60]
 import argparse
 import json
 import os
-import subprocess
-import sys
 import tempfile
 import time
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 101))
 
-from det_sim_ros.io.contract import decode_float64_multi_array, encode_clock  # noqa: E402
-from det_sim_ros.io.mcap_log import LogReader  # noqa: E402
+from det_sim_ros.io.contract import encode_clock  # noqa: E402
 from det_sim_ros.ros.node import make_executor, SimNode  # noqa: E402
 from det_sim_ros.sim.simulator import Simulator  # noqa: E402
-import numpy as np  # noqa: E402
+from peer_processes import BUSY, command_latency, CONTROLLER, spawn, stop, SUBSCRIBER  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import QoSProfile  # noqa: E402
-
-SUBSCRIBER = """
-import sys, rclpy
-from sensor_msgs.msg import JointState
-rclpy.init()
-node = rclpy.create_node('bench_listener')
-count = [0]
-for topic in sys.argv[1].split(','):
-    node.create_subscription(JointState, topic, lambda m: count.__setitem__(0, count[0] + 1),
-                             10, raw=True)
-try:
-    rclpy.spin(node)
-except BaseException:
-    pass
-"""
-
-# Answers every displacement sample with a voltage command; records when it published each
-# command and when each sample arrived (CLOCK_MONOTONIC is shared by all processes).
-CONTROLLER = """
-import json, sys, time, rclpy
-from rclpy.experimental import EventsExecutor
-from rclpy.qos import HistoryPolicy, QoSProfile
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
-from det_sim_ros.io.contract import decode_joint_state, encode_float64_multi_array
-n_det, out_path = int(sys.argv[1]), sys.argv[2]
-keep_all = sys.argv[3:4] == ['keep_all']     # reliable KEEP_ALL both ways (lossy links)
-rclpy.init()
-node = rclpy.create_node('bench_controller')
-qos = QoSProfile(history=HistoryPolicy.KEEP_ALL) if keep_all else None
-cmd = node.create_publisher(Float64MultiArray, 'voltage_command', qos or 10)
-sent, received = [], {}
-def on_sample(data):
-    now = time.monotonic()
-    received[decode_joint_state(data).stamp_ns] = now
-    volts = 500.0 + len(sent) % 2000          # a new voltage every sample, identifiable
-    cmd.publish(encode_float64_multi_array([volts] * n_det))
-    sent.append((time.monotonic(), volts))
-node.create_subscription(JointState, 'displacement', on_sample, qos or 1000, raw=True)
-executor = EventsExecutor()
-executor.add_node(node)
-try:
-    while rclpy.ok():
-        executor.spin_once(timeout_sec=0.1)
-except BaseException:
-    pass
-finally:
-    with open(out_path, 'w') as stream:
-        json.dump({'sent': sent, 'received': received}, stream)
-"""
-
-BUSY = 'while True: pass'
-
-
-def _spawn(code, *args):
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [os.path.dirname(os.path.dirname(os.path.abspath(__file__)))] + sys.path))
-    return subprocess.Popen([sys.executable, '-c', code, *args], env=env)
-
-
-def _stop(proc):
-    proc.send_signal(2)
-    try:
-        proc.wait(timeout=20)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
 
 
 def _cpu():
@@ -349,40 +279,6 @@ def run_node(seconds, executor_kind, folder, wait_topics=None, **params):
     return result, path
 
 
-def command_latency(log_path, controller_file, dt, topic='voltage_command'):
-    with open(controller_file) as stream:
-        data = json.load(stream)
-    sent = data['sent']
-    received = {int(k): v for k, v in data['received'].items()}
-    applied = [(m.log_time, decode_float64_multi_array(m.data)[0][0])
-               for m in LogReader(log_path).messages([topic])]
-    # the log holds the commands the node received, in order, each at the period it applied
-    # to; a command can be missing (sent before discovery, or after the run): match by value
-    latencies, unmatched, j = [], 0, 0
-    for log_time, logged in applied:
-        start = j
-        while j < len(sent) and sent[j][1] != logged and j - start < 1000:
-            j += 1
-        if j >= len(sent) or sent[j][1] != logged:
-            unmatched += 1
-            j = start
-            continue
-        effect = log_time + round(dt * 1e9)   # the first sample that shows the command
-        if effect in received:
-            latencies.append(received[effect] - sent[j][0])
-        j += 1
-    stamps = sorted(received)
-    step = round(dt * 1e9)
-    lost = sum((b - a) // step - 1 for a, b in zip(stamps, stamps[1:]))
-    lat = np.array(latencies) * 1e3
-    return {'commands_sent': len(sent), 'commands_applied': len(applied),
-            'commands_unmatched': unmatched, 'samples_received': len(stamps),
-            'samples_lost': int(lost),
-            'cmd_to_effect_ms_p50': float(np.percentile(lat, 50)) if lat.size else None,
-            'cmd_to_effect_ms_p99': float(np.percentile(lat, 99)) if lat.size else None,
-            'cmd_to_effect_ms_max': float(lat.max()) if lat.size else None}
-
-
 def lockstep_in_process(scene_name, sim_seconds):
     """
     Run lockstep with an in-process P controller answering every sample (one executor).
@@ -415,103 +311,109 @@ def lockstep_in_process(scene_name, sim_seconds):
         sim.close()
 
 
-class _Skip(Exception):
-    """--rounds 0: no free-run figures."""
+def _free_run_rounds(scene_name, topics, samples, n, args, folder):
+    """
+    Measure the free-run figures in ``args.rounds`` interleaved rounds.
+
+    Each round: the publish loop, the floor node, the node and the node with 30 Hz markers;
+    then the node once under the SingleThreadedExecutor. Returns the report's entries.
+    """
+    rounds = {'publish_loop': [], 'floor': [], 'node': [], 'node_with_markers': [],
+              'floor_main_thread': [], 'node_main_thread': []}
+    for _ in range(args.rounds):   # interleaved: the host's drift hits all alike
+        rounds['publish_loop'].append(floor(scene_name, topics, samples, n, True) * 1e6)
+        rounds['floor'].append(floor_node(topics, samples, n, 10) * 1e6)
+        rounds['floor_main_thread'].append(floor_node.main_thread * 1e6)
+        for key, rate in (('node', 0.0), ('node_with_markers', 30.0)):
+            result, _ = run_node(args.free_seconds, 'events', folder, scene_file=scene_name,
+                                 real_time=False, **{'markers.rate_hz': rate})
+            rounds[key].append(result['cpu_us_per_period'])
+            if key == 'node':
+                rounds['node_main_thread'].append(result['main_thread_us_per_period'])
+    report = {'free_run_us_per_period': {key: _spread(v) for key, v in rounds.items()}}
+    ratios = [a / b for a, b in zip(rounds['node'], rounds['floor'])]
+    report['node_over_floor'] = _spread(ratios)
+    report['node_over_publish_loop'] = _spread(
+        [a / b for a, b in zip(rounds['node'], rounds['publish_loop'])])
+    report['markers_30hz_added'] = _spread(
+        [b / a - 1 for a, b in zip(rounds['node'], rounds['node_with_markers'])])
+    result, _ = run_node(args.free_seconds, 'single', folder, scene_file=scene_name,
+                         real_time=False, **{'markers.rate_hz': 0.0})
+    report['free_run_single_threaded_executor'] = result
+    return report
+
+
+def _paired_runs(scene_name, topics, samples, args, folder, physics_us):
+    """Measure node and floor in paired blocks (and without the log if asked); report entries."""
+    report = {'paired_node_and_floor': paired_node_floor(
+        scene_name, topics, samples, args.paired, args.paired_block_s, folder,
+        compression=args.log_compression)}
+    paired = report['paired_node_and_floor']
+    # the I/O alone: an array's physics is itself about the floor (100 DETs held: ~40 us per
+    # period), which no I/O work can take off
+    paired['node_minus_physics_over_floor'] = (
+        (paired['node_us_per_period'] - physics_us) / paired['floor_us_per_period'])
+    if args.paired_no_log:   # the log's share, measured the same way
+        report['paired_node_without_log_and_floor'] = paired_node_floor(
+            scene_name, topics, samples, args.paired, args.paired_block_s, folder, log=False)
+    return report
+
+
+def _real_time_run(scene_name, n_det, dt, args, folder):
+    """Run the node in real time with an outside controller and a busy core; its figures."""
+    controller_file = os.path.join(folder, f'controller_{scene_name}.json')
+    busy = spawn(BUSY)
+    controller = spawn(CONTROLLER, str(n_det), controller_file)
+    if args.controller_priority:   # the user's controller at SCHED_FIFO too (chrt -f)
+        os.sched_setscheduler(controller.pid, os.SCHED_FIFO,
+                              os.sched_param(args.controller_priority))
+    try:
+        time.sleep(2.0)
+        result, log_path = run_node(args.rt_seconds, 'events', folder, ['displacement'],
+                                    scene_file=scene_name, real_time=True,
+                                    realtime_priority=args.realtime_priority,
+                                    **({'log.enabled': False} if args.rt_no_log else
+                                       {'log.compression': args.log_compression}))
+    finally:
+        stop(controller)
+        busy.kill()
+        busy.wait()
+    if not args.rt_no_log:
+        result.update(command_latency(log_path, controller_file, dt))
+    return result
 
 
 def bench_scene(scene_name, args, folder):
+    """Measure every figure of one scene that ``args`` asks for; return them as a dict."""
     from det_sim_ros.io.contract import OutputContract
     from det_sim_ros.scenes.scene import load_scene
     report = {}
     scene = load_scene(scene_name)
     sim = Simulator(scene)
-    contract = OutputContract(sim.model)
-    encoder = contract.encoder()
-    out = sim.step().copy()
-    samples = encoder.encode(out, 1_000_000)
+    encoder = OutputContract(sim.model).encoder()
+    samples = encoder.encode(sim.step().copy(), 1_000_000)
     topics = encoder.topics
     n = int(args.floor_periods)
-
-    listener = _spawn(SUBSCRIBER, ','.join(topics)) if args.rounds > 0 else None
+    listener = spawn(SUBSCRIBER, ','.join(topics)) if args.rounds > 0 else None
     try:
         report['physics_us_per_period'] = physics(scene, n) * 1e6
-        if listener is None:
-            raise _Skip()
-        report['physics_us_per_period'] = physics(scene, n) * 1e6
-        rounds = {'publish_loop': [], 'floor': [], 'node': [], 'node_with_markers': [],
-                  'floor_main_thread': [], 'node_main_thread': []}
-        for _ in range(args.rounds):   # interleaved: the host's drift hits all alike
-            rounds['publish_loop'].append(floor(scene_name, topics, samples, n, True) * 1e6)
-            rounds['floor'].append(floor_node(topics, samples, n, 10) * 1e6)
-            rounds['floor_main_thread'].append(floor_node.main_thread * 1e6)
-            for key, rate in (('node', 0.0), ('node_with_markers', 30.0)):
-                result, _ = run_node(args.free_seconds, 'events', folder, scene_file=scene_name,
-                                     real_time=False, **{'markers.rate_hz': rate})
-                rounds[key].append(result['cpu_us_per_period'])
-                if key == 'node':
-                    rounds['node_main_thread'].append(result['main_thread_us_per_period'])
-        report['free_run_us_per_period'] = {key: _spread(v) for key, v in rounds.items()}
-        ratios = [a / b for a, b in zip(rounds['node'], rounds['floor'])]
-        report['node_over_floor'] = _spread(ratios)
-        report['node_over_publish_loop'] = _spread(
-            [a / b for a, b in zip(rounds['node'], rounds['publish_loop'])])
-        report['markers_30hz_added'] = _spread(
-            [b / a - 1 for a, b in zip(rounds['node'], rounds['node_with_markers'])])
-        result, _ = run_node(args.free_seconds, 'single', folder, scene_file=scene_name,
-                             real_time=False, **{'markers.rate_hz': 0.0})
-        report['free_run_single_threaded_executor'] = result
-    except _Skip:
-        pass
-    except BaseException:
-        if listener is not None:
-            _stop(listener)
-        raise
-
-    if args.paired > 0 and listener is None:
-        listener = _spawn(SUBSCRIBER, ','.join(topics))
-    try:
+        if listener is not None:   # --rounds 0: no free-run figures
+            report['physics_us_per_period'] = physics(scene, n) * 1e6
+            report.update(_free_run_rounds(scene_name, topics, samples, n, args, folder))
         if args.paired > 0:
-            report['paired_node_and_floor'] = paired = paired_node_floor(
-                scene_name, topics, samples, args.paired, args.paired_block_s, folder,
-                compression=args.log_compression)
-            # the I/O alone: an array's physics is itself about the floor (100 DETs held:
-            # ~40 us per period), which no I/O work can take off
-            paired['node_minus_physics_over_floor'] = (
-                (paired['node_us_per_period'] - report['physics_us_per_period'])
-                / paired['floor_us_per_period'])
-            if args.paired_no_log:   # the log's share, measured the same way
-                report['paired_node_without_log_and_floor'] = paired_node_floor(
-                    scene_name, topics, samples, args.paired, args.paired_block_s, folder,
-                    log=False)
+            if listener is None:
+                listener = spawn(SUBSCRIBER, ','.join(topics))
+            report.update(_paired_runs(scene_name, topics, samples, args, folder,
+                                       report['physics_us_per_period']))
     finally:
         if listener is not None:
-            _stop(listener)
-
+            stop(listener)
     if args.lockstep_seconds > 0:
         report['lockstep_in_process_controller'] = lockstep_in_process(scene_name,
                                                                        args.lockstep_seconds)
     if args.rt_seconds > 0:
-        n_det = sim.model.n_inputs
-        controller_file = os.path.join(folder, f'controller_{scene_name}.json')
-        busy = _spawn(BUSY)
-        controller = _spawn(CONTROLLER, str(n_det), controller_file)
-        if args.controller_priority:   # the user's controller at SCHED_FIFO too (chrt -f)
-            os.sched_setscheduler(controller.pid, os.SCHED_FIFO,
-                                  os.sched_param(args.controller_priority))
-        try:
-            time.sleep(2.0)
-            result, log_path = run_node(args.rt_seconds, 'events', folder, ['displacement'],
-                                        scene_file=scene_name, real_time=True,
-                                        realtime_priority=args.realtime_priority,
-                                        **({'log.enabled': False} if args.rt_no_log else
-                                           {'log.compression': args.log_compression}))
-        finally:
-            _stop(controller)
-            busy.kill()
-            busy.wait()
-        if not args.rt_no_log:
-            result.update(command_latency(log_path, controller_file, sim.dt))
-        report['real_time_with_controller_and_busy_core'] = result
+        report['real_time_with_controller_and_busy_core'] = _real_time_run(
+            scene_name, sim.model.n_inputs, sim.dt, args, folder)
     return report
 
 
