@@ -107,10 +107,10 @@ def one_term_jacobian(model):
     """
     Return the analytic Jacobian df/dx(x, u) of a one-cell, one-term model.
 
-    Such are the six 'step' scenes. It is model.py's Lagrange equations for that case written in
-    closed form with the model's own constants and differentiated by sympy. Returns jac(x, v) ->
-    (n_state, n_state) array. Checked against central differences in :func:`run_scene` before it is
-    used.
+    The six 'step' scenes are such models. It is model.py's Lagrange equations for that case
+    written in closed form with the model's own constants and differentiated by sympy. Returns
+    jac(x, v) -> (n_state, n_state) array. Checked against central differences in
+    :func:`run_scene` before it is used.
     """
     import sympy as sp
     a = model.arrays
@@ -294,9 +294,9 @@ def run_scene(beam, eps_b, quick=False, repeats=3, log=print, reference_dir=None
 
 def _project_runs(rows, model, U, quick, repeats):
     """
-    Run the project's steppers.
+    Run the project's steppers at fixed substeps and 'auto' at several tolerances.
 
-    At fixed substeps, 'auto' at several tolerances, and 'auto' on the reduced models.
+    Then 'auto' on the reduced models (ideal source, no creep, no power monitor).
     """
     beam, eps_b, t_end = rows.beam, rows.eps_b, rows.t_end
     n_periods = round(t_end / model.scene.dt)

@@ -105,8 +105,9 @@ class ElasticaPath:
     """
     The elastica at the end shortenings ``y`` (y/l).
 
-    Load P l^2/EI, transverse end reaction V l^2/EI, reference-point and maximum deflection (w/l),
-    and the largest slope angle (rad).
+    Fields: ``load`` P l^2/EI, ``shear`` the transverse end reaction V l^2/EI, ``q_ref`` and
+    ``q_max`` the reference-point and maximum deflection (w/l), and ``theta_max`` the largest
+    slope angle (rad).
     """
 
     beam: str

@@ -59,7 +59,8 @@ class RitzPath:
     """
     Post-buckling path of one beam.
 
-    At each point: y/l, P l^2/EI, reference and max deflection / l, and the Ritz coordinates (m).
+    At each point: ``y`` y/l, ``load`` P l^2/EI, ``q_ref`` and ``q_max`` the reference and max
+    deflection / l, and ``coords`` the Ritz coordinates (m).
     """
 
     y: np.ndarray
