@@ -1,5 +1,5 @@
 """
-Batch benchmark (issue 7): N independent SISO actuators stepped together at a 1 kHz control rate.
+Batch benchmark: N independent SISO actuators stepped together at a 1 kHz control rate.
 
 An 'array' scene (config/array.yaml) holds N copies of the default cell with spread parameters;
 the simulator steps all of them in one compiled call per control period, so the fixed cost of a
@@ -8,16 +8,18 @@ period (Python, dispatch, outputs) is shared. Measured side by side in one run:
 - ``array step``: one Simulator.step() per 1 ms period for all N (what sim_node does);
 - ``array run``: the offline path, simulate() with the whole input record (one call);
 - ``N x SISO step``: N separate single-cell Simulators stepped one after another (the baseline
-  the array replaces), for N up to --max-separate.
+  the array is compared with), for N up to --max-separate.
 
-Inputs: each actuator gets its own 0 / v_max square wave (period 0.2 s), either staggered (phases
-spread over N, so charge transients and snaps start at different periods) or synchronized (all
-switch together). Every copy is its own coupled group with its own adaptive step count, so one
-copy snapping does not make the others take its steps. ``array run`` is also timed on
-``--threads`` threads (groups spread over them; results are identical). Cost: process CPU
-seconds per simulated second, median of --repeats; RTF = wall-clock real-time factor (for
-threads > 1, wall time is what a user waits). The simulators are built outside the timing (reset() between runs): building a 1000-copy
-array takes ~5 s, mostly its copies' rest-state solves. Run: ``python bench/batch.py``.
+Inputs (--commands): each actuator gets its own 0 / v_max square wave (period 0.2 s: 'square') or
+one v_max step of 0.3 s ('step'), either staggered (phases or switch times spread over N, so charge
+transients and snaps start at different periods) or synchronized (all switch together). Every copy
+is its own coupled group with its own adaptive step count, so one copy snapping does not make the
+others take its steps. ``array run`` is also timed on ``--threads`` threads (groups spread over
+them; results are identical). Cost: process CPU seconds per simulated second, median of --repeats;
+RTF = wall-clock real-time factor (for threads > 1, wall time is what a user waits); the figure of
+merit is CPU us per actuator and period (1000 actuators at 1x real time on two cores need <= 2 us
+with perfect scaling). The simulators are built outside the timing (reset() between runs): building
+a 1000-copy array takes ~5 s, mostly its copies' rest-state solves. Run: ``python bench/batch.py``.
 """
 
 import argparse
@@ -25,17 +27,20 @@ import statistics
 import sys
 import time
 
-import numpy as np
-
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import simulate, Simulator
+import numpy as np
 
 
 def _commands(n, periods, dt, v_max, synchronized=False, kind='square'):
-    """Per-period voltages (periods x n). 'square': a 0 / v_max square wave of period 0.2 s per
-    copy (a snap every 0.1 s: the hard case); 'step': the 'step' profile per copy, v_max for
-    0.3 s from a switch-on time (what a controller test does), spread over the first half of
-    the run. Staggered: phases / switch times spread over the copies; synchronized: all equal."""
+    """
+    Return the per-period voltages (periods x n).
+
+    'square': a 0 / v_max square wave of period 0.2 s per copy (a snap every 0.1 s: the hard
+    case); 'step': the 'step' profile per copy, v_max for 0.3 s from a switch-on time (what a
+    controller test does), spread over the first half of the run. Staggered: phases / switch
+    times spread over the copies; synchronized: all equal.
+    """
     t = np.arange(periods)[:, None] * dt
     if kind == 'step':
         on = np.full(n, 0.1) if synchronized else 0.1 + 0.5 * periods * dt * np.arange(n) / n
@@ -62,7 +67,7 @@ def _wall(fn, repeats):
     return statistics.median(times)
 
 
-def main(argv=None) -> int:
+def _parse(argv):
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--sizes', default='1,10,100,1000')
     parser.add_argument('--sim-time', type=float, default=1.0, help='simulated seconds per run')
@@ -72,11 +77,59 @@ def main(argv=None) -> int:
     parser.add_argument('--max-separate', type=int, default=100)
     parser.add_argument('--tolerance', type=float, default=1e-6)
     parser.add_argument('--threads', default='1,2', help='thread counts for the array run')
-    parser.add_argument('--substeps', type=int, default=0, help='fixed steps per period (0: adaptive)')
+    parser.add_argument('--substeps', type=int, default=0,
+                        help='fixed steps per period (0: adaptive)')
     parser.add_argument('--initial-state', default='rest', choices=('rest', 'released'),
                         help="the scene's start: 'rest' (config/array.yaml's) or 'released' "
                              '(every copy buckles from q0 first)')
-    args = parser.parse_args(argv)
+    return parser.parse_args(argv)
+
+
+def _row(scene, sim, n, kind, synchronized, threads, args):
+    """Measure one workload on an N-copy array and print its table row."""
+    periods = int(round(args.sim_time / sim.dt))
+    U = _commands(n, periods, sim.dt, scene.physics.v_max, synchronized, kind)
+    sim.stepper.threads = 1
+    steps0 = sim.steps_taken
+    sim.reset()
+    simulate(sim, U, args.sim_time)
+    steps = (sim.steps_taken - steps0) / (n * periods)
+
+    def stepping():
+        sim.reset()
+        for k in range(periods):
+            sim.set_input(U[k])
+            sim.step()
+    per = 1e6 / (n * periods)     # seconds per run -> us per actuator and period
+    cost_step = _cpu(stepping, args.repeats) * per
+
+    def offline(threads):
+        sim.stepper.threads = threads
+        sim.reset()
+        simulate(sim, U, args.sim_time)
+    runs = [_wall(lambda: offline(t), args.repeats) * per for t in threads]
+    sim.stepper.threads = 1
+    cost_sep = float('nan')
+    if n <= args.max_separate:
+        singles = [Simulator(scene.cell_scene(i)) for i in range(n)]
+
+        def separate():
+            for s in singles:
+                s.reset()
+            for k in range(periods):
+                for i, s in enumerate(singles):
+                    s.set_input([U[k, i]])
+                    s.step()
+        cost_sep = _cpu(separate, args.repeats) * per
+    rtf = lambda us: 1e3 / (us * n)  # noqa: E731 - 1 ms of sim time per period
+    print(f"| {n} | {kind}, {'synchronized' if synchronized else 'staggered'} | "
+          f'{steps:.1f} | {cost_step:.3g} | {rtf(cost_step):.3g} | '
+          + ' | '.join(f'{r:.3g} | {rtf(r):.3g}' for r in runs)
+          + f' | {cost_sep:.3g} |', flush=True)
+
+
+def main(argv=None) -> int:
+    args = _parse(argv)
     threads = [int(t) for t in args.threads.split(',')]
     print('| N | commands | steps / period | array step(): µs CPU per actuator and period | RTF | '
           + ' | '.join(f'simulate() {t} thread(s): µs wall per actuator and period | RTF'
@@ -88,47 +141,9 @@ def main(argv=None) -> int:
                                      'integrator.substeps': args.substeps,
                                      'scene.initial_state': args.initial_state})
         sim = Simulator(scene)   # built once: a 1000-copy array takes ~5 s (rest states)
-        periods = int(round(args.sim_time / sim.dt))
         for kind, synchronized in ((k, sync) for k in args.commands.split(',')
                                    for sync in (False, True)):
-            U = _commands(n, periods, sim.dt, scene.physics.v_max, synchronized, kind)
-            sim.stepper.threads = 1
-            steps0 = sim.steps_taken
-            sim.reset()
-            simulate(sim, U, args.sim_time)
-            steps = (sim.steps_taken - steps0) / (n * periods)
-
-            def stepping():
-                sim.reset()
-                for k in range(periods):
-                    sim.set_input(U[k])
-                    sim.step()
-            per = 1e6 / (n * periods)     # seconds per run -> us per actuator and period
-            cost_step = _cpu(stepping, args.repeats) * per
-
-            def offline(threads):
-                sim.stepper.threads = threads
-                sim.reset()
-                simulate(sim, U, args.sim_time)
-            runs = [_wall(lambda: offline(t), args.repeats) * per for t in threads]
-            sim.stepper.threads = 1
-            cost_sep = float('nan')
-            if n <= args.max_separate:
-                singles = [Simulator(scene.cell_scene(i)) for i in range(n)]
-
-                def separate():
-                    for s in singles:
-                        s.reset()
-                    for k in range(periods):
-                        for i, s in enumerate(singles):
-                            s.set_input([U[k, i]])
-                            s.step()
-                cost_sep = _cpu(separate, args.repeats) * per
-            rtf = lambda us: 1e3 / (us * n)  # noqa: E731 - 1 ms of sim time per period
-            print(f"| {n} | {kind}, {'synchronized' if synchronized else 'staggered'} | "
-                  f'{steps:.1f} | {cost_step:.3g} | {rtf(cost_step):.3g} | '
-                  + ' | '.join(f'{r:.3g} | {rtf(r):.3g}' for r in runs)
-                  + f' | {cost_sep:.3g} |', flush=True)
+            _row(scene, sim, n, kind, synchronized, threads, args)
     return 0
 
 

@@ -1,10 +1,12 @@
 """
-Fingerprints of the simulator's behaviour, to show that a change which should not alter results
-did not: SHA-256 of the states, outputs and step counts on nine scene kinds, of a fixed run's
-MCAP log (its messages, its metadata but the wall-clock start, the file's bytes up to that), and of its re-simulation.
+Fingerprints of the simulator's behaviour, to show that a change leaves results bit for bit.
 
-    python bench/behaviour_hashes.py > before.json      # on the old code
-    python bench/behaviour_hashes.py | diff before.json -   # on the new code: no output
+SHA-256 of the states, outputs and step counts on nine scene kinds, of a fixed run's MCAP log
+(its messages, its metadata but the wall-clock start, the file's bytes up to that), and of its
+re-simulation. A change that should not alter results must leave every hash as it was:
+
+    python bench/behaviour_hashes.py > before.json          # before the change
+    python bench/behaviour_hashes.py | diff before.json -   # after it: no output
 
 Uses only the public entry points (``load_scene``, ``Simulator``, ``simulate``, ``Recorder``,
 ``LogReader``, ``resimulate``), so the same script runs on both sides of a refactor.
@@ -21,14 +23,14 @@ import warnings
 
 import numpy as np
 
-warnings.simplefilter('ignore', DeprecationWarning)   # old module paths, if any
+warnings.simplefilter('ignore', DeprecationWarning)   # the flat module aliases warn once
 
 try:
     from det_sim_ros.io.mcap_log import LogReader, Recorder
     from det_sim_ros.io.replay import resimulate, simulate_to_log
     from det_sim_ros.scenes.scene import load_scene
     from det_sim_ros.sim.simulator import simulate, Simulator
-except ImportError:   # the flat layout before the layer subpackages
+except ImportError:   # a package with the flat module layout (no layer subpackages)
     from det_sim_ros.mcap_log import LogReader, Recorder
     from det_sim_ros.replay import resimulate, simulate_to_log
     from det_sim_ros.scene import load_scene

@@ -1,11 +1,10 @@
 """
-What a controller's command rate costs the physics (found while measuring issue 15's
-100-actuator real-time run, where Stepper.period was 703 of the main thread's 1029 us per
-period). The node holds each command for a whole control period, so a controller that sends a
-new voltage every period makes every period start with an input jump; on RC scenes the
-exponential steppers then resolve the charge transient with graded fine steps
-(fixed_period in _csrc/stepping.c, calibrated on the 'step' scenes' kV jumps), even when the
-jump is 1 V.
+What a controller's command rate costs the physics: CPU and internal steps per control period.
+
+The node holds each command for a whole control period, so a controller that sends a new voltage
+every period makes every period start with an input jump; on RC scenes the exponential steppers
+then resolve the charge transient with graded fine steps (fixed_period in _csrc/stepping.c,
+calibrated on the 'step' scenes' kV jumps), even when the jump is 1 V.
 
 For the default scene and the 100-copy array at integrator.tolerance 1e-6, after the start has
 settled: the voltage held (the benchmarks' usual case), a new voltage every 10 periods, and a
@@ -22,12 +21,11 @@ import argparse
 import math
 import time
 
-import numpy as np
-
-import det_sim_ros.sim.simulator as simulator_module
-from det_sim_ros.sim.integrators import TransientSettings
 from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.integrators import TransientSettings
+import det_sim_ros.sim.simulator as simulator_module
 from det_sim_ros.sim.simulator import Simulator
+import numpy as np
 
 DRIVES = {
     'held': lambda k: 1500.0,
@@ -38,7 +36,7 @@ DRIVES = {
 
 
 def run(scene_name, overrides, drive, periods, transient=True):
-    """(CPU us per period, steps per period and DET, deflection q of the first DET)."""
+    """Return (CPU us per period, steps per period and DET, deflection q of the first DET)."""
     original = simulator_module.transient_settings
     if not transient:
         simulator_module.transient_settings = lambda method, scene: TransientSettings()

@@ -1,17 +1,16 @@
 """
-Model fidelity benchmark (issue 6): what each fidelity level gets right and what it costs.
+Model fidelity benchmark: what each fidelity level gets right and what it costs.
 
 (a) Ritz critical load of one beam vs n_r against the Euler load (both beams).
-(b) Model error vs CPU: for 'paper' (n_r = 1), 'consistent' (n_r = 1..7) and 'exact' (n_r = 3, 5,
-    7, 9), the max relative
-    error of the static load P l^2/EI, the reference-point deflection (the published q) and the
-    max deflection against the exact elastica for y/l in [0.01, 0.15], next to the simulator's
-    CPU seconds per simulated second on the 'step' scenario (eps_b = 0.20, median of 3 runs,
-    time.process_time; the automatic internal step count, listed, follows the fastest beam mode).
+(b) Model error vs CPU: for 'paper' (n_r = 1), 'consistent' (n_r = 1..7) and 'exact' (n_r = 3,
+    5, 7, 9), the max relative error of the static load P l^2/EI, the reference-point deflection
+    (the published q) and the max deflection against the exact elastica for y/l in
+    [0.01, 0.15], next to the simulator's CPU seconds per simulated second on the 'step'
+    scenario (eps_b = 0.20, median of 3 runs, time.process_time; the automatic internal step
+    count, listed, follows the fastest beam mode).
 (c) The 'step' scenario, both beams, eps_b in {0.15, 0.20, 0.25}: paper vs consistent and exact
-    n_r = 5,
-    eps_y at the end of the 3 kV phase and whether the beam switched (sign of q at the end of the
-    3 kV phase differs from the sign at its start, as in `det_sim step`).
+    n_r = 5, eps_y at the end of the 3 kV phase and whether the beam switched (sign of q at the
+    end of the 3 kV phase differs from the sign at its start, as in `det_sim step`).
 
 Writes fidelity_*.csv, fidelity.md and (with matplotlib) fidelity.png to --out.
 
@@ -28,13 +27,12 @@ import statistics
 import sys
 import time
 
-import numpy as np
-
 from det_sim_ros.analysis import elastica as E
 from det_sim_ros.analysis import fidelity as F
-from det_sim_ros.analysis.scenarios import STEP_SWITCH_TIMES, delta_y, step_scene, step_voltage
+from det_sim_ros.analysis.scenarios import delta_y, step_scene, STEP_SWITCH_TIMES, step_voltage
 from det_sim_ros.physics.model import ModelDomainError
-from det_sim_ros.sim.simulator import Simulator, simulate
+from det_sim_ros.sim.simulator import simulate, Simulator
+import numpy as np
 
 BEAMS = ('simply_supported', 'fixed')
 LEVELS = ([('paper', 1)] + [('consistent', n) for n in range(1, 8)]

@@ -1,10 +1,12 @@
 """
-What a new user meets (issue 14): a fresh venv, `pip install .`, then `sim_node` started as a
-process; seconds from the process start to the first `displacement` sample at a subscriber in
-this process (reliable QoS, own ROS domain, localhost only). The first start after the install
-is reported separately from the following ones; nothing should differ, because nothing is
-compiled at run time. With --colcon the same after `colcon build` of a workspace holding this
-repository (colcon-core and colcon-ros from PyPI, installed into the fresh venv).
+What a new user meets: seconds from `sim_node`'s start to its first sample, after `pip install .`.
+
+A fresh venv, `pip install .`, then `sim_node` started as a process; seconds from the process
+start to the first `displacement` sample at a subscriber in this process (reliable QoS, own ROS
+domain, localhost only). The first start after the install is reported separately from the
+following ones; nothing should differ, because nothing is compiled at run time. With --colcon
+the same after `colcon build` of a workspace holding this repository (colcon-core and colcon-ros
+from PyPI, installed into the fresh venv).
 
 Discovery is part of that time and is not the node's: Fast DDS learns of an already running
 participant only when that one re-announces itself (every 3 s by default), so a subscriber

@@ -1,6 +1,8 @@
 #!/usr/bin/env python3
 """
-Benchmark fleets of sim_nodes (issue 20; a script, not a test). Run each part under the CPU lock.
+Benchmark fleets of sim_nodes: nodes per host, lockstep loops per host, QoS across hosts.
+
+A script, not a test. Run each part under the CPU lock.
 
 capacity  N default-scene nodes in real time at 1 kHz on this host (det_sim_ros.ros.fleet), one
           listener process subscribed (reliable, depth 1000) to every node's displacement:
@@ -8,15 +10,16 @@ capacity  N default-scene nodes in real time at 1 kHz on this host (det_sim_ros.
           CPU (s per wall s, all N together); the nodes' own real-time factor (their INFO
           lines, every 5 s). A host "holds" N when every node lost 0 samples and kept real
           time (>= 0.995).
-lockstep  N lockstep nodes, each answered by its own controller process (bench/node_rate.py's
-          CONTROLLER): aggregate simulated seconds per wall second (sum over nodes).
+lockstep  N lockstep nodes, each answered by its own controller process
+          (bench/peer_processes.py's CONTROLLER): aggregate simulated seconds per wall second
+          (sum over nodes).
 hosts     One node at 1 kHz in real time (lockstep_* cases: lockstep, sim s per wall s) on
-          namespace host h0 (det_sim_ros.ros.netns), its controller
-          (node_rate CONTROLLER: answers every displacement sample) on host h1, unicast discovery
-          over UDP: command-to-effect latency p50/p99 (controller publishes a command -> it
-          receives the first sample that shows it) and samples lost at the controller; the h1
-          link direct (veth) or through the TAP relay with delay / loss, default QoS (reliable
-          depth 10) or qos_keep_all, with or without config/dds_lossy.xml.
+          namespace host h0 (det_sim_ros.ros.netns), its controller (CONTROLLER: answers every
+          displacement sample) on host h1, unicast discovery over UDP: command-to-effect
+          latency p50/p99 (controller publishes a command -> it receives the first sample that
+          shows it) and samples lost at the controller; the h1 link direct (veth) or through
+          the TAP relay with delay / loss, default QoS (reliable depth 10) or qos_keep_all,
+          with or without config/dds_lossy.xml.
 
 Usage (root for hosts):
     flock /tmp/det_cpu.lock python bench/fleet.py capacity --nodes 1,2,4 --seconds 15
@@ -41,8 +44,8 @@ sys.path.insert(0, HERE)
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 101))
 
-from node_rate import command_latency, CONTROLLER  # noqa: E402
 from det_sim_ros.ros.fleet import Fleet, FleetNode  # noqa: E402
+from peer_processes import command_latency, CONTROLLER  # noqa: E402
 
 DT_NS = 1_000_000          # the default scene's period (1 kHz)
 STARTUP_LIMIT = 120.0      # s: bounds a start that hangs (never part of a measurement)
@@ -50,7 +53,7 @@ SETTLE = 2.0               # s after every node runs before the window opens
 
 # Subscribes to /n<i>/displacement for i < N (reliable, depth 1000, raw bytes) and records each
 # sample's stamp and arrival time (CLOCK_MONOTONIC); writes them as JSON at SIGINT.
-LISTENER = '''
+LISTENER = """
 import json, sys, time, rclpy
 from rclpy.experimental import EventsExecutor
 from sensor_msgs.msg import JointState
@@ -74,7 +77,7 @@ except BaseException:
 finally:
     with open(out_path, 'w') as stream:
         json.dump(got, stream)
-'''
+"""
 
 
 def child_env(**extra):
@@ -125,7 +128,7 @@ def wait_ready(fleet):
 
 
 def window_stats(samples, t0, t1):
-    """Samples lost and sim s per wall s of one topic's (stamp, arrival) list in [t0, t1]."""
+    """Return samples lost and sim s per wall s of a topic's (stamp, arrival) list in [t0, t1]."""
     inside = [(s, r) for s, r in samples if t0 <= r <= t1]
     if len(inside) < 2:
         return {'received': len(inside), 'lost': None, 'rtf': 0.0}
@@ -136,7 +139,7 @@ def window_stats(samples, t0, t1):
 
 
 def node_rtf(log_file):
-    """The real-time factors of a node's INFO lines (every 5 s), the start-up one left out."""
+    """Return the real-time factors of a node's INFO lines (every 5 s) but the start-up one."""
     import re
     with open(log_file, encoding='utf-8', errors='replace') as stream:
         return [float(x) for x in re.findall(r'RTF=([0-9.]+)', stream.read())][1:]

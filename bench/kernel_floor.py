@@ -1,7 +1,10 @@
 """
-The compiled kernel against the floor (issue 14): cost per internal step of the kernel's
-steppers and of a plain C RK4 loop of the same one-term model (bench/c_floor/rk4_floor.c,
-scalar code, every constant local), on the default scene, in one process, interleaved.
+The compiled kernel against a plain C loop: cost per internal step of each stepper.
+
+The floor is a plain C RK4 loop of the same one-term model (bench/c_floor/rk4_floor.c, scalar
+code, every constant local): the cost a hand-written loop pays per step. It is timed with the
+kernel's steppers on the default scene, in one process, interleaved; the table gives each
+stepper's cost per step and its ratio to the floor.
 
 The floor is compiled here with the package's flags. Before timing, it is checked to follow
 the kernel's 'rk4' trajectory (same model, same steps) to round-off, so both compute the same
@@ -16,12 +19,11 @@ import subprocess
 import tempfile
 import time
 
-import numpy as np
-
-from det_sim_ros.sim.integrators import get_method, make_stepper, StepControl
 from det_sim_ros.physics.model import build_model
 from det_sim_ros.physics.statics import initial_state
 from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.integrators import get_method, make_stepper, StepControl
+import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 FIELDS = ('m_tot', 'Mb', 'K', 'D', 'm', 'c2', 'e4', 'length', 'l0', 'VY', 'C0', 'V', 'E_M',

@@ -1,6 +1,7 @@
 """
-Cost of MCAP logging per simulation step (issue 5, reworked in issue 15): the node's per-step
-work offline (no ROS graph): encode the output bytes (det_sim_ros.io.contract), record them (and a
+Cost of MCAP logging per simulation step, measured offline (no ROS graph).
+
+The node's per-step work: encode the output bytes (det_sim_ros.io.contract), record them (and a
 command every 10 steps), synchronously or with the writer thread. Prints CPU microseconds per
 step (all threads); run on a shared host, compare the rows of one run.
 

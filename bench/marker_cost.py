@@ -1,6 +1,5 @@
 """
-CPU cost of the shape markers (issue 18 target: 30 Hz markers add <= 5 % to the node's CPU per
-simulated second).
+CPU cost of the shape markers (target: 30 Hz markers add <= 5 % to the node's CPU per sim s).
 
 One sim_node runs in this process (free run by default, the node's cheapest mode per simulated
 second, so the markers' largest share; --real-time: the node's default mode, the one a user
@@ -33,7 +32,7 @@ import subprocess
 import sys
 import time
 
-SUBSCRIBER = '''
+SUBSCRIBER = """
 import rclpy, sys
 from visualization_msgs.msg import MarkerArray
 rclpy.init()
@@ -49,12 +48,11 @@ try:
     rclpy.spin(node)
 except BaseException:
     pass
-'''
+"""
 
 
-def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1, real_time=False,
-        control=False):
-    import random
+def _start_node(scene, log_dir, real_time, subscribe):
+    """Start one paused sim_node with 30 Hz markers; return (its context, node, executor)."""
     import rclpy
     from rclpy.parameter import Parameter
     from det_sim_ros.ros.node import make_executor, SimNode
@@ -67,19 +65,26 @@ def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1, rea
         Parameter('start_paused', value=True), Parameter('markers.rate_hz', value=30.0)])
     executor = make_executor(context)   # the node's own executor (EventsExecutor)
     executor.add_node(node)
-    markers = node.markers
-    every, OFF = markers.every, 1 << 62
     deadline = time.monotonic() + 20.0
     # wait for the subscriber, so every message it asks for is delivered
-    waits = [markers.publisher]
+    waits = [node.markers.publisher]
     if subscribe == 'all':
         waits.append(node.output_publishers['deflection'])
     while not all(p.get_subscription_count() for p in waits) and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.05)
+    return context, node, executor
+
+
+def _time_marker_code(markers, control):
+    """
+    Wrap the marker code so that its own CPU time is counted; return the one-item counter.
+
+    The counter holds the executor thread's CPU time in frame_for (which runs for every frame
+    on the display grid, sent or not, building and logging it) and in publish (for those sent).
+    """
     spent = [0.0]
 
-    def timed(inner):   # the marker code's own CPU time (the executor thread's): frame_for
-        # runs for every frame on the display grid (sent or not), publish for those sent
+    def timed(inner):
         def call(*a, **k):
             t0 = time.thread_time()
             result = inner(*a, **k)
@@ -90,18 +95,41 @@ def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1, rea
         markers.frame_for = lambda *args, **kwargs: None
     markers.frame_for = timed(markers.frame_for)   # building (and logging) a frame
     markers.publish = timed(markers.publish)
-    if drive_hz > 0:   # a square wave 0 V <-> 2.5 kV: the actuator snaps and creeps, so frames
-        # change (a settled actuator sends one frame per simulated second)
-        half = max(1, int(round(0.5 / drive_hz / node.dt)))
-        simulator, step = node.simulator, node.simulator.step
+    return spent
 
-        def driven_step():
-            k = simulator.k
-            if k % half == 0:
-                simulator.set_input([2500.0 if (k // half) % 2 == 0 else 0.0]
-                                    * len(simulator.u))
-            return step()
-        simulator.step = driven_step
+
+def _drive(node, drive_hz):
+    """Drive the node with a square wave 0 V <-> 2.5 kV at ``drive_hz`` (sim time)."""
+    # the actuator snaps and creeps, so frames change (a settled actuator sends one frame per
+    # simulated second)
+    half = max(1, int(round(0.5 / drive_hz / node.dt)))
+    simulator, step = node.simulator, node.simulator.step
+
+    def driven_step():
+        k = simulator.k
+        if k % half == 0:
+            simulator.set_input([2500.0 if (k // half) % 2 == 0 else 0.0]
+                                * len(simulator.u))
+        return step()
+    simulator.step = driven_step
+
+
+def run(scene, blocks, block_s, subscribe, log_dir='', drive_hz=2.0, seed=1, real_time=False,
+        control=False):
+    """
+    Measure the node with markers on and off in ``blocks`` randomly ordered pairs of blocks.
+
+    Returns the per-pair CPU s per sim s (off, on), the totals per state (CPU s, sim s, executor
+    CPU s), the frames sent per simulated second on and the marker code's own CPU s per sim s.
+    """
+    import random
+    import rclpy
+    context, node, executor = _start_node(scene, log_dir, real_time, subscribe)
+    markers = node.markers
+    every, OFF = markers.every, 1 << 62
+    spent = _time_marker_code(markers, control)
+    if drive_hz > 0:
+        _drive(node, drive_hz)
     node.set_paused(False)
     warm = time.perf_counter() + 1.0
     while time.perf_counter() < warm:
@@ -153,8 +181,8 @@ def main():
                         help='the viewer takes the frames as bytes (as RViz and the Foxglove '
                         'bridge, both C++, do) instead of building Python MarkerArray objects')
     parser.add_argument('--subscribe', choices=('markers', 'all'), default='all',
-                        help="the other process subscribes to /markers only, or to the outputs "
-                        "too (a controller and a viewer; default)")
+                        help='the other process subscribes to /markers only, or to the outputs '
+                        'too (a controller and a viewer; default)')
     args = parser.parse_args()
     os.environ.setdefault('ROS_DOMAIN_ID', str(150 + os.getpid() % 50))
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')

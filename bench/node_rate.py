@@ -1,12 +1,15 @@
 #!/usr/bin/env python3
 """
-Benchmark sim_node's I/O (issue 15; a script, not a test). Every figure of one scene is measured
-in the same run, side by side, so compare ratios; absolute times depend on the host.
+Benchmark sim_node's I/O: free-run CPU against a plain publishing node, and real time.
+
+A script, not a test. Every figure of one scene is measured in the same run, side by side, so
+compare ratios; absolute times depend on the host. Targets: in free run with the MCAP log, the
+node costs at most 1.5x the floor (markers off); in real time with a controller answering every
+sample, command-to-effect p99 <= 2 ms with no sample lost and the lag not growing.
 
 1. Free-run CPU per control period, all outputs + /clock + /diagnostics + MCAP logging, one
-   subscriber process on every output topic (markers off: the issue-15 target; a run with the
-   default 30 Hz markers per round too, a rough figure: bench/marker_cost.py measures their
-   share, issue 18). Measured next to:
+   subscriber process on every output topic (markers off; a run with the default 30 Hz markers
+   per round too, a rough figure: bench/marker_cost.py measures their share). Measured next to:
    - the floor: a plain node publishing the same pre-serialized bytes (one sample's CDR) and
      /clock on the same topics to the same subscribers, per period. It runs as the node runs:
      an EventsExecutor timer callback publishing steps_per_tick (10) periods' messages per call,
@@ -15,12 +18,14 @@ in the same run, side by side, so compare ratios; absolute times depend on the h
      subscriber's wake per message when messages come apart), and the node in free run
      publishes each tick's samples as one burst; a floor publishing one period per callback
      would be higher, and the node's own figure no better. A tight publish loop without an
-     executor is reported too (``publish_loop``, the lowest possible figure; the old floor);
+     executor is reported too (``publish_loop``, the lowest possible figure);
    - the physics alone: Simulator.step() per period;
    - the node under the SingleThreadedExecutor (the node uses the EventsExecutor; once).
    CPU is the process's CPU time (all threads: the DDS threads and the MCAP writer thread too)
    per period. The host is shared, so --rounds repeats floor, node and node with markers
    interleaved; medians of each and of the per-round ratios are reported, with min..max.
+   --paired N measures node and floor in N randomly ordered pairs of blocks in one process
+   instead: the precise node/floor ratio.
 2. Real time at the scene rate for --rt-seconds, an outside controller process answering every
    displacement sample with a command, another process keeping one core busy: samples lost at
    the controller's reliable subscriber, command-to-effect latency (controller publishes the
@@ -38,92 +43,20 @@ Usage: python bench/node_rate.py [--scenes default,array] [--rt-seconds 60]
 import argparse
 import json
 import os
-import subprocess
-import sys
 import tempfile
 import time
-
-import numpy as np
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 101))
 
+from det_sim_ros.io.contract import encode_clock  # noqa: E402
+from det_sim_ros.ros.node import make_executor, SimNode  # noqa: E402
+from det_sim_ros.sim.simulator import Simulator  # noqa: E402
+from peer_processes import BUSY, command_latency, CONTROLLER, spawn, stop, SUBSCRIBER  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import QoSProfile  # noqa: E402
-
-from det_sim_ros.io.contract import decode_float64_multi_array, encode_clock  # noqa: E402
-from det_sim_ros.io.mcap_log import LogReader  # noqa: E402
-from det_sim_ros.ros.node import make_executor, SimNode  # noqa: E402
-from det_sim_ros.sim.simulator import Simulator  # noqa: E402
-
-SUBSCRIBER = '''
-import sys, rclpy
-from sensor_msgs.msg import JointState
-rclpy.init()
-node = rclpy.create_node('bench_listener')
-count = [0]
-for topic in sys.argv[1].split(','):
-    node.create_subscription(JointState, topic, lambda m: count.__setitem__(0, count[0] + 1),
-                             10, raw=True)
-try:
-    rclpy.spin(node)
-except BaseException:
-    pass
-'''
-
-# Answers every displacement sample with a voltage command; records when it published each
-# command and when each sample arrived (CLOCK_MONOTONIC is shared by all processes).
-CONTROLLER = '''
-import json, sys, time, rclpy
-from rclpy.experimental import EventsExecutor
-from rclpy.qos import HistoryPolicy, QoSProfile
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
-from det_sim_ros.io.contract import decode_joint_state, encode_float64_multi_array
-n_det, out_path = int(sys.argv[1]), sys.argv[2]
-keep_all = sys.argv[3:4] == ['keep_all']     # reliable KEEP_ALL both ways (lossy links)
-rclpy.init()
-node = rclpy.create_node('bench_controller')
-qos = QoSProfile(history=HistoryPolicy.KEEP_ALL) if keep_all else None
-cmd = node.create_publisher(Float64MultiArray, 'voltage_command', qos or 10)
-sent, received = [], {}
-def on_sample(data):
-    now = time.monotonic()
-    received[decode_joint_state(data).stamp_ns] = now
-    volts = 500.0 + len(sent) % 2000          # a new voltage every sample, identifiable
-    cmd.publish(encode_float64_multi_array([volts] * n_det))
-    sent.append((time.monotonic(), volts))
-node.create_subscription(JointState, 'displacement', on_sample, qos or 1000, raw=True)
-executor = EventsExecutor()
-executor.add_node(node)
-try:
-    while rclpy.ok():
-        executor.spin_once(timeout_sec=0.1)
-except BaseException:
-    pass
-finally:
-    with open(out_path, 'w') as stream:
-        json.dump({'sent': sent, 'received': received}, stream)
-'''
-
-BUSY = 'while True: pass'
-
-
-def _spawn(code, *args):
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [os.path.dirname(os.path.dirname(os.path.abspath(__file__)))] + sys.path))
-    return subprocess.Popen([sys.executable, '-c', code, *args], env=env)
-
-
-def _stop(proc):
-    proc.send_signal(2)
-    try:
-        proc.wait(timeout=20)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
 
 
 def _cpu():
@@ -168,9 +101,12 @@ def floor(scene_name, topics, samples, n, with_clock):
 
 
 def _make_floor_node(context, name, topics, samples, burst):
-    """A plain node publishing pre-serialized bytes (one sample's outputs and /clock per
-    period) from a timer, ``burst`` periods per callback: (node, its publishers, a list whose
-    one item counts the periods published)."""
+    """
+    Build a plain node publishing pre-serialized bytes from a timer.
+
+    It publishes one sample's outputs and /clock per period, ``burst`` periods per callback.
+    Returns (node, its publishers, a list whose one item counts the periods published).
+    """
     from sensor_msgs.msg import JointState
     from rosgraph_msgs.msg import Clock
     node = rclpy.create_node(name, context=context)
@@ -191,8 +127,12 @@ def _make_floor_node(context, name, topics, samples, burst):
 
 
 def floor_node(topics, samples, n, burst):
-    """CPU per period of a plain node publishing pre-serialized bytes (one sample's outputs and
-    /clock per period) from an EventsExecutor timer, ``burst`` periods per callback."""
+    """
+    Return the CPU per period of a plain node publishing pre-serialized bytes.
+
+    It publishes one sample's outputs and /clock per period from an EventsExecutor timer,
+    ``burst`` periods per callback.
+    """
     context = rclpy.context.Context()
     rclpy.init(context=context)
     node, pubs, done = _make_floor_node(context, 'bench_floor_node', topics, samples, burst)
@@ -214,13 +154,13 @@ def floor_node(topics, samples, n, burst):
 def paired_node_floor(scene_name, topics, samples, pairs, block_s, folder, seed=1, log=True,
                       compression='zstd'):
     """
-    Node and floor in one process, in ``pairs`` randomly ordered pairs of ``block_s`` wall
-    seconds each (only one of the two is spun at a time): the host's drift hits both alike,
-    which separate runs of a few seconds could not resolve (their rounds spread by +-30 %).
-    The node runs free with the MCAP log (unless ``log`` is false), markers off; the floor is
-    floor_node's timer.
-    Returns the CPU per period of each (totals over all blocks), the ratio of the totals and
-    the mean of the per-pair ratios with its standard error.
+    Measure node and floor in one process, in ``pairs`` randomly ordered pairs of blocks.
+
+    Each block is ``block_s`` wall seconds (only one of the two is spun at a time): the host's
+    drift hits both alike, which separate runs of a few seconds could not resolve (their rounds
+    spread by +-30 %). The node runs free with the MCAP log (unless ``log`` is false), markers off;
+    the floor is floor_node's timer. Returns the CPU per period of each (totals over all blocks),
+    the ratio of the totals and the mean of the per-pair ratios with its standard error.
     """
     import random
     contexts = [rclpy.context.Context(), rclpy.context.Context()]
@@ -339,43 +279,12 @@ def run_node(seconds, executor_kind, folder, wait_topics=None, **params):
     return result, path
 
 
-def command_latency(log_path, controller_file, dt, topic='voltage_command'):
-    with open(controller_file) as stream:
-        data = json.load(stream)
-    sent = data['sent']
-    received = {int(k): v for k, v in data['received'].items()}
-    applied = [(m.log_time, decode_float64_multi_array(m.data)[0][0])
-               for m in LogReader(log_path).messages([topic])]
-    # the log holds the commands the node received, in order, each at the period it applied
-    # to; a command can be missing (sent before discovery, or after the run): match by value
-    latencies, unmatched, j = [], 0, 0
-    for log_time, logged in applied:
-        start = j
-        while j < len(sent) and sent[j][1] != logged and j - start < 1000:
-            j += 1
-        if j >= len(sent) or sent[j][1] != logged:
-            unmatched += 1
-            j = start
-            continue
-        effect = log_time + round(dt * 1e9)   # the first sample that shows the command
-        if effect in received:
-            latencies.append(received[effect] - sent[j][0])
-        j += 1
-    stamps = sorted(received)
-    step = round(dt * 1e9)
-    lost = sum((b - a) // step - 1 for a, b in zip(stamps, stamps[1:]))
-    lat = np.array(latencies) * 1e3
-    return {'commands_sent': len(sent), 'commands_applied': len(applied),
-            'commands_unmatched': unmatched, 'samples_received': len(stamps),
-            'samples_lost': int(lost),
-            'cmd_to_effect_ms_p50': float(np.percentile(lat, 50)) if lat.size else None,
-            'cmd_to_effect_ms_p99': float(np.percentile(lat, 99)) if lat.size else None,
-            'cmd_to_effect_ms_max': float(lat.max()) if lat.size else None}
-
-
 def lockstep_in_process(scene_name, sim_seconds):
-    """Lockstep with an in-process P controller answering every sample (one executor):
-    sim seconds per wall second."""
+    """
+    Run lockstep with an in-process P controller answering every sample (one executor).
+
+    Returns sim seconds per wall second, CPU per period and the missed deadlines.
+    """
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
     from det_sim_ros.io.contract import decode_joint_state, encode_float64_multi_array
@@ -402,103 +311,109 @@ def lockstep_in_process(scene_name, sim_seconds):
         sim.close()
 
 
-class _Skip(Exception):
-    """--rounds 0: no free-run figures."""
+def _free_run_rounds(scene_name, topics, samples, n, args, folder):
+    """
+    Measure the free-run figures in ``args.rounds`` interleaved rounds.
+
+    Each round: the publish loop, the floor node, the node and the node with 30 Hz markers;
+    then the node once under the SingleThreadedExecutor. Returns the report's entries.
+    """
+    rounds = {'publish_loop': [], 'floor': [], 'node': [], 'node_with_markers': [],
+              'floor_main_thread': [], 'node_main_thread': []}
+    for _ in range(args.rounds):   # interleaved: the host's drift hits all alike
+        rounds['publish_loop'].append(floor(scene_name, topics, samples, n, True) * 1e6)
+        rounds['floor'].append(floor_node(topics, samples, n, 10) * 1e6)
+        rounds['floor_main_thread'].append(floor_node.main_thread * 1e6)
+        for key, rate in (('node', 0.0), ('node_with_markers', 30.0)):
+            result, _ = run_node(args.free_seconds, 'events', folder, scene_file=scene_name,
+                                 real_time=False, **{'markers.rate_hz': rate})
+            rounds[key].append(result['cpu_us_per_period'])
+            if key == 'node':
+                rounds['node_main_thread'].append(result['main_thread_us_per_period'])
+    report = {'free_run_us_per_period': {key: _spread(v) for key, v in rounds.items()}}
+    ratios = [a / b for a, b in zip(rounds['node'], rounds['floor'])]
+    report['node_over_floor'] = _spread(ratios)
+    report['node_over_publish_loop'] = _spread(
+        [a / b for a, b in zip(rounds['node'], rounds['publish_loop'])])
+    report['markers_30hz_added'] = _spread(
+        [b / a - 1 for a, b in zip(rounds['node'], rounds['node_with_markers'])])
+    result, _ = run_node(args.free_seconds, 'single', folder, scene_file=scene_name,
+                         real_time=False, **{'markers.rate_hz': 0.0})
+    report['free_run_single_threaded_executor'] = result
+    return report
+
+
+def _paired_runs(scene_name, topics, samples, args, folder, physics_us):
+    """Measure node and floor in paired blocks (and without the log if asked); report entries."""
+    report = {'paired_node_and_floor': paired_node_floor(
+        scene_name, topics, samples, args.paired, args.paired_block_s, folder,
+        compression=args.log_compression)}
+    paired = report['paired_node_and_floor']
+    # the I/O alone: an array's physics is itself about the floor (100 DETs held: ~40 us per
+    # period), which no I/O work can take off
+    paired['node_minus_physics_over_floor'] = (
+        (paired['node_us_per_period'] - physics_us) / paired['floor_us_per_period'])
+    if args.paired_no_log:   # the log's share, measured the same way
+        report['paired_node_without_log_and_floor'] = paired_node_floor(
+            scene_name, topics, samples, args.paired, args.paired_block_s, folder, log=False)
+    return report
+
+
+def _real_time_run(scene_name, n_det, dt, args, folder):
+    """Run the node in real time with an outside controller and a busy core; its figures."""
+    controller_file = os.path.join(folder, f'controller_{scene_name}.json')
+    busy = spawn(BUSY)
+    controller = spawn(CONTROLLER, str(n_det), controller_file)
+    if args.controller_priority:   # the user's controller at SCHED_FIFO too (chrt -f)
+        os.sched_setscheduler(controller.pid, os.SCHED_FIFO,
+                              os.sched_param(args.controller_priority))
+    try:
+        time.sleep(2.0)
+        result, log_path = run_node(args.rt_seconds, 'events', folder, ['displacement'],
+                                    scene_file=scene_name, real_time=True,
+                                    realtime_priority=args.realtime_priority,
+                                    **({'log.enabled': False} if args.rt_no_log else
+                                       {'log.compression': args.log_compression}))
+    finally:
+        stop(controller)
+        busy.kill()
+        busy.wait()
+    if not args.rt_no_log:
+        result.update(command_latency(log_path, controller_file, dt))
+    return result
 
 
 def bench_scene(scene_name, args, folder):
+    """Measure every figure of one scene that ``args`` asks for; return them as a dict."""
     from det_sim_ros.io.contract import OutputContract
     from det_sim_ros.scenes.scene import load_scene
     report = {}
     scene = load_scene(scene_name)
     sim = Simulator(scene)
-    contract = OutputContract(sim.model)
-    encoder = contract.encoder()
-    out = sim.step().copy()
-    samples = encoder.encode(out, 1_000_000)
+    encoder = OutputContract(sim.model).encoder()
+    samples = encoder.encode(sim.step().copy(), 1_000_000)
     topics = encoder.topics
     n = int(args.floor_periods)
-
-    listener = _spawn(SUBSCRIBER, ','.join(topics)) if args.rounds > 0 else None
+    listener = spawn(SUBSCRIBER, ','.join(topics)) if args.rounds > 0 else None
     try:
         report['physics_us_per_period'] = physics(scene, n) * 1e6
-        if listener is None:
-            raise _Skip()
-        report['physics_us_per_period'] = physics(scene, n) * 1e6
-        rounds = {'publish_loop': [], 'floor': [], 'node': [], 'node_with_markers': [],
-                  'floor_main_thread': [], 'node_main_thread': []}
-        for _ in range(args.rounds):   # interleaved: the host's drift hits all alike
-            rounds['publish_loop'].append(floor(scene_name, topics, samples, n, True) * 1e6)
-            rounds['floor'].append(floor_node(topics, samples, n, 10) * 1e6)
-            rounds['floor_main_thread'].append(floor_node.main_thread * 1e6)
-            for key, rate in (('node', 0.0), ('node_with_markers', 30.0)):
-                result, _ = run_node(args.free_seconds, 'events', folder, scene_file=scene_name,
-                                     real_time=False, **{'markers.rate_hz': rate})
-                rounds[key].append(result['cpu_us_per_period'])
-                if key == 'node':
-                    rounds['node_main_thread'].append(result['main_thread_us_per_period'])
-        report['free_run_us_per_period'] = {key: _spread(v) for key, v in rounds.items()}
-        ratios = [a / b for a, b in zip(rounds['node'], rounds['floor'])]
-        report['node_over_floor'] = _spread(ratios)
-        report['node_over_publish_loop'] = _spread(
-            [a / b for a, b in zip(rounds['node'], rounds['publish_loop'])])
-        report['markers_30hz_added'] = _spread(
-            [b / a - 1 for a, b in zip(rounds['node'], rounds['node_with_markers'])])
-        result, _ = run_node(args.free_seconds, 'single', folder, scene_file=scene_name,
-                             real_time=False, **{'markers.rate_hz': 0.0})
-        report['free_run_single_threaded_executor'] = result
-    except _Skip:
-        pass
-    except BaseException:
-        if listener is not None:
-            _stop(listener)
-        raise
-
-    if args.paired > 0 and listener is None:
-        listener = _spawn(SUBSCRIBER, ','.join(topics))
-    try:
+        if listener is not None:   # --rounds 0: no free-run figures
+            report['physics_us_per_period'] = physics(scene, n) * 1e6
+            report.update(_free_run_rounds(scene_name, topics, samples, n, args, folder))
         if args.paired > 0:
-            report['paired_node_and_floor'] = paired = paired_node_floor(
-                scene_name, topics, samples, args.paired, args.paired_block_s, folder,
-                compression=args.log_compression)
-            # the I/O alone: an array's physics is itself about the floor (100 DETs held:
-            # ~40 us per period), which no I/O work can take off
-            paired['node_minus_physics_over_floor'] = (
-                (paired['node_us_per_period'] - report['physics_us_per_period'])
-                / paired['floor_us_per_period'])
-            if args.paired_no_log:   # the log's share, measured the same way
-                report['paired_node_without_log_and_floor'] = paired_node_floor(
-                    scene_name, topics, samples, args.paired, args.paired_block_s, folder,
-                    log=False)
+            if listener is None:
+                listener = spawn(SUBSCRIBER, ','.join(topics))
+            report.update(_paired_runs(scene_name, topics, samples, args, folder,
+                                       report['physics_us_per_period']))
     finally:
         if listener is not None:
-            _stop(listener)
-
+            stop(listener)
     if args.lockstep_seconds > 0:
         report['lockstep_in_process_controller'] = lockstep_in_process(scene_name,
                                                                        args.lockstep_seconds)
     if args.rt_seconds > 0:
-        n_det = sim.model.n_inputs
-        controller_file = os.path.join(folder, f'controller_{scene_name}.json')
-        busy = _spawn(BUSY)
-        controller = _spawn(CONTROLLER, str(n_det), controller_file)
-        if args.controller_priority:   # the user's controller at SCHED_FIFO too (chrt -f)
-            os.sched_setscheduler(controller.pid, os.SCHED_FIFO,
-                                  os.sched_param(args.controller_priority))
-        try:
-            time.sleep(2.0)
-            result, log_path = run_node(args.rt_seconds, 'events', folder, ['displacement'],
-                                        scene_file=scene_name, real_time=True,
-                                        realtime_priority=args.realtime_priority,
-                                        **({'log.enabled': False} if args.rt_no_log else
-                                           {'log.compression': args.log_compression}))
-        finally:
-            _stop(controller)
-            busy.kill()
-            busy.wait()
-        if not args.rt_no_log:
-            result.update(command_latency(log_path, controller_file, sim.dt))
-        report['real_time_with_controller_and_busy_core'] = result
+        report['real_time_with_controller_and_busy_core'] = _real_time_run(
+            scene_name, sim.model.n_inputs, sim.dt, args, folder)
     return report
 
 
@@ -514,7 +429,7 @@ def main():
                         help="real-time run: the node's realtime_priority (SCHED_FIFO; 0 = off)")
     parser.add_argument('--controller-priority', type=int, default=0,
                         help="real-time run: the controller process's SCHED_FIFO priority "
-                        "(set right after it starts: its threads inherit it)")
+                        '(set right after it starts: its threads inherit it)')
     parser.add_argument('--rt-no-log', action='store_true', help='real-time run without the '
                         'MCAP log (then no command-to-effect figures)')
     parser.add_argument('--paired', type=int, default=0,
@@ -524,7 +439,7 @@ def main():
     parser.add_argument('--log-compression', default='zstd', choices=('zstd', 'lz4', 'none'),
                         help="the node's log.compression in the paired and real-time runs")
     parser.add_argument('--paired-no-log', action='store_true',
-                        help='a second paired run with the log off (the log\'s share)')
+                        help="a second paired run with the log off (the log's share)")
     parser.add_argument('--json', help='write the numbers to this file')
     args = parser.parse_args()
     report = {'cpus': os.cpu_count(), 'load_avg_at_start': os.getloadavg()}

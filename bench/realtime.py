@@ -1,10 +1,12 @@
 """
-Real-time factor of the default stepper (issue 3's target: >= 100x real time at 1 kHz with an
-error <= 1e-6): the 4.5 s 'step' scenario on all six scenes at integrator.tolerance 1e-6, the
-whole run in one simulate() call as the offline path and Simulator.step() per period as the node
-does. Cost = process CPU seconds per simulated second; min and median of --repeats (a shared
-host only ever adds time, so the min is the closest to the code's own cost). The error is in
-bench/work_precision.py (same scenes, same settings). Run: python bench/realtime.py (~1 min).
+Real-time factor of the default stepper on the 'step' scenario, offline and stepped per period.
+
+Target: >= 100x real time at 1 kHz with an error <= 1e-6. The 4.5 s 'step' scenario on all six
+scenes at integrator.tolerance 1e-6, the whole run in one simulate() call as the offline path
+and Simulator.step() per period as the node does. Cost = process CPU seconds per simulated
+second; min and median of --repeats (a shared host only ever adds time, so the min is the
+closest to the code's own cost). The error is in bench/work_precision.py (same scenes, same
+settings). Run: python bench/realtime.py (~1 min).
 """
 
 import argparse

@@ -1,5 +1,8 @@
-"""Work-precision benchmark script: ``det_sim bench`` (det_sim_ros/cli/verbs/bench.py, the
-measurements in det_sim_ros/analysis/benchmark.py), with the same options."""
+"""
+Work-precision benchmark script: ``det_sim bench``, with the same options.
+
+The verb is det_sim_ros/cli/verbs/bench.py, the measurements det_sim_ros/analysis/benchmark.py.
+"""
 
 import sys
 

@@ -95,13 +95,13 @@ def _bounds(bounds) -> str:
 
 
 def _cell(text: str) -> str:
-    """Text safe inside a Markdown table cell."""
+    """Return the text made safe inside a Markdown table cell."""
     text = _TICKET.sub('', text).replace('|', '\\|').replace('\n', ' ')
     return text.replace('<', '&lt;').replace('>', '&gt;')
 
 
 def row(name: str, entry) -> str:
-    """One table row of a parameter (``entry``: default, description, read_only, bounds)."""
+    """Return the table row of a parameter (``entry``: default, description, read_only, bounds)."""
     default, description, read_only, bounds = entry
     return (f'| `{name}` | {_type_name(default)} | `{_literal(default)}` | {_bounds(bounds)} '
             f'| {"no" if read_only else "yes"} | {_cell(description)} |')
@@ -128,8 +128,12 @@ def _scene_bounds(kind: str, spec: tuple) -> str:
 
 
 def scene_row(key: str, spec: tuple, default) -> str:
-    """One table row of a scene key (``spec``: the kind, then the kind's fields of the scene
-    module's tables, the description last)."""
+    """
+    Return the table row of a scene key.
+
+    ``spec`` is the kind, then the kind's fields of the scene module's tables, the description
+    last.
+    """
     kind, fields = spec[0], spec[1:]
     unit = fields[3] if kind in ('float', 'int') else ''
     kinds = {'float': 'double', 'choice': 'string', 'str': 'string', 'names': 'string list'}
@@ -139,7 +143,7 @@ def scene_row(key: str, spec: tuple, default) -> str:
 
 
 def scene_rows() -> list:
-    """The rows of every scene key, section by section, with the default scene's values."""
+    """Return the rows of every scene key, section by section, with the default scene's values."""
     from det_sim_ros.scenes import scene
     with open(DEFAULT_SCENE, encoding='utf-8') as f:
         values = yaml.safe_load(f)['sim_node']['ros__parameters']
@@ -153,7 +157,7 @@ def scene_rows() -> list:
 
 
 def render(params=None) -> str:
-    """The whole page for a parameter table (default: the node's NODE_PARAMS)."""
+    """Return the whole page for a parameter table (default: the node's NODE_PARAMS)."""
     if params is None:
         from det_sim_ros.ros.params import NODE_PARAMS as params
     rows = '\n'.join(row(name, entry) for name, entry in params.items())

@@ -16,7 +16,7 @@ import re
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-TREES = ('det_sim_ros', 'test', 'bench')
+TREES = ('det_sim_ros', 'test', 'bench', 'docs')
 LOCATION = re.compile(r'^(?P<path>[^:]+):(?P<line>\d+)')
 
 # One violation of each kind the checks must see: import order (I100), a shadowed builtin

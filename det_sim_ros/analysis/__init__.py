@@ -1,2 +1,6 @@
-"""Studies on top of the simulator: the elastica, fidelity against it, the paper's scenarios and
-the benchmarks behind ``det_sim bench``."""
+"""
+Studies on top of the simulator.
+
+The elastica, fidelity against it, the paper's scenarios and the benchmarks behind
+``det_sim bench``.
+"""

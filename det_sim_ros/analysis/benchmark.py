@@ -36,10 +36,10 @@ import time
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from .scenarios import (reference_solution, STEP_END, step_error, step_scene, STEP_SWITCH_TIMES,
+                        step_voltage)
 from ..physics.model import build_model
 from ..physics.statics import initial_state
-from .scenarios import (reference_solution, step_error, step_scene, step_voltage, STEP_END,
-                        STEP_SWITCH_TIMES)
 from ..sim.simulator import simulate, Simulator
 
 __all__ = ['run', 'run_scene', 'write_tables', 'cost_at_error', 'speedups', 'one_term_jacobian']
@@ -55,9 +55,12 @@ def _cpu(fn, repeats):
 
 
 def _rhs_for_solvers(model):
-    """f(t, x, u) that returns NaN outside the model's domain instead of raising: an implicit
-    solver's Newton iterate or a rejected trial step may leave the domain, and scipy's
-    solvers answer NaN with a smaller step (an exception would end the run)."""
+    """
+    Return f(t, x, u) that returns NaN outside the model's domain instead of raising.
+
+    An implicit solver's Newton iterate or a rejected trial step may leave the domain, and
+    scipy's solvers answer NaN with a smaller step (an exception would end the run).
+    """
     nan = np.full(model.n_states, np.nan)
 
     def f(t, x, u):
@@ -69,8 +72,12 @@ def _rhs_for_solvers(model):
 
 
 def _run_start(model, t_end):
-    """What every solver run starts from: the voltage profile, dt, the number of samples, the
-    initial state, the absolute-tolerance scale, the sample array and the rhs."""
+    """
+    Return what every solver run starts from.
+
+    That is: the voltage profile, dt, the number of samples, the initial state, the
+    absolute-tolerance scale, the sample array and the rhs.
+    """
     dt = model.scene.dt
     n = int(round(t_end / dt))
     x = initial_state(model)
@@ -98,10 +105,12 @@ IMPLICIT = ('Radau', 'BDF', 'LSODA')
 
 def one_term_jacobian(model):
     """
-    The analytic Jacobian df/dx(x, u) of a one-cell, one-term model (the six 'step' scenes):
-    model.py's Lagrange equations for that case written in closed form with the model's own
-    constants and differentiated by sympy. Returns jac(x, v) -> (n_state, n_state) array.
-    Checked against central differences in :func:`run_scene` before it is used.
+    Return the analytic Jacobian df/dx(x, u) of a one-cell, one-term model.
+
+    The six 'step' scenes are such models. It is model.py's Lagrange equations for that case
+    written in closed form with the model's own constants and differentiated by sympy. Returns
+    jac(x, v) -> (n_state, n_state) array. Checked against central differences in
+    :func:`run_scene` before it is used.
     """
     import sympy as sp
     a = model.arrays
@@ -150,8 +159,12 @@ def one_term_jacobian(model):
 
 
 def _check_jacobian(model, jac):
-    """The analytic Jacobian against central differences of the compiled rhs (a buckled beam in
-    motion under 2 kV); raises if they disagree."""
+    """
+    Check the analytic Jacobian against central differences of the compiled rhs.
+
+    The state is a buckled beam in motion under 2 kV. Raises if they disagree; returns the
+    worst relative difference.
+    """
     typical = {'q[0]': 5e-3 / model.bases[0].reference_row()[0], 'q_dot[0]': 0.2,
                'eps_E[0]': 2e-3, 'q_p[0]': model.arrays.C0[0] * 1500.0, 'W_in': 1e-3,
                'W_diss': 1e-4}
@@ -173,8 +186,12 @@ def _check_jacobian(model, jac):
 
 
 def _scipy_offline_run(model, method, rtol, t_end, jac=None):
-    """The whole run the way an offline user would: one solve_ivp call per constant-voltage
-    segment, dense output at the 1 kHz samples, the analytic Jacobian for implicit methods."""
+    """
+    Solve the whole run the way an offline user would.
+
+    One solve_ivp call per constant-voltage segment, dense output at the 1 kHz samples, the
+    analytic Jacobian for implicit methods.
+    """
     volts, dt, n, x, scale, X, f = _run_start(model, t_end)
     edges = [0] + [int(round(ts / dt)) for ts in STEP_SWITCH_TIMES if ts < t_end] + [n]
     for k0, k1 in zip(edges[:-1], edges[1:]):
@@ -213,8 +230,11 @@ def _control_run(model, rtol, t_end):
 
 
 def _reference(scene, beam, eps_b, t_end, reference_dir, log):
-    """The sample times and the Radau rtol 1e-12 reference of a scene (cached as .npy in
-    ``reference_dir`` if given)."""
+    """
+    Return the sample times and the Radau rtol 1e-12 reference of a scene.
+
+    The reference is cached as .npy in ``reference_dir`` if given.
+    """
     cached = (os.path.join(reference_dir, f'ref_{beam}_{eps_b:g}_rc.npy') if reference_dir
               else None)
     if cached and os.path.exists(cached):
@@ -237,27 +257,28 @@ class _Rows:
         self.rows = []
 
     def add(self, solver, setting, cpu, X, steps=np.nan):
-        """A run with its error (NaN if it failed: ``X`` None)."""
+        """Add a run with its error (NaN if it failed: ``X`` None)."""
         err_y, err_q = (step_error(self.model, self.t, X, self.X_ref) if X is not None
                         else (np.nan, np.nan))
-        self.rows.append(dict(beam=self.beam, eps_b=self.eps_b, solver=solver, setting=setting,
-                              cpu_per_sim_s=cpu / self.t_end, err_dy=err_y, err_qp=err_q,
-                              realtime_factor=self.t_end / cpu, steps_per_period=steps))
+        self.rows.append({'beam': self.beam, 'eps_b': self.eps_b, 'solver': solver,
+                          'setting': setting, 'cpu_per_sim_s': cpu / self.t_end,
+                          'err_dy': err_y, 'err_qp': err_q,
+                          'realtime_factor': self.t_end / cpu, 'steps_per_period': steps})
         self.log(f'  {solver:>14} {setting:>10}  cpu/sim-s {cpu / self.t_end:9.4f}  '
                  f'err {err_y:.2e}')
 
     def add_reduced(self, label, setting, cpu, steps):
-        """A run of a reduced model (its own error is not measured)."""
-        self.rows.append(dict(beam=self.beam, eps_b=self.eps_b, solver=f'auto ({label})',
-                              setting=setting, cpu_per_sim_s=cpu / self.t_end, err_dy=np.nan,
-                              err_qp=np.nan, realtime_factor=self.t_end / cpu,
-                              steps_per_period=steps))
+        """Add a run of a reduced model (its own error is not measured)."""
+        self.rows.append({'beam': self.beam, 'eps_b': self.eps_b, 'solver': f'auto ({label})',
+                          'setting': setting, 'cpu_per_sim_s': cpu / self.t_end,
+                          'err_dy': np.nan, 'err_qp': np.nan,
+                          'realtime_factor': self.t_end / cpu, 'steps_per_period': steps})
         self.log(f'  {label:>24}  cpu/sim-s {cpu / self.t_end:9.4f} '
                  '(reduced model: own error not shown)')
 
 
 def run_scene(beam, eps_b, quick=False, repeats=3, log=print, reference_dir=None):
-    """All competitors on one scene; returns a list of result rows (dicts)."""
+    """Run all competitors on one scene; return a list of result rows (dicts)."""
     scene = step_scene(beam, eps_b)
     model = build_model(scene)
     t_end = STEP_END
@@ -272,8 +293,11 @@ def run_scene(beam, eps_b, quick=False, repeats=3, log=print, reference_dir=None
 
 
 def _project_runs(rows, model, U, quick, repeats):
-    """The project's steppers at fixed substeps, 'auto' at several tolerances, and 'auto' on
-    the reduced models."""
+    """
+    Run the project's steppers at fixed substeps and 'auto' at several tolerances.
+
+    Then 'auto' on the reduced models (ideal source, no creep, no power monitor).
+    """
     beam, eps_b, t_end = rows.beam, rows.eps_b, rows.t_end
     n_periods = round(t_end / model.scene.dt)
     for method, subs in (('etdrk4', (4, 8, 16, 32, 64)), ('lawson5', (8, 16, 32, 64)),
@@ -305,7 +329,7 @@ def _project_runs(rows, model, U, quick, repeats):
 
 
 def _scipy_runs(rows, model, quick, log):
-    """solve_ivp per period, then per constant-voltage segment with the analytic Jacobian."""
+    """Run solve_ivp per period, then per constant-voltage segment with the analytic Jacobian."""
     t_end = rows.t_end
     for method in ('RK45', 'DOP853', 'Radau', 'BDF', 'LSODA'):
         for rtol in ((1e-6,) if quick else (1e-4, 1e-6, 1e-8)):
@@ -327,7 +351,7 @@ def _scipy_runs(rows, model, quick, log):
 
 
 def _control_runs(rows, model, quick, log):
-    """python-control's input_output_response, if installed."""
+    """Run python-control's input_output_response, if installed."""
     try:
         import control  # noqa: F401
     except ImportError:
@@ -347,10 +371,13 @@ ERROR_LEVELS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
 
 
 def cost_at_error(points, level):
-    """CPU needed to reach an error ``level`` along a solver's work-precision curve: the runs'
-    Pareto front (cheapest for their error), interpolated log-log between the two front points
-    that bracket the level; the cheapest run when every run reaches it; NaN when none does.
-    ``points``: (error, cost) of one solver's runs."""
+    """
+    Return the CPU needed to reach an error ``level`` along a solver's work-precision curve.
+
+    The curve is the runs' Pareto front (cheapest for their error), interpolated log-log between
+    the two front points that bracket the level; the cheapest run when every run reaches it; NaN
+    when none does. ``points``: (error, cost) of one solver's runs.
+    """
     points = sorted((e, c) for e, c in points if np.isfinite(e) and np.isfinite(c) and e > 0)
     front = []                          # error ascending, cost strictly descending
     for err, cost in points:
@@ -368,10 +395,14 @@ def cost_at_error(points, level):
 
 
 def speedups(rows, competitors):
-    """Per scene and error level: the CPU the cheapest of ``competitors(solver)`` needs to reach
+    """
+    Return the speed-up of 'auto' over the cheapest competitor, per scene and error level.
+
+    Per scene and error level: the CPU the cheapest of ``competitors(solver)`` needs to reach
     that error, divided by what 'auto' needs (both from :func:`cost_at_error`: each solver's
     Pareto front, interpolated log-log; NaN where either cannot reach the level). Returns
-    {(beam, eps_b): [ratio per ERROR_LEVELS]}."""
+    {(beam, eps_b): [ratio per ERROR_LEVELS]}.
+    """
     table = {}
     for key in dict.fromkeys((r['beam'], r['eps_b']) for r in rows):
         scene = [r for r in rows if (r['beam'], r['eps_b']) == key]
@@ -399,8 +430,12 @@ def _whole_run(solver):
 
 
 def write_tables(rows, out):
-    """``work_precision.csv`` (one row per run) and ``work_precision.md`` (the runs and the
-    speed-up tables) in the folder ``out``."""
+    """
+    Write the result tables into the folder ``out``.
+
+    ``work_precision.csv`` (one row per run) and ``work_precision.md`` (the runs and the
+    speed-up tables).
+    """
     os.makedirs(out, exist_ok=True)
     with open(os.path.join(out, 'work_precision.csv'), 'w', newline='') as stream:
         writer = csv.DictWriter(stream, fieldnames=list(rows[0]))
@@ -431,8 +466,12 @@ def write_tables(rows, out):
 
 
 def run(beams, eps_values, quick=False, repeats=3, reference_dir=None, log=print):
-    """:func:`run_scene` on each beam and pre-strain in turn; yields the rows measured so far
-    after each scene (so that a long run can write what it measured as it goes)."""
+    """
+    Run :func:`run_scene` on each beam and pre-strain in turn.
+
+    Yields the rows measured so far after each scene (so that a long run can write what it
+    measured as it goes).
+    """
     rows = []
     for beam in beams:
         for eps_b in eps_values:

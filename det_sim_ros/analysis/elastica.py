@@ -47,8 +47,11 @@ _RTOL = 1e-12
 
 
 def euler_load(beam: str) -> float:
-    """Euler critical load P_cr l^2 / EI of one beam: mu^2 with tan mu = mu (clamped-pinned,
-    20.1907...) or 4 pi^2 (clamped-clamped)."""
+    """
+    Return the Euler critical load P_cr l^2 / EI of one beam.
+
+    It is mu^2 with tan mu = mu (clamped-pinned, 20.1907...) or 4 pi^2 (clamped-clamped).
+    """
     if beam == 'simply_supported':
         mu = brentq(lambda m: math.sin(m) - m * math.cos(m), 4.0, 4.6, xtol=1e-15, rtol=1e-15)
         return mu * mu
@@ -58,8 +61,11 @@ def euler_load(beam: str) -> float:
 
 
 def euler_mode(beam: str):
-    """The Euler buckling mode phi(s) (s = x/l) and its first three derivatives, as callables
-    returning arrays (unnormalized)."""
+    """
+    Return the Euler buckling mode phi(s) (s = x/l) and its first three derivatives.
+
+    They are callables returning arrays (unnormalized).
+    """
     if beam == 'simply_supported':
         m = math.sqrt(euler_load(beam))
         # w = A sin + B cos + C s + D with w(0) = w'(0) = w(1) = w''(1) = 0
@@ -76,11 +82,13 @@ def euler_mode(beam: str):
 
 def initial_slope(beam: str) -> float:
     """
-    d(P/P_cr)/d(y/l) at y = 0 on the exact elastica (Koiter's symmetric-bifurcation coefficient):
-    with the energy 1/2 EI int theta'^2 ds and y = int (1 - cos theta) ds expanded to fourth
-    order about the Euler mode phi (no second-order field by symmetry),
-    P/P_cr = 1 + 8 (u4 - P_cr y4) / (P_cr g^2) y/l, u4 = 1/2 int phi''^2 phi'^2,
-    y4 = 1/8 int phi'^4, g = int phi'^2. Equals 1/2 for the clamped-clamped beam.
+    Return d(P/P_cr)/d(y/l) at y = 0 on the exact elastica.
+
+    This is Koiter's symmetric-bifurcation coefficient: with the energy 1/2 EI int theta'^2 ds and
+    y = int (1 - cos theta) ds expanded to fourth order about the Euler mode phi (no second-order
+    field by symmetry), P/P_cr = 1 + 8 (u4 - P_cr y4) / (P_cr g^2) y/l,
+    u4 = 1/2 int phi''^2 phi'^2, y4 = 1/8 int phi'^4, g = int phi'^2. Equals 1/2 for the
+    clamped-clamped beam.
     """
     _, d1, d2, _ = euler_mode(beam)
     s, w = np.polynomial.legendre.leggauss(200)
@@ -94,8 +102,13 @@ def initial_slope(beam: str) -> float:
 
 @dataclasses.dataclass(frozen=True)
 class ElasticaPath:
-    """The elastica at the end shortenings ``y`` (y/l): load P l^2/EI, transverse end reaction
-    V l^2/EI, reference-point and maximum deflection (w/l), and the largest slope angle (rad)."""
+    """
+    The elastica at the end shortenings ``y`` (y/l).
+
+    Fields: ``load`` P l^2/EI, ``shear`` the transverse end reaction V l^2/EI, ``q_ref`` and
+    ``q_max`` the reference-point and maximum deflection (w/l), and ``theta_max`` the largest
+    slope angle (rad).
+    """
 
     beam: str
     y: np.ndarray
@@ -181,8 +194,10 @@ def _solve(beam: str, ys: tuple) -> ElasticaPath:
 
 def elastica(beam: str, y) -> ElasticaPath:
     """
-    The exact elastica of one beam at end shortening(s) ``y`` = y/l (increasing, 0 < y < 0.5),
-    on the first (Euler) branch. Solved by continuation from the Euler mode; cached.
+    Return the exact elastica of one beam at end shortening(s) ``y`` = y/l.
+
+    ``y`` is increasing, 0 < y < 0.5, on the first (Euler) branch. Solved by continuation from
+    the Euler mode; cached.
     """
     if beam not in BEAMS:
         raise ValueError(f'unknown beam {beam!r}')
@@ -193,7 +208,10 @@ def elastica(beam: str, y) -> ElasticaPath:
 
 
 def elastica_fixed_closed_form(y) -> tuple:
-    """Clamped-clamped elastica in closed form at y/l (arrays): (P l^2/EI, w(l/2)/l, theta_max).
+    """
+    Return the clamped-clamped elastica in closed form at y/l (arrays).
+
+    The result is (P l^2/EI, w(l/2)/l, theta_max).
 
     Four quarter waves of the Euler elastica with modulus k = sin(theta_max/2):
     p = 16 K^2, y/l = 2 (1 - E/K), w(l/2)/l = k/K (scipy's ellipk/ellipe take m = k^2).

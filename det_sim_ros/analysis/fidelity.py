@@ -1,10 +1,9 @@
 """
-Ritz statics of one beam alone, for measuring the model's fidelity against the exact solutions
-of :mod:`det_sim_ros.analysis.elastica`.
+Ritz statics of one beam alone, for measuring the model's fidelity against the exact solutions.
 
-The beam is the one the simulator builds: its Ritz basis comes from
-:func:`det_sim_ros.physics.model.build_model` for the scene (``model.bases``), and its energies
-are the model's (model.py): per beam
+The exact solutions are those of :mod:`det_sim_ros.analysis.elastica`. The beam is the one the
+simulator builds: its Ritz basis comes from :func:`det_sim_ros.physics.model.build_model` for the
+scene (``model.bases``), and its energies are the model's (model.py): per beam
 
     U(q) = 1/2 EI int w''^2 (1 + w'^2) dx,      y(q) = int (1/2 w'^2 + kappa/8 w'^4) dx,
 
@@ -35,16 +34,19 @@ import numpy as np
 import scipy.linalg
 
 from ..physics.model import build_model
-from ..scenes.scene import load_scene, Scene
 from ..physics.shapes import RitzBasis
+from ..scenes.scene import load_scene, Scene
 
 __all__ = ['BeamRitz', 'RitzPath', 'beam_ritz', 'fidelity_scene']
 
 
 def fidelity_scene(beam: str, fidelity: str = 'consistent', n_ritz: int = 1,
                    eps_b: float = 0.2) -> Scene:
-    """The default scene with the given beam and fidelity, ideal source, no creep: its H and y
-    outputs at rest are U_s + U_DE and the end shortening."""
+    """
+    Return the default scene with the given beam and fidelity, ideal source, no creep.
+
+    Its H and y outputs at rest are U_s + U_DE and the end shortening.
+    """
     return load_scene('default', {'scene.beam': beam, 'scene.eps_b': eps_b,
                                   'scene.fidelity': fidelity, 'scene.n_ritz': n_ritz,
                                   'scene.source': 'ideal', 'scene.creep': False,
@@ -54,8 +56,12 @@ def fidelity_scene(beam: str, fidelity: str = 'consistent', n_ritz: int = 1,
 
 @dataclasses.dataclass(frozen=True)
 class RitzPath:
-    """Post-buckling path of one beam: y/l, P l^2/EI, reference and max deflection / l, and the
-    Ritz coordinates (m) at each point."""
+    """
+    Post-buckling path of one beam.
+
+    At each point: ``y`` y/l, ``load`` P l^2/EI, ``q_ref`` and ``q_max`` the reference and max
+    deflection / l, and ``coords`` the Ritz coordinates (m).
+    """
 
     y: np.ndarray
     load: np.ndarray
@@ -91,21 +97,27 @@ class BeamRitz:
 
     @property
     def n_ritz(self) -> int:
-        """Ritz terms of the beam."""
+        """Return the number of Ritz terms of the beam."""
         return self.basis.n_ritz
 
     # -- energies (per beam) -------------------------------------------------------------------
     def _bending_factor(self, wp):
-        """a(w') in U = 1/2 EI int w''^2 a dx and its first two derivatives: 1 + w'^2 (eq 51)
-        or 1/(1 - w'^2) (exact)."""
+        """
+        Return a(w') in U = 1/2 EI int w''^2 a dx and its first two derivatives.
+
+        a(w') is 1 + w'^2 (eq 51) or 1/(1 - w'^2) (exact).
+        """
         if self.kappa == 2.0:
             c2 = 1.0 - wp * wp
             return 1.0 / c2, 2.0 * wp / c2 ** 2, (2.0 + 6.0 * wp * wp) / c2 ** 3
         return 1.0 + wp * wp, 2.0 * wp, 2.0 + 0.0 * wp
 
     def _shortening_density(self, wp):
-        """f(w') in y = int f dx and its first two derivatives: w'^2/2 + kappa w'^4/8, or
-        1 - sqrt(1 - w'^2) (exact)."""
+        """
+        Return f(w') in y = int f dx and its first two derivatives.
+
+        f(w') is w'^2/2 + kappa w'^4/8, or 1 - sqrt(1 - w'^2) (exact).
+        """
         if self.kappa == 2.0:
             c = np.sqrt(1.0 - wp * wp)
             return 1.0 - c, wp / c, 1.0 / c ** 3
@@ -114,12 +126,12 @@ class BeamRitz:
                 1.0 + 1.5 * k * wp * wp)
 
     def energy(self, q) -> float:
-        """U = 1/2 EI int w''^2 a(w') dx, J (see _bending_factor)."""
+        """Return the energy U = 1/2 EI int w''^2 a(w') dx, J (see _bending_factor)."""
         wp, wpp = self.B1 @ q, self.B2 @ q
         return 0.5 * self.EI * float(self.w @ (wpp * wpp * self._bending_factor(wp)[0]))
 
     def shortening(self, q) -> float:
-        """y = int f(w') dx, m (see _shortening_density)."""
+        """Return the end shortening y = int f(w') dx, m (see _shortening_density)."""
         return float(self.w @ self._shortening_density(self.B1 @ q)[0])
 
     def _derivatives(self, q):
@@ -137,7 +149,7 @@ class BeamRitz:
         return gU, HU, gy, Hy
 
     def deflection(self, q) -> tuple:
-        """(reference-point deflection, max |w|), m."""
+        """Return (reference-point deflection, max |w|), m."""
         q_ref = float(self.ref @ q)
         w = self._S @ q
         k = int(np.argmax(np.abs(w)))
@@ -151,7 +163,7 @@ class BeamRitz:
 
     # -- buckling ------------------------------------------------------------------------------
     def critical_load(self) -> tuple:
-        """(P_cr l^2/EI, mode) from K v = P G v (smallest eigenvalue)."""
+        """Return (P_cr l^2/EI, mode) from K v = P G v (smallest eigenvalue)."""
         vals, vecs = scipy.linalg.eigh(self.K, self.G)
         mode = vecs[:, 0]
         if self.ref @ mode < 0.0:
@@ -162,13 +174,13 @@ class BeamRitz:
         """Minimize U subject to y(q) = Y at each Y = y_over_l * l (increasing); P = dU/dy."""
         ys = np.atleast_1d(np.asarray(y_over_l, dtype=float))
         p_cr, mode = self.critical_load()
-        l = self.length
-        q = mode * math.sqrt(2.0 * ys[0] * l / float(mode @ self.G @ mode))
-        P = p_cr * self.EI / l ** 2
+        l_beam = self.length
+        q = mode * math.sqrt(2.0 * ys[0] * l_beam / float(mode @ self.G @ mode))
+        P = p_cr * self.EI / l_beam ** 2
         y_prev = None
         rows, coords = [], []
         for yl in ys:
-            Y = yl * l
+            Y = yl * l_beam
             if y_prev is not None:
                 q = q * math.sqrt(Y / y_prev)
             for _ in range(50):
@@ -178,7 +190,7 @@ class BeamRitz:
                 step = np.linalg.solve(A, -r)
                 q = q + step[:-1]
                 P = P + step[-1]
-                if np.max(np.abs(step[:-1])) < tol * l and abs(step[-1]) < tol * abs(P):
+                if np.max(np.abs(step[:-1])) < tol * l_beam and abs(step[-1]) < tol * abs(P):
                     break
             else:
                 raise RuntimeError(f'Ritz path: Newton did not converge at y/l = {yl}')
@@ -188,7 +200,7 @@ class BeamRitz:
                 raise RuntimeError(f'Ritz path: not a constrained minimum at y/l = {yl}')
             y_prev = Y
             q_ref, q_max = self.deflection(q)
-            rows.append((yl, P * l * l / self.EI, q_ref / l, q_max / l))
+            rows.append((yl, P * l_beam * l_beam / self.EI, q_ref / l_beam, q_max / l_beam))
             coords.append(q.copy())
         rows = np.array(rows)
         return RitzPath(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], np.array(coords))
@@ -196,8 +208,10 @@ class BeamRitz:
     # -- one source of truth -------------------------------------------------------------------
     def check_against_model(self, model, q) -> tuple:
         """
-        (U_pair from the model, 2 U here, y from the model, y here) at Ritz coordinates q, rest,
-        0 V: the model's H minus its DET energy V Y/6 (lambda^2 + lambda^-2 - 2).
+        Return (U_pair from the model, 2 U here, y from the model, y here) at coordinates q.
+
+        At Ritz coordinates q, rest, 0 V; U_pair is the model's H minus its DET energy
+        V Y/6 (lambda^2 + lambda^-2 - 2).
         """
         x = np.zeros(model.n_states)
         x[:len(q)] = q
@@ -210,7 +224,7 @@ class BeamRitz:
 
 def beam_ritz(beam: str, fidelity: str = 'consistent', n_ritz: int = 1,
               scene: Scene | None = None) -> tuple:
-    """(BeamRitz, model) for one beam of the scene's model (default scene if None)."""
+    """Return (BeamRitz, model) for one beam of the scene's model (default scene if None)."""
     scene = scene or fidelity_scene(beam, fidelity, n_ritz)
     model = build_model(scene)
     p = scene.physics
@@ -220,13 +234,14 @@ def beam_ritz(beam: str, fidelity: str = 'consistent', n_ritz: int = 1,
 
 def stable_substeps(model, dt: float, substeps: int, limit: float = 2.0) -> int:
     """
-    Internal steps per control period that keep an explicit stepper stable for a many-term
-    model: h times the fastest beam rate (the largest undamped frequency of (K, Mb) or the largest
-    Kelvin-Voigt decay rate of (D, Mb), which grows like omega^2 eta_b/E_b and dominates from
-    about 6 Ritz terms) at most ``limit``. Returns max(substeps, that count).
+    Return the internal steps per control period that keep an explicit stepper stable.
+
+    For a many-term model: h times the fastest beam rate (the largest undamped frequency of (K, Mb)
+    or the largest Kelvin-Voigt decay rate of (D, Mb), which grows like omega^2 eta_b/E_b and
+    dominates from about 6 Ritz terms) at most ``limit``. Returns max(substeps, that count).
 
     An independent check of Model.fastest_beam_rate, which the simulator's automatic substeps
-    use (without it the 'step' scenario diverged for n_ritz >= 6 simply supported, 7 fixed).
+    use (without it the 'step' scenario diverges for n_ritz >= 6 simply supported, 7 fixed).
     """
     p = model.scene.physics
     basis = model.bases[0]

@@ -24,14 +24,14 @@ STEP_END = 4.5                   # s
 
 
 def step_voltage(v_max: float):
-    """The 'step' profile v(t) (V) as a function, exact at the switching instants."""
+    """Return the 'step' profile v(t) (V) as a function, exact at the switching instants."""
     def voltage(t):
         return v_max if STEP_SWITCH_TIMES[0] <= t + 1e-12 < STEP_SWITCH_TIMES[1] else 0.0
     return voltage
 
 
 def step_scene(beam: str = 'fixed', eps_b: float = 0.20, **overrides):
-    """The default scene set up for the 'step' scenario (1 kHz sampling, released from q0)."""
+    """Return the default scene for the 'step' scenario (1 kHz sampling, released from q0)."""
     return load_scene('default', {'scene.beam': beam, 'scene.eps_b': eps_b, 'rate_hz': 1000.0,
                                   'scene.initial_state': 'released', **overrides})
 
@@ -48,7 +48,7 @@ def delta_y(t, y, l_beam):
 def reference_solution(scene, t_end: float = STEP_END, voltage=None, method: str = 'Radau',
                        rtol: float = 1e-12):
     """
-    The 'step' run solved by solve_ivp at a tight tolerance, restarted at every 1 ms sample.
+    Return the 'step' run solved by solve_ivp at a tight tolerance, restarted at every 1 ms sample.
 
     Returns (t, X) at the control samples. Restarting at every sample both holds the input
     exactly and gives the sampled values without dense-output interpolation error.
@@ -92,8 +92,10 @@ def _state_scale(model):
 
 def step_error(model, t, X, X_ref):
     """
-    Benchmark error of a run: max |Delta-y - Delta-y_ref| / max |Delta-y_ref|, and the max
-    charge error relative to C0 v_max (0 for scenes without a charge state).
+    Return the benchmark error of a run: the relative Delta-y error and the charge error.
+
+    The Delta-y error is max |Delta-y - Delta-y_ref| / max |Delta-y_ref|; the charge error is the
+    max charge error relative to C0 v_max (0 for scenes without a charge state).
     """
     l_beam = model.scene.beam_length
     u = np.zeros(model.n_inputs)
