@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import re
 import sys
 
 import yaml
@@ -62,10 +61,6 @@ the value in `config/default.yaml` (the `structure` section is optional; its def
 | --- | --- | --- | --- | --- | --- |
 """
 
-# Ticket references in a description name nothing a reader of this page can look up.
-_TICKET = re.compile(r'\s*\(issue \d+\)')
-
-
 def _type_name(default) -> str:
     if isinstance(default, bool):
         return 'bool'
@@ -96,7 +91,7 @@ def _bounds(bounds) -> str:
 
 def _cell(text: str) -> str:
     """Return the text made safe inside a Markdown table cell."""
-    text = _TICKET.sub('', text).replace('|', '\\|').replace('\n', ' ')
+    text = text.replace('|', '\\|').replace('\n', ' ')
     return text.replace('<', '&lt;').replace('>', '&gt;')
 
 
