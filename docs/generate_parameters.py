@@ -61,6 +61,7 @@ the value in `config/default.yaml` (the `structure` section is optional; its def
 | --- | --- | --- | --- | --- | --- |
 """
 
+
 def _type_name(default) -> str:
     if isinstance(default, bool):
         return 'bool'
