@@ -394,9 +394,8 @@ def _write_samples(path, fast, background=False, stress=False):
     from det_sim_ros.io.contract import encode_float64_multi_array, encode_joint_state, TOPIC_TYPES
     options = dict(flush_sim_s=2e-5, split_s=1.5e-4, max_queue=5) if stress else {}
     recorder = Recorder(path, load_scene('default'), chunk_size=2048, background=background,
-                        flush_period_s=1e9, **options)   # no wall-clock flushes: comparable
-    if not fast:
-        recorder._fast = None   # the plain mcap add_message path
+                        flush_period_s=1e9, packing=fast,   # False: mcap's add_message path
+                        **options)   # no wall-clock flushes: comparable
     topics = ['deflection', 'displacement', 'charge', 'current']
     for k in range(500):
         t = k * 1000 - (2500 if stress and k % 11 == 5 else 0)
@@ -408,7 +407,7 @@ def _write_samples(path, fast, background=False, stress=False):
                 for i in range(len(topics))]
         recorder.record_sample(t, topics, data, TOPIC_TYPES)
         if fast and not background:
-            assert recorder._fast is not None
+            assert recorder.packing
     recorder.close()
     assert recorder.fault == '' and recorder.messages == 500 * 4 + 72
     assert (recorder.clamped > 0) == stress

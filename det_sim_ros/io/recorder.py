@@ -68,6 +68,8 @@ class Recorder:
         thread; :meth:`close` writes everything queued before it finishes the file.
     :param max_queue: background mode: when this many records wait, the recording thread
         writes the queue itself before it goes on (:mod:`det_sim_ros.io.writer_thread`).
+    :param packing: write messages through the compiled record packer where mcap's internals
+        allow it; False: through mcap's ``Writer.add_message`` (the same bytes).
     """
 
     def __init__(self, path, scene=None, *, qos_by_topic: Mapping | None = None,
@@ -79,7 +81,8 @@ class Recorder:
                  on_fault: Callable[[str], None] | None = None,
                  clock: Callable[[], float] = time.monotonic, prefix: str = 'det_sim',
                  namespace: str = '/', background: bool = False,
-                 drain_period_s: float = 0.01, max_queue: int = 64):
+                 drain_period_s: float = 0.01, max_queue: int = 64,
+                 packing: bool = True):
         self.fault = ''
         self.messages = 0       # messages written
         self.bytes = 0          # serialized payload bytes written
@@ -98,7 +101,7 @@ class Recorder:
         self._compression = compression
         self._metadata = {str(k): str(v) for k, v in (metadata or {}).items()}
         self._file: LogFile | None = None
-        self._packing = True
+        self._packing = packing
         self._rotation: LogRotation | None = None
         self._last_t = 0
         self._types: dict[str, str] = {}       # topic -> type name (over all files)
@@ -144,20 +147,9 @@ class Recorder:
         return self._mode.queued
 
     @property
-    def _fast(self):
-        """The record packer (None: mcap's add_message path; setting None selects it)."""
-        return self._file.packer if self._file is not None else None
-
-    @_fast.setter
-    def _fast(self, packer) -> None:
-        self._packing = packer is not None
-        if self._file is not None:
-            self._file.packer = packer
-
-    @property
-    def _stream(self):
-        """The current file's stream (None between files; tests close it to play a crash)."""
-        return self._file.stream if self._file is not None else None
+    def packing(self) -> bool:
+        """Return whether the current file's messages go through the record packer."""
+        return self._file is not None and self._file.packer is not None
 
     # -- files -------------------------------------------------------------------------------
     def _open(self) -> None:
