@@ -78,7 +78,7 @@ _LITTLE = sys.byteorder == 'little'
 
 
 def basename(topic: str) -> str:
-    """A topic's last name ('/ns/voltage_command' -> 'voltage_command')."""
+    """Return a topic's last name ('/ns/voltage_command' -> 'voltage_command')."""
     return topic.rstrip('/').rsplit('/', 1)[-1]
 
 
@@ -97,6 +97,8 @@ def rest_shortening(scene) -> float:
 
 def rest_shortenings(scene) -> list[float]:
     """
+    Return the rest shortening y0_i (m) of each cell in DET order.
+
     Rest shortening y0_i (m) of each cell in DET order: cell i alone at 0 V
     (``scene.cell_scene(i)``). Cells with identical physics share one statics solve, so an array
     of identical copies costs one solve; an array with spread costs one per copy (about 20 ms).
@@ -112,6 +114,8 @@ def rest_shortenings(scene) -> list[float]:
 
 def structure_channels(model, y0) -> tuple:
     """
+    Return the structure topic's contract for a model.
+
     The structure topic's contract for a model: (output indices, published names, signs, rest
     values). Empty for structures without outputs ('single', 'array').
 
@@ -131,6 +135,8 @@ def structure_channels(model, y0) -> tuple:
 
 class OutputContract:
     """
+    What sim_node publishes for a model, as arrays.
+
     What sim_node publishes for a model, as arrays: per-DET channels (names ``det_names``, rest
     shortenings ``y0``) and the structure topic (``structure_names``, empty if none).
 
@@ -156,24 +162,28 @@ class OutputContract:
 
     @property
     def topics(self) -> list[str]:
-        """The output topics, structure topic last (if the model has one)."""
+        """Return the output topics, structure topic last (if the model has one)."""
         return list(self.fields) + ([self.structure_topic] if self.structure_names else [])
 
     def names(self, topic: str) -> list[str]:
-        """The JointState ``name`` list of an output topic."""
+        """Return the JointState ``name`` list of an output topic."""
         return list(self.structure_names) if topic == self.structure_topic else self.det_names
 
     def values(self, out, topic: str, field: str) -> np.ndarray:
-        """The published array of one topic field from an output vector (output_names order)."""
+        """Return one topic field's published array from an output vector (output_names order)."""
         values = np.asarray(out)[self.index[(topic, field)]]
         return self.y0 - values if (topic, field) in RELATIVE_TO_Y0 else values
 
     def structure(self, out) -> np.ndarray:
-        """The structure topic's positions from an output vector."""
+        """Return the structure topic's positions from an output vector."""
         return self._s_sign * (np.asarray(out)[self._s_idx] - self._s_rest)
 
     def encoder(self) -> 'SampleEncoder':
-        """A :class:`SampleEncoder` for this contract (preallocated buffers, one per topic)."""
+        """
+        Return a :class:`SampleEncoder` for this contract.
+
+        Its buffers are preallocated, one per topic.
+        """
         return SampleEncoder(self)
 
 
@@ -204,7 +214,7 @@ def encode_joint_state(name=(), position=(), velocity=(), effort=(), stamp_ns: i
 
 
 def decode_joint_state(data) -> JointStateData:
-    """The fields of a CDR sensor_msgs/JointState. :raises CdrError: malformed bytes."""
+    """Return the fields of a CDR sensor_msgs/JointState. :raises CdrError: malformed bytes."""
     r = Reader(data)
     return JointStateData(r.stamp(), r.string(), r.strings(), r.doubles(), r.doubles(),
                           r.doubles())
@@ -224,7 +234,7 @@ def encode_float64_multi_array(data=(), dims: Sequence[tuple] = (), data_offset:
 
 
 def decode_float64_multi_array(data) -> tuple[list[float], list[tuple], int]:
-    """(data, dims, data_offset) of a CDR std_msgs/Float64MultiArray."""
+    """Return (data, dims, data_offset) of a CDR std_msgs/Float64MultiArray."""
     r = Reader(data)
     dims = [(r.string(), r.u32(), r.u32()) for _ in range(r.count(12))]
     offset = r.u32()
@@ -245,6 +255,8 @@ def encode_clock(t_ns: int) -> bytes:
 @dataclasses.dataclass(frozen=True)
 class SampleWire:
     """
+    The named fields the compiled encoder (``_ckernel.SampleCodec``) is built from.
+
     The named fields the compiled encoder (``_ckernel.SampleCodec``) is built from: the
     messages' bytes with their constant parts (``template``, each message from
     ``message_start[k]``), and per published double its ``source`` in the output vector, its
@@ -265,6 +277,8 @@ class SampleWire:
 
 class SampleEncoder:
     """
+    The CDR bytes of every output topic for one sample, from the simulator's output vector.
+
     The CDR bytes of every output topic for one sample, straight from the simulator's output
     vector. :meth:`encode` is one compiled call (``_ckernel.SampleCodec``, built from the
     :class:`SampleWire` fields here): it reads the published doubles, computes y0 - y and the
@@ -341,8 +355,12 @@ class SampleEncoder:
             raise NotImplementedError('SampleEncoder needs a little-endian host')
 
     def values(self, out) -> list[float]:
-        """The published doubles of a sample, all topics, in message order (y0 - y and the
-        structure outputs computed)."""
+        """
+        Return the published doubles of a sample, all topics, in message order.
+
+        The published doubles of a sample, all topics, in message order (y0 - y and the
+        structure outputs computed).
+        """
         values = out.tolist() if hasattr(out, 'tolist') else list(out)
         published = [values[i] for i in self._gather]
         for slot, y0 in self._y0:
@@ -353,15 +371,18 @@ class SampleEncoder:
         return published
 
     def encode(self, out, t_ns: int) -> list[bytes]:
-        """The bytes of each topic of :attr:`topics` (same order) for output vector ``out``
-        (float64), stamped ``t_ns``: new bytes objects (earlier ones are not changed)."""
+        """
+        Return the bytes of each topic of :attr:`topics` for output vector ``out``.
+
+        The bytes of each topic of :attr:`topics` (same order) for output vector ``out``
+        (float64), stamped ``t_ns``: new bytes objects (earlier ones are not changed).
+        """
         if type(out) is not np.ndarray or out.dtype != np.float64 or not out.flags.c_contiguous:
             out = np.ascontiguousarray(out, dtype=np.float64)
         return self._codec.encode(out, t_ns)
 
     def encode_values(self, published: list, t_ns: int) -> list[bytes]:
-        """The bytes of each topic from :meth:`values` (the reference :meth:`encode` is held
-        to)."""
+        """Return the bytes of each topic from :meth:`values` (:meth:`encode`'s reference)."""
         sec, nanosec = divmod(t_ns, NS)
         result = []
         for pack, parts in self._layouts:
@@ -380,6 +401,8 @@ class SampleEncoder:
 @dataclasses.dataclass(frozen=True)
 class Command:
     """
+    A decoded voltage command: the full voltage vector in DET order, or a refusal.
+
     A decoded voltage command: the full voltage vector in DET order (``volts``), or a refusal
     (``volts`` None and ``reason`` says why). ``clamped`` names the channels outside
     [0, v_max] (the simulator clamps them). ``canonical``: the message's CDR bytes re-encoded
@@ -426,8 +449,12 @@ class CommandDecoder:
         self._unpack_vector = struct.Struct(f'<{n}d').unpack_from
 
     def decode(self, topic: str, data, held: Sequence[float]) -> Command:
-        """Decode CDR ``data`` received on ``topic`` (a name of :data:`COMMAND_TOPICS`);
-        ``held``: the voltages now (a JointState may name a subset)."""
+        """
+        Decode CDR ``data`` received on ``topic`` (a name of :data:`COMMAND_TOPICS`).
+
+        Decode CDR ``data`` received on ``topic`` (a name of :data:`COMMAND_TOPICS`);
+        ``held``: the voltages now (a JointState may name a subset).
+        """
         if topic == COMMAND_TOPIC and len(data) >= self._vector_size \
                 and data[4:16] == self._vector_head[4:16] and data[:2] == b'\x00\x01':
             volts = list(self._unpack_vector(data, 20))
@@ -445,7 +472,7 @@ class CommandDecoder:
             return Command(None, f'{topic}: malformed message ({exc})')
 
     def from_vector(self, values, canonical: bytes = b'') -> Command:
-        """A full voltage vector in DET order."""
+        """Return a full voltage vector in DET order."""
         volts = [float(v) for v in values]
         n = len(self.det_names)
         if len(volts) != n:
@@ -489,6 +516,10 @@ class CommandDecoder:
 
 
 def clamp_message(topic: str, clamped: Sequence[str], v_max: float) -> str:
-    """The clamp warning for a command's ``clamped`` channels (:attr:`Command.clamped`):
-    'det0: -5 V clamped to [0, 3000] V (voltage_command)'."""
+    """
+    Return the clamp warning for a command's ``clamped`` channels.
+
+    The clamp warning for a command's ``clamped`` channels (:attr:`Command.clamped`):
+    'det0: -5 V clamped to [0, 3000] V (voltage_command)'.
+    """
     return f'{_name_list(clamped)} clamped to [0, {v_max:g}] V ({topic})'

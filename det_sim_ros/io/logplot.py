@@ -1,4 +1,6 @@
 """
+``det_sim plot LOG.mcap``: every channel of a sim_node log against sim time.
+
 ``det_sim plot LOG.mcap``: every channel of a sim_node log against sim time, as one PNG (one
 panel per quantity, every DET a line, the voltage commands as steps) and a text summary.
 Single, plate and array logs alike; no ROS graph needed.
@@ -75,8 +77,12 @@ class LogData:
 # -- CDR layouts (read by det_sim_ros.io.cdr's Reader) -------------------------------------------
 
 def _joint_state_layout(data):
-    """Offsets of a little-endian JointState payload: stamp, names, and (offset, n) of the
-    three arrays (None for big endian: the column reader views the bytes as little endian)."""
+    """
+    Return the offsets of a little-endian JointState payload.
+
+    Offsets of a little-endian JointState payload: stamp, names, and (offset, n) of the
+    three arrays (None for big endian: the column reader views the bytes as little endian).
+    """
     r = Reader(data)
     if not r.little:
         return None
@@ -102,6 +108,8 @@ def _multiarray_layout(data):
 
 def _columns(by_length, layout_of, decode_slow):
     """
+    Read one topic's payloads vectorized, grouped by payload length.
+
     Vectorized reading of one topic's payloads, ``by_length``: length -> (order, log times,
     uint8 matrix of the payloads). Returns groups (order, log times, layout, matrix) and the
     rows decoded one by one (order, log time, message).
@@ -143,6 +151,8 @@ _LENGTH, _CHANNEL, _LOG_TIME, _PAYLOAD = (MESSAGE_FIELDS[name] for name in
 
 class _Scan:
     """
+    All messages of a log as per-topic uint8 matrices grouped by payload length.
+
     All messages of a log as per-topic uint8 matrices grouped by payload length: each record
     block of :meth:`LogReader.blocks` (a chunk's records, walked once by the reader) is read
     with numpy at its message offsets. Reading stops quietly at a torn record (a file cut by a
@@ -181,7 +191,7 @@ class _Scan:
             entry['parts'].setdefault(dl, []).append((order[sel], log_time[sel], matrix))
 
     def by_length(self, topic):
-        """length -> (order, log times ns, matrix) of one topic (basename match)."""
+        """Return payload length -> (order, log times ns, matrix) of one topic (basename match)."""
         out = {}
         for name, entry in self.topics.items():
             if basename(name) != topic:
@@ -192,12 +202,12 @@ class _Scan:
                 for dl, parts in out.items()}
 
     def type_of(self, topic):
-        """The type name of a topic (basename match), '' if absent."""
+        """Return the type name of a topic (basename match), '' if absent."""
         return next((e['type'] for name, e in self.topics.items() if basename(name) == topic),
                     '')
 
     def basenames(self):
-        """The topics' last names, sorted."""
+        """Return the topics' last names, sorted."""
         return sorted({basename(name) for name in self.topics})
 
 
@@ -307,7 +317,7 @@ def _read_joint_states(by_length, decode):
 
 
 def _applied_voltages(scan, det_names, n_det, v_max, deserialize):
-    """The voltages the node held, as steps: (times s, (n, n_det) V, commands, refused)."""
+    """Return the voltages the node held, as steps: (times s, (n, n_det) V, commands, refused)."""
     events = []    # (order, log time ns, values, joint names or None)
     for topic in COMMAND_TOPICS:
         type_name = scan.type_of(topic)

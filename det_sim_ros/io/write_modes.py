@@ -1,4 +1,6 @@
 """
+How the recorder's records reach the file.
+
 How the recorder's records reach the file: :class:`WriteNow` writes them in the recording
 thread; :class:`WriteBehind` (``background=True``) queues their bytes for the
 :class:`~det_sim_ros.io.writer_thread.WriterThread`.
@@ -52,6 +54,8 @@ class WriteNow:
 
 class WriteBehind:
     """
+    Records queued as bytes, written by the writer thread.
+
     Records are queued as bytes (serialized here) and written, compressed and flushed by the
     writer thread, in order; the thread owns the file (None for a moment between two files),
     so queueing depends only on whether recording has stopped.
@@ -65,7 +69,7 @@ class WriteBehind:
 
     @property
     def caught_up(self) -> int:
-        """Times the recording thread wrote the queue itself."""
+        """Return how many times the recording thread wrote the queue itself."""
         return self._thread.caught_up
 
     @property

@@ -1,4 +1,6 @@
 """
+The recorder's background writer and the bound on its queue.
+
 The recorder's background writer: a thread that writes what the recording thread queued, in
 order, every ``period_s``; and the bound on its queue.
 
@@ -49,7 +51,7 @@ class WriterThread:
 
     @property
     def running(self) -> bool:
-        """The thread takes items (until :meth:`stop`)."""
+        """Return whether the thread takes items (until :meth:`stop`)."""
         return self._thread is not None
 
     def __len__(self) -> int:
@@ -79,9 +81,13 @@ class WriterThread:
             self._on_error(exc)
 
     def _drain(self, yield_gil: bool = True) -> None:
-        """Write everything queued, in order. ``yield_gil``: release the GIL every 16 samples
-        (the writer thread, so the node's thread is not held up; the node's own catch-up must
-        not: each release cost it ~0.3 ms of waiting for the GIL back)."""
+        """
+        Write everything queued, in order.
+
+        ``yield_gil``: release the GIL every 16 samples (the writer thread, so the node's thread is
+        not held up; the node's own catch-up must not: each release cost it ~0.3 ms of waiting for
+        the GIL back).
+        """
         queue = self._queue
         written = 0
         while queue:
