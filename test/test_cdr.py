@@ -1,8 +1,8 @@
 """
 The one CDR codec (det_sim_ros.io.cdr) against rclpy's serializer and rosbags.
 
-The one CDR codec (det_sim_ros.io.cdr): its generic message writer and reader agree with
-rclpy's serializer and with rosbags, for every field kind the ROS messages of a log use.
+Its generic message writer and reader agree with rclpy's serializer and with rosbags, for
+every field kind the ROS messages of a log use.
 """
 
 import struct
@@ -64,8 +64,8 @@ def test_writer_layout_rules():
     """
     Check the writer's layout rules: alignment, strings, sequences, zero padding.
 
-    Alignment counted from the end of the header, strings with their NUL, sequences
-    counted, fixed arrays not; zero padding.
+    Alignment is counted from the end of the header, strings carry their NUL, sequences are
+    counted, fixed arrays not.
     """
     w = cdr.Writer()
     w.primitive(struct.Struct('<B'), 1)

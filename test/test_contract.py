@@ -1,8 +1,8 @@
 """
 The ROS-free topic contract: output bytes, command decoding and checks.
 
-The ROS-free topic contract: the bytes of every output equal the simulator's values (read by
-rclpy and by rosbags), command decoding and checks, and no rclpy import.
+The bytes of every output equal the simulator's values (read by rclpy and by rosbags); no
+rclpy import.
 """
 
 import math
@@ -321,9 +321,8 @@ def _independent_mismatches(scene, sim, out, encoder, t_ns):
     """
     Return the encoder's fields, decoded by rclpy, that differ from the simulator's.
 
-    Fields of the encoder's messages, decoded by rclpy, that differ from the simulator's
-    values (the displacement: y0 - y with y0 from each cell's statics; the plate: the mean
-    and the tilt of the two displacements).
+    The simulator's values: the displacement y0 - y with y0 from each cell's statics; the
+    plate: the mean and the tilt of the two displacements.
     """
     from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import JointState
@@ -390,8 +389,7 @@ def test_commands_and_clock_read_by_rclpy():
     """
     Check that command and clock bytes, decoded by rclpy, hold the encoded values.
 
-    Float64MultiArray, JointState and Clock bytes of the contract, decoded by rclpy, hold
-    the values given to the encoders.
+    Float64MultiArray, JointState and Clock bytes of the contract.
     """
     from rclpy.serialization import deserialize_message
     from rosgraph_msgs.msg import Clock

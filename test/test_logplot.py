@@ -1,8 +1,8 @@
 """
 ``det_sim plot``: logs of single, plate and array scenes read back and plotted.
 
-`det_sim plot`: logs of single, plate and array scenes read back to the simulated values,
-commands as held steps, the PNG and the summary, unfinished files and bad input.
+The logs read back to the simulated values, commands as held steps, the PNG and the
+summary, unfinished files and bad input.
 """
 
 import math

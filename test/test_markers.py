@@ -1,8 +1,8 @@
 """
 The actuator's shape: geometry, its MarkerArray bytes and the node's marker topic.
 
-The actuator's shape: geometry from the Ritz basis (no ROS), its MarkerArray bytes, and the
-node's marker topic (display rate, frames, q at the reference point, MCAP recording).
+The geometry comes from the Ritz basis (no ROS); the node's marker topic: display rate,
+frames, q at the reference point, MCAP recording.
 """
 
 from det_sim_ros.io.mcap_log import deserialize
@@ -36,8 +36,8 @@ def test_shape_matches_model_outputs(overrides):
     """
     Check that the drawn centre line comes from the model's basis and kinematics.
 
-    The drawn centre line comes from the model's basis and kinematics: the reference point's
-    deflection is q and the moving end's height is l - y, for every fidelity.
+    The reference point's deflection is q and the moving end's height is l - y, for every
+    fidelity.
     """
     scene = load_scene('default', overrides)
     sim = driven(scene, [3000.0])
@@ -282,8 +282,7 @@ def test_no_frames_without_a_viewer_or_a_log(harness):
     """
     Check that the node builds no frames without a marker subscriber or a log.
 
-    Nobody subscribed to markers and no log: the node builds no frames (the work would be
-    lost); they start when a viewer subscribes.
+    The work would be lost; frames start when a viewer subscribes.
     """
     from visualization_msgs.msg import MarkerArray
     h = harness(start_paused=True, **{'log.enabled': False})
@@ -310,8 +309,8 @@ def test_foxglove_layout_uses_the_nodes_topics():
     """
     Check that config/foxglove_layout.json uses the node's topics and fields.
 
-    config/foxglove_layout.json: a 3D panel on /markers following det0's frame, and plots
-    of voltage, Delta-y, q, charge and current on topics and fields the node publishes.
+    A 3D panel on /markers following det0's frame, and plots of voltage, Delta-y, q, charge and
+    current on topics and fields the node publishes.
     """
     import json
     import os

@@ -1,8 +1,8 @@
 """
 The mcap writer internals the record packer uses (det_sim_ros.io.mcap_internals).
 
-The mcap writer internals the record packer uses (det_sim_ros.io.mcap_internals): present in
-the installed mcap, and a change to them is reported loudly, naming the mcap version.
+They are present in the installed mcap, and a change to them is reported loudly, naming the
+mcap version.
 """
 
 from det_sim_ros.io import mcap_internals
@@ -40,8 +40,8 @@ def test_without_the_internals_the_recorder_writes_the_same_file(tmp_path, monke
     """
     Check that without the internals the recorder writes the same file.
 
-    When attach() finds no internals, the recorder writes through add_message: the same
-    bytes as with the packer.
+    When attach() finds no internals, the recorder writes through add_message: the same bytes
+    as with the packer.
     """
     import time as time_module
     from det_sim_ros.io.contract import encode_joint_state, TOPIC_TYPES

@@ -369,8 +369,7 @@ def test_log_directory_is_bounded(tmp_path):
     """
     Check that max_files / max_total_mb delete the oldest of the recorder's own files.
 
-    max_files / max_total_mb: the oldest of the recorder's own files are deleted (never the
-    current one, never other files).
+    Never the current one, never other files.
     """
     from std_msgs.msg import Float64MultiArray
     folder = tmp_path / 'logs'

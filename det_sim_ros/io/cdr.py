@@ -1,9 +1,8 @@
 """
-CDR (XCDR1, the encoding ROS 2 and rosbag2 use): the package's one writer and reader.
+CDR (XCDR1, the encoding ROS 2 and rosbag2 use): the package's one writer and one reader.
 
-CDR (XCDR1, the encoding ROS 2 and rosbag2 use): the one writer and the one reader of the
-package, and the generic message codec built on them from a rosidl message class's
-``SLOT_TYPES`` (rosidl's generated classes only: no rclpy).
+Also the generic message codec built on them from a rosidl message class's ``SLOT_TYPES``
+(rosidl's generated classes only: no rclpy).
 
 Layout rules: a 4-byte encapsulation header (0x00 0x01 = little endian, 0x00 0x00 = big endian,
 then two option bytes), then the fields; a primitive of size s is aligned to a multiple of s
@@ -81,10 +80,10 @@ class Writer:
 
     def numbers(self, code: str, values, counted: bool = True) -> int:
         """
-        Write a sequence or fixed array of one primitive type; return its offset.
+        Write a sequence or fixed array of one primitive type; return its first value's offset.
 
-        A sequence (``counted``) or fixed array of one primitive type (struct ``code``);
-        returns the offset of its first value (for in-place updates).
+        A sequence if ``counted``, else a fixed array, of struct ``code`` values; the offset is
+        for in-place updates.
         """
         n = len(values)
         if counted:
@@ -107,7 +106,7 @@ class Writer:
         return offset
 
     def doubles(self, values) -> int:
-        """Return a float64 sequence; returns the offset of its first value."""
+        """Write a float64 sequence; return the offset of its first value."""
         return self.numbers('d', np.asarray(values, dtype='<f8').reshape(-1))
 
     def stamp(self, t_ns: int) -> None:
@@ -148,24 +147,23 @@ class Reader:
         return start
 
     def primitive(self, code: str):
-        """Return one primitive value of struct ``code``."""
+        """Read one primitive value of struct ``code``."""
         size = struct.calcsize(code)
         return struct.unpack_from(self.order + code, self.data, self.take(size, size))[0]
 
     def u32(self) -> int:
-        """Write a uint32."""
+        """Read a uint32."""
         return struct.unpack_from(self.order + 'I', self.data, self.take(4, 4))[0]
 
     def i32(self) -> int:
-        """Write an int32."""
+        """Read an int32."""
         return struct.unpack_from(self.order + 'i', self.data, self.take(4, 4))[0]
 
     def count(self, item_size: int) -> int:
         """
         Read a sequence's count, checked to fit in what is left.
 
-        A sequence's count, checked to fit in what is left (items of ``item_size`` bytes at
-        least).
+        Its items are of ``item_size`` bytes at least.
         """
         n = self.u32()
         if n * max(item_size, 1) > len(self.data) - self.pos:
@@ -173,7 +171,7 @@ class Reader:
         return n
 
     def string(self) -> str:
-        """Write a UTF-8 string, its length counting the NUL."""
+        """Read a string."""
         n = self.count(1)
         start = self.take(n, 1)
         raw = self.data[start:start + n]
@@ -185,15 +183,15 @@ class Reader:
             raise CdrError(f'string is not UTF-8: {exc}') from None
 
     def strings(self) -> list[str]:
-        """Write a string sequence."""
+        """Read a string sequence."""
         return [self.string() for _ in range(self.count(5))]
 
     def numbers_at(self, code: str, n: int | None = None) -> tuple[int, int]:
         """
-        Skip a sequence or fixed array of primitives; return (offset, count).
+        Skip a sequence or fixed array of primitives; return its (offset, count).
 
-        (offset, count) of a sequence (``n`` None: counted) or fixed array of ``n``
-        primitives of struct ``code``, skipped.
+        A sequence if ``n`` is None (counted), else a fixed array of ``n`` primitives of struct
+        ``code``.
         """
         size = struct.calcsize(code)
         if n is None:
@@ -203,12 +201,12 @@ class Reader:
         return self.take(size * n, size), n
 
     def numbers(self, code: str, n: int | None = None) -> tuple:
-        """Return the values of a sequence (``n`` None) or fixed array of primitives."""
+        """Read the values of a sequence (``n`` None) or fixed array of primitives."""
         start, n = self.numbers_at(code, n)
         return struct.unpack_from(f'{self.order}{n}{code}', self.data, start) if n else ()
 
     def doubles(self) -> list[float]:
-        """Return a float64 sequence."""
+        """Read a float64 sequence."""
         return list(self.numbers('d'))
 
     def doubles_at(self) -> tuple[int, int]:
@@ -216,7 +214,7 @@ class Reader:
         return self.numbers_at('d')
 
     def stamp(self) -> int:
-        """Write a builtin_interfaces/Time (int32 sec, uint32 nanosec) of ``t_ns``."""
+        """Read a builtin_interfaces/Time, in ns."""
         sec = self.i32()
         return sec * NS + self.u32()
 
@@ -316,7 +314,9 @@ def _message_writer(cls) -> Callable:
 
 def serialize(msg) -> bytes:
     """
-    CDR bytes of a rosidl message, as rosbag2 stores them (encapsulation header included).
+    Return the CDR bytes of a rosidl message, as rosbag2 stores them.
+
+    The encapsulation header is included.
 
     :raises TypeError: a field type CDR here does not cover (wide strings).
     """
@@ -368,11 +368,10 @@ def _message_reader(cls) -> Callable:
 
 def deserialize(cls, data):
     """
-    Return the rosidl message decoded from CDR ``data``.
+    Return the rosidl message of class ``cls`` decoded from CDR ``data``.
 
-    The rosidl message of class ``cls`` (or its type name, 'pkg/msg/Type') from CDR
-    ``data`` (either byte order; trailing bytes, as rclpy's serializer leaves them, are
-    ignored).
+    ``cls`` may also be its type name, 'pkg/msg/Type'. Either byte order is read; trailing
+    bytes, as rclpy's serializer leaves them, are ignored.
 
     :raises CdrError: malformed bytes.
     """

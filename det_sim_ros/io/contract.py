@@ -99,9 +99,9 @@ def rest_shortenings(scene) -> list[float]:
     """
     Return the rest shortening y0_i (m) of each cell in DET order.
 
-    Rest shortening y0_i (m) of each cell in DET order: cell i alone at 0 V
-    (``scene.cell_scene(i)``). Cells with identical physics share one statics solve, so an array
-    of identical copies costs one solve; an array with spread costs one per copy (about 20 ms).
+    Cell i is alone at 0 V (``scene.cell_scene(i)``). Cells with identical physics share one
+    statics solve, so an array of identical copies costs one solve; an array with spread costs
+    one per copy (about 20 ms).
     """
     cells = scene.cell_physics()
     template = scene.cell_scene(0)
@@ -116,8 +116,8 @@ def structure_channels(model, y0) -> tuple:
     """
     Return the structure topic's contract for a model.
 
-    The structure topic's contract for a model: (output indices, published names, signs, rest
-    values). Empty for structures without outputs ('single', 'array').
+    The contract is (output indices, published names, signs, rest values); empty for
+    structures without outputs ('single', 'array').
 
     The structure outputs are linear in the cells' end shortenings (Model.structure_map P), so
     their rest values are P @ y0.
@@ -137,8 +137,8 @@ class OutputContract:
     """
     What sim_node publishes for a model, as arrays.
 
-    What sim_node publishes for a model, as arrays: per-DET channels (names ``det_names``, rest
-    shortenings ``y0``) and the structure topic (``structure_names``, empty if none).
+    Per-DET channels (names ``det_names``, rest shortenings ``y0``) and the structure topic
+    (``structure_names``, empty if none).
 
     :param y0: per-DET rest shortenings (default: computed as the node does).
     """
@@ -257,8 +257,7 @@ class SampleWire:
     """
     The named fields the compiled encoder (``_ckernel.SampleCodec``) is built from.
 
-    The named fields the compiled encoder (``_ckernel.SampleCodec``) is built from: the
-    messages' bytes with their constant parts (``template``, each message from
+    The messages' bytes with their constant parts (``template``, each message from
     ``message_start[k]``), and per published double its ``source`` in the output vector, its
     ``op`` (0: v; 1: a - v, the displacement y0 - y; 2: a (v - b), the structure outputs
     sign (v - rest)), constants ``a`` and ``b``, and byte ``position``; each message's header
@@ -279,8 +278,7 @@ class SampleEncoder:
     """
     The CDR bytes of every output topic for one sample, from the simulator's output vector.
 
-    The CDR bytes of every output topic for one sample, straight from the simulator's output
-    vector. :meth:`encode` is one compiled call (``_ckernel.SampleCodec``, built from the
+    :meth:`encode` is one compiled call (``_ckernel.SampleCodec``, built from the
     :class:`SampleWire` fields here): it reads the published doubles, computes y0 - y and the
     structure outputs, and writes them and the stamp into each message's preallocated bytes
     (~1 us per sample; the struct packs below cost 4-7 us for one DET and ~50 us for 100).
@@ -358,8 +356,7 @@ class SampleEncoder:
         """
         Return the published doubles of a sample, all topics, in message order.
 
-        The published doubles of a sample, all topics, in message order (y0 - y and the
-        structure outputs computed).
+        y0 - y and the structure outputs are computed.
         """
         values = out.tolist() if hasattr(out, 'tolist') else list(out)
         published = [values[i] for i in self._gather]
@@ -374,8 +371,8 @@ class SampleEncoder:
         """
         Return the bytes of each topic of :attr:`topics` for output vector ``out``.
 
-        The bytes of each topic of :attr:`topics` (same order) for output vector ``out``
-        (float64), stamped ``t_ns``: new bytes objects (earlier ones are not changed).
+        The topics in the same order; ``out`` is float64; stamped ``t_ns``. The bytes objects are
+        new (earlier ones are not changed).
         """
         if type(out) is not np.ndarray or out.dtype != np.float64 or not out.flags.c_contiguous:
             out = np.ascontiguousarray(out, dtype=np.float64)
@@ -403,10 +400,10 @@ class Command:
     """
     A decoded voltage command: the full voltage vector in DET order, or a refusal.
 
-    A decoded voltage command: the full voltage vector in DET order (``volts``), or a refusal
-    (``volts`` None and ``reason`` says why). ``clamped`` names the channels outside
-    [0, v_max] (the simulator clamps them). ``canonical``: the message's CDR bytes re-encoded
-    with zero padding (what the log stores, so equal commands give equal logs).
+    ``volts``: the voltage vector, or None for a refusal (``reason`` says why). ``clamped``
+    names the channels outside [0, v_max] (the simulator clamps them). ``canonical``: the
+    message's CDR bytes re-encoded with zero padding (what the log stores, so equal commands give
+    equal logs).
     """
 
     volts: list | None
@@ -452,7 +449,6 @@ class CommandDecoder:
         """
         Decode CDR ``data`` received on ``topic`` (a name of :data:`COMMAND_TOPICS`).
 
-        Decode CDR ``data`` received on ``topic`` (a name of :data:`COMMAND_TOPICS`);
         ``held``: the voltages now (a JointState may name a subset).
         """
         if topic == COMMAND_TOPIC and len(data) >= self._vector_size \
@@ -472,7 +468,7 @@ class CommandDecoder:
             return Command(None, f'{topic}: malformed message ({exc})')
 
     def from_vector(self, values, canonical: bytes = b'') -> Command:
-        """Return a full voltage vector in DET order."""
+        """Return the command of a full voltage vector in DET order."""
         volts = [float(v) for v in values]
         n = len(self.det_names)
         if len(volts) != n:
@@ -519,7 +515,7 @@ def clamp_message(topic: str, clamped: Sequence[str], v_max: float) -> str:
     """
     Return the clamp warning for a command's ``clamped`` channels.
 
-    The clamp warning for a command's ``clamped`` channels (:attr:`Command.clamped`):
-    'det0: -5 V clamped to [0, 3000] V (voltage_command)'.
+    ``clamped`` as in :attr:`Command.clamped`; e.g. 'det0: -5 V clamped to [0, 3000] V
+    (voltage_command)'.
     """
     return f'{_name_list(clamped)} clamped to [0, {v_max:g}] V ({topic})'

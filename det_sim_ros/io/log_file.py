@@ -1,10 +1,10 @@
 """
 One MCAP file being written in the rosbag2 conventions.
 
-One MCAP file being written in the rosbag2 conventions: its start (header, the run's metadata
-record and scene attachment), its schemas and channels, its messages (through the record packer
-when mcap's internals allow, else ``Writer.add_message``: the same bytes), its flushes and its
-end (the counters' metadata record, the summary).
+Its start (header, the run's metadata record and scene attachment), its schemas and
+channels, its messages (through the record packer when mcap's internals allow, else
+``Writer.add_message``: the same bytes), its flushes and its end (the counters' metadata
+record, the summary).
 """
 
 from __future__ import annotations
@@ -50,9 +50,8 @@ class LogFile:
         """
         Write the header, the run's metadata record and the scene attachment; flush.
 
-        The header, the run's metadata record ``info`` (:func:`file_info`: its
-        ``wall_start_ns`` is filled in here) and the scene attachment (none for ''), at log time
-        ``log_time``; flushed.
+        The metadata record is ``info`` (:func:`file_info`: its ``wall_start_ns`` is filled in
+        here); there is no scene attachment for ''; all at log time ``log_time``.
         """
         from mcap.writer import Writer
         writer = Writer(self.stream, chunk_size=self._chunk_size,

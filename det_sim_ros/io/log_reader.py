@@ -1,10 +1,10 @@
 """
 Reading MCAP run logs, finished or not, message by message or in blocks.
 
-Reading MCAP run logs: one scanning path for messages one by one (:meth:`LogReader.messages`)
-and for messages as blocks of records (:meth:`LogReader.blocks`, the column reader of
-``det_sim plot`` builds on it), both from finished and unfinished files; :func:`recover` and
-:func:`recover_unfinished` rewrite unfinished files as finished, indexed ones.
+One scanning path for messages one by one (:meth:`LogReader.messages`) and for messages as
+blocks of records (:meth:`LogReader.blocks`, the column reader of ``det_sim plot`` builds on
+it), both from finished and unfinished files; :func:`recover` and :func:`recover_unfinished`
+rewrite unfinished files as finished, indexed ones.
 
 The file is read here once, record by record (their lengths only); mcap's
 record classes parse the few records the reader needs (header, schemas, channels, metadata,
@@ -56,8 +56,8 @@ class RecordBlock:
     """
     Message records in file order, with the byte offset of each.
 
-    Message records in file order: ``raw`` bytes (a chunk's records, or one record) and the
-    byte offset of each Message record in it (``positions``).
+    ``raw``: the bytes (a chunk's records, or one record); ``positions``: the byte offset of
+    each Message record in it.
     """
 
     raw: bytes
@@ -96,8 +96,7 @@ def _top_records(stream) -> Iterator[tuple[int, bytes]]:
     """
     Yield (opcode, the bytes after its length) of each record up to the Footer.
 
-    (opcode, the bytes after its length) of each record up to the Footer, read in turn;
-    the data section's CRC checked at DataEnd.
+    The records are read in turn; the data section's CRC is checked at DataEnd.
 
     :raises ValueError: no magic, a torn record (EOFError), a CRC mismatch.
     """
@@ -201,8 +200,8 @@ class LogReader:
         """
         Take one top-level record (opcode, bytes after its length).
 
-        Take one top-level record (opcode, bytes after its length): a block of messages,
-        True for the Footer (False: a Footer without summary), else None.
+        Return a block of messages, True for the Footer (False: a Footer without summary), else
+        None.
         """
         from mcap import records
         if op == OP_CHUNK:
@@ -254,8 +253,7 @@ class LogReader:
         """
         Yield the Message records of all files as blocks, in file order.
 
-        The Message records of all files as blocks, in file order; :attr:`channels` holds
-        the channels of the block's file when it is yielded.
+        :attr:`channels` holds the channels of the block's file when it is yielded.
         """
         self.complete = True
         for path in self.files:
@@ -348,10 +346,10 @@ def recover_unfinished(folder: str, exclude: Iterable[str] = ()) -> list[tuple[s
     """
     Repair every torn ``*.mcap`` in ``folder`` in place.
 
-    Repair every torn ``*.mcap`` in ``folder`` (one that does not end in a valid footer: power
-    loss, or a kill inside a flush's write) in place: its readable part is rewritten as a
-    finished, indexed file (:func:`recover`, through a temporary file and an atomic rename).
-    Files that end in the writer's provisional end are valid MCAP already and left alone.
+    A torn file does not end in a valid footer (power loss, or a kill inside a flush's write):
+    its readable part is rewritten as a finished, indexed file (:func:`recover`, through a
+    temporary file and an atomic rename). Files that end in the writer's provisional end are
+    valid MCAP already and left alone.
 
     :returns: ``[(path, {'messages': n, 'complete': False}), ...]`` for the repaired files.
     """

@@ -37,9 +37,9 @@ class LogRotation:
     """
     File rotation (next path, due splits) and retention (oldest files deleted).
 
-    File rotation (the next file's path, whether a split is due) and retention (the oldest
-    files deleted to respect the limits). :attr:`paths`: the files written, in order;
-    :attr:`deleted`: the old files removed.
+    Rotation: the next file's path, whether a split is due; retention: the oldest files
+    deleted to respect the limits. :attr:`paths`: the files written, in order; :attr:`deleted`:
+    the old files removed.
 
     :raises OSError: the path's directory cannot be made.
     """
@@ -84,22 +84,20 @@ class LogRotation:
         """
         Return whether the current file has reached split_mb or its time span.
 
-        The current file (``size`` bytes) has reached split_mb, or its time span at the
-        message at log time ``t``.
+        ``size``: the current file's bytes; ``t``: the log time of the message being written.
         """
         return bool((self.split_ns and t - self.file_start_t >= self.split_ns)
                     or self.size_reached(size))
 
     def size_reached(self, size: int) -> bool:
-        """Return a file of ``size`` bytes is due to be split."""
+        """Return whether a file of ``size`` bytes is due to be split."""
         return bool(self.split_bytes and size >= self.split_bytes)
 
     def run_end(self, times, end: int) -> int:
         """
         Return how many log ``times`` (at most ``end``) belong in the current file.
 
-        How many of the (non-decreasing) log ``times`` (at most ``end``) belong in the
-        current file.
+        ``times`` are non-decreasing.
         """
         if not self.split_ns:
             return end
@@ -122,8 +120,7 @@ class LogRotation:
         """
         Note an opened file: list the pattern's other files, then enforce the limits.
 
-        A file was opened: list the other files of the pattern (oldest first), then
-        enforce the limits.
+        The other files of the pattern are listed oldest first.
         """
         if not self.bounded:
             return
@@ -151,8 +148,8 @@ class LogRotation:
         """
         Delete the oldest files until the directory is within the limits.
 
-        Delete the oldest files until the directory, with the current file of
-        ``current_size`` bytes, is within max_total_mb / max_files.
+        The limits are max_total_mb / max_files, counted with the current file of
+        ``current_size`` bytes.
         """
         if not self.bounded:
             return

@@ -1,9 +1,8 @@
 """
 ``det_sim plot LOG.mcap``: every channel of a sim_node log against sim time.
 
-``det_sim plot LOG.mcap``: every channel of a sim_node log against sim time, as one PNG (one
-panel per quantity, every DET a line, the voltage commands as steps) and a text summary.
-Single, plate and array logs alike; no ROS graph needed.
+The plot is one PNG (one panel per quantity, every DET a line, the voltage commands as
+steps), with a text summary. Single, plate and array logs alike; no ROS graph needed.
 
 Speed (a 10-minute 1 kHz log holds 2.4 million messages): the CDR payloads of a topic mostly
 share one byte layout (the same DET names, the same array lengths), so they are grouped by
@@ -80,8 +79,8 @@ def _joint_state_layout(data):
     """
     Return the offsets of a little-endian JointState payload.
 
-    Offsets of a little-endian JointState payload: stamp, names, and (offset, n) of the
-    three arrays (None for big endian: the column reader views the bytes as little endian).
+    The stamp, the names, and (offset, n) of the three arrays; None for big endian (the column
+    reader views the bytes as little endian).
     """
     r = Reader(data)
     if not r.little:
@@ -110,9 +109,9 @@ def _columns(by_length, layout_of, decode_slow):
     """
     Read one topic's payloads vectorized, grouped by payload length.
 
-    Vectorized reading of one topic's payloads, ``by_length``: length -> (order, log times,
-    uint8 matrix of the payloads). Returns groups (order, log times, layout, matrix) and the
-    rows decoded one by one (order, log time, message).
+    ``by_length``: length -> (order, log times, uint8 matrix of the payloads). Returns groups
+    (order, log times, layout, matrix) and the rows decoded one by one (order, log time,
+    message).
     """
     groups, slow = [], []
     for length, (order, times, matrix) in by_length.items():
@@ -153,10 +152,9 @@ class _Scan:
     """
     All messages of a log as per-topic uint8 matrices grouped by payload length.
 
-    All messages of a log as per-topic uint8 matrices grouped by payload length: each record
-    block of :meth:`LogReader.blocks` (a chunk's records, walked once by the reader) is read
-    with numpy at its message offsets. Reading stops quietly at a torn record (a file cut by a
-    crash: ``complete`` False), as the reader does.
+    Each record block of :meth:`LogReader.blocks` (a chunk's records, walked once by the reader)
+    is read with numpy at its message offsets. Reading stops quietly at a torn record (a file
+    cut by a crash: ``complete`` False), as the reader does.
     """
 
     def __init__(self, reader):

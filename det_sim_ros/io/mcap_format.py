@@ -1,10 +1,10 @@
 """
 The MCAP bytes this package writes and scans itself.
 
-The MCAP bytes this package writes and scans itself: the magic, the opcodes it reads, the Message
-record's head (the one Python statement of the layout ``core/_csrc`` ``pack_records`` writes),
-the provisional end written after every flush, the file that writes it (:class:`TailStream`),
-and the check for a torn file (:func:`is_torn`).
+The magic, the opcodes it reads, the Message record's head (the one Python statement of the
+layout ``core/_csrc`` ``pack_records`` writes), the provisional end written after every
+flush, the file that writes it (:class:`TailStream`), and the check for a torn file
+(:func:`is_torn`).
 """
 
 from __future__ import annotations
@@ -48,10 +48,10 @@ class TailStream:
     """
     The writer's output file: records collected in memory, written at each flush.
 
-    The writer's output file: records are collected in memory and written at each flush in one
-    ``pwrite``, followed by the provisional end, at the offset where the next flush continues
-    (so the provisional end is overwritten by it). Between flushes the file on disk is always a
-    complete MCAP. :meth:`finish` writes the writer's real end (after ``Writer.finish``).
+    Each flush writes them in one ``pwrite``, followed by the provisional end, at the offset where
+    the next flush continues (so the provisional end is overwritten by it). Between flushes the
+    file on disk is always a complete MCAP. :meth:`finish` writes the writer's real end (after
+    ``Writer.finish``).
     """
 
     def __init__(self, path: str):

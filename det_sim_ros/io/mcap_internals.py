@@ -61,9 +61,9 @@ class WriterInternals:
     """
     The private state of one started ``mcap.Writer`` (chunked).
 
-    The private state of one started ``mcap.Writer`` (chunked): :attr:`statistics`, the chunk
-    builder :attr:`chunk`, :attr:`chunk_size`, :meth:`finalize` (end the chunk if it is full)
-    and :meth:`buffer` (the chunk's record buffer; a new one after each chunk).
+    :attr:`statistics`, the chunk builder :attr:`chunk`, :attr:`chunk_size`, :meth:`finalize`
+    (end the chunk if it is full) and :meth:`buffer` (the chunk's record buffer; a new one after
+    each chunk).
     """
 
     def __init__(self, writer):
@@ -81,8 +81,7 @@ def attach(writer) -> WriterInternals | None:
     """
     Return the internals of ``writer``, or None when mcap does not have them.
 
-    The internals of ``writer``, or None when mcap does not have them (or the writer does
-    not chunk).
+    None also when the writer does not chunk.
     """
     if MessageIndex is None or _missing(writer) or getattr(writer, _WRITER[1]) is None:
         return None
@@ -93,8 +92,7 @@ def check() -> None:
     """
     Raise :class:`McapInternalsChanged` if the record packer's internals are missing.
 
-    Raise :class:`McapInternalsChanged` if the installed mcap's writer lacks an internal the
-    record packer uses.
+    That is, if the installed mcap's writer lacks an internal the record packer uses.
     """
     from mcap import writer as mcap_writer
     probe = mcap_writer.Writer(io.BytesIO())
@@ -116,8 +114,7 @@ try:
         """
         mcap's MessageIndex, written with one pack instead of two calls per entry.
 
-        mcap's MessageIndex, written with one pack instead of two calls per entry (with
-        those calls, the index of a 50-sample chunk costs a quarter of the recording).
+        With those calls, the index of a 50-sample chunk costs a quarter of the recording.
         """
 
         def write(self, stream):

@@ -26,8 +26,8 @@ def _cover(record, empty: bool, log_time: int) -> None:
     """
     Widen ``record``'s message time range to ``log_time``.
 
-    Widen ``record``'s message_start_time..message_end_time (the file's statistics or the
-    chunk's) to ``log_time``; ``empty``: it has no message yet.
+    The range is message_start_time..message_end_time, of the file's statistics or the chunk's;
+    ``empty``: it has no message yet.
     """
     if empty or log_time < record.message_start_time:
         record.message_start_time = log_time
@@ -73,8 +73,7 @@ class RecordPacker:
         """
         Write (channel id, sequence, data) items, all at ``log_time``, as add_message would.
 
-        Write (channel id, sequence, data) items, all at ``log_time``, as add_message would
-        (a chunk ends after the message that makes it exceed the chunk size).
+        A chunk ends after the message that makes it exceed the chunk size.
         """
         stats, chunk = self._mcap.statistics, self._mcap.chunk
         _cover(stats, stats.message_count == 0, log_time)
@@ -95,8 +94,7 @@ class RecordPacker:
         """
         Return ((channel id, record offset), ...) of one sample's records.
 
-        ((channel id, record offset), ...) of one sample's records (a sample's payload sizes
-        are fixed for a model, so this is computed once per layout).
+        A sample's payload sizes are fixed for a model, so this is computed once per layout.
         """
         offsets = self._sample_offsets.get((channel_ids, sizes))
         if offsets is None:
@@ -112,10 +110,9 @@ class RecordPacker:
         """
         Write the messages of one sample as one write.
 
-        The messages of one sample (one per channel, all at ``log_time``) as one write:
-        a run of one (:meth:`add_run`). A sample that would end the chunk, or whose payloads
-        are not ``bytes``, goes message by message (:meth:`add`), so chunks end where
-        add_message ends them.
+        One message per channel, all at ``log_time``: a run of one (:meth:`add_run`). A sample that
+        would end the chunk, or whose payloads are not ``bytes``, goes message by message
+        (:meth:`add`), so chunks end where add_message ends them.
         """
         sizes = tuple(map(len, payloads))
         if self.chunk_used() + sample_bytes(sizes) <= self.chunk_size:
@@ -130,10 +127,9 @@ class RecordPacker:
         """
         Write consecutive samples of one layout, as add_sample would one by one.
 
-        Consecutive samples of one layout, as add_sample would write them one by one:
         ``records`` are their Message records (``pack_records``: a sample's records in channel
-        order, ``sizes`` its payload sizes), ``times`` their log times. The caller guarantees
-        the run fits in the chunk, so no message ends it.
+        order, ``sizes`` its payload sizes), ``times`` their log times. The caller guarantees the
+        run fits in the chunk, so no message ends it.
         """
         stats, chunk = self._mcap.statistics, self._mcap.chunk
         buffer = self._mcap.buffer()
@@ -158,9 +154,8 @@ class RecordPacker:
         """
         Pack and write the samples ``rows`` at ``times``; return how many were written.
 
-        Pack and write the samples ``rows`` (payloads per channel) at ``times``, sequences
-        counting from ``firsts``: how many were written (the run stops before a row of other
-        payload sizes).
+        ``rows`` hold the payloads per channel; sequences count from ``firsts``. The run stops
+        before a row of other payload sizes.
         """
         records, count = pack_records(channel_ids, firsts, times, rows, sizes)
         if count:

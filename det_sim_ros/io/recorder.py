@@ -193,10 +193,9 @@ class Recorder:
 
     def _split_if_due(self, t: int) -> bool:
         """
-        Continue in a new file when this one is full or spans its time; True if it did.
+        Continue in a new file when this one reached split_mb or its time span; True if so.
 
-        Continue in a new file when this one has reached split_mb or its time span (t: the
-        log time being written); True if it did.
+        ``t``: the log time being written.
         """
         rotation = self._rotation
         if rotation.starts(t) or not rotation.split_due(t, self._file.size()):
@@ -267,18 +266,17 @@ class Recorder:
         """
         Write one CDR message per topic, all at ``log_time_ns``.
 
-        Write one CDR message per topic, all at ``log_time_ns`` (one sample of the node's
-        outputs); ``types`` maps each topic to its type name.
+        One sample of the node's outputs; ``types`` maps each topic to its type name.
         """
         return self._mode.sample(log_time_ns, topics, data, types)
 
     def _write(self, topic: str, msg, log_time_ns: int, type_name: str | None,
                flush: bool = True) -> bool:
         """
-        Write one message; then flush if due, unless not ``flush``.
+        Write one message; then a flush if one is due, unless not ``flush``.
 
-        One message; then a flush if one is due, unless not ``flush`` (a sample's messages
-        but its last: a sample is never split by a flush).
+        ``flush`` is False for a sample's messages but its last: a sample is never split by a
+        flush.
         """
         if self._file is None:
             self.dropped += 1
@@ -310,8 +308,8 @@ class Recorder:
         """
         Write a sample message by message.
 
-        A sample message by message (the first of a layout registers its channels and
-        plans the fast path; flushed after its last message).
+        The first of a layout registers its channels and plans the fast path; flushed after its
+        last message.
         """
         ok = True
         last = len(data) - 1
@@ -354,10 +352,9 @@ class Recorder:
         """
         Write consecutive samples from the writer's queue, in runs packed at once.
 
-        Consecutive samples from the writer's queue: the bytes _write_sample writes one by
-        one, in runs packed at once. A run stops before a sample that would end the chunk, split
-        the file or come after a due flush, so the lookups, checks and counters are done once
-        per run (10 us per sample one by one; 3.5 us in runs packed in C).
+        The bytes are those _write_sample writes one by one. A run stops before a sample that
+        would end the chunk, split the file or come after a due flush, so the lookups, checks and
+        counters are done once per run (10 us per sample one by one; 3.5 us in runs packed in C).
         """
         i, n = 0, len(items)
         while i < n:
@@ -380,8 +377,7 @@ class Recorder:
         """
         Return the samples from items[i] that may go in one run.
 
-        The samples from items[i] that may go in one run: (plan, payload sizes, window),
-        or None when the sample at i needs _write_sample.
+        Return (plan, payload sizes, window), or None when the sample at i needs _write_sample.
         """
         file, topics = self._file, items[i][1]
         key = topics if type(topics) is tuple else tuple(topics)
@@ -402,8 +398,7 @@ class Recorder:
         """
         Write the run of samples from items[i]; return how many.
 
-        Write the run of samples from items[i] (see _write_sample_run); how many (0: the
-        sample at i needs _write_sample).
+        See _write_sample_run; 0: the sample at i needs _write_sample.
         """
         found = self._run_window(items, i, start)
         if found is None:

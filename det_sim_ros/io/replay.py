@@ -1,8 +1,7 @@
 """
 Replay of MCAP run logs without ROS.
 
-Replay of MCAP run logs without ROS: re-simulate a log bit-for-bit, and record a run offline
-with the node's bytes.
+Re-simulate a log bit-for-bit, and record a run offline with the node's bytes.
 
 ``det_sim replay resim LOG`` (also ``det_sim_replay resim LOG``) feeds the logged voltage
 commands through the model with the logged scene and stepper, and compares with the logged
@@ -54,8 +53,7 @@ def _logged_x0(text: str | None, n: int):
     """
     Return the metadata 'x0' (the run's initial state vector), if valid.
 
-    Metadata 'x0' (the initial state vector the run started from), None if absent or not n
-    finite values.
+    None if absent or not n finite values.
     """
     if not text:
         return None
@@ -147,8 +145,8 @@ class _Resim:
     """
     One re-simulation of a log.
 
-    One re-simulation: the simulator stepped to each logged message's time, the commands
-    applied, the logged outputs compared with the simulated ones into a :class:`ResimResult`.
+    The simulator is stepped to each logged message's time, the commands applied, the logged
+    outputs compared with the simulated ones into a :class:`ResimResult`.
     """
 
     def __init__(self, reader, method, substeps, fields):
@@ -261,9 +259,8 @@ def simulate_to_log(recorder: Recorder, sim, commands: Mapping[int, Sequence[flo
     """
     Run ``sim`` for ``n_steps`` and record commands and outputs as the node does.
 
-    Run ``sim`` (any number of DETs) for ``n_steps`` and record commands and outputs as the node
-    does, with the node's bytes (joint commands name every DET; the structure topic when the
-    scene has one). Needs no ROS.
+    ``sim`` may have any number of DETs. The bytes are the node's (joint commands name every
+    DET; the structure topic when the scene has one). Needs no ROS.
 
     The initial state is recorded at t_0, then each step's outputs at its end time.
 

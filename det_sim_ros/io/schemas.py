@@ -1,9 +1,8 @@
 """
 What a log says about its types and topics, in the rosbag2 conventions.
 
-What a log says about its types and topics, in the rosbag2 conventions: each type's complete
-``ros2msg`` definition (the schema), the type name of a message, and the
-``offered_qos_profiles`` channel metadata (Jazzy's YAML form). No rclpy needed.
+Each type's complete ``ros2msg`` definition (the schema), the type name of a message, and
+the ``offered_qos_profiles`` channel metadata (Jazzy's YAML form). No rclpy needed.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """
 The recorder's background writer and the bound on its queue.
 
-The recorder's background writer: a thread that writes what the recording thread queued, in
-order, every ``period_s``; and the bound on its queue.
+The writer is a thread that writes what the recording thread queued, in order, every
+``period_s``.
 
 The writer thread gets the GIL only now and then while the node's thread runs flat out, so in a
 free run an unbounded queue grows without bound (measured: 124k samples, 82 % of a 4 s run,

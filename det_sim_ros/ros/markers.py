@@ -87,8 +87,8 @@ def _tagged_markers(model, geo, frames, offsets):
     """
     Return the frame's markers, every moving field holding a unique sentinel.
 
-    The frame's markers, every moving field holding a unique sentinel: (markers, per DET
-    field -> sentinel tag, the plate's tag or None, per DET the float32 colour sentinel).
+    Return (markers, per DET field -> sentinel tag, the plate's tag or None, per DET the
+    float32 colour sentinel).
     """
     from geometry_msgs.msg import Point
     from visualization_msgs.msg import Marker
@@ -143,8 +143,7 @@ def _sentinel_template(markers, cells, plate, colors) -> _Template:
     """
     Return the markers' CDR bytes and where each sentinel landed in them.
 
-    The markers' CDR bytes (:mod:`det_sim_ros.io.cdr`, serialized once) and where each
-    sentinel landed in them.
+    The bytes are serialized once (:mod:`det_sim_ros.io.cdr`).
     """
     from visualization_msgs.msg import MarkerArray
     from ..io.cdr import serialize
@@ -233,11 +232,10 @@ class MarkerFrames:
         """
         Return a cell's frame values as V = V0 + Kq q + Ke e(w').
 
-        A cell's frame values as V = V0 + Kq q + Ke e(w'): the deflections are linear in the
-        Ritz coordinates q and the heights linear in the shortening density e at the Gauss
-        nodes, so a frame costs a few matrix products (the frame is per control sample in the
-        node's thread: fewer numpy calls is what makes it cheap). Order: beam A x (n), z (n),
-        beam B x, z, DET centre (3), DET size (3), reference point (3).
+        The deflections are linear in the Ritz coordinates q and the heights linear in the
+        shortening density e at the Gauss nodes, so a frame costs a few matrix products (the frame
+        is per control sample in the node's thread: fewer numpy calls is what makes it cheap).
+        Order: beam A x (n), z (n), beam B x, z, DET centre (3), DET size (3), reference point (3).
         """
         n, r = sampler.n_samples, sampler.S.shape[1]
         paper = sampler.kinematics not in ('consistent', 'exact')
@@ -271,13 +269,12 @@ class MarkerFrames:
         """
         Return the cells as one stacked map when every drawn value is a polynomial in q.
 
-        The cells as one stacked map when each has one coordinate and paper or consistent
-        kinematics (every drawn value a polynomial in q): V = P @ (1, q, q^2, q^4) for all
-        cells in one matrix product; else None (the general path of :meth:`values`). A frame
-        then takes a handful of numpy calls instead of ~20: 77 -> 22 us per frame in a loop
-        that steps 33 periods between frames (cold caches, as in the node). Inside the node a
-        frame still costs 150-240 us of the executor thread, most of it the first touch of
-        each numpy and DDS path after the samples' work (README, "Watching it").
+        That is when each cell has one coordinate and paper or consistent kinematics:
+        V = P @ (1, q, q^2, q^4) for all cells in one matrix product; else None (the general path
+        of :meth:`values`). A frame then takes a handful of numpy calls instead of ~20: 77 -> 22 us
+        per frame in a loop that steps 33 periods between frames (cold caches, as in the node).
+        Inside the node a frame still costs 150-240 us of the executor thread, most of it the first
+        touch of each numpy and DDS path after the samples' work (README, "Watching it").
         """
         maps = self._cell_maps
         if (any(poly is None for *_, poly in maps) or len({len(m[0]) for m in maps}) != 1
@@ -294,10 +291,9 @@ class MarkerFrames:
         """
         Return the compiled frame builder of stacked cells without a plate, or None.
 
-        The compiled frame builder (_ckernel.FrameMap, frames.c) of stacked cells without
-        a plate, or None (then the numpy path builds the frames). It computes what
-        :meth:`values` computes, in the same order (the same bits), compares with the last
-        frame it wrote, and writes values and stamps into the frame bytes in one call.
+        The builder is _ckernel.FrameMap (frames.c); with None the numpy path builds the frames. It
+        computes what :meth:`values` computes, in the same order (the same bits), compares with the
+        last frame it wrote, and writes values and stamps into the frame bytes in one call.
         """
         if self._stacked is None or self._plate_slot is not None:
             return None
@@ -360,11 +356,10 @@ class MarkerFrames:
         """
         Return the frame, or None when it would show what the last one showed.
 
-        The frame, or None when it would show what the last frame returned here showed: no
-        drawn coordinate moved by more than :data:`MOVE_TOLERANCE`, the voltages are the
-        same, and less than :data:`KEEPALIVE_S` of sim time has passed (markers persist in
-        RViz and Foxglove until replaced, so a settled actuator needs no new frames; the
-        keep-alive serves viewers that join later).
+        None when, since the last frame returned here, no drawn coordinate moved by more than
+        :data:`MOVE_TOLERANCE`, the voltages are the same, and less than :data:`KEEPALIVE_S` of sim
+        time has passed (markers persist in RViz and Foxglove until replaced, so a settled actuator
+        needs no new frames; the keep-alive serves viewers that join later).
         """
         volts = self._volts(u)
         last = self._last_sent
@@ -393,8 +388,7 @@ class MarkerFrames:
         """
         Return every drawn coordinate that moves, in the order of the frame's fields.
 
-        Every drawn coordinate that moves (m; the plate's orientation as a quaternion), in
-        the order of the frame's fields (a new array).
+        In m; the plate's orientation as a quaternion; a new array.
         """
         if self._stacked is not None:
             return self._stacked_values(self._coordinates(x))
@@ -430,8 +424,7 @@ class MarkerFrames:
         """
         Write each DET's colour into the frame bytes if the voltages changed.
 
-        Each DET's colour (blue at 0 V to red at v_max) into the frame bytes, if the
-        voltages changed since the last call.
+        The colour goes from blue at 0 V to red at v_max; changed: since the last call.
         """
         if volts != self._colored_for:
             self._colored_for = volts
@@ -483,9 +476,8 @@ class NodeMarkers:
         """
         Return the frame of sample k if it is on the display grid and shows a change.
 
-        The frame of sample k (recorded) if it is on the display grid and shows a change
-        (:meth:`MarkerFrames.frame_if_moved`), else None; the caller publishes it
-        (:meth:`publish`), e.g. with the other messages of a burst.
+        The frame is recorded; a change as :meth:`MarkerFrames.frame_if_moved` sees it; else None.
+        The caller publishes it (:meth:`publish`), e.g. with the other messages of a burst.
         """
         if k % self.every:
             return None
