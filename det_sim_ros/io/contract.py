@@ -11,8 +11,8 @@ it (nothing here imports rclpy):
   outputs relative to rest (:func:`structure_channels`);
 - the CDR bytes (XCDR1, the encoding ROS 2 and rosbag2 use; written and read by
   :mod:`det_sim_ros.io.cdr`) of every output sample, written straight from the simulator's
-  output vector (:class:`SampleEncoder`), of /clock, and of the command types; command
-  decoding and validation (:class:`CommandDecoder`).
+  output vector (:class:`SampleEncoder`), of /clock, and of the command types
+  (:mod:`det_sim_ros.io.messages`); command decoding and validation (:class:`CommandDecoder`).
 
 Units are SI throughout: m, m/s, C, A, V, rad, s; times on the wire are ns of sim time.
 """
@@ -27,7 +27,9 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .cdr import CdrError, HEADER_LE, NS, Reader, Writer
+from .cdr import CdrError, HEADER_LE, NS, Writer
+from .messages import (decode_float64_multi_array, decode_joint_state, encode_clock,
+                       encode_float64_multi_array, encode_joint_state, JointStateData)
 from ..core.kernel import SampleCodec
 from ..sim.simulator import inputs_within
 
@@ -185,71 +187,6 @@ class OutputContract:
         Its buffers are preallocated, one per topic.
         """
         return SampleEncoder(self)
-
-
-# -- CDR messages of the contract (the codec: det_sim_ros.io.cdr) --------------------------------
-
-@dataclasses.dataclass
-class JointStateData:
-    """The fields of a sensor_msgs/JointState (stamp in ns)."""
-
-    stamp_ns: int = 0
-    frame_id: str = ''
-    name: list = dataclasses.field(default_factory=list)
-    position: list = dataclasses.field(default_factory=list)
-    velocity: list = dataclasses.field(default_factory=list)
-    effort: list = dataclasses.field(default_factory=list)
-
-
-def encode_joint_state(name=(), position=(), velocity=(), effort=(), stamp_ns: int = 0,
-                       frame_id: str = '') -> bytes:
-    """CDR bytes of a sensor_msgs/JointState."""
-    w = Writer()
-    w.stamp(stamp_ns)
-    w.string(frame_id)
-    w.strings(list(name))
-    for values in (position, velocity, effort):
-        w.doubles(values)
-    return w.to_bytes()
-
-
-def decode_joint_state(data) -> JointStateData:
-    """Return the fields of a CDR sensor_msgs/JointState. :raises CdrError: malformed bytes."""
-    r = Reader(data)
-    return JointStateData(r.stamp(), r.string(), r.strings(), r.doubles(), r.doubles(),
-                          r.doubles())
-
-
-def encode_float64_multi_array(data=(), dims: Sequence[tuple] = (), data_offset: int = 0) -> bytes:
-    """CDR bytes of a std_msgs/Float64MultiArray (``dims``: (label, size, stride) tuples)."""
-    w = Writer()
-    w.u32(len(dims))
-    for label, size, stride in dims:
-        w.string(label)
-        w.u32(size)
-        w.u32(stride)
-    w.u32(data_offset)
-    w.doubles(data)
-    return w.to_bytes()
-
-
-def decode_float64_multi_array(data) -> tuple[list[float], list[tuple], int]:
-    """Return (data, dims, data_offset) of a CDR std_msgs/Float64MultiArray."""
-    r = Reader(data)
-    dims = [(r.string(), r.u32(), r.u32()) for _ in range(r.count(12))]
-    offset = r.u32()
-    return r.doubles(), dims, offset
-
-
-# a Clock is the header and one stamp: Writer.stamp's layout in one pack (it is published
-# every step of a free run); test_contract holds it to the Writer's bytes
-_CLOCK = struct.Struct('<4siI')
-
-
-def encode_clock(t_ns: int) -> bytes:
-    """CDR bytes of a rosgraph_msgs/Clock at sim time ``t_ns``."""
-    sec, nanosec = divmod(int(t_ns), NS)
-    return _CLOCK.pack(HEADER_LE, sec, nanosec)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -140,11 +140,7 @@ def _tagged_markers(model, geo, frames, offsets):
 
 
 def _sentinel_template(markers, cells, plate, colors) -> _Template:
-    """
-    Return the markers' CDR bytes and where each sentinel landed in them.
-
-    The bytes are serialized once (:mod:`det_sim_ros.io.cdr`).
-    """
+    """Return the markers' CDR bytes (io.cdr, serialized once) and where each sentinel landed."""
     from visualization_msgs.msg import MarkerArray
     from ..io.cdr import serialize
     raw = serialize(MarkerArray(markers=markers))
@@ -385,11 +381,7 @@ class MarkerFrames:
         return list(u) if np.ndim(u) else [u] * len(self._samplers)
 
     def values(self, x) -> np.ndarray:
-        """
-        Return every drawn coordinate that moves, in the order of the frame's fields.
-
-        In m; the plate's orientation as a quaternion; a new array.
-        """
+        """Return the moving drawn coordinates (m; plate: quaternion) in field order; new array."""
         if self._stacked is not None:
             return self._stacked_values(self._coordinates(x))
         parts, heights = [], []
@@ -421,11 +413,7 @@ class MarkerFrames:
         return self._buffer.tobytes()
 
     def _color(self, volts) -> None:
-        """
-        Write each DET's colour into the frame bytes if the voltages changed.
-
-        The colour goes from blue at 0 V to red at v_max; changed: since the last call.
-        """
+        """Write each DET's colour (blue 0 V, red v_max) to the frame if the voltages changed."""
         if volts != self._colored_for:
             self._colored_for = volts
             level = np.clip(np.asarray(volts, dtype=float) / self.v_max, 0.0, 1.0)
