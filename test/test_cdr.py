@@ -1,11 +1,14 @@
-"""The one CDR codec (det_sim_ros.io.cdr): its generic message writer and reader agree with
-rclpy's serializer and with rosbags, for every field kind the ROS messages of a log use."""
+"""
+The one CDR codec (det_sim_ros.io.cdr) against rclpy's serializer and rosbags.
+
+Its generic message writer and reader agree with rclpy's serializer and with rosbags, for
+every field kind the ROS messages of a log use.
+"""
 
 import struct
 
-import pytest
-
 from det_sim_ros.io import cdr
+import pytest
 
 
 def _messages():
@@ -58,8 +61,12 @@ def test_generic_reader_sees_a_changed_field():
 
 
 def test_writer_layout_rules():
-    """Alignment counted from the end of the header, strings with their NUL, sequences
-    counted, fixed arrays not; zero padding."""
+    """
+    Check the writer's layout rules: alignment, strings, sequences, zero padding.
+
+    Alignment is counted from the end of the header, strings carry their NUL, sequences are
+    counted, fixed arrays not.
+    """
     w = cdr.Writer()
     w.primitive(struct.Struct('<B'), 1)
     w.doubles([2.0])

@@ -1,21 +1,24 @@
-"""The ROS-free topic contract: the bytes of every output equal the simulator's values (read by
-rclpy and by rosbags), command decoding and checks, and no rclpy import."""
+"""
+The ROS-free topic contract: output bytes, command decoding and checks.
+
+The bytes of every output equal the simulator's values (read by rclpy and by rosbags); no
+rclpy import.
+"""
 
 import math
 import struct
 import subprocess
 import sys
 
-import numpy as np
-import pytest
-
+from conftest import child_env
 from det_sim_ros.io.contract import (CdrError, Command, CommandDecoder,
                                      decode_float64_multi_array, decode_joint_state, encode_clock,
                                      encode_float64_multi_array, encode_joint_state, JOINT_STATE,
                                      OUTPUT_FIELDS, OutputContract)
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import Simulator
-from conftest import child_env
+import numpy as np
+import pytest
 
 
 def _run(scene, volts, n):
@@ -77,9 +80,13 @@ def test_encoded_samples_decode_to_exactly_the_simulator_values(scene_name, over
     ('default', {}), ('plate', {}), ('array', {'structure.copies': 20}),
     ('default', {'scene.fidelity': 'exact', 'scene.n_ritz': 2})])
 def test_compiled_encoding_is_the_reference_bytes(scene_name, overrides):
-    """The compiled encoder (SampleCodec) writes the struct-packed reference's bytes, for
+    """
+    Check that the compiled encoder writes the struct-packed reference's bytes.
+
+    The compiled encoder (SampleCodec) writes the struct-packed reference's bytes, for
     simulator states and random output vectors (signed zeros, tiny and huge values), stamps
-    from 0 to 2^31 s; it refuses an output vector too short for the contract."""
+    from 0 to 2^31 s; it refuses an output vector too short for the contract.
+    """
     scene = load_scene(scene_name, overrides)
     sim, out = _run(scene, [1800.0] * len(scene.cell_physics()), 11)
     encoder = OutputContract(sim.model).encoder()
@@ -185,10 +192,14 @@ def test_command_rules_per_channel():
 
 @pytest.mark.parametrize('n', [1, 2, 100])
 def test_vector_command_fast_path_gives_what_the_general_path_gives(n):
-    """A plain Float64MultiArray command is read by one unpack: same voltages and canonical
+    """
+    Check that a plain Float64MultiArray command read by one unpack reads as in general.
+
+    A plain Float64MultiArray command is read by one unpack: same voltages and canonical
     bytes as the general reader, whatever its padding held (rclpy leaves it uninitialised);
     anything else (dims, an offset, a wrong count, NaN, out of range, big endian, too short)
-    takes the general path and its reasons."""
+    takes the general path and its reasons.
+    """
     from rclpy.serialization import serialize_message
     from std_msgs.msg import Float64MultiArray
     names = [f'd{i}' for i in range(n)]
@@ -244,8 +255,12 @@ def test_contract_and_replay_need_no_rclpy(tmp_path):
 
 
 def test_inputs_within_is_the_generator_check():
-    """simulator.inputs_within (sum, min, max in C) answers as all(0 <= v <= v_max) does, for
-    NaN, infinities, signed zeros, subnormals, overflowing sums and random lists."""
+    """
+    Check that simulator.inputs_within answers as all(0 <= v <= v_max) does.
+
+    simulator.inputs_within (sum, min, max in C) answers as all(0 <= v <= v_max) does, for
+    NaN, infinities, signed zeros, subnormals, overflowing sums and random lists.
+    """
     import random
     from det_sim_ros.sim.simulator import inputs_within
     nan, inf = float('nan'), float('inf')
@@ -260,8 +275,12 @@ def test_inputs_within_is_the_generator_check():
 
 
 def test_sample_codec_refuses_inconsistent_fields():
-    """_ckernel.SampleCodec checks its named fields: a value or stamp outside the messages, a
-    bad op, offsets that do not span the template; it is built once."""
+    """
+    Check that _ckernel.SampleCodec checks its named fields.
+
+    _ckernel.SampleCodec checks its named fields: a value or stamp outside the messages, a
+    bad op, offsets that do not span the template; it is built once.
+    """
     import dataclasses
     from det_sim_ros.core._ckernel import SampleCodec
     encoder = OutputContract(Simulator(load_scene('default')).model).encoder()
@@ -292,16 +311,19 @@ PUBLISHED = {('deflection', 'position'): 'q', ('deflection', 'velocity'): 'q_dot
 
 
 def _output(sim, out, name, det):
-    """The simulator's value of output ``name`` of DET ``det``, by its output name."""
+    """Return the simulator's value of output ``name`` of DET ``det``, by its output name."""
     names = list(sim.model.output_names)
     key = name if name in names else f'{name}[{det}]'
     return float(out[names.index(key)])
 
 
 def _independent_mismatches(scene, sim, out, encoder, t_ns):
-    """Fields of the encoder's messages, decoded by rclpy, that differ from the simulator's
-    values (the displacement: y0 - y with y0 from each cell's statics; the plate: the mean
-    and the tilt of the two displacements)."""
+    """
+    Return the encoder's fields, decoded by rclpy, that differ from the simulator's.
+
+    The simulator's values: the displacement y0 - y with y0 from each cell's statics; the
+    plate: the mean and the tilt of the two displacements.
+    """
     from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import JointState
     from det_sim_ros.physics.statics import rest_shortening
@@ -339,8 +361,12 @@ def _independent_mismatches(scene, sim, out, encoder, t_ns):
 @pytest.mark.parametrize('scene_name, overrides', [
     ('default', {}), ('plate', {}), ('array', {'structure.copies': 3, 'structure.spread': 0.05})])
 def test_samples_read_by_rclpy_are_the_simulator_values(scene_name, overrides):
-    """The encoder's bytes, decoded by rclpy's own deserializer, hold on each topic and field
-    the simulator's output of the README's table, per DET by name."""
+    """
+    Check that the encoder's bytes, decoded by rclpy, hold the simulator's outputs.
+
+    The encoder's bytes, decoded by rclpy's own deserializer, hold on each topic and field
+    the simulator's output of the README's table, per DET by name.
+    """
     scene = load_scene(scene_name, overrides)
     sim, out = _run(scene, [2200.0] * len(scene.cell_physics()), 23)
     encoder = OutputContract(sim.model).encoder()
@@ -360,8 +386,11 @@ def test_the_independent_check_sees_a_swapped_field(monkeypatch):
 
 
 def test_commands_and_clock_read_by_rclpy():
-    """Float64MultiArray, JointState and Clock bytes of the contract, decoded by rclpy, hold
-    the values given to the encoders."""
+    """
+    Check that command and clock bytes, decoded by rclpy, hold the encoded values.
+
+    Float64MultiArray, JointState and Clock bytes of the contract.
+    """
     from rclpy.serialization import deserialize_message
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import JointState

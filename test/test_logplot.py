@@ -1,17 +1,20 @@
-"""`det_sim plot`: logs of single, plate and array scenes read back to the simulated values,
-commands as held steps, the PNG and the summary, unfinished files and bad input."""
+"""
+``det_sim plot``: logs of single, plate and array scenes read back and plotted.
+
+The logs read back to the simulated values, commands as held steps, the PNG and the
+summary, unfinished files and bad input.
+"""
 
 import math
 
-import numpy as np
-import pytest
-
-from det_sim_ros.io import logplot
 from det_sim_ros.cli.det_sim import main
+from det_sim_ros.io import logplot
 from det_sim_ros.io.mcap_log import Recorder
 from det_sim_ros.io.replay import OutputContract, simulate_to_log
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import Simulator
+import numpy as np
+import pytest
 
 
 def make_log(path, scene, commands, n_steps, joint=False):
@@ -22,7 +25,7 @@ def make_log(path, scene, commands, n_steps, joint=False):
 
 
 def expected(scene, commands, n_steps):
-    """Published values per sample, offline (the node's contract)."""
+    """Publish values per sample, offline (the node's contract)."""
     sim = Simulator(scene)
     contract = OutputContract(sim.model)
     rows = [np.array(list(sim.outputs().values()))]
@@ -114,8 +117,12 @@ def test_unfinished_log_plots_its_readable_part(tmp_path):
 
 
 def test_odd_payloads_take_the_slow_path(tmp_path):
-    """A message whose fixed bytes differ from its length group (another name) is decoded one
-    by one and, not having the node's channel set, left out."""
+    """
+    Check that a message unlike its length group is decoded one by one and left out.
+
+    A message whose fixed bytes differ from its length group (another name) is decoded one
+    by one and, not having the node's channel set, left out.
+    """
     from sensor_msgs.msg import JointState
     scene = load_scene('default')
     log = tmp_path / 'odd.mcap'
@@ -142,8 +149,12 @@ def test_cli_plot_bad_input_one_line(tmp_path, capsys, content, message):
 
 
 def test_a_killed_run_is_read_up_to_its_last_flush_and_marked_unfinished(tmp_path):
-    """A file as a SIGKILL leaves it (records up to the last flush and the provisional end) is
-    read by the same path as LogReader: its samples, and complete False."""
+    """
+    Check that a file as a SIGKILL leaves it is read to its last flush, unfinished.
+
+    A file as a SIGKILL leaves it (records up to the last flush and the provisional end) is
+    read by the same path as LogReader: its samples, and complete False.
+    """
     import shutil
     scene = load_scene('default')
     live = tmp_path / 'live.mcap'

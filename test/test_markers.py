@@ -1,16 +1,17 @@
 """
-The actuator's shape: geometry from the Ritz basis (no ROS), its MarkerArray bytes, and the
-node's marker topic (display rate, frames, q at the reference point, MCAP recording).
+The actuator's shape: geometry, its MarkerArray bytes and the node's marker topic.
+
+The geometry comes from the Ritz basis (no ROS); the node's marker topic: display rate,
+frames, q at the reference point, MCAP recording.
 """
 
-import numpy as np
-import pytest
-
+from det_sim_ros.io.mcap_log import deserialize
 from det_sim_ros.physics.geometry import ActuatorGeometry
 from det_sim_ros.ros.markers import MARKER_TYPE, MarkerFrames
-from det_sim_ros.io.mcap_log import deserialize
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import Simulator
+import numpy as np
+import pytest
 
 
 def driven(scene, volts, steps=60):
@@ -32,8 +33,12 @@ def per_det(sim, base):
     {'scene.fidelity': 'consistent', 'scene.n_ritz': 3},
     {'scene.fidelity': 'exact', 'scene.n_ritz': 3, 'scene.beam': 'simply_supported'}])
 def test_shape_matches_model_outputs(overrides):
-    """The drawn centre line comes from the model's basis and kinematics: the reference point's
-    deflection is q and the moving end's height is l - y, for every fidelity."""
+    """
+    Check that the drawn centre line comes from the model's basis and kinematics.
+
+    The reference point's deflection is q and the moving end's height is l - y, for every
+    fidelity.
+    """
     scene = load_scene('default', overrides)
     sim = driven(scene, [3000.0])
     cell, = ActuatorGeometry(sim.model).cells(sim.x)
@@ -94,9 +99,13 @@ def test_common_frame_lays_out_the_cells():
 
 
 def test_node_publishes_markers_at_the_display_rate(harness, tmp_path):
-    """30 frames per simulated second, stamped on the sample grid, all in the MCAP log; the
+    """
+    Check that the node publishes 30 frames per simulated second, all logged.
+
+    30 frames per simulated second, stamped on the sample grid, all in the MCAP log; the
     reference point's deflection equals the q published for the same sample. (What reaches a
-    viewer in free run is capped in wall time: test_viewers_get_frames_at_most_...)"""
+    viewer in free run is capped in wall time: test_viewers_get_frames_at_most_...)
+    """
     from visualization_msgs.msg import MarkerArray
     log = tmp_path / 'run.mcap'
     h = harness(start_paused=True, **{'log.path': str(log)})
@@ -131,7 +140,7 @@ def test_node_publishes_markers_at_the_display_rate(harness, tmp_path):
         assert ref.pose.position.x == pytest.approx(q[k], rel=1e-12, abs=1e-18)
         if t_ns in h.samples['deflection']:     # and what the node published for it
             assert ref.pose.position.x == pytest.approx(h.samples['deflection'][t_ns][0],
-                                                       rel=1e-12, abs=1e-18)
+                                                        rel=1e-12, abs=1e-18)
     h.close()
     from det_sim_ros.io.mcap_log import LogReader
     logged = [m for m in LogReader(str(log)).messages() if m.topic == '/markers']
@@ -142,10 +151,14 @@ def test_node_publishes_markers_at_the_display_rate(harness, tmp_path):
 
 
 def test_viewers_get_frames_at_most_twice_per_display_period_of_wall_time():
-    """Free run at ~6.6x real time (a display-grid sample every 5 ms of wall time): the log
+    """
+    Check that viewers get frames at most twice per display period of wall time.
+
+    Free run at ~6.6x real time (a display-grid sample every 5 ms of wall time): the log
     gets every frame, viewers one per 16.7 ms of wall time (half the 30 Hz display period);
     at real-time pace viewers get every frame; a frame held back while the beam moved is sent
-    once it settles, so a viewer ends with the last shape."""
+    once it settles, so a viewer ends with the last shape.
+    """
     import types
     from det_sim_ros.ros.markers import NodeMarkers
     sent, logged, now = [], [], [0.0]
@@ -180,8 +193,12 @@ def test_viewers_get_frames_at_most_twice_per_display_period_of_wall_time():
 
 
 def test_frames_that_show_nothing_new_are_not_sent():
-    """frame_if_moved: a frame when a coordinate moved by more than MOVE_TOLERANCE, the
-    voltage changed, or KEEPALIVE_S passed; otherwise None. What is sent is frame()'s bytes."""
+    """
+    Check that frame_if_moved sends a frame only when something changed.
+
+    frame_if_moved: a frame when a coordinate moved by more than MOVE_TOLERANCE, the
+    voltage changed, or KEEPALIVE_S passed; otherwise None. What is sent is frame()'s bytes.
+    """
     from det_sim_ros.ros.markers import KEEPALIVE_NS, MarkerFrames, MOVE_TOLERANCE
     sim = Simulator(load_scene('default'))
     frames = MarkerFrames(sim.model)
@@ -208,10 +225,14 @@ def test_frames_that_show_nothing_new_are_not_sent():
     ('plate', {}, [3000.0, 0.0]),
     ('array', {'structure.copies': 3}, [2500.0, 1000.0, 0.0])])
 def test_stacked_cells_give_the_general_paths_frame(name, overrides, volts):
-    """One-coordinate cells take the stacked polynomial map (all cells at once), and without a
+    """
+    Check that the stacked and compiled frame paths give the general path's frame.
+
+    One-coordinate cells take the stacked polynomial map (all cells at once), and without a
     plate the compiled FrameMap (frames.c) builds the node's frames from it. The stacked map
     draws what the general basis-and-kinematics path draws; the compiled frames are the
-    numpy frames' bytes exactly; all three agree on whether a frame moved enough to send."""
+    numpy frames' bytes exactly; all three agree on whether a frame moved enough to send.
+    """
     from det_sim_ros.ros.markers import MOVE_TOLERANCE
     sim = driven(load_scene(name, overrides=overrides), volts, 40)
 
@@ -258,8 +279,11 @@ def test_compiled_frames_refuse_wrong_buffers():
 
 
 def test_no_frames_without_a_viewer_or_a_log(harness):
-    """Nobody subscribed to markers and no log: the node builds no frames (the work would be
-    lost); they start when a viewer subscribes."""
+    """
+    Check that the node builds no frames without a marker subscriber or a log.
+
+    The work would be lost; frames start when a viewer subscribes.
+    """
     from visualization_msgs.msg import MarkerArray
     h = harness(start_paused=True, **{'log.enabled': False})
     markers = h.node.markers
@@ -282,8 +306,12 @@ def test_markers_off(harness):
 
 
 def test_foxglove_layout_uses_the_nodes_topics():
-    """config/foxglove_layout.json: a 3D panel on /markers following det0's frame, and plots
-    of voltage, Delta-y, q, charge and current on topics and fields the node publishes."""
+    """
+    Check that config/foxglove_layout.json uses the node's topics and fields.
+
+    A 3D panel on /markers following det0's frame, and plots of voltage, Delta-y, q, charge and
+    current on topics and fields the node publishes.
+    """
     import json
     import os
     import re

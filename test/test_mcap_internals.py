@@ -1,9 +1,12 @@
-"""The mcap writer internals the record packer uses (det_sim_ros.io.mcap_internals): present in
-the installed mcap, and a change to them is reported loudly, naming the mcap version."""
+"""
+The mcap writer internals the record packer uses (det_sim_ros.io.mcap_internals).
 
-import pytest
+They are present in the installed mcap, and a change to them is reported loudly, naming the
+mcap version.
+"""
 
 from det_sim_ros.io import mcap_internals
+import pytest
 
 
 def test_the_installed_mcap_has_the_internals_the_packer_uses():
@@ -11,8 +14,12 @@ def test_the_installed_mcap_has_the_internals_the_packer_uses():
 
 
 def test_a_changed_mcap_is_reported_with_its_version(monkeypatch):
-    """An mcap whose writer renamed a private (planted here) makes check() fail with the
-    version and the missing name, and attach() give None (the add_message path)."""
+    """
+    Check that a changed mcap writer is reported with its version.
+
+    An mcap whose writer renamed a private (planted here) makes check() fail with the
+    version and the missing name, and attach() give None (the add_message path).
+    """
     from mcap import writer as mcap_writer
 
     class Renamed(mcap_writer.Writer):
@@ -30,8 +37,12 @@ def test_a_changed_mcap_is_reported_with_its_version(monkeypatch):
 
 
 def test_without_the_internals_the_recorder_writes_the_same_file(tmp_path, monkeypatch):
-    """When attach() finds no internals, the recorder writes through add_message: the same
-    bytes as with the packer."""
+    """
+    Check that without the internals the recorder writes the same file.
+
+    When attach() finds no internals, the recorder writes through add_message: the same bytes
+    as with the packer.
+    """
     import time as time_module
     from det_sim_ros.io.contract import encode_joint_state, TOPIC_TYPES
     from det_sim_ros.io.mcap_log import Recorder

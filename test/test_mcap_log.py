@@ -1,5 +1,8 @@
-"""MCAP run logs: rosbag2 conventions checked by three independent readers, faults, crash
-safety."""
+"""
+MCAP run logs: rosbag2 conventions, faults, crash safety.
+
+The rosbag2 conventions are checked by three independent readers.
+"""
 
 import os
 import pathlib
@@ -10,16 +13,15 @@ import subprocess
 import sys
 import textwrap
 
-import pytest
-import yaml
-
+from conftest import child_env
 from det_sim_ros import __version__
 from det_sim_ros.io.mcap_log import (LogReader, message_definition, qos_profiles_yaml, Recorder,
                                      recover)
 from det_sim_ros.io.replay import OUTPUT_FIELDS, simulate_to_log
 from det_sim_ros.scenes.scene import load_scene, scene_to_dict
 from det_sim_ros.sim.simulator import Simulator
-from conftest import child_env
+import pytest
+import yaml
 
 N_STEPS = 300
 OUTPUT_TOPICS = ['/' + t for t in OUTPUT_FIELDS]
@@ -31,7 +33,7 @@ def _command(k):
 
 @pytest.fixture(scope='module')
 def logged_run(tmp_path_factory):
-    """A run of the default scene logged in-process, plus the expected values."""
+    """Return a run of the default scene logged in-process, plus the expected values."""
     scene = load_scene('default')
     sim = Simulator(scene)
     path = str(tmp_path_factory.mktemp('log') / 'run.mcap')
@@ -210,7 +212,7 @@ def test_split_by_size_and_duration(tmp_path):
     assert len(by_time.paths) == 3
 
 
-CHILD = textwrap.dedent('''
+CHILD = textwrap.dedent("""
     import sys, time
     from std_msgs.msg import Float64MultiArray
     from det_sim_ros.io.mcap_log import Recorder
@@ -227,7 +229,7 @@ CHILD = textwrap.dedent('''
             time.sleep(0.0002)
     finally:
         print('closing', flush=True)
-''')
+""")
 
 
 def _start_child(path, mode='sync'):
@@ -321,8 +323,12 @@ def test_cdr_serializer_matches_rclpy_and_rosbags():
 
 
 def test_flush_by_sim_time_bounds_the_loss_whatever_the_speed(tmp_path):
-    """A frozen wall clock (a free run far faster than real time): the writer still flushes
-    every flush_sim_s of log time, so at most that much sim time is only in memory."""
+    """
+    Check that flushes every flush_sim_s of log time bound the loss at any speed.
+
+    A frozen wall clock (a free run far faster than real time): the writer still flushes
+    every flush_sim_s of log time, so at most that much sim time is only in memory.
+    """
     from std_msgs.msg import Float64MultiArray
     recorder = Recorder(tmp_path / 'fast.mcap', None, clock=lambda: 0.0, flush_sim_s=0.05)
     for k in range(1001):                                  # 1 s of sim time at 1 kHz
@@ -360,8 +366,11 @@ def test_torn_file_is_recovered_in_place(tmp_path):
 
 
 def test_log_directory_is_bounded(tmp_path):
-    """max_files / max_total_mb: the oldest of the recorder's own files are deleted (never the
-    current one, never other files)."""
+    """
+    Check that max_files / max_total_mb delete the oldest of the recorder's own files.
+
+    Never the current one, never other files.
+    """
     from std_msgs.msg import Float64MultiArray
     folder = tmp_path / 'logs'
     folder.mkdir()
@@ -377,7 +386,7 @@ def test_log_directory_is_bounded(tmp_path):
         made += rec.paths
         os.utime(rec.paths[-1])
     left = sorted(p for p in os.listdir(folder) if p.endswith('.mcap'))
-    assert len(left) == 3 and set(os.path.join(folder, p) for p in left) <= set(made[-3:])
+    assert len(left) == 3 and {os.path.join(folder, p) for p in left} <= set(made[-3:])
     assert (folder / 'notes.mcap.txt').exists()
     big = Recorder(folder, None, max_total_mb=0.01, chunk_size=1024)   # 10 KiB in all
     for k in range(2000):
@@ -388,15 +397,18 @@ def test_log_directory_is_bounded(tmp_path):
 
 
 def _write_samples(path, fast, background=False, stress=False):
-    """500 samples of four topics and a command every 7th. ``stress``: what ends a run of the
-    batched writer, often: log times that step back (clamped), a longer payload every 37th
-    sample, a flush every 20 us of log time, a new file every 150 us, a writer queue of 5."""
+    """
+    500 samples of four topics and a command every 7th.
+
+    ``stress``: what ends a run of the batched writer, often: log times that step back (clamped), a
+    longer payload every 37th sample, a flush every 20 us of log time, a new file every 150 us, a
+    writer queue of 5.
+    """
     from det_sim_ros.io.contract import encode_float64_multi_array, encode_joint_state, TOPIC_TYPES
-    options = dict(flush_sim_s=2e-5, split_s=1.5e-4, max_queue=5) if stress else {}
+    options = {'flush_sim_s': 2e-5, 'split_s': 1.5e-4, 'max_queue': 5} if stress else {}
     recorder = Recorder(path, load_scene('default'), chunk_size=2048, background=background,
-                        flush_period_s=1e9, **options)   # no wall-clock flushes: comparable
-    if not fast:
-        recorder._fast = None   # the plain mcap add_message path
+                        flush_period_s=1e9, packing=fast,   # False: mcap's add_message path
+                        **options)   # no wall-clock flushes: comparable
     topics = ['deflection', 'displacement', 'charge', 'current']
     for k in range(500):
         t = k * 1000 - (2500 if stress and k % 11 == 5 else 0)
@@ -408,7 +420,7 @@ def _write_samples(path, fast, background=False, stress=False):
                 for i in range(len(topics))]
         recorder.record_sample(t, topics, data, TOPIC_TYPES)
         if fast and not background:
-            assert recorder._fast is not None
+            assert recorder.packing
     recorder.close()
     assert recorder.fault == '' and recorder.messages == 500 * 4 + 72
     assert (recorder.clamped > 0) == stress
@@ -419,10 +431,14 @@ def _write_samples(path, fast, background=False, stress=False):
                                                 (False, True), (True, True)])
 def test_fast_sample_path_writes_the_same_file_as_add_message(tmp_path, monkeypatch, background,
                                                               stress):
-    """record_sample's batched writer (compiled record packing, runs of samples), record's
+    """
+    Check that the batched sample writer gives the bytes mcap's add_message gives.
+
+    record_sample's batched writer (compiled record packing, runs of samples), record's
     single messages (and the writer thread) give the bytes mcap's own add_message gives:
     records, chunk indexes and statistics; also when clamped times, other payload sizes,
-    flushes and file splits end the runs."""
+    flushes and file splits end the runs.
+    """
     import time as time_module
     monkeypatch.setattr(time_module, 'time_ns', lambda: 1234)   # the wall start in the metadata
     slow = _write_samples(tmp_path / 'slow.mcap', fast=False, stress=stress)
@@ -440,9 +456,13 @@ def test_fast_sample_path_writes_the_same_file_as_add_message(tmp_path, monkeypa
 
 
 def test_pack_records_is_the_records_of_one_by_one_writes():
-    """_ckernel.pack_records: MCAP Message records (opcode 5, length, channel, sequence, log
+    """
+    Check that _ckernel.pack_records writes the records of one-by-one writes.
+
+    _ckernel.pack_records: MCAP Message records (opcode 5, length, channel, sequence, log
     and publish time, payload), sequences counting up per sample; it stops before a row of
-    other payload sizes and refuses bad arguments."""
+    other payload sizes and refuses bad arguments.
+    """
     from det_sim_ros.core._ckernel import pack_records
     rows = [[b'ab', b'xyz'], (b'cd', b'uvw'), [b'e', b'rst']]
     records, count = pack_records((3, 70000 % 65536), [5, 9], [10, 2**40, 2**41], rows,
@@ -464,9 +484,13 @@ def test_pack_records_is_the_records_of_one_by_one_writes():
 
 
 def test_background_queue_stays_bounded_when_the_writer_falls_behind(tmp_path):
-    """A free run records faster than the writer thread gets the GIL: past max_queue records
+    """
+    Check that the writer queue stays bounded when the writer thread falls behind.
+
+    A free run records faster than the writer thread gets the GIL: past max_queue records
     the recording thread writes the queue itself, so memory and what a SIGKILL could lose stay
-    bounded; everything lands, in order."""
+    bounded; everything lands, in order.
+    """
     from det_sim_ros.io.contract import encode_joint_state, TOPIC_TYPES
     recorder = Recorder(tmp_path / 'bounded.mcap', None, background=True, max_queue=8)
     topics = ['deflection', 'displacement']
@@ -482,10 +506,14 @@ def test_background_queue_stays_bounded_when_the_writer_falls_behind(tmp_path):
     assert times == [k * 1000 for k in range(3000)]
 
 
-def test_background_recording_drops_nothing_while_the_writer_switches_files(tmp_path,
-                                                                          monkeypatch):
-    """The writer thread owns the MCAP writer (None for a moment between two files): records
-    queued meanwhile by the node's thread must all land, none counted as dropped."""
+def test_background_recording_drops_nothing_while_the_writer_switches_files(
+        tmp_path, monkeypatch):
+    """
+    Check that records queued while the writer thread switches files all land.
+
+    The writer thread owns the MCAP writer (None for a moment between two files): records
+    queued meanwhile by the node's thread must all land, none counted as dropped.
+    """
     import threading
     import time as _time
     from std_msgs.msg import Float64MultiArray

@@ -17,6 +17,7 @@ import glob
 import math
 import os
 import random
+import shutil
 import signal
 import subprocess
 import sys
@@ -441,10 +442,12 @@ def test_node_repairs_a_torn_log_in_its_directory_at_start(tmp_path, harness):
     from det_sim_ros.io.mcap_log import Recorder
     folder = tmp_path / 'logs'
     torn = folder / 'det_sim_20260101-000000_1.mcap'
-    recorder = Recorder(torn, None, flush_sim_s=0.01)
+    recorder = Recorder(tmp_path / 'live.mcap', None, flush_sim_s=0.01)
     for k in range(100):
         recorder.record('voltage_command', Float64MultiArray(data=[float(k)]), k * 1_000_000)
-    recorder._stream.close()                       # the crash: never finished
+    folder.mkdir()
+    shutil.copyfile(recorder.path, torn)   # the crash: what is on disk before the file's end
+    recorder.close()
     with open(torn, 'r+b') as stream:
         stream.truncate(os.path.getsize(torn) - 10)
     assert is_torn(str(torn))

@@ -1,7 +1,8 @@
 """
-CDR (XCDR1, the encoding ROS 2 and rosbag2 use): the one writer and the one reader of the
-package, and the generic message codec built on them from a rosidl message class's
-``SLOT_TYPES`` (rosidl's generated classes only: no rclpy).
+CDR (XCDR1, the encoding ROS 2 and rosbag2 use): the package's one writer and one reader.
+
+Also the generic message codec built on them from a rosidl message class's ``SLOT_TYPES``
+(rosidl's generated classes only: no rclpy).
 
 Layout rules: a 4-byte encapsulation header (0x00 0x01 = little endian, 0x00 0x00 = big endian,
 then two option bytes), then the fields; a primitive of size s is aligned to a multiple of s
@@ -50,12 +51,12 @@ class Writer:
             self.buf += _ZEROS[:pad]
 
     def u32(self, value: int) -> None:
-        """A uint32."""
+        """Write a uint32."""
         self.align(4)
         self.buf += _U32.pack(value)
 
     def i32(self, value: int) -> None:
-        """An int32."""
+        """Write an int32."""
         self.align(4)
         self.buf += struct.pack('<i', value)
 
@@ -65,21 +66,25 @@ class Writer:
         self.buf += packer.pack(value)
 
     def string(self, text: str) -> None:
-        """A UTF-8 string, its length counting the NUL."""
+        """Write a UTF-8 string, its length counting the NUL."""
         data = text.encode()
         self.u32(len(data) + 1)
         self.buf += data
         self.buf += b'\0'
 
     def strings(self, texts: Sequence[str]) -> None:
-        """A string sequence."""
+        """Write a string sequence."""
         self.u32(len(texts))
         for text in texts:
             self.string(text)
 
     def numbers(self, code: str, values, counted: bool = True) -> int:
-        """A sequence (``counted``) or fixed array of one primitive type (struct ``code``);
-        returns the offset of its first value (for in-place updates)."""
+        """
+        Write a sequence or fixed array of one primitive type; return its first value's offset.
+
+        A sequence if ``counted``, else a fixed array, of struct ``code`` values; the offset is
+        for in-place updates.
+        """
         n = len(values)
         if counted:
             self.u32(n)
@@ -101,22 +106,23 @@ class Writer:
         return offset
 
     def doubles(self, values) -> int:
-        """A float64 sequence; returns the offset of its first value."""
+        """Write a float64 sequence; return the offset of its first value."""
         return self.numbers('d', np.asarray(values, dtype='<f8').reshape(-1))
 
     def stamp(self, t_ns: int) -> None:
-        """A builtin_interfaces/Time (int32 sec, uint32 nanosec) of ``t_ns``."""
+        """Write a builtin_interfaces/Time (int32 sec, uint32 nanosec) of ``t_ns``."""
         sec, nanosec = divmod(int(t_ns), NS)
         self.i32(sec)
         self.u32(nanosec)
 
     def to_bytes(self) -> bytes:
-        """The message's bytes."""
+        """Return the message's bytes."""
         return bytes(self.buf)
 
 
 class Reader:
-    """CDR of either byte order (from the encapsulation header), checked against its length.
+    """
+    CDR of either byte order (from the encapsulation header), checked against its length.
 
     :raises CdrError: an unknown header, a value past the end, a bad string.
     """
@@ -141,28 +147,31 @@ class Reader:
         return start
 
     def primitive(self, code: str):
-        """One primitive value of struct ``code``."""
+        """Read one primitive value of struct ``code``."""
         size = struct.calcsize(code)
         return struct.unpack_from(self.order + code, self.data, self.take(size, size))[0]
 
     def u32(self) -> int:
-        """A uint32."""
+        """Read a uint32."""
         return struct.unpack_from(self.order + 'I', self.data, self.take(4, 4))[0]
 
     def i32(self) -> int:
-        """An int32."""
+        """Read an int32."""
         return struct.unpack_from(self.order + 'i', self.data, self.take(4, 4))[0]
 
     def count(self, item_size: int) -> int:
-        """A sequence's count, checked to fit in what is left (items of ``item_size`` bytes at
-        least)."""
+        """
+        Read a sequence's count, checked to fit in what is left.
+
+        Its items are of ``item_size`` bytes at least.
+        """
         n = self.u32()
         if n * max(item_size, 1) > len(self.data) - self.pos:
             raise CdrError(f'sequence of {n} items does not fit in {len(self.data)} bytes')
         return n
 
     def string(self) -> str:
-        """A string."""
+        """Read a string."""
         n = self.count(1)
         start = self.take(n, 1)
         raw = self.data[start:start + n]
@@ -174,12 +183,16 @@ class Reader:
             raise CdrError(f'string is not UTF-8: {exc}') from None
 
     def strings(self) -> list[str]:
-        """A string sequence."""
+        """Read a string sequence."""
         return [self.string() for _ in range(self.count(5))]
 
     def numbers_at(self, code: str, n: int | None = None) -> tuple[int, int]:
-        """(offset, count) of a sequence (``n`` None: counted) or fixed array of ``n``
-        primitives of struct ``code``, skipped."""
+        """
+        Skip a sequence or fixed array of primitives; return its (offset, count).
+
+        A sequence if ``n`` is None (counted), else a fixed array of ``n`` primitives of struct
+        ``code``.
+        """
         size = struct.calcsize(code)
         if n is None:
             n = self.count(size)
@@ -188,12 +201,12 @@ class Reader:
         return self.take(size * n, size), n
 
     def numbers(self, code: str, n: int | None = None) -> tuple:
-        """The values of a sequence (``n`` None) or fixed array of primitives."""
+        """Read the values of a sequence (``n`` None) or fixed array of primitives."""
         start, n = self.numbers_at(code, n)
         return struct.unpack_from(f'{self.order}{n}{code}', self.data, start) if n else ()
 
     def doubles(self) -> list[float]:
-        """A float64 sequence."""
+        """Read a float64 sequence."""
         return list(self.numbers('d'))
 
     def doubles_at(self) -> tuple[int, int]:
@@ -201,7 +214,7 @@ class Reader:
         return self.numbers_at('d')
 
     def stamp(self) -> int:
-        """A builtin_interfaces/Time, in ns."""
+        """Read a builtin_interfaces/Time, in ns."""
         sec = self.i32()
         return sec * NS + self.u32()
 
@@ -226,7 +239,7 @@ def split_type(name: str) -> tuple[str, str, str]:
 
 
 def message_class(type_name: str):
-    """The rosidl Python class of ``'pkg/msg/Type'``."""
+    """Return the rosidl Python class of ``'pkg/msg/Type'``."""
     package, kind, type_ = split_type(type_name)
     return getattr(importlib.import_module(f'{package}.{kind}'), type_)
 
@@ -300,9 +313,13 @@ def _message_writer(cls) -> Callable:
 
 
 def serialize(msg) -> bytes:
-    """CDR bytes of a rosidl message, as rosbag2 stores them (encapsulation header included).
+    """
+    Return the CDR bytes of a rosidl message, as rosbag2 stores them.
 
-    :raises TypeError: a field type CDR here does not cover (wide strings)."""
+    The encapsulation header is included.
+
+    :raises TypeError: a field type CDR here does not cover (wide strings).
+    """
     w = Writer()
     _message_writer(type(msg))(w, msg)
     return w.to_bytes()
@@ -350,11 +367,14 @@ def _message_reader(cls) -> Callable:
 
 
 def deserialize(cls, data):
-    """The rosidl message of class ``cls`` (or its type name, 'pkg/msg/Type') from CDR
-    ``data`` (either byte order; trailing bytes, as rclpy's serializer leaves them, are
-    ignored).
+    """
+    Return the rosidl message of class ``cls`` decoded from CDR ``data``.
 
-    :raises CdrError: malformed bytes."""
+    ``cls`` may also be its type name, 'pkg/msg/Type'. Either byte order is read; trailing
+    bytes, as rclpy's serializer leaves them, are ignored.
+
+    :raises CdrError: malformed bytes.
+    """
     if isinstance(cls, str):
         cls = message_class(cls)
     return _message_reader(cls)(Reader(data))

@@ -11,8 +11,8 @@ it (nothing here imports rclpy):
   outputs relative to rest (:func:`structure_channels`);
 - the CDR bytes (XCDR1, the encoding ROS 2 and rosbag2 use; written and read by
   :mod:`det_sim_ros.io.cdr`) of every output sample, written straight from the simulator's
-  output vector (:class:`SampleEncoder`), of /clock, and of the command types; command
-  decoding and validation (:class:`CommandDecoder`).
+  output vector (:class:`SampleEncoder`), of /clock, and of the command types
+  (:mod:`det_sim_ros.io.messages`); command decoding and validation (:class:`CommandDecoder`).
 
 Units are SI throughout: m, m/s, C, A, V, rad, s; times on the wire are ns of sim time.
 """
@@ -27,7 +27,9 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .cdr import CdrError, HEADER_LE, NS, Reader, Writer
+from .cdr import CdrError, HEADER_LE, NS, Writer
+from .messages import (decode_float64_multi_array, decode_joint_state, encode_clock,
+                       encode_float64_multi_array, encode_joint_state, JointStateData)
 from ..core.kernel import SampleCodec
 from ..sim.simulator import inputs_within
 
@@ -78,7 +80,7 @@ _LITTLE = sys.byteorder == 'little'
 
 
 def basename(topic: str) -> str:
-    """A topic's last name ('/ns/voltage_command' -> 'voltage_command')."""
+    """Return a topic's last name ('/ns/voltage_command' -> 'voltage_command')."""
     return topic.rstrip('/').rsplit('/', 1)[-1]
 
 
@@ -97,9 +99,11 @@ def rest_shortening(scene) -> float:
 
 def rest_shortenings(scene) -> list[float]:
     """
-    Rest shortening y0_i (m) of each cell in DET order: cell i alone at 0 V
-    (``scene.cell_scene(i)``). Cells with identical physics share one statics solve, so an array
-    of identical copies costs one solve; an array with spread costs one per copy (about 20 ms).
+    Return the rest shortening y0_i (m) of each cell in DET order.
+
+    Cell i is alone at 0 V (``scene.cell_scene(i)``). Cells with identical physics share one
+    statics solve, so an array of identical copies costs one solve; an array with spread costs
+    one per copy (about 20 ms).
     """
     cells = scene.cell_physics()
     template = scene.cell_scene(0)
@@ -112,8 +116,10 @@ def rest_shortenings(scene) -> list[float]:
 
 def structure_channels(model, y0) -> tuple:
     """
-    The structure topic's contract for a model: (output indices, published names, signs, rest
-    values). Empty for structures without outputs ('single', 'array').
+    Return the structure topic's contract for a model.
+
+    The contract is (output indices, published names, signs, rest values); empty for
+    structures without outputs ('single', 'array').
 
     The structure outputs are linear in the cells' end shortenings (Model.structure_map P), so
     their rest values are P @ y0.
@@ -131,8 +137,10 @@ def structure_channels(model, y0) -> tuple:
 
 class OutputContract:
     """
-    What sim_node publishes for a model, as arrays: per-DET channels (names ``det_names``, rest
-    shortenings ``y0``) and the structure topic (``structure_names``, empty if none).
+    What sim_node publishes for a model, as arrays.
+
+    Per-DET channels (names ``det_names``, rest shortenings ``y0``) and the structure topic
+    (``structure_names``, empty if none).
 
     :param y0: per-DET rest shortenings (default: computed as the node does).
     """
@@ -156,97 +164,37 @@ class OutputContract:
 
     @property
     def topics(self) -> list[str]:
-        """The output topics, structure topic last (if the model has one)."""
+        """Return the output topics, structure topic last (if the model has one)."""
         return list(self.fields) + ([self.structure_topic] if self.structure_names else [])
 
     def names(self, topic: str) -> list[str]:
-        """The JointState ``name`` list of an output topic."""
+        """Return the JointState ``name`` list of an output topic."""
         return list(self.structure_names) if topic == self.structure_topic else self.det_names
 
     def values(self, out, topic: str, field: str) -> np.ndarray:
-        """The published array of one topic field from an output vector (output_names order)."""
+        """Return one topic field's published array from an output vector (output_names order)."""
         values = np.asarray(out)[self.index[(topic, field)]]
         return self.y0 - values if (topic, field) in RELATIVE_TO_Y0 else values
 
     def structure(self, out) -> np.ndarray:
-        """The structure topic's positions from an output vector."""
+        """Return the structure topic's positions from an output vector."""
         return self._s_sign * (np.asarray(out)[self._s_idx] - self._s_rest)
 
     def encoder(self) -> 'SampleEncoder':
-        """A :class:`SampleEncoder` for this contract (preallocated buffers, one per topic)."""
+        """
+        Return a :class:`SampleEncoder` for this contract.
+
+        Its buffers are preallocated, one per topic.
+        """
         return SampleEncoder(self)
-
-
-# -- CDR messages of the contract (the codec: det_sim_ros.io.cdr) --------------------------------
-
-@dataclasses.dataclass
-class JointStateData:
-    """The fields of a sensor_msgs/JointState (stamp in ns)."""
-
-    stamp_ns: int = 0
-    frame_id: str = ''
-    name: list = dataclasses.field(default_factory=list)
-    position: list = dataclasses.field(default_factory=list)
-    velocity: list = dataclasses.field(default_factory=list)
-    effort: list = dataclasses.field(default_factory=list)
-
-
-def encode_joint_state(name=(), position=(), velocity=(), effort=(), stamp_ns: int = 0,
-                       frame_id: str = '') -> bytes:
-    """CDR bytes of a sensor_msgs/JointState."""
-    w = Writer()
-    w.stamp(stamp_ns)
-    w.string(frame_id)
-    w.strings(list(name))
-    for values in (position, velocity, effort):
-        w.doubles(values)
-    return w.to_bytes()
-
-
-def decode_joint_state(data) -> JointStateData:
-    """The fields of a CDR sensor_msgs/JointState. :raises CdrError: malformed bytes."""
-    r = Reader(data)
-    return JointStateData(r.stamp(), r.string(), r.strings(), r.doubles(), r.doubles(),
-                          r.doubles())
-
-
-def encode_float64_multi_array(data=(), dims: Sequence[tuple] = (), data_offset: int = 0) -> bytes:
-    """CDR bytes of a std_msgs/Float64MultiArray (``dims``: (label, size, stride) tuples)."""
-    w = Writer()
-    w.u32(len(dims))
-    for label, size, stride in dims:
-        w.string(label)
-        w.u32(size)
-        w.u32(stride)
-    w.u32(data_offset)
-    w.doubles(data)
-    return w.to_bytes()
-
-
-def decode_float64_multi_array(data) -> tuple[list[float], list[tuple], int]:
-    """(data, dims, data_offset) of a CDR std_msgs/Float64MultiArray."""
-    r = Reader(data)
-    dims = [(r.string(), r.u32(), r.u32()) for _ in range(r.count(12))]
-    offset = r.u32()
-    return r.doubles(), dims, offset
-
-
-# a Clock is the header and one stamp: Writer.stamp's layout in one pack (it is published
-# every step of a free run); test_contract holds it to the Writer's bytes
-_CLOCK = struct.Struct('<4siI')
-
-
-def encode_clock(t_ns: int) -> bytes:
-    """CDR bytes of a rosgraph_msgs/Clock at sim time ``t_ns``."""
-    sec, nanosec = divmod(int(t_ns), NS)
-    return _CLOCK.pack(HEADER_LE, sec, nanosec)
 
 
 @dataclasses.dataclass(frozen=True)
 class SampleWire:
     """
-    The named fields the compiled encoder (``_ckernel.SampleCodec``) is built from: the
-    messages' bytes with their constant parts (``template``, each message from
+    The named fields the compiled encoder (``_ckernel.SampleCodec``) is built from.
+
+    The messages' bytes with their constant parts (``template``, each message from
     ``message_start[k]``), and per published double its ``source`` in the output vector, its
     ``op`` (0: v; 1: a - v, the displacement y0 - y; 2: a (v - b), the structure outputs
     sign (v - rest)), constants ``a`` and ``b``, and byte ``position``; each message's header
@@ -265,8 +213,9 @@ class SampleWire:
 
 class SampleEncoder:
     """
-    The CDR bytes of every output topic for one sample, straight from the simulator's output
-    vector. :meth:`encode` is one compiled call (``_ckernel.SampleCodec``, built from the
+    The CDR bytes of every output topic for one sample, from the simulator's output vector.
+
+    :meth:`encode` is one compiled call (``_ckernel.SampleCodec``, built from the
     :class:`SampleWire` fields here): it reads the published doubles, computes y0 - y and the
     structure outputs, and writes them and the stamp into each message's preallocated bytes
     (~1 us per sample; the struct packs below cost 4-7 us for one DET and ~50 us for 100).
@@ -341,8 +290,11 @@ class SampleEncoder:
             raise NotImplementedError('SampleEncoder needs a little-endian host')
 
     def values(self, out) -> list[float]:
-        """The published doubles of a sample, all topics, in message order (y0 - y and the
-        structure outputs computed)."""
+        """
+        Return the published doubles of a sample, all topics, in message order.
+
+        y0 - y and the structure outputs are computed.
+        """
         values = out.tolist() if hasattr(out, 'tolist') else list(out)
         published = [values[i] for i in self._gather]
         for slot, y0 in self._y0:
@@ -353,15 +305,18 @@ class SampleEncoder:
         return published
 
     def encode(self, out, t_ns: int) -> list[bytes]:
-        """The bytes of each topic of :attr:`topics` (same order) for output vector ``out``
-        (float64), stamped ``t_ns``: new bytes objects (earlier ones are not changed)."""
+        """
+        Return the bytes of each topic of :attr:`topics` for output vector ``out``.
+
+        The topics in the same order; ``out`` is float64; stamped ``t_ns``. The bytes objects are
+        new (earlier ones are not changed).
+        """
         if type(out) is not np.ndarray or out.dtype != np.float64 or not out.flags.c_contiguous:
             out = np.ascontiguousarray(out, dtype=np.float64)
         return self._codec.encode(out, t_ns)
 
     def encode_values(self, published: list, t_ns: int) -> list[bytes]:
-        """The bytes of each topic from :meth:`values` (the reference :meth:`encode` is held
-        to)."""
+        """Return the bytes of each topic from :meth:`values` (:meth:`encode`'s reference)."""
         sec, nanosec = divmod(t_ns, NS)
         result = []
         for pack, parts in self._layouts:
@@ -380,10 +335,12 @@ class SampleEncoder:
 @dataclasses.dataclass(frozen=True)
 class Command:
     """
-    A decoded voltage command: the full voltage vector in DET order (``volts``), or a refusal
-    (``volts`` None and ``reason`` says why). ``clamped`` names the channels outside
-    [0, v_max] (the simulator clamps them). ``canonical``: the message's CDR bytes re-encoded
-    with zero padding (what the log stores, so equal commands give equal logs).
+    A decoded voltage command: the full voltage vector in DET order, or a refusal.
+
+    ``volts``: the voltage vector, or None for a refusal (``reason`` says why). ``clamped``
+    names the channels outside [0, v_max] (the simulator clamps them). ``canonical``: the
+    message's CDR bytes re-encoded with zero padding (what the log stores, so equal commands give
+    equal logs).
     """
 
     volts: list | None
@@ -426,8 +383,11 @@ class CommandDecoder:
         self._unpack_vector = struct.Struct(f'<{n}d').unpack_from
 
     def decode(self, topic: str, data, held: Sequence[float]) -> Command:
-        """Decode CDR ``data`` received on ``topic`` (a name of :data:`COMMAND_TOPICS`);
-        ``held``: the voltages now (a JointState may name a subset)."""
+        """
+        Decode CDR ``data`` received on ``topic`` (a name of :data:`COMMAND_TOPICS`).
+
+        ``held``: the voltages now (a JointState may name a subset).
+        """
         if topic == COMMAND_TOPIC and len(data) >= self._vector_size \
                 and data[4:16] == self._vector_head[4:16] and data[:2] == b'\x00\x01':
             volts = list(self._unpack_vector(data, 20))
@@ -445,7 +405,7 @@ class CommandDecoder:
             return Command(None, f'{topic}: malformed message ({exc})')
 
     def from_vector(self, values, canonical: bytes = b'') -> Command:
-        """A full voltage vector in DET order."""
+        """Return the command of a full voltage vector in DET order."""
         volts = [float(v) for v in values]
         n = len(self.det_names)
         if len(volts) != n:
@@ -489,6 +449,10 @@ class CommandDecoder:
 
 
 def clamp_message(topic: str, clamped: Sequence[str], v_max: float) -> str:
-    """The clamp warning for a command's ``clamped`` channels (:attr:`Command.clamped`):
-    'det0: -5 V clamped to [0, 3000] V (voltage_command)'."""
+    """
+    Return the clamp warning for a command's ``clamped`` channels.
+
+    ``clamped`` as in :attr:`Command.clamped`; e.g. 'det0: -5 V clamped to [0, 3000] V
+    (voltage_command)'.
+    """
     return f'{_name_list(clamped)} clamped to [0, {v_max:g}] V ({topic})'

@@ -1,8 +1,10 @@
 """
-One MCAP file being written in the rosbag2 conventions: its start (header, the run's metadata
-record and scene attachment), its schemas and channels, its messages (through the record packer
-when mcap's internals allow, else ``Writer.add_message``: the same bytes), its flushes and its
-end (the counters' metadata record, the summary).
+One MCAP file being written in the rosbag2 conventions.
+
+Its start (header, the run's metadata record and scene attachment), its schemas and
+channels, its messages (through the record packer when mcap's internals allow, else
+``Writer.add_message``: the same bytes), its flushes and its end (the counters' metadata
+record, the summary).
 """
 
 from __future__ import annotations
@@ -45,9 +47,12 @@ class LogFile:
 
     def start(self, version: str, info: Mapping[str, str], scene_yaml: str,
               log_time: int) -> None:
-        """The header, the run's metadata record ``info`` (:func:`file_info`: its
-        ``wall_start_ns`` is filled in here) and the scene attachment (none for ''), at log time
-        ``log_time``; flushed."""
+        """
+        Write the header, the run's metadata record and the scene attachment; flush.
+
+        The metadata record is ``info`` (:func:`file_info`: its ``wall_start_ns`` is filled in
+        here); there is no scene attachment for ''; all at log time ``log_time``.
+        """
         from mcap.writer import Writer
         writer = Writer(self.stream, chunk_size=self._chunk_size,
                         compression=_compression(self._compression))
@@ -66,11 +71,11 @@ class LogFile:
         self.packer = RecordPacker.attach(writer) if self._packing else None
 
     def size(self) -> int:
-        """The file's size once everything written is flushed."""
+        """Return the file's size once everything written is flushed."""
         return self.stream.tell()
 
     def register(self, topic: str, type_name: str, qos=None) -> int:
-        """A channel for ``topic`` (its type's schema on first use); its id."""
+        """Return a channel for ``topic`` (its type's schema on first use); its id."""
         schema_id = self._schemas.get(type_name)
         if schema_id is None:
             schema_id = self.writer.register_schema(
@@ -83,7 +88,7 @@ class LogFile:
         return channel_id
 
     def add(self, channel_id: int, sequence: int, data: bytes, log_time: int) -> None:
-        """One message (its publish time is its log time)."""
+        """Write one message (its publish time is its log time)."""
         if self.packer is not None:   # the same records, one pack (a marker frame: 26 -> 8 us)
             self.packer.add(((channel_id, sequence, data),), log_time)
         else:
@@ -119,7 +124,7 @@ class LogFile:
 
 def file_info(version: str, scene_yaml: str, file_index: int,
               metadata: Mapping[str, str]) -> dict:
-    """The ``det_sim_ros`` metadata record of a file (``wall_start_ns`` added when opened)."""
+    """Return a file's ``det_sim_ros`` metadata record (``wall_start_ns`` added when opened)."""
     info = {'version': version, 'scene_yaml': scene_yaml, 'time_base': 'sim_time',
             'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'), 'wall_start_ns': None,
             'file_index': str(file_index)}
@@ -128,7 +133,7 @@ def file_info(version: str, scene_yaml: str, file_index: int,
 
 
 def scene_text(scene) -> str:
-    """The YAML text stored in a log for a Scene, its YAML text or mapping ('' for None)."""
+    """Return the YAML text stored in a log for a Scene, its YAML text or mapping ('' for None)."""
     if scene is None:
         return ''
     if isinstance(scene, str):

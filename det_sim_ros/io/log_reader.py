@@ -1,8 +1,10 @@
 """
-Reading MCAP run logs: one scanning path for messages one by one (:meth:`LogReader.messages`)
-and for messages as blocks of records (:meth:`LogReader.blocks`, the column reader of
-``det_sim plot`` builds on it), both from finished and unfinished files; :func:`recover` and
-:func:`recover_unfinished` rewrite unfinished files as finished, indexed ones.
+Reading MCAP run logs, finished or not, message by message or in blocks.
+
+One scanning path for messages one by one (:meth:`LogReader.messages`) and for messages as
+blocks of records (:meth:`LogReader.blocks`, the column reader of ``det_sim plot`` builds on
+it), both from finished and unfinished files; :func:`recover` and :func:`recover_unfinished`
+rewrite unfinished files as finished, indexed ones.
 
 The file is read here once, record by record (their lengths only); mcap's
 record classes parse the few records the reader needs (header, schemas, channels, metadata,
@@ -45,14 +47,18 @@ class LogMessage:
     data: bytes
 
     def decode(self):
-        """The rosidl message (no rclpy needed)."""
+        """Return the rosidl message (no rclpy needed)."""
         return deserialize(self.type_name, self.data)
 
 
 @dataclasses.dataclass(frozen=True)
 class RecordBlock:
-    """Message records in file order: ``raw`` bytes (a chunk's records, or one record) and the
-    byte offset of each Message record in it (``positions``)."""
+    """
+    Message records in file order, with the byte offset of each.
+
+    ``raw``: the bytes (a chunk's records, or one record); ``positions``: the byte offset of
+    each Message record in it.
+    """
 
     raw: bytes
     positions: list
@@ -87,10 +93,13 @@ def _stream(body: bytes):
 
 
 def _top_records(stream) -> Iterator[tuple[int, bytes]]:
-    """(opcode, the bytes after its length) of each record up to the Footer, read in turn;
-    the data section's CRC checked at DataEnd.
+    """
+    Yield (opcode, the bytes after its length) of each record up to the Footer.
 
-    :raises ValueError: no magic, a torn record (EOFError), a CRC mismatch."""
+    The records are read in turn; the data section's CRC is checked at DataEnd.
+
+    :raises ValueError: no magic, a torn record (EOFError), a CRC mismatch.
+    """
     if stream.read(len(MAGIC)) != MAGIC:
         raise ValueError('not an MCAP file (no magic)')
     crc, at, size = zlib.crc32(MAGIC), len(MAGIC), os.fstat(stream.fileno()).st_size
@@ -112,7 +121,7 @@ def _top_records(stream) -> Iterator[tuple[int, bytes]]:
 
 
 def _chunk_data(chunk) -> bytes:
-    """A chunk's records, decompressed and checked against its CRC."""
+    """Return a chunk's records, decompressed and checked against its CRC."""
     if chunk.compression == 'zstd':
         import zstandard
         data = zstandard.ZstdDecompressor().decompress(
@@ -165,7 +174,7 @@ class LogReader:
             self.qos.setdefault(record.topic, record.metadata['offered_qos_profiles'])
 
     def _walk_chunk(self, raw: bytes) -> RecordBlock:
-        """The chunk's Message records as a block; its schemas and channels read."""
+        """Return the chunk's Message records as a block; its schemas and channels read."""
         from mcap.records import Channel, Schema
         positions, p, n = [], 0, len(raw)
         unpack, head = RECORD_HEAD.unpack_from, RECORD_HEAD.size
@@ -188,8 +197,12 @@ class LogReader:
         return RecordBlock(raw, positions)
 
     def _record(self, op: int, body: bytes) -> RecordBlock | bool | None:
-        """Take one top-level record (opcode, bytes after its length): a block of messages,
-        True for the Footer (False: a Footer without summary), else None."""
+        """
+        Take one top-level record (opcode, bytes after its length).
+
+        Return a block of messages, True for the Footer (False: a Footer without summary), else
+        None.
+        """
         from mcap import records
         if op == OP_CHUNK:
             return self._walk_chunk(_chunk_data(records.Chunk.read(_stream(body))))
@@ -214,7 +227,7 @@ class LogReader:
         return None
 
     def _file_blocks(self, path: str, stop_at_message: bool = False) -> Iterator[RecordBlock]:
-        """The message blocks of one file; the other records read into the attributes."""
+        """Yield the message blocks of one file; the other records read into the attributes."""
         self._schemas, self.channels = {}, {}
         finished = False
         with open(path, 'rb') as stream:   # a missing or unreadable file is the caller's error
@@ -237,8 +250,11 @@ class LogReader:
             self.complete = False
 
     def blocks(self) -> Iterator[RecordBlock]:
-        """The Message records of all files as blocks, in file order; :attr:`channels` holds
-        the channels of the block's file when it is yielded."""
+        """
+        Yield the Message records of all files as blocks, in file order.
+
+        :attr:`channels` holds the channels of the block's file when it is yielded.
+        """
         self.complete = True
         for path in self.files:
             yield from self._file_blocks(path)
@@ -253,7 +269,7 @@ class LogReader:
         return self
 
     def messages(self, topics: Iterable[str] | None = None) -> Iterator[LogMessage]:
-        """All readable messages of all files, in file order (= non-decreasing log time)."""
+        """Yield all readable messages of all files, in file order (= non-decreasing log time)."""
         wanted = None if topics is None else {_fully_qualified(t) for t in topics}
         unpack = MESSAGE_HEAD.unpack_from
         for block in self.blocks():
@@ -268,13 +284,13 @@ class LogReader:
 
     @property
     def info(self) -> dict[str, str]:
-        """The ``det_sim_ros`` metadata record (version, scene_yaml, stepper, ...)."""
+        """Return the ``det_sim_ros`` metadata record (version, scene_yaml, stepper, ...)."""
         self.scan_info()
         return self.metadata.get(METADATA_NAME, {})
 
     @property
     def scene_yaml(self) -> str:
-        """The scene YAML the run used ('' if the log has none)."""
+        """Return the scene YAML the run used ('' if the log has none)."""
         self.scan_info()
         data = self.attachments.get(SCENE_ATTACHMENT)
         return data.decode() if data is not None else self.info.get('scene_yaml', '')
@@ -328,10 +344,12 @@ def recover(source, target: str, compression: str = 'zstd') -> dict:
 
 def recover_unfinished(folder: str, exclude: Iterable[str] = ()) -> list[tuple[str, dict]]:
     """
-    Repair every torn ``*.mcap`` in ``folder`` (one that does not end in a valid footer: power
-    loss, or a kill inside a flush's write) in place: its readable part is rewritten as a
-    finished, indexed file (:func:`recover`, through a temporary file and an atomic rename).
-    Files that end in the writer's provisional end are valid MCAP already and left alone.
+    Repair every torn ``*.mcap`` in ``folder`` in place.
+
+    A torn file does not end in a valid footer (power loss, or a kill inside a flush's write):
+    its readable part is rewritten as a finished, indexed file (:func:`recover`, through a
+    temporary file and an atomic rename). Files that end in the writer's provisional end are
+    valid MCAP already and left alone.
 
     :returns: ``[(path, {'messages': n, 'complete': False}), ...]`` for the repaired files.
     """

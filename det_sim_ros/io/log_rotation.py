@@ -35,9 +35,11 @@ def _first_path(path: str, prefix: str) -> str:
 
 class LogRotation:
     """
-    File rotation (the next file's path, whether a split is due) and retention (the oldest
-    files deleted to respect the limits). :attr:`paths`: the files written, in order;
-    :attr:`deleted`: the old files removed.
+    File rotation (next path, due splits) and retention (oldest files deleted).
+
+    Rotation: the next file's path, whether a split is due; retention: the oldest files
+    deleted to respect the limits. :attr:`paths`: the files written, in order; :attr:`deleted`:
+    the old files removed.
 
     :raises OSError: the path's directory cannot be made.
     """
@@ -60,14 +62,14 @@ class LogRotation:
 
     # -- rotation ----------------------------------------------------------------------------
     def next_path(self) -> str:
-        """The path of the next file (the first, then the splits)."""
+        """Return the path of the next file (the first, then the splits)."""
         if not self.paths:
             return self._base
         stem = self._base[:-5] if self._base.endswith('.mcap') else self._base
         return f'{stem}_{len(self.paths):03d}.mcap'
 
     def add(self, path: str) -> None:
-        """A file was created at ``path`` (now the current one, in :attr:`paths`)."""
+        """Note a file created at ``path`` (now the current one, in :attr:`paths`)."""
         self.paths.append(path)
         self.file_start_t = None
 
@@ -79,18 +81,24 @@ class LogRotation:
         return False
 
     def split_due(self, t: int, size: int) -> bool:
-        """The current file (``size`` bytes) has reached split_mb, or its time span at the
-        message at log time ``t``."""
+        """
+        Return whether the current file has reached split_mb or its time span.
+
+        ``size``: the current file's bytes; ``t``: the log time of the message being written.
+        """
         return bool((self.split_ns and t - self.file_start_t >= self.split_ns)
                     or self.size_reached(size))
 
     def size_reached(self, size: int) -> bool:
-        """A file of ``size`` bytes is due to be split."""
+        """Return whether a file of ``size`` bytes is due to be split."""
         return bool(self.split_bytes and size >= self.split_bytes)
 
     def run_end(self, times, end: int) -> int:
-        """How many of the (non-decreasing) log ``times`` (at most ``end``) belong in the
-        current file."""
+        """
+        Return how many log ``times`` (at most ``end``) belong in the current file.
+
+        ``times`` are non-decreasing.
+        """
         if not self.split_ns:
             return end
         return bisect.bisect_left(times, self.file_start_t + self.split_ns, 0, end)
@@ -98,7 +106,7 @@ class LogRotation:
     # -- retention ---------------------------------------------------------------------------
     @property
     def bounded(self) -> bool:
-        """The directory has limits (max_total_mb or max_files)."""
+        """Return whether the directory has limits (max_total_mb or max_files)."""
         return bool(self.max_total_bytes or self.max_files)
 
     def _pattern(self):
@@ -109,8 +117,11 @@ class LogRotation:
         return folder, re.compile(re.escape(os.path.basename(stem)) + r'(_\d{3})?\.mcap$')
 
     def opened(self, current: str, size: int) -> None:
-        """A file was opened: list the other files of the pattern (oldest first), then
-        enforce the limits."""
+        """
+        Note an opened file: list the pattern's other files, then enforce the limits.
+
+        The other files of the pattern are listed oldest first.
+        """
         if not self.bounded:
             return
         folder, pattern = self._pattern()
@@ -127,15 +138,19 @@ class LogRotation:
         self.enforce(size)
 
     def closed(self, path: str) -> None:
-        """A file was finished: it is an old file now."""
+        """Note a finished file: it is an old file now."""
         try:
             self._old_files.append((path, os.path.getsize(path)))
         except OSError:
             pass
 
     def enforce(self, current_size: int) -> None:
-        """Delete the oldest files until the directory, with the current file of
-        ``current_size`` bytes, is within max_total_mb / max_files."""
+        """
+        Delete the oldest files until the directory is within the limits.
+
+        The limits are max_total_mb / max_files, counted with the current file of
+        ``current_size`` bytes.
+        """
         if not self.bounded:
             return
         while self._old_files and (

@@ -1,7 +1,8 @@
 """
-``det_sim plot LOG.mcap``: every channel of a sim_node log against sim time, as one PNG (one
-panel per quantity, every DET a line, the voltage commands as steps) and a text summary.
-Single, plate and array logs alike; no ROS graph needed.
+``det_sim plot LOG.mcap``: every channel of a sim_node log against sim time.
+
+The plot is one PNG (one panel per quantity, every DET a line, the voltage commands as
+steps), with a text summary. Single, plate and array logs alike; no ROS graph needed.
 
 Speed (a 10-minute 1 kHz log holds 2.4 million messages): the CDR payloads of a topic mostly
 share one byte layout (the same DET names, the same array lengths), so they are grouped by
@@ -75,8 +76,12 @@ class LogData:
 # -- CDR layouts (read by det_sim_ros.io.cdr's Reader) -------------------------------------------
 
 def _joint_state_layout(data):
-    """Offsets of a little-endian JointState payload: stamp, names, and (offset, n) of the
-    three arrays (None for big endian: the column reader views the bytes as little endian)."""
+    """
+    Return the offsets of a little-endian JointState payload.
+
+    The stamp, the names, and (offset, n) of the three arrays; None for big endian (the column
+    reader views the bytes as little endian).
+    """
     r = Reader(data)
     if not r.little:
         return None
@@ -102,9 +107,11 @@ def _multiarray_layout(data):
 
 def _columns(by_length, layout_of, decode_slow):
     """
-    Vectorized reading of one topic's payloads, ``by_length``: length -> (order, log times,
-    uint8 matrix of the payloads). Returns groups (order, log times, layout, matrix) and the
-    rows decoded one by one (order, log time, message).
+    Read one topic's payloads vectorized, grouped by payload length.
+
+    ``by_length``: length -> (order, log times, uint8 matrix of the payloads). Returns groups
+    (order, log times, layout, matrix) and the rows decoded one by one (order, log time,
+    message).
     """
     groups, slow = [], []
     for length, (order, times, matrix) in by_length.items():
@@ -143,10 +150,11 @@ _LENGTH, _CHANNEL, _LOG_TIME, _PAYLOAD = (MESSAGE_FIELDS[name] for name in
 
 class _Scan:
     """
-    All messages of a log as per-topic uint8 matrices grouped by payload length: each record
-    block of :meth:`LogReader.blocks` (a chunk's records, walked once by the reader) is read
-    with numpy at its message offsets. Reading stops quietly at a torn record (a file cut by a
-    crash: ``complete`` False), as the reader does.
+    All messages of a log as per-topic uint8 matrices grouped by payload length.
+
+    Each record block of :meth:`LogReader.blocks` (a chunk's records, walked once by the reader)
+    is read with numpy at its message offsets. Reading stops quietly at a torn record (a file
+    cut by a crash: ``complete`` False), as the reader does.
     """
 
     def __init__(self, reader):
@@ -181,7 +189,7 @@ class _Scan:
             entry['parts'].setdefault(dl, []).append((order[sel], log_time[sel], matrix))
 
     def by_length(self, topic):
-        """length -> (order, log times ns, matrix) of one topic (basename match)."""
+        """Return payload length -> (order, log times ns, matrix) of one topic (basename match)."""
         out = {}
         for name, entry in self.topics.items():
             if basename(name) != topic:
@@ -192,12 +200,12 @@ class _Scan:
                 for dl, parts in out.items()}
 
     def type_of(self, topic):
-        """The type name of a topic (basename match), '' if absent."""
+        """Return the type name of a topic (basename match), '' if absent."""
         return next((e['type'] for name, e in self.topics.items() if basename(name) == topic),
                     '')
 
     def basenames(self):
-        """The topics' last names, sorted."""
+        """Return the topics' last names, sorted."""
         return sorted({basename(name) for name in self.topics})
 
 
@@ -307,7 +315,7 @@ def _read_joint_states(by_length, decode):
 
 
 def _applied_voltages(scan, det_names, n_det, v_max, deserialize):
-    """The voltages the node held, as steps: (times s, (n, n_det) V, commands, refused)."""
+    """Return the voltages the node held, as steps: (times s, (n, n_det) V, commands, refused)."""
     events = []    # (order, log time ns, values, joint names or None)
     for topic in COMMAND_TOPICS:
         type_name = scan.type_of(topic)

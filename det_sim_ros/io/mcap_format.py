@@ -1,8 +1,10 @@
 """
-The MCAP bytes this package writes and scans itself: the magic, the opcodes it reads, the Message
-record's head (the one Python statement of the layout ``core/_csrc`` ``pack_records`` writes),
-the provisional end written after every flush, the file that writes it (:class:`TailStream`),
-and the check for a torn file (:func:`is_torn`).
+The MCAP bytes this package writes and scans itself.
+
+The magic, the opcodes it reads, the Message record's head (the one Python statement of the
+layout ``core/_csrc`` ``pack_records`` writes), the provisional end written after every
+flush, the file that writes it (:class:`TailStream`), and the check for a torn file
+(:func:`is_torn`).
 """
 
 from __future__ import annotations
@@ -44,10 +46,12 @@ _FOOTER_SIZE = len(_FOOTER_HEAD) + 20 + len(MAGIC)
 
 class TailStream:
     """
-    The writer's output file: records are collected in memory and written at each flush in one
-    ``pwrite``, followed by the provisional end, at the offset where the next flush continues
-    (so the provisional end is overwritten by it). Between flushes the file on disk is always a
-    complete MCAP. :meth:`finish` writes the writer's real end (after ``Writer.finish``).
+    The writer's output file: records collected in memory, written at each flush.
+
+    Each flush writes them in one ``pwrite``, followed by the provisional end, at the offset where
+    the next flush continues (so the provisional end is overwritten by it). Between flushes the
+    file on disk is always a complete MCAP. :meth:`finish` writes the writer's real end (after
+    ``Writer.finish``).
     """
 
     def __init__(self, path: str):
@@ -61,7 +65,7 @@ class TailStream:
         return len(data)
 
     def tell(self) -> int:
-        """The file's size once what is collected is written."""
+        """Return the file's size once what is collected is written."""
         return self._committed + len(self._pending)
 
     def _commit(self, tail: bytes) -> None:
@@ -91,7 +95,7 @@ class TailStream:
 
 
 def is_torn(path: str) -> bool:
-    """True for an MCAP file that does not end in a valid footer (a cut file)."""
+    """Return True for an MCAP file that does not end in a valid footer (a cut file)."""
     try:
         with open(path, 'rb') as stream:
             stream.seek(0, os.SEEK_END)

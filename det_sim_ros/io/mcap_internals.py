@@ -34,7 +34,7 @@ class McapInternalsChanged(RuntimeError):
 
 
 def mcap_version() -> str:
-    """The installed mcap package's version."""
+    """Return the installed mcap package's version."""
     try:
         from mcap import __version__
     except ImportError:   # pragma: no cover - mcap is a dependency
@@ -59,9 +59,11 @@ def _missing(writer) -> list[str]:
 
 class WriterInternals:
     """
-    The private state of one started ``mcap.Writer`` (chunked): :attr:`statistics`, the chunk
-    builder :attr:`chunk`, :attr:`chunk_size`, :meth:`finalize` (end the chunk if it is full)
-    and :meth:`buffer` (the chunk's record buffer; a new one after each chunk).
+    The private state of one started ``mcap.Writer`` (chunked).
+
+    :attr:`statistics`, the chunk builder :attr:`chunk`, :attr:`chunk_size`, :meth:`finalize`
+    (end the chunk if it is full) and :meth:`buffer` (the chunk's record buffer; a new one after
+    each chunk).
     """
 
     def __init__(self, writer):
@@ -71,21 +73,27 @@ class WriterInternals:
         self.chunk_size = getattr(writer, '_Writer__chunk_size')
 
     def buffer(self):
-        """The BytesIO that holds the records of the chunk in progress."""
+        """Return the BytesIO that holds the records of the chunk in progress."""
         return self.chunk.record_writer._buffer
 
 
 def attach(writer) -> WriterInternals | None:
-    """The internals of ``writer``, or None when mcap does not have them (or the writer does
-    not chunk)."""
+    """
+    Return the internals of ``writer``, or None when mcap does not have them.
+
+    None also when the writer does not chunk.
+    """
     if MessageIndex is None or _missing(writer) or getattr(writer, _WRITER[1]) is None:
         return None
     return WriterInternals(writer)
 
 
 def check() -> None:
-    """Raise :class:`McapInternalsChanged` if the installed mcap's writer lacks an internal the
-    record packer uses."""
+    """
+    Raise :class:`McapInternalsChanged` if the record packer's internals are missing.
+
+    That is, if the installed mcap's writer lacks an internal the record packer uses.
+    """
     from mcap import writer as mcap_writer
     probe = mcap_writer.Writer(io.BytesIO())
     probe.start()
@@ -103,11 +111,14 @@ try:
     from mcap.records import MessageIndex as _McapMessageIndex
 
     class MessageIndex(_McapMessageIndex):
-        """mcap's MessageIndex, written with one pack instead of two calls per entry (with
-        those calls, the index of a 50-sample chunk costs a quarter of the recording)."""
+        """
+        mcap's MessageIndex, written with one pack instead of two calls per entry.
+
+        With those calls, the index of a 50-sample chunk costs a quarter of the recording.
+        """
 
         def write(self, stream):
-            """The record, as mcap writes it."""
+            """Return the record, as mcap writes it."""
             records = self.records
             stream.start_record(0x07)   # Opcode.MESSAGE_INDEX
             stream.write(struct.pack(f'<HI{2 * len(records)}Q', self.channel_id,

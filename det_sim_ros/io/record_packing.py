@@ -18,13 +18,17 @@ __all__ = ['RecordPacker', 'sample_bytes']
 
 
 def sample_bytes(sizes) -> int:
-    """The bytes of one sample's Message records, for payloads of ``sizes``."""
+    """Return the bytes of one sample's Message records, for payloads of ``sizes``."""
     return sum(sizes) + MESSAGE_HEAD.size * len(sizes)
 
 
 def _cover(record, empty: bool, log_time: int) -> None:
-    """Widen ``record``'s message_start_time..message_end_time (the file's statistics or the
-    chunk's) to ``log_time``; ``empty``: it has no message yet."""
+    """
+    Widen ``record``'s message time range to ``log_time``.
+
+    The range is message_start_time..message_end_time, of the file's statistics or the chunk's;
+    ``empty``: it has no message yet.
+    """
     if empty or log_time < record.message_start_time:
         record.message_start_time = log_time
     if log_time > record.message_end_time:
@@ -32,9 +36,11 @@ def _cover(record, empty: bool, log_time: int) -> None:
 
 
 class RecordPacker:
-    """Message records into one started mcap.Writer's chunks (see the module docstring).
+    """
+    Message records into one started mcap.Writer's chunks (see the module docstring).
 
-    Build with :meth:`attach`, which returns None when mcap's internals are not there."""
+    Build with :meth:`attach`, which returns None when mcap's internals are not there.
+    """
 
     def __init__(self, internals: mcap_internals.WriterInternals):
         self._mcap = internals
@@ -43,7 +49,7 @@ class RecordPacker:
 
     @classmethod
     def attach(cls, writer) -> 'RecordPacker | None':
-        """A packer for ``writer``, or None (then write through ``add_message``)."""
+        """Return a packer for ``writer``, or None (then write through ``add_message``)."""
         internals = mcap_internals.attach(writer)
         return cls(internals) if internals is not None else None
 
@@ -52,7 +58,7 @@ class RecordPacker:
         return self._mcap.buffer().tell()
 
     def room(self, sizes) -> int:
-        """How many samples of payload ``sizes`` fit in the chunk in progress."""
+        """Return how many samples of payload ``sizes`` fit in the chunk in progress."""
         return (self.chunk_size - self.chunk_used()) // sample_bytes(sizes)
 
     def _index(self, channel_id: int):
@@ -64,8 +70,11 @@ class RecordPacker:
         return index
 
     def add(self, items, log_time: int) -> None:
-        """Write (channel id, sequence, data) items, all at ``log_time``, as add_message would
-        (a chunk ends after the message that makes it exceed the chunk size)."""
+        """
+        Write (channel id, sequence, data) items, all at ``log_time``, as add_message would.
+
+        A chunk ends after the message that makes it exceed the chunk size.
+        """
         stats, chunk = self._mcap.statistics, self._mcap.chunk
         _cover(stats, stats.message_count == 0, log_time)
         counts, pack = stats.channel_message_counts, MESSAGE_HEAD.pack
@@ -82,8 +91,11 @@ class RecordPacker:
             self._mcap.finalize()
 
     def _offsets(self, channel_ids: tuple, sizes: tuple) -> tuple:
-        """((channel id, record offset), ...) of one sample's records (a sample's payload sizes
-        are fixed for a model, so this is computed once per layout)."""
+        """
+        Return ((channel id, record offset), ...) of one sample's records.
+
+        A sample's payload sizes are fixed for a model, so this is computed once per layout.
+        """
         offsets = self._sample_offsets.get((channel_ids, sizes))
         if offsets is None:
             starts, at = [], 0
@@ -95,10 +107,13 @@ class RecordPacker:
         return offsets
 
     def add_sample(self, channel_ids: tuple, sequences, payloads, log_time: int) -> None:
-        """The messages of one sample (one per channel, all at ``log_time``) as one write:
-        a run of one (:meth:`add_run`). A sample that would end the chunk, or whose payloads
-        are not ``bytes``, goes message by message (:meth:`add`), so chunks end where
-        add_message ends them."""
+        """
+        Write the messages of one sample as one write.
+
+        One message per channel, all at ``log_time``: a run of one (:meth:`add_run`). A sample that
+        would end the chunk, or whose payloads are not ``bytes``, goes message by message
+        (:meth:`add`), so chunks end where add_message ends them.
+        """
         sizes = tuple(map(len, payloads))
         if self.chunk_used() + sample_bytes(sizes) <= self.chunk_size:
             records, count = pack_records(channel_ids, sequences, (log_time,), (payloads,),
@@ -110,10 +125,11 @@ class RecordPacker:
 
     def add_run(self, channel_ids: tuple, sizes: tuple, records: bytes, times) -> None:
         """
-        Consecutive samples of one layout, as add_sample would write them one by one:
+        Write consecutive samples of one layout, as add_sample would one by one.
+
         ``records`` are their Message records (``pack_records``: a sample's records in channel
-        order, ``sizes`` its payload sizes), ``times`` their log times. The caller guarantees
-        the run fits in the chunk, so no message ends it.
+        order, ``sizes`` its payload sizes), ``times`` their log times. The caller guarantees the
+        run fits in the chunk, so no message ends it.
         """
         stats, chunk = self._mcap.statistics, self._mcap.chunk
         buffer = self._mcap.buffer()
@@ -135,9 +151,12 @@ class RecordPacker:
         self._mcap.finalize()
 
     def pack_run(self, channel_ids, firsts, times, rows, sizes) -> int:
-        """Pack and write the samples ``rows`` (payloads per channel) at ``times``, sequences
-        counting from ``firsts``: how many were written (the run stops before a row of other
-        payload sizes)."""
+        """
+        Pack and write the samples ``rows`` at ``times``; return how many were written.
+
+        ``rows`` hold the payloads per channel; sequences count from ``firsts``. The run stops
+        before a row of other payload sizes.
+        """
         records, count = pack_records(channel_ids, firsts, times, rows, sizes)
         if count:
             self.add_run(channel_ids, sizes, records, times[:count])

@@ -68,6 +68,8 @@ class Recorder:
         thread; :meth:`close` writes everything queued before it finishes the file.
     :param max_queue: background mode: when this many records wait, the recording thread
         writes the queue itself before it goes on (:mod:`det_sim_ros.io.writer_thread`).
+    :param packing: write messages through the compiled record packer where mcap's internals
+        allow it; False: through mcap's ``Writer.add_message`` (the same bytes).
     """
 
     def __init__(self, path, scene=None, *, qos_by_topic: Mapping | None = None,
@@ -79,7 +81,8 @@ class Recorder:
                  on_fault: Callable[[str], None] | None = None,
                  clock: Callable[[], float] = time.monotonic, prefix: str = 'det_sim',
                  namespace: str = '/', background: bool = False,
-                 drain_period_s: float = 0.01, max_queue: int = 64):
+                 drain_period_s: float = 0.01, max_queue: int = 64,
+                 packing: bool = True):
         self.fault = ''
         self.messages = 0       # messages written
         self.bytes = 0          # serialized payload bytes written
@@ -98,7 +101,7 @@ class Recorder:
         self._compression = compression
         self._metadata = {str(k): str(v) for k, v in (metadata or {}).items()}
         self._file: LogFile | None = None
-        self._packing = True
+        self._packing = packing
         self._rotation: LogRotation | None = None
         self._last_t = 0
         self._types: dict[str, str] = {}       # topic -> type name (over all files)
@@ -120,7 +123,7 @@ class Recorder:
     # -- the state the collaborators hold ----------------------------------------------------
     @property
     def paths(self) -> list[str]:
-        """The files written, in order."""
+        """Return the files written, in order."""
         return self._rotation.paths if self._rotation is not None else []
 
     @property
@@ -144,20 +147,9 @@ class Recorder:
         return self._mode.queued
 
     @property
-    def _fast(self):
-        """The record packer (None: mcap's add_message path; setting None selects it)."""
-        return self._file.packer if self._file is not None else None
-
-    @_fast.setter
-    def _fast(self, packer) -> None:
-        self._packing = packer is not None
-        if self._file is not None:
-            self._file.packer = packer
-
-    @property
-    def _stream(self):
-        """The current file's stream (None between files; tests close it to play a crash)."""
-        return self._file.stream if self._file is not None else None
+    def packing(self) -> bool:
+        """Return whether the current file's messages go through the record packer."""
+        return self._file is not None and self._file.packer is not None
 
     # -- files -------------------------------------------------------------------------------
     def _open(self) -> None:
@@ -200,8 +192,11 @@ class Recorder:
             self._set_fault(exc)
 
     def _split_if_due(self, t: int) -> bool:
-        """Continue in a new file when this one has reached split_mb or its time span (t: the
-        log time being written); True if it did."""
+        """
+        Continue in a new file when this one reached split_mb or its time span; True if so.
+
+        ``t``: the log time being written.
+        """
         rotation = self._rotation
         if rotation.starts(t) or not rotation.split_due(t, self._file.size()):
             return False
@@ -232,7 +227,7 @@ class Recorder:
 
     # -- recording ---------------------------------------------------------------------------
     def _clamp(self, log_time_ns: int, count: int) -> int:
-        """The log time to write: never before the last one (counted in :attr:`clamped`)."""
+        """Return the log time to write: never before the last one (counted in :attr:`clamped`)."""
         t = int(log_time_ns)
         if t < self._last_t:
             t = self._last_t
@@ -248,7 +243,7 @@ class Recorder:
         return firsts
 
     def type_of(self, topic: str) -> str | None:
-        """The type name recorded on ``topic`` (None before its first message)."""
+        """Return the type name recorded on ``topic`` (None before its first message)."""
         return self._types.get(topic)
 
     def _channel(self, topic: str, msg, type_name: str | None) -> int:
@@ -269,15 +264,20 @@ class Recorder:
     def record_sample(self, log_time_ns: int, topics: Sequence[str], data: Sequence[bytes],
                       types: Mapping[str, str]) -> bool:
         """
-        Write one CDR message per topic, all at ``log_time_ns`` (one sample of the node's
-        outputs); ``types`` maps each topic to its type name.
+        Write one CDR message per topic, all at ``log_time_ns``.
+
+        One sample of the node's outputs; ``types`` maps each topic to its type name.
         """
         return self._mode.sample(log_time_ns, topics, data, types)
 
     def _write(self, topic: str, msg, log_time_ns: int, type_name: str | None,
                flush: bool = True) -> bool:
-        """One message; then a flush if one is due, unless not ``flush`` (a sample's messages
-        but its last: a sample is never split by a flush)."""
+        """
+        Write one message; then a flush if one is due, unless not ``flush``.
+
+        ``flush`` is False for a sample's messages but its last: a sample is never split by a
+        flush.
+        """
         if self._file is None:
             self.dropped += 1
             return False
@@ -305,8 +305,12 @@ class Recorder:
             self.record_time_s += self._clock() - start
 
     def _sample_one_by_one(self, log_time_ns, topics, data, types, key) -> bool:
-        """A sample message by message (the first of a layout registers its channels and
-        plans the fast path; flushed after its last message)."""
+        """
+        Write a sample message by message.
+
+        The first of a layout registers its channels and plans the fast path; flushed after its
+        last message.
+        """
         ok = True
         last = len(data) - 1
         for j, (topic, payload) in enumerate(zip(topics, data)):
@@ -345,10 +349,13 @@ class Recorder:
             self.record_time_s += self._clock() - start
 
     def _write_sample_run(self, items) -> None:
-        """Consecutive samples from the writer's queue: the bytes _write_sample writes one by
-        one, in runs packed at once. A run stops before a sample that would end the chunk, split
-        the file or come after a due flush, so the lookups, checks and counters are done once
-        per run (10 us per sample one by one; 3.5 us in runs packed in C)."""
+        """
+        Write consecutive samples from the writer's queue, in runs packed at once.
+
+        The bytes are those _write_sample writes one by one. A run stops before a sample that
+        would end the chunk, split the file or come after a due flush, so the lookups, checks and
+        counters are done once per run (10 us per sample one by one; 3.5 us in runs packed in C).
+        """
         i, n = 0, len(items)
         while i < n:
             start = self._clock()
@@ -367,8 +374,11 @@ class Recorder:
                 i += 1
 
     def _run_window(self, items, i: int, start: float):
-        """The samples from items[i] that may go in one run: (plan, payload sizes, window),
-        or None when the sample at i needs _write_sample."""
+        """
+        Return the samples from items[i] that may go in one run.
+
+        Return (plan, payload sizes, window), or None when the sample at i needs _write_sample.
+        """
         file, topics = self._file, items[i][1]
         key = topics if type(topics) is tuple else tuple(topics)
         plan = file.sample_plans.get(key) if file is not None else None
@@ -385,8 +395,11 @@ class Recorder:
         return (plan, sizes, window) if window else None
 
     def _pack_run(self, items, i: int, start: float) -> int:
-        """Write the run of samples from items[i] (see _write_sample_run); how many (0: the
-        sample at i needs _write_sample)."""
+        """
+        Write the run of samples from items[i]; return how many.
+
+        See _write_sample_run; 0: the sample at i needs _write_sample.
+        """
         found = self._run_window(items, i, start)
         if found is None:
             return 0
@@ -432,12 +445,12 @@ class Recorder:
 
     @property
     def active(self) -> bool:
-        """True while messages are being written."""
+        """Return True while messages are being written."""
         return self._file is not None
 
     @property
     def path(self) -> str:
-        """The file being written (the last one after a split)."""
+        """Return the file being written (the last one after a split)."""
         return self.paths[-1] if self.paths else ''
 
     def counters(self, strings: bool = False) -> dict:

@@ -1,6 +1,7 @@
 """
-Replay of MCAP run logs without ROS: re-simulate a log bit-for-bit, and record a run offline
-with the node's bytes.
+Replay of MCAP run logs without ROS.
+
+Re-simulate a log bit-for-bit, and record a run offline with the node's bytes.
 
 ``det_sim replay resim LOG`` (also ``det_sim_replay resim LOG``) feeds the logged voltage
 commands through the model with the logged scene and stepper, and compares with the logged
@@ -22,7 +23,7 @@ import math
 from typing import Callable, Mapping, Sequence
 
 from .contract import basename as _basename
-from .contract import (COMMAND_TOPIC, COMMAND_TOPICS, CdrError, CommandDecoder,
+from .contract import (CdrError, COMMAND_TOPIC, COMMAND_TOPICS, CommandDecoder,
                        decode_joint_state, encode_float64_multi_array, encode_joint_state,
                        JOINT_COMMAND_TOPIC, OUTPUT_FIELDS, OutputContract, rest_shortening,
                        rest_shortenings, stamp_ns, TOPIC_TYPES)
@@ -49,8 +50,11 @@ def _logged_y0(text: str | None, n: int) -> list[float] | None:
 
 
 def _logged_x0(text: str | None, n: int):
-    """Metadata 'x0' (the initial state vector the run started from), None if absent or not n
-    finite values."""
+    """
+    Return the metadata 'x0' (the run's initial state vector), if valid.
+
+    None if absent or not n finite values.
+    """
     if not text:
         return None
     try:
@@ -77,12 +81,12 @@ class ResimResult:
     substeps: int = 0                # 0: adaptive
 
     def ok(self, tolerance: float = 0.0) -> bool:
-        """True if every compared output is within ``tolerance`` and nothing went wrong."""
+        """Return True if every compared output is within ``tolerance`` and nothing went wrong."""
         return (not self.fault and bool(self.compared) and self.skipped == 0
                 and all(v <= tolerance for v in self.max_deviation.values()))
 
     def table(self) -> str:
-        """A plain-text table of the deviations."""
+        """Return a plain-text table of the deviations."""
         width = max([len(k) for k in self.max_deviation] + [6])
         lines = [f"{'output':<{width}}  {'samples':>8}  max |deviation|"]
         for key, value in self.max_deviation.items():
@@ -138,8 +142,12 @@ def resimulate(log, method: str | None = None, substeps: int | None = None,
 
 
 class _Resim:
-    """One re-simulation: the simulator stepped to each logged message's time, the commands
-    applied, the logged outputs compared with the simulated ones into a :class:`ResimResult`."""
+    """
+    One re-simulation of a log.
+
+    The simulator is stepped to each logged message's time, the commands applied, the logged
+    outputs compared with the simulated ones into a :class:`ResimResult`.
+    """
 
     def __init__(self, reader, method, substeps, fields):
         import numpy as np
@@ -159,7 +167,7 @@ class _Resim:
         self.contract = OutputContract(sim.model, _logged_y0(info.get('y0'), sim.model.n_inputs),
                                        fields)
         self.decoder = CommandDecoder(self.det_names, scene.physics.v_max)
-        self.structure_key = (f"{self.contract.structure_topic}.position "
+        self.structure_key = (f'{self.contract.structure_topic}.position '
                               f"({', '.join(self.contract.structure_outputs)})")
         self.dt_ns = sim.dt * 1e9
         self.result = ResimResult({}, {}, method=sim.method.name,
@@ -189,7 +197,7 @@ class _Resim:
         return sim.k == k
 
     def _reached(self, k: int) -> bool | None:
-        """True at step k; False if the simulation failed; None if k is behind (skipped)."""
+        """Return True at step k; False if the simulation failed; None if k is behind (skipped)."""
         if self._advance_to(k):
             return True
         if self.result.fault:
@@ -249,9 +257,10 @@ class _Resim:
 def simulate_to_log(recorder: Recorder, sim, commands: Mapping[int, Sequence[float]] | Callable,
                     n_steps: int, joint_commands: bool = False) -> None:
     """
-    Run ``sim`` (any number of DETs) for ``n_steps`` and record commands and outputs as the node
-    does, with the node's bytes (joint commands name every DET; the structure topic when the
-    scene has one). Needs no ROS.
+    Run ``sim`` for ``n_steps`` and record commands and outputs as the node does.
+
+    ``sim`` may have any number of DETs. The bytes are the node's (joint commands name every
+    DET; the structure topic when the scene has one). Needs no ROS.
 
     The initial state is recorded at t_0, then each step's outputs at its end time.
 

@@ -1,7 +1,8 @@
 """
-What a log says about its types and topics, in the rosbag2 conventions: each type's complete
-``ros2msg`` definition (the schema), the type name of a message, and the
-``offered_qos_profiles`` channel metadata (Jazzy's YAML form). No rclpy needed.
+What a log says about its types and topics, in the rosbag2 conventions.
+
+Each type's complete ``ros2msg`` definition (the schema), the type name of a message, and
+the ``offered_qos_profiles`` channel metadata (Jazzy's YAML form). No rclpy needed.
 """
 
 from __future__ import annotations
@@ -76,7 +77,7 @@ _DEFINITIONS: dict[str, str] = {}
 
 def message_definition(type_name: str) -> str:
     """
-    The complete ``ros2msg`` definition of a type, as rosbag2 stores it.
+    Return the complete ``ros2msg`` definition of a type, as rosbag2 stores it.
 
     The type's own ``.msg`` text first, then every dependency once (depth first, sorted), each
     after an 80 ``=`` line and ``MSG: pkg/Type``. The ``.msg`` files are looked up in the
@@ -135,7 +136,7 @@ def _duration(value):
 
 def qos_profiles_yaml(qos=None) -> str:
     """
-    The ``offered_qos_profiles`` channel metadata, in rosbag2 Jazzy's (version 9) YAML form.
+    Return the ``offered_qos_profiles`` channel metadata, in rosbag2 Jazzy's (version 9) YAML form.
 
     :param qos: an ``rclpy.qos.QoSProfile``, a mapping with the same keys (history, depth,
         reliability, durability, liveliness, deadline/lifespan/liveliness_lease_duration in ns),

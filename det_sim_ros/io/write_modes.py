@@ -1,6 +1,8 @@
 """
-How the recorder's records reach the file: :class:`WriteNow` writes them in the recording
-thread; :class:`WriteBehind` (``background=True``) queues their bytes for the
+How the recorder's records reach the file.
+
+:class:`WriteNow` writes them in the recording thread; :class:`WriteBehind`
+(``background=True``) queues their bytes for the
 :class:`~det_sim_ros.io.writer_thread.WriterThread`.
 
 A mode is given the :class:`~det_sim_ros.io.recorder.Recorder` it serves and uses its writing
@@ -52,9 +54,11 @@ class WriteNow:
 
 class WriteBehind:
     """
-    Records are queued as bytes (serialized here) and written, compressed and flushed by the
-    writer thread, in order; the thread owns the file (None for a moment between two files),
-    so queueing depends only on whether recording has stopped.
+    Records queued as bytes, written by the writer thread.
+
+    The bytes are serialized here; the writer thread writes, compresses and flushes them in
+    order. The thread owns the file (None for a moment between two files), so queueing depends
+    only on whether recording has stopped.
     """
 
     def __init__(self, recorder, period_s: float, max_queue: int):
@@ -65,7 +69,7 @@ class WriteBehind:
 
     @property
     def caught_up(self) -> int:
-        """Times the recording thread wrote the queue itself."""
+        """Return how many times the recording thread wrote the queue itself."""
         return self._thread.caught_up
 
     @property

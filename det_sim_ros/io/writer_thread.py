@@ -1,6 +1,8 @@
 """
-The recorder's background writer: a thread that writes what the recording thread queued, in
-order, every ``period_s``; and the bound on its queue.
+The recorder's background writer and the bound on its queue.
+
+The writer is a thread that writes what the recording thread queued, in order, every
+``period_s``.
 
 The writer thread gets the GIL only now and then while the node's thread runs flat out, so in a
 free run an unbounded queue grows without bound (measured: 124k samples, 82 % of a 4 s run,
@@ -49,7 +51,7 @@ class WriterThread:
 
     @property
     def running(self) -> bool:
-        """The thread takes items (until :meth:`stop`)."""
+        """Return whether the thread takes items (until :meth:`stop`)."""
         return self._thread is not None
 
     def __len__(self) -> int:
@@ -79,9 +81,13 @@ class WriterThread:
             self._on_error(exc)
 
     def _drain(self, yield_gil: bool = True) -> None:
-        """Write everything queued, in order. ``yield_gil``: release the GIL every 16 samples
-        (the writer thread, so the node's thread is not held up; the node's own catch-up must
-        not: each release cost it ~0.3 ms of waiting for the GIL back)."""
+        """
+        Write everything queued, in order.
+
+        ``yield_gil``: release the GIL every 16 samples (the writer thread, so the node's thread is
+        not held up; the node's own catch-up must not: each release cost it ~0.3 ms of waiting for
+        the GIL back).
+        """
         queue = self._queue
         written = 0
         while queue:

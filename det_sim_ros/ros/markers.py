@@ -37,7 +37,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..physics.geometry import DET_WIDTH_MIN, ActuatorGeometry
+from ..physics.geometry import ActuatorGeometry, DET_WIDTH_MIN
 
 __all__ = ['MarkerFrames', 'NodeMarkers', 'MARKER_TOPIC', 'MARKER_TYPE', 'attach_markers']
 
@@ -58,6 +58,7 @@ KEEPALIVE_NS = int(KEEPALIVE_S * 1e9)
 
 class _StackedCells(NamedTuple):
     """One-coordinate cells as one map (see MarkerFrames._stack_polynomial_cells)."""
+
     maps: np.ndarray                    # (cells, values, 4): V = maps @ (1, q, q^2, q^4)
     height: int                         # index of the cell height in a cell's values
     thickness: int                      # index of the drawn DET thickness (set per frame)
@@ -66,7 +67,7 @@ class _StackedCells(NamedTuple):
 
 
 def _sentinel(k: int) -> float:
-    """A float64 that cannot occur in a real frame (a subnormal-range tag)."""
+    """Return a float64 that cannot occur in a real frame (a subnormal-range tag)."""
     return (k + 1) * 1.0e-300
 
 
@@ -83,8 +84,12 @@ _STAMP_TAG = 0x5A5A0000   # int32 sentinels of the markers' stamps: this + marke
 
 
 def _tagged_markers(model, geo, frames, offsets):
-    """The frame's markers, every moving field holding a unique sentinel: (markers, per DET
-    field -> sentinel tag, the plate's tag or None, per DET the float32 colour sentinel)."""
+    """
+    Return the frame's markers, every moving field holding a unique sentinel.
+
+    Return (markers, per DET field -> sentinel tag, the plate's tag or None, per DET the
+    float32 colour sentinel).
+    """
     from geometry_msgs.msg import Point
     from visualization_msgs.msg import Marker
     tags = iter(range(10 ** 6))
@@ -135,8 +140,7 @@ def _tagged_markers(model, geo, frames, offsets):
 
 
 def _sentinel_template(markers, cells, plate, colors) -> _Template:
-    """The markers' CDR bytes (:mod:`det_sim_ros.io.cdr`, serialized once) and where each
-    sentinel landed in them."""
+    """Return the markers' CDR bytes (io.cdr, serialized once) and where each sentinel landed."""
     from visualization_msgs.msg import MarkerArray
     from ..io.cdr import serialize
     raw = serialize(MarkerArray(markers=markers))
@@ -222,11 +226,12 @@ class MarkerFrames:
     @staticmethod
     def _cell_map(sampler, off):
         """
-        A cell's frame values as V = V0 + Kq q + Ke e(w'): the deflections are linear in the
-        Ritz coordinates q and the heights linear in the shortening density e at the Gauss
-        nodes, so a frame costs a few matrix products (the frame is per control sample in the
-        node's thread: fewer numpy calls is what makes it cheap). Order: beam A x (n), z (n),
-        beam B x, z, DET centre (3), DET size (3), reference point (3).
+        Return a cell's frame values as V = V0 + Kq q + Ke e(w').
+
+        The deflections are linear in the Ritz coordinates q and the heights linear in the
+        shortening density e at the Gauss nodes, so a frame costs a few matrix products (the frame
+        is per control sample in the node's thread: fewer numpy calls is what makes it cheap).
+        Order: beam A x (n), z (n), beam B x, z, DET centre (3), DET size (3), reference point (3).
         """
         n, r = sampler.n_samples, sampler.S.shape[1]
         paper = sampler.kinematics not in ('consistent', 'exact')
@@ -258,13 +263,14 @@ class MarkerFrames:
 
     def _stack_polynomial_cells(self):
         """
-        The cells as one stacked map when each has one coordinate and paper or consistent
-        kinematics (every drawn value a polynomial in q): V = P @ (1, q, q^2, q^4) for all
-        cells in one matrix product; else None (the general path of :meth:`values`). A frame
-        then takes a handful of numpy calls instead of ~20: 77 -> 22 us per frame in a loop
-        that steps 33 periods between frames (cold caches, as in the node). Inside the node a
-        frame still costs 150-240 us of the executor thread, most of it the first touch of
-        each numpy and DDS path after the samples' work (README, "Watching it").
+        Return the cells as one stacked map when every drawn value is a polynomial in q.
+
+        That is when each cell has one coordinate and paper or consistent kinematics:
+        V = P @ (1, q, q^2, q^4) for all cells in one matrix product; else None (the general path
+        of :meth:`values`). A frame then takes a handful of numpy calls instead of ~20: 77 -> 22 us
+        per frame in a loop that steps 33 periods between frames (cold caches, as in the node).
+        Inside the node a frame still costs 150-240 us of the executor thread, most of it the first
+        touch of each numpy and DDS path after the samples' work (README, "Watching it").
         """
         maps = self._cell_maps
         if (any(poly is None for *_, poly in maps) or len({len(m[0]) for m in maps}) != 1
@@ -278,10 +284,13 @@ class MarkerFrames:
             coordinate=np.array([s.start for s, _, _ in self._samplers]))
 
     def _compile(self):
-        """The compiled frame builder (_ckernel.FrameMap, frames.c) of stacked cells without
-        a plate, or None (then the numpy path builds the frames). It computes what
-        :meth:`values` computes, in the same order (the same bits), compares with the last
-        frame it wrote, and writes values and stamps into the frame bytes in one call."""
+        """
+        Return the compiled frame builder of stacked cells without a plate, or None.
+
+        The builder is _ckernel.FrameMap (frames.c); with None the numpy path builds the frames. It
+        computes what :meth:`values` computes, in the same order (the same bits), compares with the
+        last frame it wrote, and writes values and stamps into the frame bytes in one call.
+        """
         if self._stacked is None or self._plate_slot is not None:
             return None
         try:
@@ -300,7 +309,7 @@ class MarkerFrames:
         return FrameMap(fields)
 
     def _coordinates(self, x):
-        """The stacked cells' coordinates: a float for one cell, else an array."""
+        """Return the stacked cells' coordinates: a float for one cell, else an array."""
         index = self._stacked.coordinate
         return float(x[index[0]]) if len(index) == 1 else x[index]
 
@@ -328,7 +337,7 @@ class MarkerFrames:
                                                           sum(heights) / len(heights))))
 
     def _plate_values(self, first_height, last_height, mean_height):
-        """The plate's centre and orientation (quaternion) on the cells' moving ends."""
+        """Return the plate's centre and orientation (quaternion) on the cells' moving ends."""
         w = self.geometry.scene.structure['plate_width']
         tilt = math.atan2(last_height - first_height, w)   # > 0: the right side is higher
         centre = self._plate_shift + (0.0, 0.0, mean_height + 0.5 * PLATE_THICKNESS)
@@ -340,11 +349,14 @@ class MarkerFrames:
         return self.pack(self.values(x), u, stamp_ns)
 
     def frame_if_moved(self, x, u, stamp_ns: int) -> bytes | None:
-        """The frame, or None when it would show what the last frame returned here showed: no
-        drawn coordinate moved by more than :data:`MOVE_TOLERANCE`, the voltages are the
-        same, and less than :data:`KEEPALIVE_S` of sim time has passed (markers persist in
-        RViz and Foxglove until replaced, so a settled actuator needs no new frames; the
-        keep-alive serves viewers that join later)."""
+        """
+        Return the frame, or None when it would show what the last one showed.
+
+        None when, since the last frame returned here, no drawn coordinate moved by more than
+        :data:`MOVE_TOLERANCE`, the voltages are the same, and less than :data:`KEEPALIVE_S` of sim
+        time has passed (markers persist in RViz and Foxglove until replaced, so a settled actuator
+        needs no new frames; the keep-alive serves viewers that join later).
+        """
         volts = self._volts(u)
         last = self._last_sent
         force = last is None or volts != last[0] or stamp_ns - last[1] >= KEEPALIVE_NS
@@ -363,14 +375,13 @@ class MarkerFrames:
         return self.pack(values, u, stamp_ns)
 
     def _volts(self, u) -> list:
-        """The voltages as a list, one per DET (a scalar stands for all)."""
+        """Return the voltages as a list, one per DET (a scalar stands for all)."""
         if isinstance(u, np.ndarray):
             return u.tolist()
         return list(u) if np.ndim(u) else [u] * len(self._samplers)
 
     def values(self, x) -> np.ndarray:
-        """Every drawn coordinate that moves (m; the plate's orientation as a quaternion), in
-        the order of the frame's fields (a new array)."""
+        """Return the moving drawn coordinates (m; plate: quaternion) in field order; new array."""
         if self._stacked is not None:
             return self._stacked_values(self._coordinates(x))
         parts, heights = [], []
@@ -393,7 +404,7 @@ class MarkerFrames:
         return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
     def pack(self, values, u, stamp_ns: int) -> bytes:
-        """The frame's bytes from :meth:`values`, the voltages and the stamp."""
+        """Return the frame's bytes from :meth:`values`, the voltages and the stamp."""
         self._f64[self._f64_index] = values
         self._color(self._volts(u))
         sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
@@ -402,8 +413,7 @@ class MarkerFrames:
         return self._buffer.tobytes()
 
     def _color(self, volts) -> None:
-        """Each DET's colour (blue at 0 V to red at v_max) into the frame bytes, if the
-        voltages changed since the last call."""
+        """Write each DET's colour (blue 0 V, red v_max) to the frame if the voltages changed."""
         if volts != self._colored_for:
             self._colored_for = volts
             level = np.clip(np.asarray(volts, dtype=float) / self.v_max, 0.0, 1.0)
@@ -451,9 +461,12 @@ class NodeMarkers:
             self.publish(data)
 
     def frame_for(self, k: int, x, u, stamp_ns: int, recorder=None) -> bytes | None:
-        """The frame of sample k (recorded) if it is on the display grid and shows a change
-        (:meth:`MarkerFrames.frame_if_moved`), else None; the caller publishes it
-        (:meth:`publish`), e.g. with the other messages of a burst."""
+        """
+        Return the frame of sample k if it is on the display grid and shows a change.
+
+        The frame is recorded; a change as :meth:`MarkerFrames.frame_if_moved` sees it; else None.
+        The caller publishes it (:meth:`publish`), e.g. with the other messages of a burst.
+        """
         if k % self.every:
             return None
         now = self._clock()
@@ -481,7 +494,7 @@ class NodeMarkers:
 
 
 def attach_markers(node, model, display_hz: float, frame_id: str, qos):
-    """The node's :class:`NodeMarkers`, or None when the display rate is 0 (off)."""
+    """Return the node's :class:`NodeMarkers`, or None when the display rate is 0 (off)."""
     if not display_hz or display_hz <= 0.0:
         return None
     return NodeMarkers(node, model, display_hz, frame_id, qos)
