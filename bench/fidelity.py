@@ -145,7 +145,7 @@ def markdown(crit, err, step, args):
     lines += ['', '## Step scenario: paper vs consistent vs exact', '',
               'eps_y at the end of the 3 kV phase; switched = sign of q at the end of the 3 kV '
               "phase differs from its sign at the start; 'slope limit': the exact kinematics' "
-              "w' = sin(theta) reached 1 in the run (a domain error, see README).", '',
+              "w' = sin(theta) reached 1 in the run (a domain error, see docs/model.md).", '',
               '| beam | eps_b | eps_y paper | eps_y consistent | eps_y exact | switched paper | '
               'switched consistent | switched exact |', '|---|---|---|---|---|---|---|---|']
     tab = {(b, e, f): (ey, sw) for b, e, f, _, ey, sw, *_ in step}

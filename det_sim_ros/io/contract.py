@@ -359,7 +359,7 @@ def _name_list(names, limit=6) -> str:
 
 class CommandDecoder:
     """
-    Read and check voltage commands (the README's input rules), per channel.
+    Read and check voltage commands (the input rules of docs/topics.md), per channel.
 
     - ``voltage_command`` (Float64MultiArray): ``data`` = one voltage per DET, in DET order.
     - ``voltage_command_joint`` (JointState): ``position[i]`` = voltage of DET ``name[i]``; a

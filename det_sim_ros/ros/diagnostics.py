@@ -2,8 +2,8 @@
 What the node reports: the /diagnostics status and the periodic INFO line.
 
 The /diagnostics status (level, message, key-value pairs) and the periodic INFO line are each
-built in one place from named inputs. Keys and values: README.md (Diagnostics). Wall times in
-s, rates per wall second.
+built in one place from named inputs. Keys and values: docs/real_time.md (/diagnostics).
+Wall times in s, rates per wall second.
 """
 
 from __future__ import annotations

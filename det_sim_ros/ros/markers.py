@@ -9,8 +9,8 @@ Geometry: :mod:`det_sim_ros.physics.geometry`.
 
 Frames: by default one frame per DET, ``<namespace>/<DET name>`` (``det0``, ``arm1/left``),
 each cell at its frame's origin; the plate is drawn in the first DET's frame (the others are
-placed relative to it by the user's transforms: see README). With ``frame_id`` set, all DETs
-are drawn in that one frame, side by side (:func:`det_sim_ros.physics.geometry.layout_offsets`).
+placed relative to it by the user's transforms: see docs/visualization.md). With ``frame_id``
+set, all DETs are drawn in that one frame, side by side (:func:`det_sim_ros.physics.geometry.layout_offsets`).
 
 Speed: the message layout is fixed for a model, so it is serialized once with sentinel values
 in the fields that move, their byte offsets are located, and each frame only writes the new
@@ -270,7 +270,7 @@ class MarkerFrames:
         of :meth:`values`). A frame then takes a handful of numpy calls instead of ~20: 77 -> 22 us
         per frame in a loop that steps 33 periods between frames (cold caches, as in the node).
         Inside the node a frame still costs 150-240 us of the executor thread, most of it the first
-        touch of each numpy and DDS path after the samples' work (README, "Watching it").
+        touch of each numpy and DDS path after the samples' work (docs/visualization.md).
         """
         maps = self._cell_maps
         if (any(poly is None for *_, poly in maps) or len({len(m[0]) for m in maps}) != 1

@@ -71,8 +71,8 @@ NODE_PARAMS = {
                              'depth 10', True, None),
     'qos_keep_all': Param(False, 'outputs, /clock and command subscriptions reliable KEEP_ALL '
                           'instead of depth 10: over a lossy link every lost sample is '
-                          'repaired, none overwritten (README: Fleets, QoS across hosts)', True,
-                          None),
+                          'repaired, none overwritten (docs/fleets.md: QoS on real networks)',
+                          True, None),
     'start_paused': Param(False, 'start paused (resume with ~/pause false, or ~/step)', True,
                           None),
     'diagnostics_period': Param(1.0, 'seconds between /diagnostics messages (wall clock)', True,

@@ -13,8 +13,8 @@ HELP = ('start the sim_nodes of a fleet file on this host (one process per names
 DESCRIPTION = ('Start the sim_node processes a fleet YAML file lists for this host, each in its '
                'namespace with its log file; forward SIGINT and SIGTERM to all; exit 0 once '
                'every node stopped cleanly. Across hosts, run the same file on every host '
-               '(nodes with host: start on that host only). File format: README, section '
-               'Fleets.')
+               '(nodes with host: start on that host only). File format: '
+               'docs/fleets.md.')
 
 
 def add_arguments(parser) -> None:
