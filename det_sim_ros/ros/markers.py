@@ -9,8 +9,8 @@ Geometry: :mod:`det_sim_ros.physics.geometry`.
 
 Frames: by default one frame per DET, ``<namespace>/<DET name>`` (``det0``, ``arm1/left``),
 each cell at its frame's origin; the plate is drawn in the first DET's frame (the others are
-placed relative to it by the user's transforms: see docs/visualization.md). With ``frame_id``
-set, all DETs are drawn in that one frame, side by side (:func:`det_sim_ros.physics.geometry.layout_offsets`).
+placed relative to it by the user's transforms: docs/visualization.md). With ``frame_id`` set,
+all DETs are drawn in that one frame, side by side (:func:`.geometry.layout_offsets`).
 
 Speed: the message layout is fixed for a model, so it is serialized once with sentinel values
 in the fields that move, their byte offsets are located, and each frame only writes the new
