@@ -87,6 +87,21 @@ typedef struct {
 } BuiltObject;
 
 DS_HIDDEN void Built_dealloc(PyObject *self);
+
+/* The type object of a kernel type: every type is a plain object with a generic new, an
+ * init reading named fields, a dealloc, methods and (or NULL) getters. */
+#define DS_TYPE(Name, Doc, Object, Init, Dealloc, Methods, Getset) {                    \
+    PyVarObject_HEAD_INIT(NULL, 0)                                                        \
+    .tp_name = "det_sim_ros.core._ckernel." #Name,                                        \
+    .tp_doc = (Doc),                                                                      \
+    .tp_basicsize = sizeof(Object),                                                       \
+    .tp_flags = Py_TPFLAGS_DEFAULT,                                                       \
+    .tp_new = PyType_GenericNew,                                                          \
+    .tp_init = (initproc)(Init),                                                          \
+    .tp_dealloc = (destructor)(Dealloc),                                                  \
+    .tp_methods = (Methods),                                                              \
+    .tp_getset = (Getset),                                                                \
+}
 DS_HIDDEN int built_fields(PyObject *self, PyObject *args, PyObject *kwds, PyObject **src);
 DS_HIDDEN int built_ready(PyObject *self);
 

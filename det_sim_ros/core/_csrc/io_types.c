@@ -116,17 +116,10 @@ static PyMethodDef FrameMap_methods[] = {
     {NULL}
 };
 
-PyTypeObject FrameMapType = {
-    PyVarObject_HEAD_INIT(NULL, 0)
-    .tp_name = "det_sim_ros.core._ckernel.FrameMap",
-    .tp_doc = "FrameMap(fields): marker frames of one-coordinate cells, from named fields",
-    .tp_basicsize = sizeof(FrameMapObject),
-    .tp_flags = Py_TPFLAGS_DEFAULT,
-    .tp_new = PyType_GenericNew,
-    .tp_init = (initproc)FrameMap_init,
-    .tp_dealloc = Built_dealloc,
-    .tp_methods = FrameMap_methods,
-};
+PyTypeObject FrameMapType = DS_TYPE(
+    FrameMap,
+    "FrameMap(fields): marker frames of one-coordinate cells, from named fields",
+    FrameMapObject, FrameMap_init, Built_dealloc, FrameMap_methods, NULL);
 
 /* ---------------------------------------------------------------- SampleCodec */
 
@@ -245,17 +238,10 @@ static PyMethodDef SampleCodec_methods[] = {
     {NULL}
 };
 
-PyTypeObject SampleCodecType = {
-    PyVarObject_HEAD_INIT(NULL, 0)
-    .tp_name = "det_sim_ros.core._ckernel.SampleCodec",
-    .tp_doc = "SampleCodec(fields): one sample's output messages, from named fields",
-    .tp_basicsize = sizeof(SampleCodecObject),
-    .tp_flags = Py_TPFLAGS_DEFAULT,
-    .tp_new = PyType_GenericNew,
-    .tp_init = (initproc)SampleCodec_init,
-    .tp_dealloc = Built_dealloc,
-    .tp_methods = SampleCodec_methods,
-};
+PyTypeObject SampleCodecType = DS_TYPE(
+    SampleCodec,
+    "SampleCodec(fields): one sample's output messages, from named fields",
+    SampleCodecObject, SampleCodec_init, Built_dealloc, SampleCodec_methods, NULL);
 
 /* ---------------------------------------------------------------- pack_records */
 

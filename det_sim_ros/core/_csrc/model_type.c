@@ -297,15 +297,7 @@ static PyGetSetDef Model_getset[] = {
     {NULL}
 };
 
-PyTypeObject ModelType = {
-    PyVarObject_HEAD_INIT(NULL, 0)
-    .tp_name = "det_sim_ros.core._ckernel.Model",
-    .tp_doc = "Model(arrays): the compiled model, built from ModelArrays' named fields",
-    .tp_basicsize = sizeof(ModelObject),
-    .tp_flags = Py_TPFLAGS_DEFAULT,
-    .tp_new = PyType_GenericNew,
-    .tp_init = (initproc)Model_init,
-    .tp_dealloc = (destructor)Model_dealloc,
-    .tp_methods = Model_methods,
-    .tp_getset = Model_getset,
-};
+PyTypeObject ModelType = DS_TYPE(
+    Model,
+    "Model(arrays): the compiled model, built from ModelArrays' named fields",
+    ModelObject, Model_init, Model_dealloc, Model_methods, Model_getset);

@@ -319,16 +319,8 @@ static PyGetSetDef Stepper_getset[] = {
     {NULL}
 };
 
-PyTypeObject StepperType = {
-    PyVarObject_HEAD_INIT(NULL, 0)
-    .tp_name = "det_sim_ros.core._ckernel.Stepper",
-    .tp_doc = "Stepper(model, c, terms, embedded, error_weights, dt, z_tol, fine, substeps, "
-              "tolerance, min_substeps, max_substeps, exponent[, jump_ref])",
-    .tp_basicsize = sizeof(StepperObject),
-    .tp_flags = Py_TPFLAGS_DEFAULT,
-    .tp_new = PyType_GenericNew,
-    .tp_init = (initproc)Stepper_init,
-    .tp_dealloc = (destructor)Stepper_dealloc,
-    .tp_methods = Stepper_methods,
-    .tp_getset = Stepper_getset,
-};
+PyTypeObject StepperType = DS_TYPE(
+    Stepper,
+    "Stepper(model, c, terms, embedded, error_weights, dt, z_tol, fine, substeps, "
+             "tolerance, min_substeps, max_substeps, exponent[, jump_ref])",
+    StepperObject, Stepper_init, Stepper_dealloc, Stepper_methods, Stepper_getset);
