@@ -10,6 +10,7 @@ SingleThreadedExecutor.
 
 import math
 import os
+import signal
 import sys
 import time
 
@@ -20,6 +21,11 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 # processes (`python -m det_sim_ros.cli.sim_node`) inherit the working directory, and without this
 # their sys.path would start there (Python 3.11+: PYTHONSAFEPATH).
 os.environ.setdefault('PYTHONSAFEPATH', '1')
+# A run started in the background of a non-interactive shell (a CI job, nohup) inherits SIGINT
+# ignored, and so would every child process: a test that stops a child with SIGINT would wait
+# for ever. A handler, unlike an ignored signal, is reset to the default in a child.
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def child_env(**extra):
