@@ -78,7 +78,7 @@ def find_config(name: str = 'default.yaml') -> str:
     folders = config_dirs()
     path = _installed(name, folders)
     if path is None:
-        raise SceneError(f'scene {name!r} not found: ' + _what_there_is(folders))
+        raise SceneError(f'scene file {name!r} not found: ' + _what_there_is(folders))
     return path
 
 
@@ -95,7 +95,7 @@ def _installed(name: str, folders) -> str | None:
 def _what_there_is(folders) -> str:
     """Return the scenes found in ``folders`` and the folders, for a name found nowhere."""
     found = scene_names(folders)
-    return ('neither a file nor a scene name; scenes: ' + (', '.join(found) or 'none')
+    return ('no such file and no scene of that name; scenes: ' + (', '.join(found) or 'none')
             + ' (looked in ' + ', '.join(folders) + ')')
 
 
