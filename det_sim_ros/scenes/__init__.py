@@ -1,1 +1,1 @@
-"""Scene files (YAML): validation (:mod:`.scene`), files on disk and their bases (:mod:`.files`)."""
+"""Scene files (YAML): validation (:mod:`.scene`), files on disk and bases (:mod:`.files`)."""
