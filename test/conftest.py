@@ -40,17 +40,16 @@ def child_env(**extra):
 
 def pick_domain_id(environ, pid) -> int:
     """
-    Return the ROS domain id for the tests.
+    Return the ROS domain id for the tests, the one the det_sim fixture picks.
 
     The user's ROS_DOMAIN_ID when set (a number in 0..232), else 1 + pid % 101 (avoids the
     default domain 0, so a running ROS system is not disturbed).
     """
-    text = environ.get('ROS_DOMAIN_ID', '').strip()
-    if text:
-        if not text.isdigit() or int(text) > 232:
-            raise pytest.UsageError(f'ROS_DOMAIN_ID={text!r}: expected a number in 0..232')
-        return int(text)
-    return 1 + pid % 101
+    from det_sim_ros.ros.testing import pick_domain_id as pick
+    try:
+        return pick(environ, pid)
+    except ValueError as exc:
+        raise pytest.UsageError(str(exc)) from None
 
 
 DOMAIN_ID = pick_domain_id(os.environ, os.getpid())

@@ -5,10 +5,11 @@ It is registered as ``det_sim`` through the ``pytest11`` entry point, so install
 det_sim_ros makes the fixture available.
 
 The fixture ``det_sim`` makes :class:`LockstepSim` objects: sim_node in-process, in lockstep
-(``mode: lockstep``), in a ROS context of its own on a domain picked from the pid with
-localhost-only discovery. Your controller nodes are created in ``sim.context`` and spun with
-sim_node in one executor; every period waits for their answer, so a run gives the same numbers
-whatever the host load::
+(``mode: lockstep``), in a ROS context of its own with localhost-only discovery, on the
+domain ``ROS_DOMAIN_ID`` names when it is set (as the package's own tests do), else on one
+picked from the pid (never the default domain 0). Your controller nodes are created in
+``sim.context`` and spun with sim_node in one executor; every period waits for their answer,
+so a run gives the same numbers whatever the host load::
 
     def test_pi(det_sim):
         sim = det_sim('default')
@@ -30,9 +31,27 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-__all__ = ['LockstepSim', 'SimRun', 'StepMetrics', 'det_sim']
+__all__ = ['LockstepSim', 'SimRun', 'StepMetrics', 'det_sim', 'pick_domain_id']
 
 WALL_TIMEOUT = 600.0   # s: a safety net against a controller that never answers
+MAX_DOMAIN_ID = 232    # the largest ROS domain id (ports must fit below 65536)
+
+
+def pick_domain_id(environ=None, pid=None) -> int:
+    """
+    Return the ROS domain id for a test.
+
+    The user's ``ROS_DOMAIN_ID`` when set (a number in 0..232; anything else is refused with
+    one line), else 1 + pid % 101, which avoids the default domain 0 so that a running ROS
+    system is not disturbed. ``environ`` and ``pid`` default to this process's.
+    """
+    environ = os.environ if environ is None else environ
+    text = environ.get('ROS_DOMAIN_ID', '').strip()
+    if text:
+        if not text.isdigit() or int(text) > MAX_DOMAIN_ID:
+            raise ValueError(f'ROS_DOMAIN_ID={text!r}: expected a number in 0..{MAX_DOMAIN_ID}')
+        return int(text)
+    return 1 + (os.getpid() if pid is None else pid) % 101
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,6 +127,7 @@ class LockstepSim:
     :param overrides: scene keys, e.g. ``{'physics.Rs': 1.0e3, 'structure.copies': 4}``.
     :param params: other node parameters (``lockstep.sources``, ``lockstep.timeout``,
         ``log.path`` to record the run, ...).
+    :param domain_id: the ROS domain (default: :func:`pick_domain_id`, ``ROS_DOMAIN_ID`` if set).
     :param executor: 'events' (sim_node's own) or 'single' (SingleThreadedExecutor).
     """
 
@@ -117,7 +137,7 @@ class LockstepSim:
         os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
         import rclpy
         from rclpy.context import Context
-        self.domain_id = 1 + os.getpid() % 101 if domain_id is None else domain_id
+        self.domain_id = pick_domain_id() if domain_id is None else domain_id
         self.context = Context()
         rclpy.init(context=self.context, domain_id=self.domain_id)
         self._scene, self._overrides = scene, dict(overrides or {})

@@ -1,1 +1,1 @@
-"""Scene files (YAML): loading, validation and defaults (:mod:`.scene`)."""
+"""Scene files (YAML): validation (:mod:`.scene`), files on disk and bases (:mod:`.files`)."""

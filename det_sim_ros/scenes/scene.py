@@ -4,8 +4,10 @@ Scenes: the validated, typed description of one simulation.
 A scene file is a ROS 2 parameter file (``sim_node: ros__parameters: ...``) with the sections
 ``scene`` (structure and model switches), ``physics`` (the parameter set, SI units), ``integrator``
 and ``rate_hz``; an optional ``node`` section belongs to the ROS node and is passed through.
-Every key is checked at load: a missing or unknown key, a wrong type, or a value out of range is
-refused with one :class:`SceneError` line naming the key, the value and the allowed range.
+A file names only what it changes from its base (``base:``, else config/default.yaml; see
+:mod:`.files`), so the scene checked here is the file laid over its base. Every key is
+checked at load: a missing or unknown key, a wrong type, or a value out of range is refused
+with one :class:`SceneError` line naming the key, the value and the allowed range.
 
 Units (stated once, used everywhere): m, kg, s, Pa, V, Ohm, F, C.
 """
@@ -16,12 +18,12 @@ import copy
 import dataclasses
 import math
 import os
-import sys
 from typing import Any, Mapping
 
 import numpy as np
 import yaml
 
+from .files import find_config, read_scene_file, resolve_base, unwrap_ros_params
 from .keys import (BEAMS, check_value, FIDELITIES, INITIAL_STATES, INTEGRATOR_SPEC,
                    PHYSICS_SPEC, REST_BRANCHES, SCENE_SPEC, SceneError, SECTION_DEFAULTS,
                    SECTIONS, SOURCES, STRUCTURE_DEFAULTS, STRUCTURE_SPEC, STRUCTURES, TOP_SPEC)
@@ -154,58 +156,6 @@ class Scene:
         return load_scene(scene_to_dict(self), overrides=changes)
 
 
-def find_config(name: str = 'default.yaml') -> str:
-    """
-    Locate an installed scene file by name.
-
-    Looks in the ament index share directory (colcon installs), ``<sys.prefix>/share`` (pip
-    installs) and the source tree, in that order. A path to an existing file is returned as is.
-    """
-    if os.path.isfile(name):
-        return name
-    if not name.endswith('.yaml'):
-        name += '.yaml'
-    candidates = []
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        candidates.append(os.path.join(get_package_share_directory('det_sim_ros'), 'config'))
-    except Exception:  # no ament environment: fall back to the prefix and the source tree
-        pass
-    candidates.append(os.path.join(sys.prefix, 'share', 'det_sim_ros', 'config'))
-    candidates.append(os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(
-        os.path.abspath(__file__)))), 'config'))
-    for folder in candidates:
-        path = os.path.join(folder, name)
-        if os.path.isfile(path):
-            return path
-    raise SceneError(f'scene file {name!r} not found in ' + ', '.join(candidates))
-
-
-def _read_yaml(path):
-    try:
-        with open(path, encoding='utf-8') as stream:
-            return yaml.safe_load(stream)
-    except OSError as exc:
-        raise SceneError(f'cannot read scene file {path!r}: {exc.strerror}') from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, 'problem_mark', None)
-        where = f' at line {mark.line + 1}' if mark is not None else ''
-        raise SceneError(f'malformed YAML in {path!r}{where}: {exc}') from None
-
-
-def _unwrap_ros_params(data, origin):
-    """Accept ``{node: {ros__parameters: {...}}}`` (or ``/**``) as well as a bare mapping."""
-    if not isinstance(data, dict):
-        raise SceneError(f'scene {origin}: top level must be a mapping, got {type(data).__name__}')
-    if len(data) == 1:
-        (only, inner), = data.items()
-        if isinstance(inner, dict) and 'ros__parameters' in inner:
-            data = inner['ros__parameters']
-            if not isinstance(data, dict):
-                raise SceneError(f'scene {origin}: ros__parameters must be a mapping')
-    return data
-
-
 def _apply_override(data, key, value):
     if '.' not in key:
         owners = [s for s, spec in SECTIONS.items() if key in spec]
@@ -301,7 +251,9 @@ def load_scene(source: Any = 'default', overrides: Mapping[str, Any] | None = No
     Load and validate a scene.
 
     :param source: a path to a scene YAML, an installed scene name ('default'), or a mapping of
-        the same shape (with or without the ``sim_node: ros__parameters:`` wrapper).
+        the same shape (with or without the ``sim_node: ros__parameters:`` wrapper). A file
+        is laid over its base (its ``base:`` scene, else the shipped defaults); a mapping only
+        over the base it names, if any.
     :param overrides: ``{'physics.Rs': 1.0e3, 'eps_b': 0.25, ...}``; a key without a section is
         looked up in the section that has it. Values given as strings are parsed as YAML, and
         text such as '1.0e3' that YAML 1.1 keeps as a string is read as a number.
@@ -310,11 +262,10 @@ def load_scene(source: Any = 'default', overrides: Mapping[str, Any] | None = No
     if isinstance(source, Scene):
         source = scene_to_dict(source)
     if isinstance(source, Mapping):
-        data, origin = copy.deepcopy(dict(source)), '<dict>'
+        data = unwrap_ros_params(copy.deepcopy(dict(source)), '<dict>')
+        data = resolve_base(data, os.getcwd(), '<dict>')
     else:
-        origin = str(source)
-        data = _read_yaml(find_config(origin))
-    data = _unwrap_ros_params(data, origin)
+        data = read_scene_file(find_config(str(source)))
     for key, value in (overrides or {}).items():
         _apply_override(data, key, _override_value(value))
     values = _checked_values(data)
