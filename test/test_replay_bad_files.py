@@ -86,7 +86,7 @@ def _one_line_error(capsys, prog):
     ('torn_in_header', 'torn before the scene')])
 @pytest.mark.parametrize('subcommand', SUBCOMMANDS)
 def test_unusable_files_give_one_line_and_exit_1(bad_files, tmp_path, capsys, subcommand,
-                                                  kind, message):
+                                                 kind, message):
     argv = _argv(subcommand, bad_files[kind], tmp_path)
     for run, prog in ((main_replay, 'det_sim_replay'),
                       (lambda a: det_sim(['replay'] + a), 'det_sim')):

@@ -42,8 +42,9 @@ def torn_note(files, done: str = 'only its readable part was read') -> str:
     """Return the one line about the torn ``files`` ('' if there are none)."""
     if not files:
         return ''
-    return (f'{files[0]}: torn (the file ends inside a record), {done}; `det_sim_replay recover {files[0]} FIXED.mcap` writes that part as a '
-            'finished file' + (f' ({len(files)} torn files)' if len(files) > 1 else ''))
+    return (f'{files[0]}: torn (the file ends inside a record), {done}; '
+            f'`det_sim_replay recover {files[0]} FIXED.mcap` writes that part as a finished file'
+            + (f' ({len(files)} torn files)' if len(files) > 1 else ''))
 
 
 def open_log(paths):
