@@ -89,21 +89,30 @@ def test_bad_values_and_no_node_are_one_line(node, capsys, argv, code, message):
 def test_parameters_get_and_set(node, capsys):
     assert _ok(capsys, ['param', 'get', 'real_time_factor']).strip() == str(RATE)
     assert _ok(capsys, ['param', 'get', 'structure.dets']).strip() == "['left', 'right']"
+    assert _ok(capsys, ['param', 'get', 'mode']).strip() == "''"
     assert _ok(capsys, ['param', 'set', 'max_lag', '1']).strip() == 'max_lag = 1.0'
     assert node.get_parameter('max_lag').value == 1.0
 
 
-def test_watch_csv_and_live_lines(node, capsys):
-    _ok(capsys, ['send', 'left=3000'])
-    assert 'running' in _ok(capsys, ['resume'])
+def test_watch_csv_and_live_lines(node, capfd):
+    """Watch with a real stderr (capfd): rclpy's EventsExecutor, as on a terminal."""
+    def ok(argv):
+        assert main(argv + NS) == 0
+        return capfd.readouterr().out
+
+    ok(['send', 'left=3000'])
+    assert 'running' in ok(['resume'])
     try:
-        lines = _ok(capsys, ['watch', '--csv', '--count', '3']).splitlines()
+        lines = ok(['watch', '--csv', '--count', '3']).splitlines()
         assert lines[0].startswith('t,deflection.position.left,deflection.position.right,'
                                    'deflection.velocity.left')
         assert len(lines) == 4 and len(lines[1].split(',')) == 1 + 5 * 2
-        live = _ok(capsys, ['watch', '--count', '2']).splitlines()
+        steps = [round(float(line.split(',')[0]) * 1000) for line in lines[1:]]
+        assert steps == list(range(steps[0], steps[0] + 3))   # consecutive samples
+        live = ok(['watch', '--count', '2']).splitlines()
         assert len(live) == 2 and all(line.startswith('t = ') for line in live)
         assert 'left: dy' in live[-1] and 'right: dy' in live[-1]
-        assert 'not paused' in _error(capsys, ['advance'] + NS, 1)
+        assert main(['advance'] + NS) == 1
+        assert 'not paused' in capfd.readouterr().err
     finally:
-        _ok(capsys, ['pause'])
+        ok(['pause'])

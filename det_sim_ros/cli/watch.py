@@ -49,6 +49,10 @@ class Watcher:
         for topic in OUTPUT_TOPICS:
             shell.subscribe(topic, self.take)
 
+    def waiting(self) -> bool:
+        """Return True while no complete sample has arrived."""
+        return self._latest is None
+
     def done(self) -> bool:
         """Return True once ``count`` rows or lines are printed."""
         return bool(self.count) and self.printed >= self.count
@@ -71,14 +75,14 @@ class Watcher:
         """Print the live line once a wall second (not with ``csv``)."""
         if self.csv or self.done():
             return
+        if self._latest is None:   # the first line shows the first sample
+            return
         if self._next_line is None:
-            self._next_line = now + 1.0
+            self._next_line = now
         if now < self._next_line:
             return
         self._next_line += 1.0
-        if self._latest is None:
-            text = 'no sample yet (is the node paused?)'
-        elif self._latest is self._shown:
+        if self._latest is self._shown:
             text = f't = {self._latest[0] * 1e-9:.3f} s (no new sample: paused?)'
         else:
             text = self._line(*self._latest)

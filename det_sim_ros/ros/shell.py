@@ -50,12 +50,11 @@ class NodeShell:
     def __enter__(self) -> 'NodeShell':
         import rclpy
         from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
         self._context = Context()
         rclpy.init(args=[], context=self._context)
         self._node = rclpy.create_node(f'det_sim_shell_{os.getpid()}', context=self._context,
                                        start_parameter_services=False)
-        self._executor = SingleThreadedExecutor(context=self._context)
+        self._executor = _executor(self._context)
         self._executor.add_node(self._node)
         return self
 
@@ -162,11 +161,11 @@ class NodeShell:
             self._node.destroy_publisher(publisher)
         return self.topic(topic)
 
-    def subscribe(self, topic: str, callback: Callable) -> None:
+    def subscribe(self, topic: str, callback: Callable, depth: int = 100) -> None:
         """Call ``callback(topic, JointState)`` for every message on an output topic."""
         from sensor_msgs.msg import JointState
         self._node.create_subscription(JointState, self.topic(topic),
-                                       lambda msg: callback(topic, msg), 10)
+                                       lambda msg: callback(topic, msg), depth)
 
     def _wait_for(self, condition: Callable[[], bool], what: str) -> None:
         end = time.monotonic() + self.timeout
@@ -175,6 +174,23 @@ class NodeShell:
                 raise ShellError(f'{what} within {self.timeout:g} s (is sim_node running, '
                                  'with this --ns?)')
             self.spin(0.05)
+
+
+def _executor(context):
+    """
+    Return rclpy's EventsExecutor, which keeps up with a 1 kHz node's outputs.
+
+    It enables faulthandler on sys.stderr, so where that is no file (a captured stream) the
+    SingleThreadedExecutor is used instead.
+    """
+    import sys
+    from rclpy.executors import SingleThreadedExecutor
+    from .spinning import make_executor
+    try:
+        sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):
+        return SingleThreadedExecutor(context=context)
+    return make_executor(context)
 
 
 def _duration(seconds: float):

@@ -110,11 +110,18 @@ def _watch(args) -> int:
 
     def action(shell):
         watcher.subscribe(shell)
-        end = math.inf if args.duration is None else time.monotonic() + args.duration
+        start = time.monotonic()
+        end = math.inf if args.duration is None else start + args.duration
+        warn_at = start + args.timeout
         try:
             while not watcher.done() and time.monotonic() < end:
                 shell.spin(0.05)
-                watcher.tick(time.monotonic())
+                now = time.monotonic()
+                watcher.tick(now)
+                if watcher.waiting() and now > warn_at:
+                    warn_at = math.inf
+                    print(f"det_sim: no sample on {shell.topic('displacement')} yet (is the "
+                          'node paused, or another --ns?)', file=sys.stderr)
         except KeyboardInterrupt:   # the usual way to stop watching
             pass
         return 0
@@ -167,7 +174,8 @@ def _param(args) -> int:
 
     def action(shell):
         if args.action == 'get':
-            print(shell.get_parameter(args.name))
+            value = shell.get_parameter(args.name)
+            print("''" if value == '' else value)
             return
         try:
             value = yaml.safe_load(args.value)
