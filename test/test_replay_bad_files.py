@@ -6,7 +6,10 @@ and random bytes: one line on stderr, a non-zero exit code, never a traceback.
 """
 
 import random
+import subprocess
+import sys
 
+from conftest import child_env
 from det_sim_ros.cli import main as det_sim
 from det_sim_ros.cli import main_replay
 from det_sim_ros.io.mcap_format import MAGIC
@@ -139,3 +142,13 @@ def test_no_traceback_on_random_cuts_and_bytes(bad_files, tmp_path, capsys):
             err = capsys.readouterr().err
             assert 'Traceback' not in err and err.count('\n') <= 1
             assert (code == 0) == (err == ''), (subcommand, trial, err)
+
+
+@pytest.mark.parametrize('kind', ['random', 'torn'])
+def test_the_console_command_prints_one_line(bad_files, kind):
+    """The command as a process: nothing on stderr but the one line (no library noise)."""
+    done = subprocess.run([sys.executable, '-m', 'det_sim_ros.cli.replay', 'info',
+                           bad_files[kind]], capture_output=True, text=True, env=child_env(),
+                          timeout=120)
+    assert done.returncode == 1
+    assert done.stderr.count('\n') == 1 and done.stderr.startswith('det_sim_replay: error: ')

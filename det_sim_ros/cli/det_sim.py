@@ -8,7 +8,7 @@ The offline verbs write data (CSV, JSON) and plots (PNG); the ROS tools are ``fl
                     [--eps-b 0.15,0.20,0.25]
     det_sim step    [--beams fixed,simply_supported] [--eps-b 0.15,0.20,0.25] [--t-end 4.5]
     det_sim bench   [--quick] [--out DIR] ...   (work-precision benchmark; the 'bench' extra)
-    det_sim plot LOG.mcap [--out DIR]                 (every channel of a sim_node log, PNG)
+    det_sim plot LOG.mcap [--out DIR] [--all]         (every channel of a sim_node log, PNG)
     det_sim linearize [--voltage 1500] [--branch buckled+] [--json]   (A, B, C, D; Bode)
     det_sim fleet FLEET.yaml [--host NAME] [--log-dir DIR]   (sim_node processes, one per
                     namespace; Ctrl-C stops them all; det_sim_ros.ros.fleet describes the file)
