@@ -65,6 +65,8 @@ setup(
         (os.path.join('share', package_name, 'config'),
          sorted(glob('config/*.yaml'))
          + ['config/foxglove_layout.json', 'config/dds_lossy.xml']),
+        # `ros2 launch det_sim_ros sim.launch.py` (a ROS install; launch is not on PyPI)
+        (os.path.join('share', package_name, 'launch'), sorted(glob('launch/*.launch.py'))),
         # `ros2 run det_sim_ros sim_node` looks only in <prefix>/lib/det_sim_ros
         (os.path.join('lib', package_name), ['scripts/sim_node']),
     ],

@@ -138,7 +138,7 @@ def test_det_sim_replay_verb_is_the_same_command(tmp_path, log_path, capsys):
     (['resim', 'nowhere.mcap'], 'No such file'),
     (['info', 'nowhere.mcap'], 'No such file'),
     (['recover', 'nowhere.mcap', 'out.mcap'], 'No such file'),
-    (['resim', 'NOT_MCAP'], 'the log holds no scene'),
+    (['resim', 'NOT_MCAP'], 'not an MCAP file'),
 ])
 def test_replay_errors_are_one_line(tmp_path, monkeypatch, capsys, argv, message):
     monkeypatch.chdir(tmp_path)

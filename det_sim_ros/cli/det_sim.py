@@ -8,11 +8,14 @@ The offline verbs write data (CSV, JSON) and plots (PNG); the ROS tools are ``fl
                     [--eps-b 0.15,0.20,0.25]
     det_sim step    [--beams fixed,simply_supported] [--eps-b 0.15,0.20,0.25] [--t-end 4.5]
     det_sim bench   [--quick] [--out DIR] ...   (work-precision benchmark; the 'bench' extra)
-    det_sim plot LOG.mcap [--out DIR]                 (every channel of a sim_node log, PNG)
+    det_sim plot LOG.mcap [--out DIR] [--all]         (every channel of a sim_node log, PNG)
     det_sim linearize [--voltage 1500] [--branch buckled+] [--json]   (A, B, C, D; Bode)
     det_sim fleet FLEET.yaml [--host NAME] [--log-dir DIR]   (sim_node processes, one per
                     namespace; Ctrl-C stops them all; det_sim_ros.ros.fleet describes the file)
     det_sim replay {resim,play,info,recover} LOG ...   (also the command det_sim_replay)
+    det_sim send det0=2000 | 2000 0   det_sim watch [--csv]   det_sim pause | resume | reset
+    det_sim advance N   det_sim param get|set NAME [VALUE]   (a running sim_node, found by
+                    --ns and --node; docs/shell.md: the ros2 commands they stand in for)
 
 The scene verbs (statics, step, linearize) take ``--scene PATH_OR_NAME`` (default 'default'),
 ``--set key=value`` (repeatable, e.g. ``--set physics.Rs=1e3 --set scene.fidelity=consistent``),
@@ -32,13 +35,13 @@ import argparse
 import sys
 
 from . import common
-from .verbs import bench, fleet, linearize, plot, replay, statics, step
+from .verbs import bench, fleet, linearize, node, plot, replay, statics, step
 
 __all__ = ['main', 'main_replay', 'build_parser', 'VERBS']
 
 PROG = 'det_sim'
 VERBS = {'statics': statics, 'step': step, 'bench': bench, 'plot': plot,
-         'linearize': linearize, 'fleet': fleet, 'replay': replay}
+         'linearize': linearize, 'fleet': fleet, 'replay': replay, **node.VERBS}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -47,7 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG, description='Run the DET-buckled-beam model offline (no ROS): statics '
         '(Fig. 5), step responses (Fig. 6), integration benchmark, plots of sim_node logs, '
         'linear models. Writes CSV, JSON and PNG files. And with ROS: fleet starts several '
-        'sim_node processes from one YAML file; replay re-simulates or republishes logs.')
+        'sim_node processes from one YAML file; replay re-simulates or republishes logs; '
+        'send, watch, pause, resume, advance, reset and param talk to a running sim_node.')
     sub = parser.add_subparsers(dest='verb', metavar='{' + ','.join(VERBS) + '}')
     for name, verb in VERBS.items():
         verb_parser = sub.add_parser(name, help=verb.HELP,

@@ -1,7 +1,9 @@
 """
 ``det_sim plot``: every channel of a sim_node MCAP log against sim time, and a summary.
 
-The plot is a PNG, the summary text; det_sim_ros.io.logplot reads and draws the log.
+The plot is a PNG, the summary text; det_sim_ros.io.logplot reads and draws the log. The
+summary file holds every channel; the screen gets one row per quantity for a log of many DETs
+(det_sim_ros.cli.plot_summary), or every channel with ``--all``.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ import os
 import sys
 
 from .. import common
+from ..plot_summary import screen_summary
 
 HELP = 'PNG of every channel of a sim_node MCAP log against sim time, and a text summary'
 
@@ -20,6 +23,9 @@ def add_arguments(parser) -> None:
     parser.add_argument('--out', default=None,
                         help='output folder (default: the folder of the log)')
     parser.add_argument('--dpi', type=int, default=80, help='PNG resolution (default: 80)')
+    parser.add_argument('--all', action='store_true', dest='all_channels',
+                        help='print every channel (default: one row per quantity when the '
+                        'log has more than 4 DETs; the summary file always has every channel)')
 
 
 def main(args) -> int:
@@ -31,7 +37,7 @@ def main(args) -> int:
     os.makedirs(out, exist_ok=True)
     stem = os.path.splitext(os.path.basename(first))[0]
     text = logplot.summary(data)
-    print(text, end='')
+    print(text if args.all_channels else screen_summary(data, text), end='')
     files = [common.write_text(os.path.join(out, f'{stem}_summary.txt'), text)]
     try:
         import matplotlib  # noqa: F401

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import argparse
 
+from .. import log_checks
+
 HELP = 're-simulate, republish, summarize or recover sim_node MCAP logs'
 DESCRIPTION = 'Re-simulate or republish det_sim_ros MCAP logs.'
 PROG = 'det_sim_replay'
@@ -59,17 +61,25 @@ def main(args) -> int:
 
 def _resim(args) -> int:
     from ...io.replay import resimulate
-    result = resimulate(args.log, method=args.method, substeps=args.substeps)
+    reader = log_checks.open_log(args.log)
+    result = resimulate(reader.files, method=args.method, substeps=args.substeps)
     print(result.table())
     ok = result.ok(args.tolerance)
     print('bit-exact' if ok and not any(result.max_deviation.values()) else
           ('within tolerance' if ok else 'MISMATCH'))
-    return 0 if ok else 1
+    return _torn_exit(reader.files, 0 if ok else 1)
+
+
+def _torn_exit(files, code: int) -> int:
+    """Return ``code``; raise the one line (exit code 1) if some of ``files`` are torn."""
+    note = log_checks.torn_note(log_checks.torn_files(files))
+    if note:
+        raise log_checks.LogFileError(note)
+    return code
 
 
 def _info(args) -> int:
-    from ...io.mcap_log import LogReader
-    reader = LogReader(args.log)
+    reader = log_checks.open_log(args.log)
     counts: dict[str, int] = {}
     first = last = None
     for message in reader.messages():
@@ -78,17 +88,18 @@ def _info(args) -> int:
         last = message.log_time
     print(f'files: {", ".join(reader.files)}')
     print(f"profile: {reader.profile}; det_sim_ros {reader.info.get('version', '?')}; "
-          f"{'finished' if reader.complete else 'UNFINISHED (readable part shown)'}")
+          f"{'finished' if reader.complete else 'unfinished (the readable part)'}")
     if first is not None:
         print(f'log time: {first / 1e9:.6f} .. {last / 1e9:.6f} s')
     for topic, count in counts.items():
         print(f'  {topic}  [{reader.topics.get(topic, "?")}]  {count} messages')
-    return 0
+    return _torn_exit(reader.files, 0)
 
 
 def _recover(args) -> int:
     from ...io.mcap_log import recover
-    outcome = recover(args.log, args.output)
+    reader = log_checks.open_log(args.log)
+    outcome = recover(reader.files, args.output)
     print(f"{outcome['messages']} messages written to {args.output}"
           + ('' if outcome['complete'] else ' (source was unfinished)'))
     return 0
@@ -98,10 +109,14 @@ def _play(args) -> int:
     import rclpy
     from rclpy.executors import ExternalShutdownException
     from ...ros.play import play
+    files = log_checks.open_log(args.log).files
+    torn = log_checks.torn_files(files)
+    if torn:   # nothing is published from a file that may end anywhere
+        raise log_checks.LogFileError(log_checks.torn_note(torn, 'not played'))
     ros_args = [] if args.ros_args is None else ['--ros-args', *args.ros_args]
     rclpy.init(args=[PROG, *ros_args])
     try:
-        stats = play(args.log, rate=args.rate, start_offset=args.start_offset, loop=args.loop,
+        stats = play(files, rate=args.rate, start_offset=args.start_offset, loop=args.loop,
                      clock=args.clock, topics=args.topics)
         print(f'published {sum(stats.published.values())} messages'
               + (f', {stats.clock} clock ticks' if args.clock else ''))
