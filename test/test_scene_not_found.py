@@ -49,3 +49,11 @@ def test_sim_node_says_it_in_one_fatal_line(capfd):
     lines = [line for line in (out + err).splitlines() if line.strip()]
     assert code == 1 and len(lines) == 1 and 'cannot start' in lines[0], lines
     _check_line(lines[0])
+
+
+def test_a_scene_file_that_is_not_text_is_one_line(tmp_path):
+    """Check that a binary scene file is refused with a SceneError naming the file."""
+    path = tmp_path / 'random.yaml'
+    path.write_bytes(bytes(range(128, 256)) * 4)
+    with pytest.raises(SceneError, match='not UTF-8 text'):
+        load_scene(str(path))

@@ -105,6 +105,9 @@ def _read_yaml(path):
             return yaml.safe_load(stream)
     except OSError as exc:
         raise SceneError(f'cannot read scene file {path!r}: {exc.strerror}') from None
+    except UnicodeDecodeError as exc:
+        raise SceneError(f'scene file {path!r} is not UTF-8 text (byte {exc.start}): '
+                         'a YAML scene file was expected') from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
         where = f' at line {mark.line + 1}' if mark is not None else ''
