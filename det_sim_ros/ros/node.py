@@ -290,16 +290,17 @@ class SimNode(Node):
     def _srv_reset(self, request, response):
         self._sim.reset()
         self._pacing.reset()
+        log = ''
         if self._recorder is not None:
             self._recorder.new_file()  # sim time restarts: one file per continuous run
             if self._recorder.active:
-                self.get_logger().info(f'reset: the log continues in a new file after '
-                                       f'{self._recorder.path}')
+                log = f'; the log continues in {self._recorder.path}'
+                self.get_logger().info(f'reset{log}')
         self._fault_reported = ''
         self._pacing.run(self.running)
         self._publish_sample(self.current_outputs())
         response.success = True
-        response.message = f'reset to t = 0, initial state {self._initial_text}, 0 V'
+        response.message = f'reset to t = 0, initial state {self._initial_text}, 0 V{log}'
         return response
 
     # -- parameters -------------------------------------------------------------------------
