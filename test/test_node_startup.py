@@ -97,6 +97,8 @@ def _unwritable_paths(tmp_path):
     yield '/proc/det_sim_logs'
     yield str(plain / 'logs')
     yield str(plain / 'run.mcap')
+    (tmp_path / 'folder.mcap').mkdir()
+    yield str(tmp_path / 'folder.mcap')
     if os.geteuid() != 0:          # root writes into a directory without write permission
         locked = tmp_path / 'locked'
         locked.mkdir(mode=0o555)

@@ -64,8 +64,8 @@ def open_recorder(get: Callable, scene, qos_by_topic: dict, metadata: dict, name
 def _check_writable(path: str) -> None:
     """Create the log directory (a log file's directory); OSError if it cannot be written."""
     as_file = path.endswith('.mcap') or (os.path.exists(path) and not os.path.isdir(path))
-    if as_file and os.path.isdir(path):
-        return   # a directory named *.mcap: the recorder refuses it with its own reason
+    if as_file and os.path.isdir(path):   # a directory named *.mcap
+        raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), path)
     folder = (os.path.dirname(path) or os.curdir) if as_file else path
     os.makedirs(folder, exist_ok=True)
     target = path if os.path.exists(path) and as_file else folder
