@@ -103,6 +103,7 @@ class Harness:
         params.setdefault('real_time', False)
         params.setdefault('info_period', 0.0)
         params.setdefault('log.enabled', 'log.path' in params)  # no MCAP files unless asked
+        params.setdefault('allow_duplicate_name', True)   # no discovery wait in-process
         overrides = [Parameter(name, value=value) for name, value in params.items()]
         self.context = context
         self.node = SimNode(context=context, namespace=namespace, parameter_overrides=overrides)

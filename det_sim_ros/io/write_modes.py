@@ -104,9 +104,10 @@ class WriteBehind:
         return True
 
     def new_file(self) -> None:
-        """Continue in a new file after what is queued."""
+        """Continue in a new file after what is queued; it is open on return."""
         if self._recorder.active:
             self._thread.put(NEW_FILE)
+            self._thread.write_queued()   # the caller may report the new file's name
         else:
             self._recorder._new_file_now()
 

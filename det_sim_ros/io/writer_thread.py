@@ -64,6 +64,10 @@ class WriterThread:
             self.caught_up += 1
             self._guarded(yield_gil=False)
 
+    def write_queued(self) -> None:
+        """Write everything queued now, in the calling thread."""
+        self._guarded(yield_gil=False)
+
     def _guarded(self, yield_gil: bool) -> None:
         try:
             with self._lock:

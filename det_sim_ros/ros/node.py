@@ -29,6 +29,7 @@ from .commands import CommandInput
 from .declaration import load_node_scene, validate_parameters
 from .diagnostics import diagnostics_message, RateWindow, status_line
 from .markers import attach_markers
+from .name_check import check_unique_name, note_node_created
 from .pacing import make_pacing
 from .recording import open_recorder
 from .spinning import make_executor, spin, spin_until_stopped, StopRequested, StopSignals
@@ -66,6 +67,7 @@ class SimNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
+        note_node_created(self.context)   # discovery runs from here, beside the preparation
         self.scene, scene_file = load_node_scene(self)
         self._pacing = make_pacing(self._p)
         started = time.perf_counter()
@@ -91,6 +93,7 @@ class SimNode(Node):
         self.on_sample = None
         self._fault_reported = self._distrust_reported = ''
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        check_unique_name(self, self._p('allow_duplicate_name'))
         self._start(scene_file)
 
     def _start(self, scene_file):
@@ -290,16 +293,17 @@ class SimNode(Node):
     def _srv_reset(self, request, response):
         self._sim.reset()
         self._pacing.reset()
+        log = ''
         if self._recorder is not None:
             self._recorder.new_file()  # sim time restarts: one file per continuous run
             if self._recorder.active:
-                self.get_logger().info(f'reset: the log continues in a new file after '
-                                       f'{self._recorder.path}')
+                log = f'; the log continues in {self._recorder.path}'
+                self.get_logger().info(f'reset{log}')
         self._fault_reported = ''
         self._pacing.run(self.running)
         self._publish_sample(self.current_outputs())
         response.success = True
-        response.message = f'reset to t = 0, initial state {self._initial_text}, 0 V'
+        response.message = f'reset to t = 0, initial state {self._initial_text}, 0 V{log}'
         return response
 
     # -- parameters -------------------------------------------------------------------------

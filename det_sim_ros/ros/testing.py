@@ -160,9 +160,10 @@ class LockstepSim:
         from rclpy.parameter import Parameter
         from .node import make_executor, SimNode
         if self.node is None:
+            # (its domain is this process's own: no discovery wait for a duplicate name)
             params = {'log.enabled': 'log.path' in self._params, 'info_period': 0.0,
-                      **self._params, 'mode': 'lockstep', 'start_paused': True,
-                      'scene_file': self._scene, **self._overrides}
+                      'allow_duplicate_name': True, **self._params, 'mode': 'lockstep',
+                      'start_paused': True, 'scene_file': self._scene, **self._overrides}
             self.node = SimNode(context=self.context, parameter_overrides=[
                 Parameter(name, value=value) for name, value in params.items()])
             self.node.on_sample = self._record
