@@ -5,8 +5,9 @@ Two nodes of one name (a fleet or a node started twice) would publish on the sam
 answer the same services, and a controller could not tell them apart. Discovery is not
 instant: with Fast DDS on the localhost discovery range a new process sees an already running
 participant from 0.1 s up to 3.1 s after ``rclpy.init`` (the running one announces itself every
-3 s), so the check looks for :data:`DISCOVERY_WINDOW_S` after the context's first node was
-created; the scene's preparation runs inside that window.
+3 s). Waiting that long before the first sample would cost every start 3.4 s, so the node looks
+once when it is created and then keeps watching for :data:`DISCOVERY_WINDOW_S` while it runs; a
+duplicate found in that window stops it with the same one-line refusal.
 """
 
 from __future__ import annotations
@@ -46,34 +47,27 @@ def _refusal(node) -> str:
 
 def check_unique_name(node, allow: bool) -> None:
     """
-    Refuse to start (:class:`SceneError`) when another node of this name is in the graph.
+    Refuse a duplicate now, and watch for one during the discovery window.
 
-    Without ``allow`` this waits until :data:`DISCOVERY_WINDOW_S` after the context's first
-    node (at once when a duplicate shows up); with ``allow`` it does not wait, and a one-shot
-    timer at the window's end logs a warning if there is one.
+    A duplicate already in the graph raises :class:`SceneError` at once (nothing was published).
+    Until :data:`DISCOVERY_WINDOW_S` after the context's first node a steady timer looks again
+    every :data:`POLL_S`: a duplicate found then is put in ``node.refusal``, which the spin loop
+    of ``sim_node``'s main raises (one FATAL line, the log finished, exit 1). With ``allow`` the
+    node never refuses, and logs one warning if it finds one.
     """
     note_node_created(node.context)
     deadline = _first_node_time[node.context] + DISCOVERY_WINDOW_S
-    if allow:
-        _warn_at(node, deadline)
-        return
-    while True:
-        if _others(node) > 0:
-            raise SceneError(_refusal(node))
-        left = deadline - time.monotonic()
-        if left <= 0.0:
-            return
-        time.sleep(min(POLL_S, left))
-
-
-def _warn_at(node, deadline: float) -> None:
+    if not allow and _others(node) > 0:
+        raise SceneError(_refusal(node))
     timer = None
 
-    def warn():
-        if timer is not None:
+    def look():
+        found = _others(node) > 0
+        if found or time.monotonic() >= deadline:
             timer.cancel()
-        if _others(node) > 0:
+        if found and not allow:
+            node.refusal = SceneError(_refusal(node))
+        elif found:
             node.get_logger().warning(_refusal(node).split(';')[0] + ' (allow_duplicate_name '
                                       'is true: started anyway)')
-    timer = node.create_timer(max(deadline - time.monotonic(), 0.001), warn,
-                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+    timer = node.create_timer(POLL_S, look, clock=Clock(clock_type=ClockType.STEADY_TIME))
