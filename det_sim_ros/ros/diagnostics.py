@@ -14,7 +14,8 @@ from typing import NamedTuple
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-__all__ = ['CommandCounts', 'diagnostics_message', 'RateWindow', 'status_line', 'Window']
+__all__ = ['CommandCounts', 'diagnostics_message', 'RateWindow', 'ReportSchedule', 'status_line',
+           'Window']
 
 
 class Window(NamedTuple):
@@ -41,6 +42,29 @@ class RateWindow:
         return Window(rate, now[2] - start[2], now[3] - start[3], wall)
 
 
+class ReportSchedule:
+    """
+    When a periodic report (INFO line, /diagnostics) is due by the wall clock.
+
+    A report's timer asks on its own grid; a pacing that starves the node's timers (free run)
+    asks after each tick. A report is due at most once per ``period`` (s): timer callbacks that
+    come late in a burst are one report, and a starved timer is made up for by the ticks.
+    """
+
+    def __init__(self, period: float, now: float):
+        self.period = period
+        self._last = now
+
+    def due(self, now: float, on_timer: bool) -> bool:
+        """Return True (and start the next period) if the report is due at ``now``."""
+        # a timer on its own grid may come a little less than a period after a report that a
+        # tick made: half a period tells its call from a late duplicate in a burst
+        if now - self._last < self.period * (0.5 if on_timer else 1.0):
+            return False
+        self._last = now
+        return True
+
+
 class CommandCounts(NamedTuple):
     """The node's command counters (totals)."""
 
@@ -53,7 +77,7 @@ class CommandCounts(NamedTuple):
 def diagnostics_message(*, node_name: str, stamp, mode: str, paused: bool, simulator,
                         window: Window, achieved_rtf: float, pacing, late_ticks: int,
                         slipped_s: float, commands: CommandCounts, distrust: str,
-                        recorder) -> DiagnosticArray:
+                        recorder, wait=None) -> DiagnosticArray:
     """
     Build one /diagnostics message with the node's one status ``<node_name>: simulation``.
 
@@ -64,6 +88,8 @@ def diagnostics_message(*, node_name: str, stamp, mode: str, paused: bool, simul
     :param late_ticks, slipped_s: the pacing's totals.
     :param distrust: why the results are not to be trusted ('' if they are).
     :param recorder: the MCAP :class:`~det_sim_ros.io.mcap_log.Recorder`, or None.
+    :param wait: what the node waits for (:class:`~det_sim_ros.ros.waiting.Wait`), or None;
+        once it is shown it is the message of an OK status.
     """
     # the fully qualified name tells namespaced nodes apart (/arm1/sim_node: simulation)
     status = DiagnosticStatus(name=f'{node_name}: simulation', hardware_id=node_name)
@@ -74,6 +100,8 @@ def diagnostics_message(*, node_name: str, stamp, mode: str, paused: bool, simul
         status.level, status.message = DiagnosticStatus.WARN, distrust
     elif pacing.warning:
         status.level, status.message = DiagnosticStatus.WARN, pacing.warning
+    elif wait is not None and wait.shown():
+        status.message = wait.text()
     dt, wall = simulator.dt, window.wall_s
     residual = simulator.power_residual() if not simulator.fault else math.nan
     values = {
@@ -97,6 +125,8 @@ def diagnostics_message(*, node_name: str, stamp, mode: str, paused: bool, simul
         'fault': simulator.fault,
         'stepper': simulator.describe_stepper(),      # adaptive: the current step count
         **pacing.values,
+        'waiting_for': wait.text() if wait is not None else '',
+        'waiting_s': f'{wait.seconds:.3f}' if wait is not None else '0.000',
         'internal_steps': str(simulator.steps_taken),
     }
     if recorder is not None:
@@ -118,12 +148,15 @@ def _mm(values) -> str:
     return f'{values.min():.3f}..{values.max():.3f}'
 
 
-def status_line(*, t: float, volts, q_mm, dy_mm, rtf: float, state: str) -> str:
+def status_line(*, t: float, volts, q_mm, dy_mm, rtf: float, window_s: float,
+                state: str) -> str:
     """
     Return the periodic INFO line.
 
     It holds the sim time (s), voltages (V), deflection and displacement (mm), the achieved
-    real-time factor and the state (running, paused, FAULT).
+    real-time factor over the last ``window_s`` of wall time and the state (running, paused,
+    FAULT, or what the node waits for).
     """
     v = volts.tolist() if len(volts) <= 4 else f'{volts.min():g}..{volts.max():g}'
-    return f't={t:.3f} s v={v} V q={_mm(q_mm)} mm dy={_mm(dy_mm)} mm RTF={rtf:.2f} {state}'
+    return (f't={t:.3f} s v={v} V q={_mm(q_mm)} mm dy={_mm(dy_mm)} mm RTF={rtf:.2f} '
+            f'(over {window_s:.1f} s) {state}')

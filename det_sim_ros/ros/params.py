@@ -99,6 +99,10 @@ NODE_PARAMS = {
                              'many per wall second; 0 = off', True, (0.0, 1.0e4)),
     'markers.frame_id': Param('', "'': one frame per DET (<namespace>/<DET name>); else all "
                               'DETs in this one frame, side by side', True, None),
+    'wait_for_subscribers': Param(0, 'publish sample 0 and start stepping only once this many '
+                                  'subscriptions of displacement have matched (and received '
+                                  'sample 0); 0 = at once (docs/real_time.md: the start of a '
+                                  'run)', True, (0, 10000)),
 }
 
 
