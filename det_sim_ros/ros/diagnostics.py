@@ -33,9 +33,14 @@ class RateWindow:
     def __init__(self, steps: int = 0, late_ticks: int = 0, slipped_s: float = 0.0):
         self._start = (time.perf_counter(), steps, late_ticks, slipped_s)
 
-    def take(self, steps: int, late_ticks: int, slipped_s: float) -> Window:
-        """Return the window up to now, given the running totals; the next one starts now."""
-        now = (time.perf_counter(), steps, late_ticks, slipped_s)
+    def take(self, steps: int, late_ticks: int, slipped_s: float,
+             wall: float | None = None) -> Window:
+        """
+        Return the window up to now, given the running totals; the next one starts now.
+
+        ``wall``: now on the wall clock (``time.perf_counter``), if the caller has read it.
+        """
+        now = (time.perf_counter() if wall is None else wall, steps, late_ticks, slipped_s)
         start, self._start = self._start, now
         wall = now[0] - start[0]
         rate = (now[1] - start[1]) / wall if wall > 0 else 0.0
@@ -93,15 +98,8 @@ def diagnostics_message(*, node_name: str, stamp, mode: str, paused: bool, simul
     """
     # the fully qualified name tells namespaced nodes apart (/arm1/sim_node: simulation)
     status = DiagnosticStatus(name=f'{node_name}: simulation', hardware_id=node_name)
-    status.level, status.message = DiagnosticStatus.OK, 'paused' if paused else 'running'
-    if simulator.fault:
-        status.level, status.message = DiagnosticStatus.ERROR, f'fault: {simulator.fault}'
-    elif distrust:
-        status.level, status.message = DiagnosticStatus.WARN, distrust
-    elif pacing.warning:
-        status.level, status.message = DiagnosticStatus.WARN, pacing.warning
-    elif wait is not None and wait.shown():
-        status.message = wait.text()
+    status.level, status.message = _level_and_message(simulator.fault, distrust,
+                                                      pacing.warning, wait, paused)
     dt, wall = simulator.dt, window.wall_s
     residual = simulator.power_residual() if not simulator.fault else math.nan
     values = {
@@ -110,6 +108,7 @@ def diagnostics_message(*, node_name: str, stamp, mode: str, paused: bool, simul
         'paused': str(paused).lower(),
         'step_rate_hz': f'{window.rate_hz:.1f}',
         'real_time_factor': f'{achieved_rtf:.3f}',
+        'window_s': f'{wall:.3f}',
         'lag_ms': f'{pacing.lag_steps * dt * 1e3:.1f}',
         'max_lag_ms': f'{pacing.max_lag_steps * dt * 1e3:.1f}',
         'late_ticks': str(late_ticks),
@@ -140,6 +139,17 @@ def diagnostics_message(*, node_name: str, stamp, mode: str, paused: bool, simul
     return msg
 
 
+def _level_and_message(fault: str, distrust: str, warning: str, wait, paused: bool) -> tuple:
+    """Return the status level and message: the most significant of what is going on."""
+    if fault:
+        return DiagnosticStatus.ERROR, f'fault: {fault}'
+    if distrust or warning:
+        return DiagnosticStatus.WARN, distrust or warning
+    if wait is not None and wait.shown():
+        return DiagnosticStatus.OK, wait.text()
+    return DiagnosticStatus.OK, 'paused' if paused else 'running'
+
+
 def _mm(values) -> str:
     if len(values) == 1:
         return f'{values[0]:.3f}'
@@ -159,4 +169,4 @@ def status_line(*, t: float, volts, q_mm, dy_mm, rtf: float, window_s: float,
     """
     v = volts.tolist() if len(volts) <= 4 else f'{volts.min():g}..{volts.max():g}'
     return (f't={t:.3f} s v={v} V q={_mm(q_mm)} mm dy={_mm(dy_mm)} mm RTF={rtf:.2f} '
-            f'(over {window_s:.1f} s) {state}')
+            f'(over {window_s:.2f} s) {state}')

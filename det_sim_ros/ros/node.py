@@ -160,8 +160,8 @@ class SimNode(Node):
         if self._p('info_period') > 0:
             self._reports[self._log_info] = ReportSchedule(self._p('info_period'), now)
         for report, schedule in self._reports.items():
-            self.create_timer(schedule.period, lambda report=report, schedule=schedule: (
-                schedule.due(time.perf_counter(), True) and report()), clock=self._steady)
+            self.create_timer(schedule.period, lambda report=report: self._timed_report(report),
+                              clock=self._steady)
         self._wait_log = WaitLog(self.get_logger().info)
         if self.mode == 'lockstep' or not self._gate.open:
             self.create_timer(0.25, lambda: self._wait_log.check(self.waiting()),
@@ -218,12 +218,17 @@ class SimNode(Node):
         """Return what the node waits for (a :class:`~det_sim_ros.ros.waiting.Wait`) or None."""
         return self._gate.waiting() or self._pacing.waiting()
 
+    def _timed_report(self, report):
+        now = time.perf_counter()
+        if self._reports[report].due(now, True):
+            report(now)
+
     def run_due_reports(self):
         """Publish /diagnostics and log the INFO line if they are due by the wall clock."""
         now = time.perf_counter()
         for report, schedule in self._reports.items():
             if schedule.due(now, False):
-                report()
+                report(now)
 
     def current_outputs(self) -> np.ndarray:
         """Return the simulator's output vector now."""
@@ -362,10 +367,11 @@ class SimNode(Node):
         self._pacing.parameters_changed(self._p, {param.name for param in params})
 
     # -- reporting --------------------------------------------------------------------------
-    def publish_diagnostics(self):
+    def publish_diagnostics(self, now: float | None = None):
         """Publish the /diagnostics status for the window since the last one; return it."""
         pacing = self._pacing
-        window = self._diag_window.take(self.steps_total, pacing.late_ticks, pacing.slipped_s)
+        window = self._diag_window.take(self.steps_total, pacing.late_ticks, pacing.slipped_s,
+                                        now)
         self.achieved_rtf = window.rate_hz * self._sim.dt
         report = pacing.report(window.rate_hz, window.slipped_s, window.wall_s)
         distrust = self._sim.trust_issue()
@@ -383,9 +389,10 @@ class SimNode(Node):
         self._diag_pub.publish(msg)
         return msg
 
-    def _log_info(self):
+    def _log_info(self, now: float | None = None):
         pacing = self._pacing
-        window = self._info_window.take(self.steps_total, pacing.late_ticks, pacing.slipped_s)
+        window = self._info_window.take(self.steps_total, pacing.late_ticks, pacing.slipped_s,
+                                        now)
         out, wait = self.current_outputs(), self.waiting()
         state = ('FAULT' if self._sim.fault else 'paused' if self.paused
                  else wait.text() if wait is not None and wait.shown() else 'running')
