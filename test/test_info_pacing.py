@@ -11,14 +11,14 @@ import re
 
 import pytest
 
-PERIOD = 0.1     # s, info_period and diagnostics_period
+PERIOD = 0.05    # s, info_period and diagnostics_period
 
 
 def test_free_run_reports_are_paced_by_the_wall_clock(harness):
     """
     Check that free-run INFO lines and /diagnostics come once per period, not in bursts.
 
-    Eight INFO lines and eight /diagnostics messages of a free-running node: each says the
+    Thirty INFO lines and thirty /diagnostics messages of a free-running node: each says the
     wall-time window its figures (RTF, step rate) cover, and no window is shorter than half a
     period (a burst of late timer callbacks gave windows of a few ms).
     """
@@ -29,7 +29,7 @@ def test_free_run_reports_are_paced_by_the_wall_clock(harness):
     h.test.create_subscription(
         Log, '/rosout', lambda msg: lines.append(msg.msg) if msg.msg.startswith('t=') else None,
         QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-    h.spin_until(lambda: len(lines) >= 8 and len(h.diagnostics) >= 8, 'eight reports')
+    h.spin_until(lambda: len(lines) >= 30 and len(h.diagnostics) >= 30, '30 reports')
     info_windows = [float(re.search(r'RTF=\S+ \(over (\S+) s\)', line).group(1))
                     for line in lines]
     diag_windows = [float({kv.key: kv.value for kv in m.status[0].values}['window_s'])
