@@ -38,6 +38,7 @@ import time
 
 import yaml
 
+from .waiting import WAIT_OVER, WAIT_STARTED
 from ..io.contract import MODES
 from ..scenes.scene import load_scene, SceneError
 
@@ -240,6 +241,7 @@ class Fleet:
         self.env = dict(os.environ if env is None else env)
         self.procs: list = []
         self._outputs: list = []
+        self._read = [0] * len(self.nodes)     # bytes of each node's log already looked at
 
     def start(self) -> 'Fleet':
         for node in self.nodes:
@@ -273,6 +275,30 @@ class Fleet:
                 pass
         return done
 
+    def waits(self) -> list:
+        """
+        Return (node, message) for every wait line the nodes logged since the last call.
+
+        A node logs a line when it has waited ``REPORT_AFTER_S`` for its controller's answers
+        (lockstep) or its subscribers (``wait_for_subscribers``), and one when the wait is over
+        (det_sim_ros.ros.waiting).
+        """
+        found = []
+        for i, node in enumerate(self.nodes):
+            try:
+                with open(node.log_file, 'rb') as stream:
+                    stream.seek(self._read[i])
+                    data = stream.read()
+            except OSError:
+                continue
+            complete = data.rfind(b'\n') + 1      # a line still being written: next time
+            self._read[i] += complete
+            for line in data[:complete].decode('utf-8', 'replace').splitlines():
+                message = line.split(']: ', 1)[-1]
+                if message.startswith((WAIT_STARTED, WAIT_OVER)):
+                    found.append((node, message))
+        return found
+
     def wait(self, stop_timeout: float) -> list:
         """
         Wait for every process; return the exit codes, in node order (-9: killed).
@@ -302,6 +328,32 @@ def _last_line(path):
         return '(no log)'
 
 
+def _watch(fleet: Fleet, stop: dict, out):
+    """
+    Report the nodes as they start, wait and end waiting, until a stop signal or a node exits.
+
+    Return (node, process) of a node that exited on its own (``stop`` then asks for SIGTERM),
+    or None.
+    """
+    reported = set()
+    while not stop['signal']:
+        for node in fleet.ready():
+            if node.namespace not in reported:
+                reported.add(node.namespace)
+                print(f'fleet: {node.namespace} running', file=out, flush=True)
+        for node, message in fleet.waits():
+            print(f'fleet: {node.namespace} {message}', file=out, flush=True)
+        exited = [(n, p) for n, p in zip(fleet.nodes, fleet.procs) if p.poll() is not None]
+        if exited:        # a node stopped on its own: stop the others
+            node, proc = exited[0]
+            print(f'fleet: {node.namespace} exited with code {proc.returncode} '
+                  f'({_last_line(node.log_file)}); stopping the others', file=out, flush=True)
+            stop['signal'] = signal.SIGTERM
+            return exited[0]
+        time.sleep(0.1)
+    return None
+
+
 def run_fleet(path: str, host: str | None = None, log_dir: str | None = None,
               stop_timeout: float = 20.0, out=None) -> int:
     """
@@ -328,22 +380,7 @@ def run_fleet(path: str, host: str | None = None, log_dir: str | None = None,
               + ', '.join(f'{n.namespace} ({n.mode}, pid {p.pid})'
                           for n, p in zip(nodes, fleet.procs))
               + f'; logs in {os.path.dirname(nodes[0].log_file)}', file=out, flush=True)
-        reported = set()
-        early = None
-        while not stop['signal']:
-            for node in fleet.ready():
-                if node.namespace not in reported:
-                    reported.add(node.namespace)
-                    print(f'fleet: {node.namespace} running', file=out, flush=True)
-            exited = [(n, p) for n, p in zip(nodes, fleet.procs) if p.poll() is not None]
-            if exited:        # a node stopped on its own: stop the others
-                early = exited[0]
-                print(f'fleet: {early[0].namespace} exited with code {early[1].returncode} '
-                      f'({_last_line(early[0].log_file)}); stopping the others', file=out,
-                      flush=True)
-                stop['signal'] = signal.SIGTERM
-                break
-            time.sleep(0.1)
+        early = _watch(fleet, stop, out)
         fleet.signal(stop['signal'])
         codes = fleet.wait(stop_timeout)
     finally:

@@ -16,6 +16,7 @@ import numpy as np
 import rclpy
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -27,12 +28,14 @@ from std_srvs.srv import SetBool, Trigger
 
 from .commands import CommandInput
 from .declaration import load_node_scene, validate_parameters
-from .diagnostics import diagnostics_message, RateWindow, status_line
+from .diagnostics import diagnostics_message, RateWindow, ReportSchedule, status_line
+from .discovery import announce_early
 from .markers import attach_markers
 from .name_check import check_unique_name, note_node_created
 from .pacing import make_pacing
 from .recording import open_recorder
 from .spinning import make_executor, spin, spin_until_stopped, StopRequested, StopSignals
+from .waiting import SubscriberGate, WaitLog
 from ..io.contract import (CLOCK_TOPIC, COMMAND_TOPIC, DIAGNOSTICS_TOPIC, encode_clock,
                            JOINT_COMMAND_TOPIC, OUTPUT_FIELDS, OutputContract, rest_shortenings,
                            stamp_ns, structure_channels, STRUCTURE_TOPIC, TOPIC_TYPES)
@@ -105,12 +108,9 @@ class SimNode(Node):
         in_qos = keep_all if self._p('qos_keep_all') else QoSProfile(depth=10)
         out_qos = qos_profile_sensor_data if self._p('qos_sensor_data') else in_qos
         self._create_endpoints(in_qos, out_qos)
+        self._gate = self._make_gate()
         self._pacing.start(self)
-        self._diag_window, self._info_window = RateWindow(), RateWindow()
-        self.create_timer(self._p('diagnostics_period'), self.publish_diagnostics,
-                          clock=self._steady)
-        if self._p('info_period') > 0:
-            self.create_timer(self._p('info_period'), self._log_info, clock=self._steady)
+        self._start_reports()
         qos = {topic: out_qos for topic in self._topics}
         qos.update({COMMAND_TOPIC: in_qos, JOINT_COMMAND_TOPIC: in_qos})
         self._recorder = open_recorder(self._p, self.scene, qos, {
@@ -125,15 +125,51 @@ class SimNode(Node):
         if self._p('realtime_priority'):   # last: every thread of the node exists by now
             self.realtime_scheduling = self._pacing.apply_priority(
                 self._p('realtime_priority'), self.get_logger())
-        self._publish_sample(self.current_outputs())
+        if self._gate.open:
+            self._publish_sample(self.current_outputs())
+        gate_text = ('' if self._gate.open else f', sample 0 once {self._gate.need} '
+                     f'subscriber(s) of {self._gate.topic} matched')
         self.get_logger().info(
             f'scene {scene_file!r}: {self.scene.beam} beam, eps_b = {self.scene.eps_b:g}, '
             f'{self.scene.rate_hz:g} Hz, {self._sim.describe_stepper()}; '
-            f'{self._pacing.label()}{", paused" if self.paused else ""}; initial state '
+            f'{self._pacing.label()}{", paused" if self.paused else ""}{gate_text}; initial state '
             f'{self._initial_text}; {len(self.det_names)} DET(s), '
             f'voltage command order: [{", ".join(self.det_names)}]'
             + (f'; structure outputs [{", ".join(self.structure_names)}]'
                if self.structure_names else ''))
+
+    def _make_gate(self) -> SubscriberGate:
+        """Hold sample 0 until wait_for_subscribers subscriptions of displacement matched."""
+        publisher = self._output_pubs['displacement']
+        gate = SubscriberGate(
+            self._p('wait_for_subscribers'), publisher.topic_name,
+            publisher.get_subscription_count,
+            lambda: all(pub.wait_for_all_acked(Duration()) for pub in self._output_pubs.values()),
+            time.perf_counter)
+        if not gate.open:
+            self._gate_timer = self.create_timer(0.01, self._poll_gate, clock=self._steady)
+        return gate
+
+    def _poll_gate(self):
+        if self._gate.poll(lambda: self._publish_sample(self.current_outputs())):
+            self.destroy_timer(self._gate_timer)
+            self._pacing.run(self.running)
+
+    def _start_reports(self):
+        """Start /diagnostics, the INFO line and the wait log lines, paced by the wall clock."""
+        self._diag_window, self._info_window = RateWindow(), RateWindow()
+        now = time.perf_counter()
+        self._reports = {self.publish_diagnostics: ReportSchedule(self._p('diagnostics_period'),
+                                                                  now)}
+        if self._p('info_period') > 0:
+            self._reports[self._log_info] = ReportSchedule(self._p('info_period'), now)
+        for report, schedule in self._reports.items():
+            self.create_timer(schedule.period, lambda report=report: self._timed_report(report),
+                              clock=self._steady)
+        self._wait_log = WaitLog(self.get_logger().info)
+        if self.mode == 'lockstep' or not self._gate.open:
+            self.create_timer(0.25, lambda: self._wait_log.check(self.waiting()),
+                              clock=self._steady)
 
     def _create_endpoints(self, in_qos, out_qos):
         self._output_pubs = {topic: self.create_publisher(JointState, topic, out_qos)
@@ -179,8 +215,24 @@ class SimNode(Node):
 
     @property
     def running(self) -> bool:
-        """Return True if neither paused nor stopped by a fault."""
-        return not self.paused and not self._sim.fault
+        """Return True if neither paused, stopped by a fault nor waiting for subscribers."""
+        return not self.paused and not self._sim.fault and self._gate.open
+
+    def waiting(self):
+        """Return what the node waits for (a :class:`~det_sim_ros.ros.waiting.Wait`) or None."""
+        return self._gate.waiting() or self._pacing.waiting()
+
+    def _timed_report(self, report):
+        now = time.perf_counter()
+        if self._reports[report].due(now, True):
+            report(now)
+
+    def run_due_reports(self):
+        """Publish /diagnostics and log the INFO line if they are due by the wall clock."""
+        now = time.perf_counter()
+        for report, schedule in self._reports.items():
+            if schedule.due(now, False):
+                report(now)
 
     def current_outputs(self) -> np.ndarray:
         """Return the simulator's output vector now."""
@@ -283,6 +335,8 @@ class SimNode(Node):
     def _srv_step(self, request, response):
         if not self.paused:
             response.success, response.message = False, 'not paused: call ~/pause first'
+        elif not self._gate.open:
+            response.success, response.message = False, self._gate.waiting().text()
         elif self._sim.fault:
             response.success, response.message = False, f'fault: {self._sim.fault}'
         else:
@@ -302,7 +356,10 @@ class SimNode(Node):
                 self.get_logger().info(f'reset{log}')
         self._fault_reported = ''
         self._pacing.run(self.running)
-        self._publish_sample(self.current_outputs())
+        if self._gate.open:
+            self._publish_sample(self.current_outputs())
+        else:
+            self._gate.restart()   # sample 0 goes out when the subscribers have matched
         response.success = True
         response.message = f'reset to t = 0, initial state {self._initial_text}, 0 V{log}'
         return response
@@ -315,10 +372,11 @@ class SimNode(Node):
         self._pacing.parameters_changed(self._p, {param.name for param in params})
 
     # -- reporting --------------------------------------------------------------------------
-    def publish_diagnostics(self):
+    def publish_diagnostics(self, now: float | None = None):
         """Publish the /diagnostics status for the window since the last one; return it."""
         pacing = self._pacing
-        window = self._diag_window.take(self.steps_total, pacing.late_ticks, pacing.slipped_s)
+        window = self._diag_window.take(self.steps_total, pacing.late_ticks, pacing.slipped_s,
+                                        now)
         self.achieved_rtf = window.rate_hz * self._sim.dt
         report = pacing.report(window.rate_hz, window.slipped_s, window.wall_s)
         distrust = self._sim.trust_issue()
@@ -332,19 +390,22 @@ class SimNode(Node):
             mode=pacing.mode, paused=self.paused, simulator=self._sim, window=window,
             achieved_rtf=self.achieved_rtf, pacing=report, late_ticks=pacing.late_ticks,
             slipped_s=pacing.slipped_s, distrust=distrust, recorder=self._recorder,
-            commands=self._commands.counts())
+            commands=self._commands.counts(), wait=self.waiting())
         self._diag_pub.publish(msg)
         return msg
 
-    def _log_info(self):
+    def _log_info(self, now: float | None = None):
         pacing = self._pacing
-        window = self._info_window.take(self.steps_total, pacing.late_ticks, pacing.slipped_s)
-        out = self.current_outputs()
+        window = self._info_window.take(self.steps_total, pacing.late_ticks, pacing.slipped_s,
+                                        now)
+        out, wait = self.current_outputs(), self.waiting()
+        state = ('FAULT' if self._sim.fault else 'paused' if self.paused
+                 else wait.text() if wait is not None and wait.shown() else 'running')
         self.get_logger().info(status_line(
             t=self._sim.t, volts=self._sim.u, rtf=window.rate_hz * self._sim.dt,
+            window_s=window.wall_s, state=state,
             q_mm=self.contract.values(out, 'deflection', 'position') * 1e3,
-            dy_mm=self.contract.values(out, 'displacement', 'position') * 1e3,
-            state='FAULT' if self._sim.fault else ('paused' if self.paused else 'running')))
+            dy_mm=self.contract.values(out, 'displacement', 'position') * 1e3))
 
 
 def main(args=None):
@@ -357,7 +418,7 @@ def main(args=None):
     from rclpy.signals import SignalHandlerOptions
     node = None
     code = 0
-    with StopSignals() as stop:
+    with StopSignals() as stop, announce_early():   # (before the participant exists)
         try:
             rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
             node = SimNode()

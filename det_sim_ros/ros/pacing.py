@@ -19,6 +19,7 @@ import os
 import time
 from typing import Callable, NamedTuple
 
+from .waiting import Wait
 from ..io.contract import MODES
 from ..scenes.scene import SceneError
 
@@ -44,7 +45,8 @@ class Pacing:
 
     What a pacing uses of its node: ``dt``, ``simulator``, ``running``, ``paused``,
     ``wall_clock``, ``steady_clock``, ``run_period``, ``send``, ``subscriptions_matched``,
-    ``create_timer``, ``destroy_timer`` and ``get_logger``.
+    ``command_subscriptions``, ``run_due_reports``, ``create_timer``, ``destroy_timer`` and
+    ``get_logger``.
 
     :param get: a parameter's current value by name (``PARAMETERS`` are read).
     """
@@ -109,6 +111,10 @@ class Pacing:
 
     def reset(self) -> None:
         """Follow the simulation back to t = 0."""
+
+    def waiting(self) -> Wait | None:
+        """Return what the node waits for before its next period (None: nothing)."""
+        return None
 
     def report(self, rate_hz: float, slipped_s: float, wall_s: float) -> PacingReport:
         """
@@ -227,6 +233,10 @@ class FreeRunPacing(Pacing):
     it spends on the same messages ~0.1 ms apart (it wakes its own and the subscribers'
     threads per message then; measured on the 2-core test host), and free run has no
     wall-clock deadline to keep. Commands are still taken before every period.
+
+    The always-due 1 us timer starves the node's other timers in rclpy's EventsExecutor (a 1 s
+    timer next to it fired at 1, 2, 2, 4, 4, 4, 7 s...), so each tick also runs the node's
+    periodic reports that are due by the wall clock (``run_due_reports``).
     """
 
     mode = 'free_run'
@@ -248,7 +258,8 @@ class FreeRunPacing(Pacing):
                 if not node.run_period(batch):
                     return
         finally:
-            node.send(batch)
+            if node.send(batch):
+                node.run_due_reports()
 
 
 class LockstepPacing(Pacing):
@@ -322,6 +333,19 @@ class LockstepPacing(Pacing):
 
     def reset(self) -> None:
         self.answers = 0   # answers to the old run's last sample do not start the new one
+
+    def waiting(self) -> Wait | None:
+        """Return the wait for the answers to the latest sample (None while not waiting)."""
+        node = self.node
+        if (node is None or self._stepping or not node.running
+                or self.answers >= self.sources):
+            return None
+        subscriptions = node.command_subscriptions.values()
+        heard = [sub.topic_name for sub in subscriptions if sub.get_publisher_count()]
+        return Wait(time.perf_counter() - self._published_wall, self.sources - self.answers,
+                    'answer', heard or [sub.topic_name for sub in subscriptions], self.answers,
+                    self.sources, f'to t = {node.simulator.t:.6g} s',
+                    '' if heard else 'no publisher matched')
 
     def _advance(self) -> None:
         """Run the next period once every expected source has answered."""

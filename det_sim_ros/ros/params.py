@@ -102,6 +102,10 @@ NODE_PARAMS = {
     'allow_duplicate_name': Param(False, 'run even if another node of this fully qualified '
                                   'name is running (one warning); false: refuse, at start or '
                                   'when discovery finds one in the first 3.5 s', True, None),
+    'wait_for_subscribers': Param(0, 'publish sample 0 and start stepping only once this many '
+                                  'subscriptions of displacement have matched (and received '
+                                  'sample 0); 0 = at once (docs/real_time.md: the start of a '
+                                  'run)', True, (0, 10000)),
 }
 
 
