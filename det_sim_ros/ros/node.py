@@ -28,14 +28,14 @@ from std_srvs.srv import SetBool, Trigger
 
 from .commands import CommandInput
 from .declaration import load_node_scene, validate_parameters
-from .diagnostics import diagnostics_message, RateWindow, ReportSchedule, status_line
 from .discovery import announce_early
 from .markers import attach_markers
 from .name_check import check_unique_name, note_node_created
 from .pacing import make_pacing
 from .recording import open_recorder
+from .reports import NodeReports
 from .spinning import make_executor, spin, spin_until_stopped, StopRequested, StopSignals
-from .waiting import SubscriberGate, WaitLog
+from .waiting import SubscriberGate
 from ..io.contract import (CLOCK_TOPIC, COMMAND_TOPIC, DIAGNOSTICS_TOPIC, encode_clock,
                            JOINT_COMMAND_TOPIC, OUTPUT_FIELDS, OutputContract, rest_shortenings,
                            stamp_ns, structure_channels, STRUCTURE_TOPIC, TOPIC_TYPES)
@@ -95,7 +95,7 @@ class SimNode(Node):
         self.wall_clock = time.perf_counter
         self.on_sample = None
         self.refusal = None         # a reason found while running to stop as at start-up
-        self._fault_reported = self._distrust_reported = ''
+        self._fault_reported = ''
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         check_unique_name(self, self._p('allow_duplicate_name'))
         self._start(scene_file)
@@ -110,7 +110,9 @@ class SimNode(Node):
         self._create_endpoints(in_qos, out_qos)
         self._gate = self._make_gate()
         self._pacing.start(self)
-        self._start_reports()
+        self._reports = NodeReports(self, self._diag_pub, self._p('diagnostics_period'),
+                                    self._p('info_period'),
+                                    self.mode == 'lockstep' or not self._gate.open)
         qos = {topic: out_qos for topic in self._topics}
         qos.update({COMMAND_TOPIC: in_qos, JOINT_COMMAND_TOPIC: in_qos})
         self._recorder = open_recorder(self._p, self.scene, qos, {
@@ -154,22 +156,6 @@ class SimNode(Node):
         if self._gate.poll(lambda: self._publish_sample(self.current_outputs())):
             self.destroy_timer(self._gate_timer)
             self._pacing.run(self.running)
-
-    def _start_reports(self):
-        """Start /diagnostics, the INFO line and the wait log lines, paced by the wall clock."""
-        self._diag_window, self._info_window = RateWindow(), RateWindow()
-        now = time.perf_counter()
-        self._reports = {self.publish_diagnostics: ReportSchedule(self._p('diagnostics_period'),
-                                                                  now)}
-        if self._p('info_period') > 0:
-            self._reports[self._log_info] = ReportSchedule(self._p('info_period'), now)
-        for report, schedule in self._reports.items():
-            self.create_timer(schedule.period, lambda report=report: self._timed_report(report),
-                              clock=self._steady)
-        self._wait_log = WaitLog(self.get_logger().info)
-        if self.mode == 'lockstep' or not self._gate.open:
-            self.create_timer(0.25, lambda: self._wait_log.check(self.waiting()),
-                              clock=self._steady)
 
     def _create_endpoints(self, in_qos, out_qos):
         self._output_pubs = {topic: self.create_publisher(JointState, topic, out_qos)
@@ -222,17 +208,9 @@ class SimNode(Node):
         """Return what the node waits for (a :class:`~det_sim_ros.ros.waiting.Wait`) or None."""
         return self._gate.waiting() or self._pacing.waiting()
 
-    def _timed_report(self, report):
-        now = time.perf_counter()
-        if self._reports[report].due(now, True):
-            report(now)
-
     def run_due_reports(self):
         """Publish /diagnostics and log the INFO line if they are due by the wall clock."""
-        now = time.perf_counter()
-        for report, schedule in self._reports.items():
-            if schedule.due(now, False):
-                report(now)
+        self._reports.run_due()
 
     def current_outputs(self) -> np.ndarray:
         """Return the simulator's output vector now."""
@@ -374,38 +352,7 @@ class SimNode(Node):
     # -- reporting --------------------------------------------------------------------------
     def publish_diagnostics(self, now: float | None = None):
         """Publish the /diagnostics status for the window since the last one; return it."""
-        pacing = self._pacing
-        window = self._diag_window.take(self.steps_total, pacing.late_ticks, pacing.slipped_s,
-                                        now)
-        self.achieved_rtf = window.rate_hz * self._sim.dt
-        report = pacing.report(window.rate_hz, window.slipped_s, window.wall_s)
-        distrust = self._sim.trust_issue()
-        if distrust and not self._distrust_reported:
-            # once, until it clears (a reset): the text changes every time (the residual and
-            # the voltages)
-            self.get_logger().warning(distrust)
-        self._distrust_reported = distrust
-        msg = diagnostics_message(
-            node_name=self.get_fully_qualified_name(), stamp=self.get_clock().now().to_msg(),
-            mode=pacing.mode, paused=self.paused, simulator=self._sim, window=window,
-            achieved_rtf=self.achieved_rtf, pacing=report, late_ticks=pacing.late_ticks,
-            slipped_s=pacing.slipped_s, distrust=distrust, recorder=self._recorder,
-            commands=self._commands.counts(), wait=self.waiting())
-        self._diag_pub.publish(msg)
-        return msg
-
-    def _log_info(self, now: float | None = None):
-        pacing = self._pacing
-        window = self._info_window.take(self.steps_total, pacing.late_ticks, pacing.slipped_s,
-                                        now)
-        out, wait = self.current_outputs(), self.waiting()
-        state = ('FAULT' if self._sim.fault else 'paused' if self.paused
-                 else wait.text() if wait is not None and wait.shown() else 'running')
-        self.get_logger().info(status_line(
-            t=self._sim.t, volts=self._sim.u, rtf=window.rate_hz * self._sim.dt,
-            window_s=window.wall_s, state=state,
-            q_mm=self.contract.values(out, 'deflection', 'position') * 1e3,
-            dy_mm=self.contract.values(out, 'displacement', 'position') * 1e3))
+        return self._reports.publish_diagnostics(now)
 
 
 def main(args=None):
