@@ -29,11 +29,14 @@ def test_free_run_reports_are_paced_by_the_wall_clock(harness):
     h.test.create_subscription(
         Log, '/rosout', lambda msg: lines.append(msg.msg) if msg.msg.startswith('t=') else None,
         QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-    h.spin_until(lambda: len(lines) >= 30 and len(h.diagnostics) >= 30, '30 reports')
+    name = h.node.get_fully_qualified_name()
+    ours = lambda: [m for m in h.diagnostics   # noqa: E731 - not another node's on the domain
+                    if m.status and m.status[0].hardware_id == name]
+    h.spin_until(lambda: len(lines) >= 30 and len(ours()) >= 30, '30 reports')
     info_windows = [float(re.search(r'RTF=\S+ \(over (\S+) s\)', line).group(1))
                     for line in lines]
     diag_windows = [float({kv.key: kv.value for kv in m.status[0].values}['window_s'])
-                    for m in h.diagnostics]
+                    for m in ours()]
     assert min(info_windows) >= 0.5 * PERIOD, lines
     assert min(diag_windows) >= 0.5 * PERIOD, diag_windows
     assert h.node.simulator.k > 0

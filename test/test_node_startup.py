@@ -128,6 +128,7 @@ def test_duplicate_name_refused_unless_allowed(tmp_path):
         assert second.returncode == 1, second.stderr
         fatal = [line for line in second.stderr.splitlines() if '[FATAL]' in line]
         assert len(fatal) == 1 and 'another node named /startup_dup/sim_node' in fatal[0]
+        assert READY not in second.stderr
         allowed = Node(tmp_path, *args, '-p', 'allow_duplicate_name:=true')
         try:
             allowed.wait_for(READY)

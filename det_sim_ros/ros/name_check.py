@@ -3,11 +3,12 @@ Start-up check that no other node of this node's fully qualified name is in the 
 
 Two nodes of one name (a fleet or a node started twice) would publish on the same topics and
 answer the same services, and a controller could not tell them apart. Discovery is not
-instant: with Fast DDS on the localhost discovery range a new process sees an already running
-participant from 0.1 s up to 3.1 s after ``rclpy.init`` (the running one announces itself every
-3 s). Waiting that long before the first sample would cost every start 3.4 s, so the node looks
-once when it is created and then keeps watching for :data:`DISCOVERY_WINDOW_S` while it runs; a
-duplicate found in that window stops it with the same one-line refusal.
+instant. With ``sim_node``'s early announcements (det_sim_ros.ros.discovery: every 0.1 s for
+the first 10 s) a new node saw an already running one 0.23-0.27 s after its creation (6 starts,
+localhost discovery range); without them, up to 3.1 s (Fast DDS announces every 3 s). So the
+check looks until :data:`DISCOVERY_WINDOW_S` after the node's creation, the scene's preparation
+included, before anything is published; only the newcomer looks, so the running node is never
+the one refused.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from ..scenes.scene import SceneError
 
 __all__ = ['DISCOVERY_WINDOW_S', 'check_unique_name', 'note_node_created']
 
-DISCOVERY_WINDOW_S = 3.5   # s after the context's first node: Fast DDS's 3 s announcements
+DISCOVERY_WINDOW_S = 0.6   # s after the context's first node: twice the discovery seen
 POLL_S = 0.05              # s between two looks at the graph
 
 _first_node_time = weakref.WeakKeyDictionary()   # context -> monotonic time of its first node
@@ -47,27 +48,34 @@ def _refusal(node) -> str:
 
 def check_unique_name(node, allow: bool) -> None:
     """
-    Refuse a duplicate now, and watch for one during the discovery window.
+    Refuse to start (:class:`SceneError`) when another node of this name is in the graph.
 
-    A duplicate already in the graph raises :class:`SceneError` at once (nothing was published).
-    Until :data:`DISCOVERY_WINDOW_S` after the context's first node a steady timer looks again
-    every :data:`POLL_S`: a duplicate found then is put in ``node.refusal``, which the spin loop
-    of ``sim_node``'s main raises (one FATAL line, the log finished, exit 1). With ``allow`` the
-    node never refuses, and logs one warning if it finds one.
+    Without ``allow`` this looks until :data:`DISCOVERY_WINDOW_S` after the context's first
+    node (at once when a duplicate shows up); with ``allow`` it does not wait, and a one-shot
+    timer at the window's end logs a warning if there is one.
     """
     note_node_created(node.context)
     deadline = _first_node_time[node.context] + DISCOVERY_WINDOW_S
-    if not allow and _others(node) > 0:
-        raise SceneError(_refusal(node))
+    if allow:
+        _warn_at(node, deadline)
+        return
+    while True:
+        if _others(node) > 0:
+            raise SceneError(_refusal(node))
+        left = deadline - time.monotonic()
+        if left <= 0.0:
+            return
+        time.sleep(min(POLL_S, left))
+
+
+def _warn_at(node, deadline: float) -> None:
+    """Log one warning at ``deadline`` if another node of this name is in the graph then."""
     timer = None
 
-    def look():
-        found = _others(node) > 0
-        if found or time.monotonic() >= deadline:
-            timer.cancel()
-        if found and not allow:
-            node.refusal = SceneError(_refusal(node))
-        elif found:
+    def warn():
+        timer.cancel()
+        if _others(node) > 0:
             node.get_logger().warning(_refusal(node).split(';')[0] + ' (allow_duplicate_name '
                                       'is true: started anyway)')
-    timer = node.create_timer(POLL_S, look, clock=Clock(clock_type=ClockType.STEADY_TIME))
+    timer = node.create_timer(max(deadline - time.monotonic(), 0.001), warn,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))

@@ -94,7 +94,6 @@ class SimNode(Node):
         self.paused = bool(self._p('start_paused'))
         self.wall_clock = time.perf_counter
         self.on_sample = None
-        self.refusal = None         # a reason found while running to stop as at start-up
         self._fault_reported = ''
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         check_unique_name(self, self._p('allow_duplicate_name'))

@@ -99,9 +99,9 @@ NODE_PARAMS = {
                              'many per wall second; 0 = off', True, (0.0, 1.0e4)),
     'markers.frame_id': Param('', "'': one frame per DET (<namespace>/<DET name>); else all "
                               'DETs in this one frame, side by side', True, None),
-    'allow_duplicate_name': Param(False, 'run even if another node of this fully qualified '
-                                  'name is running (one warning); false: refuse, at start or '
-                                  'when discovery finds one in the first 3.5 s', True, None),
+    'allow_duplicate_name': Param(False, 'start even if another node of this fully qualified '
+                                  'name is running (one warning); false: refuse to start (the '
+                                  'check looks for 0.6 s after start)', True, None),
     'wait_for_subscribers': Param(0, 'publish sample 0 and start stepping only once this many '
                                   'subscriptions of displacement have matched (and received '
                                   'sample 0); 0 = at once (docs/real_time.md: the start of a '

@@ -78,18 +78,12 @@ class StopSignals:
 
 
 def spin_until_stopped(node, stop) -> None:
-    """
-    Run the node's callbacks until a stop signal (checked at least every 0.1 s).
-
-    A refusal the node found while running (``node.refusal``, e.g. a duplicate name) is raised.
-    """
+    """Run the node's callbacks until a stop signal (checked at least every 0.1 s)."""
     executor = make_executor(node.context)
     executor.add_node(node)
     try:
         while not stop.requested and node.context.ok():
             executor.spin_once(timeout_sec=0.1)
-            if getattr(node, 'refusal', None) is not None:
-                raise node.refusal
     finally:
         executor.remove_node(node)
         executor.shutdown(timeout_sec=0.0)
