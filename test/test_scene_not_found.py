@@ -10,22 +10,22 @@ import re
 
 from det_sim_ros.cli import main as det_sim
 from det_sim_ros.ros.node import main as sim_node
-from det_sim_ros.scenes.scene import load_scene, SceneError
+from det_sim_ros.scenes.scene import find_config, load_scene, SceneError
 import pytest
 
-SOURCE_CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                             'config')
+# the folder the shipped scenes are found in: the install's share folder, or the source tree's
+SHIPPED = os.path.dirname(find_config('default'))
 
 
 def _check_line(line):
-    """Check one line: the name, the scenes found (no fleet file) and the source folder."""
+    """Check one line: the name, the scenes found (no fleet file) and their folder."""
     assert "'plates' not found" in line, line
     listed = re.search(r'scenes: ([\w, ]+) \(looked in ', line)
     assert listed is not None, line
     names = set(listed.group(1).split(', '))
     assert {'array', 'default', 'plate'} <= names and 'fleet' not in names, line
-    assert os.path.realpath(SOURCE_CONFIG) in {os.path.realpath(p.strip(' ()'))
-                                               for p in line.split('looked in ')[1].split(',')}
+    looked_in = line.split('looked in ')[1].split(',')
+    assert os.path.realpath(SHIPPED) in {os.path.realpath(p.strip(' ()')) for p in looked_in}
 
 
 def test_load_scene_lists_the_scenes_and_where_it_looked():
