@@ -22,7 +22,7 @@ from ..scenes.scene import SceneError
 
 __all__ = ['DISCOVERY_WINDOW_S', 'check_unique_name', 'note_node_created']
 
-DISCOVERY_WINDOW_S = 0.6   # s after the context's first node: twice the discovery seen
+DISCOVERY_WINDOW_S = 0.45  # s after the context's first node: 1.7x the discovery seen
 POLL_S = 0.05              # s between two looks at the graph
 
 _first_node_time = weakref.WeakKeyDictionary()   # context -> monotonic time of its first node
