@@ -58,11 +58,12 @@ class _MovedPath(importlib.abc.MetaPathFinder, importlib.abc.Loader):
         warnings.warn(f'{spec.name} has moved to {new}; import it from there',
                       DeprecationWarning, stacklevel=2)
         module = importlib.import_module(new)
-        self._spec = module.__spec__          # the import system overwrites it: restored below
+        spec.loader_state = module.__spec__   # the import system overwrites it: restored below
         return module
 
     def exec_module(self, module):
-        module.__spec__ = self._spec
+        """Give the module back its own spec (the import system set the alias's)."""
+        module.__spec__ = module.__spec__.loader_state
 
     def get_code(self, fullname):
         """

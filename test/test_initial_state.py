@@ -162,13 +162,13 @@ def test_missing_rest_state_is_refused_with_a_reason(monkeypatch):
 
     No stable state on the branch: a one-line RestStateError (a SceneError).
     """
-    import det_sim_ros.physics.statics as statics
+    from det_sim_ros.physics.landscape import Landscape
     scene = load_scene('default', {'scene.eps_b': 0.21})
-    real = statics._Statics.equilibria
+    real = Landscape.equilibria
 
     def no_buckled(self, vp, v):
         return [row for row in real(self, vp, v) if row[0] == 'buckled-']
-    monkeypatch.setattr(statics._Statics, 'equilibria', no_buckled)
+    monkeypatch.setattr(Landscape, 'equilibria', no_buckled)
     with pytest.raises(RestStateError, match='no stable buckled\\+ equilibrium') as info:
         rest_coords(scene, 'buckled+')
     assert isinstance(info.value, SceneError) and '\n' not in str(info.value)

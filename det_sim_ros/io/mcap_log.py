@@ -60,5 +60,3 @@ __all__ = ['Recorder', 'LogReader', 'LogMessage', 'message_definition', 'qos_pro
            'type_name_of', 'serialize', 'deserialize', 'recover', 'recover_unfinished',
            'is_torn', 'log_files', 'LIBRARY', 'METADATA_NAME', 'END_METADATA_NAME',
            'SCENE_ATTACHMENT', 'DELIMITER', 'message_class']
-
-_message_class = message_class   # the name replay's player imported it by

@@ -50,7 +50,6 @@ __all__ = ['Equilibrium', 'BranchPoint', 'potential', 'potential_coords', 'equil
            'RestStateError', 'initial_state']
 
 _NEWTON_ITERS = 30      # most Newton steps polishing a rest state
-_Statics = Landscape    # the name test_initial_state.py patches the equilibria through
 
 
 class RestStateError(SceneError):
