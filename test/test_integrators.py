@@ -14,7 +14,7 @@ import pytest
 RELEASED = {'scene.initial_state': 'released'}
 
 ORDERS = {'euler': 1, 'midpoint': 2, 'rk3': 3, 'rk4': 4, 'dp5': 5, 'lawson4': 4,
-          'lawson5': 5, 'exp_euler': 1, 'etd2': 2, 'etdrk4': 4}
+          'lawson5': 5, 'exp_euler': 1, 'etd2': 2, 'etdrk4': 4, 'etdrk4_linearized': 4}
 
 
 def test_every_method_is_declared_with_its_order():

@@ -9,6 +9,8 @@ Physics and stepping:
   fields of :class:`det_sim_ros.physics.model.ModelArrays`.
 - ``Stepper(model, ...)``: a method table (det_sim_ros.sim.integrators), the charge-transient
   settings and the per-period step-count control; one count per independent coupled group.
+- ``matrix_phis(Z, scale, full, half)``: the phi functions of a small matrix (the dense linear
+  part of 'etdrk4_linearized'; det_sim_ros.physics.matrix_phi is the same in numpy).
 - status codes ``OK``, ``BAD_STRETCH``, ``NON_FINITE``, ``BAD_SLOPE``.
 
 Wire and log (the bytes of det_sim_ros.io.contract and det_sim_ros.io.mcap_log):
@@ -22,8 +24,8 @@ compiled kernel to it on random states of every scene kind.
 """
 
 try:
-    from ._ckernel import (BAD_SLOPE, BAD_STRETCH, CELL_OUTPUTS, FrameMap, Model, NON_FINITE,
-                           OK, pack_records, SampleCodec, Stepper)
+    from ._ckernel import (BAD_SLOPE, BAD_STRETCH, CELL_OUTPUTS, FrameMap, matrix_phis, Model,
+                           NON_FINITE, OK, pack_records, SampleCodec, Stepper)
 except ImportError as error:  # pragma: no cover - only a broken install gets here
     raise ImportError(
         'det_sim_ros: the compiled kernel det_sim_ros.core._ckernel is missing or broken '
@@ -31,4 +33,4 @@ except ImportError as error:  # pragma: no cover - only a broken install gets he
         'compiler); in a source checkout, `python setup.py build_ext --inplace`.') from None
 
 __all__ = ['Model', 'Stepper', 'OK', 'BAD_STRETCH', 'NON_FINITE', 'BAD_SLOPE', 'CELL_OUTPUTS',
-           'SampleCodec', 'pack_records', 'FrameMap']
+           'SampleCodec', 'pack_records', 'FrameMap', 'matrix_phis']

@@ -49,6 +49,9 @@ class Method:
     # first stage), and the embedded solution's order. () = none: fixed substeps only.
     embedded: tuple = ()
     embedded_order: int = 0
+    # True: the linear part also holds the Jacobian of the beams' q, qdot (dense, taken at a
+    # period's start, see LINEAR_REFRESH), so their stiff modes are integrated exactly too
+    linearized: bool = False
 
     @property
     def n_stages(self) -> int:
@@ -147,7 +150,14 @@ METHODS = {m.name: m for m in (
     Method('etdrk4', 4, (0.0, 0.5, 0.5, 1.0), _ETD_KROGSTAD, True,
            'Krogstad ETDRK4-B: classical RK4 on the mechanics, exact charge relaxation',
            *_RK4_EMBEDDED),
+    Method('etdrk4_linearized', 4, (0.0, 0.5, 0.5, 1.0), _ETD_KROGSTAD, True,
+           'Krogstad ETDRK4-B with the beams linearized: exact charge relaxation and exact '
+           'linear beam modes (their Jacobian per control period)', *_RK4_EMBEDDED, True),
 )}
+# The dense linear part of 'etdrk4_linearized' is taken anew at a period's start when the input
+# changed or a q or qdot moved by more than this in the error norm's scale (beam length, length
+# per period) since it was taken: between, the weights phi_k(c h A) of each step size are kept.
+LINEAR_REFRESH = 1e-3
 
 
 def get_method(name: str) -> Method:
@@ -165,7 +175,7 @@ def get_method(name: str) -> Method:
 # resolved (fixed_period in _csrc/stepping.c): etdrk4 (RC source) 0.035...0.14, dp5 (ideal source)
 # 0.0013...0.05; the largest, at eps_b = 0.15 where the snap-through is most sensitive, is used so
 # the tolerance holds on every shared scene.
-ERROR_CONSTANT = {'etdrk4': 0.15, 'dp5': 0.06}
+ERROR_CONSTANT = {'etdrk4': 0.15, 'etdrk4_linearized': 0.15, 'dp5': 0.06}
 MAX_STEP = 1.0e-3   # s: keeps h * omega_beam < 0.6 (stable for every table here)
 
 
@@ -180,6 +190,8 @@ def choose_substeps(method: Method, dt: float, tolerance: float, beam_rate: floa
     fastest beam mode (``beam_rate``, 1/s; see Model.fastest_beam_rate: it decides from about 6
     Ritz terms on).
     """
+    if method.linearized:   # the stiff beam modes are in the linear part
+        beam_rate = 0.0
     const = ERROR_CONSTANT.get(method.name)
     if const is None:
         return min_substeps(dt, beam_rate)
@@ -212,6 +224,12 @@ LOCAL_TOLERANCE = {3: 5e-4, 4: 5e-4}
 # unbounded, 35 with this bound, 15 with a bound of 1x, which let the error exceed 1e-3 at
 # tolerance 1e-3).
 MAX_SUBSTEPS_FACTOR = 2
+# A linearized method takes few steps while the beam is settled or slow, but the violent
+# ringing right after a release or a snap-through (qdot ~ 5 m/s) can ask for more than twice
+# the fixed count of the tolerance: its estimate follows the error there, so its bound is
+# this many times the larger of that count and the count the explicit stages' stability
+# would need.
+LINEARIZED_MAX_FACTOR = 16
 
 
 @dataclasses.dataclass(frozen=True)
@@ -243,14 +261,17 @@ def step_control(method: Method, model, substeps: int = 0) -> StepControl:
     ``substeps`` (0: :func:`choose_substeps`).
     """
     scene = model.scene
-    beam_rate = model.fastest_beam_rate()
+    beam_rate = 0.0 if method.linearized else model.fastest_beam_rate()
     n0 = substeps or choose_substeps(method, scene.dt, scene.tolerance, beam_rate)
     if substeps or not method.adaptive:
         return StepControl(n0, 0.0, n0, n0, 1.0)
     n_min = min_substeps(scene.dt, beam_rate)
     tol = LOCAL_TOLERANCE[method.embedded_order] * scene.tolerance
-    return StepControl(max(n0, n_min), tol, n_min, MAX_SUBSTEPS_FACTOR * max(n0, n_min),
-                       method.embedded_order + 1.0)
+    n_max = MAX_SUBSTEPS_FACTOR * max(n0, n_min)
+    if method.linearized:   # see LINEARIZED_MAX_FACTOR
+        n_max = LINEARIZED_MAX_FACTOR * max(n0, n_min, min_substeps(scene.dt,
+                                                                    model.fastest_beam_rate()))
+    return StepControl(max(n0, n_min), tol, n_min, n_max, method.embedded_order + 1.0)
 
 
 def make_stepper(model, method: Method, control: StepControl, dt: float,
@@ -270,7 +291,8 @@ def make_stepper(model, method: Method, control: StepControl, dt: float,
                           min_substeps=int(control.min_substeps),
                           max_substeps=int(control.max_substeps),
                           exponent=float(control.exponent),
-                          jump_ref=float(transient.jump_ref))
+                          jump_ref=float(transient.jump_ref),
+                          linearized=method.linearized, lin_refresh=LINEAR_REFRESH)
 
 
 def error_weights(model) -> np.ndarray:

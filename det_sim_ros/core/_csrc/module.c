@@ -8,6 +8,9 @@ static PyMethodDef module_functions[] = {
     {"pack_records", (PyCFunction)(void (*)(void))pack_records, METH_FASTCALL,
      "pack_records(channel_ids, first_sequences, times, rows, sizes) -> (records, count): "
      "the MCAP Message records of consecutive samples (see wire.c)"},
+    {"matrix_phis", (PyCFunction)(void (*)(void))matrix_phis, METH_FASTCALL,
+     "matrix_phis(Z, scale, full, half): phi_k(scale Z) and phi_k(scale Z / 2) of a small "
+     "matrix (see matrix_phi.c)"},
     {NULL}
 };
 

@@ -14,6 +14,9 @@
 
 #define CORE_PART static inline __attribute__((always_inline))
 
+int ds_advance_linear(const ds_stepper *st, ds_group *g, double *x, const double *u, double h,
+                      int64_t n_steps, double growth);
+
 /* The weights of the stiff states [s0, s1) for a step of size h: each term's weight times
  * phi_k(c_arg h L_k) into coef, and exp(c_i h L_k) (row s: exp(h L_k)) into e_c. */
 CORE_PART void stiff_weights(const ds_method *me, const double *L, double h, double *phis,
@@ -183,6 +186,8 @@ int ds_advance(const ds_stepper *st, ds_group *g, double *x, const double *u, do
                int64_t n_steps, double growth)
 {
     const int64_t nx = g->m->n_state, s = st->method.n_stages, s0 = g->s0, s1 = g->s1;
+    if (g->lin)
+        return ds_advance_linear(st, g, x, u, h, n_steps, growth);
     if (s == 4 && s0 == 3 && s1 == 4) {
         if (nx == 6)
             return advance_core(st, g, x, u, h, n_steps, growth, 6, 4, 3, 4);
@@ -190,4 +195,155 @@ int ds_advance(const ds_stepper *st, ds_group *g, double *x, const double *u, do
             return advance_core(st, g, x, u, h, n_steps, growth, 4, 4, 3, 4);
     }
     return advance_core(st, g, x, u, h, n_steps, growth, nx, s, s0, s1);
+}
+
+/* Row i of the table with the dense linear part over q, qdot (states [0, nd)): there
+ * X = phi_0(c_i h A) x + h sum_j W_ij N_j; the other states as stage_row. */
+static void stage_row_linear(const ds_method *me, const ds_linear *lin,
+                             const ds_lin_slot *slot, const double *x, const double *N,
+                             const double *coef, const double *e_c, double h, int64_t i,
+                             double *X, int64_t nx, int64_t s0, int64_t s1)
+{
+    const int64_t nd = lin->nd, nn = nd * nd;
+    memcpy(X, x, (size_t)nx * sizeof(double));
+    for (int64_t t = me->merged_start[i]; t < me->merged_start[i + 1]; t++) {
+        const double *Nj = N + me->merged_stage[t] * nx;
+        const double wt = h * me->merged_weight[t];
+        for (int64_t k = nd; k < s0; k++)
+            X[k] += wt * Nj[k];
+        for (int64_t k = s1; k < nx; k++)
+            X[k] += wt * Nj[k];
+    }
+    for (int64_t k = s0; k < s1; k++) {
+        double acc = e_c[i * nx + k] * x[k];
+        for (int64_t t = me->row_start[i]; t < me->row_start[i + 1]; t++)
+            acc += h * coef[t * nx + k] * N[me->term_stage[t] * nx + k];
+        X[k] = acc;
+    }
+    const double *E = slot->E + i * nn;
+    for (int64_t r = 0; r < nd; r++) {
+        double acc = 0.0;
+        for (int64_t c = 0; c < nd; c++)
+            acc += E[r * nd + c] * x[c];
+        for (int64_t p = lin->pair_start[i]; p < lin->pair_start[i + 1]; p++) {
+            const double *W = slot->W + p * nn + r * nd, *Nj = N + lin->pair_stage[p] * nx;
+            double sum = 0.0;
+            for (int64_t c = 0; c < nd; c++)
+                sum += W[c] * Nj[c];
+            acc += h * sum;
+        }
+        X[r] = acc;
+    }
+}
+
+/* N = f(X) - L X on the charge and f(X) - A X on q, qdot (N holds f(X) on entry). */
+static void linear_remainder(const ds_group *g, const double *X, double *N, int64_t s0, int64_t s1)
+{
+    const ds_linear *lin = g->lin;
+    const int64_t nd = lin->nd;
+    for (int64_t k = s0; k < s1; k++)
+        N[k] -= g->L[k] * X[k];
+    for (int64_t r = 0; r < nd; r++) {
+        double acc = 0.0;
+        for (int64_t c = 0; c < nd; c++)
+            acc += lin->A[r * nd + c] * X[c];
+        N[r] -= acc;
+    }
+}
+
+/* The last step's estimate with the dense linear part: h_prev b_{s-1}(h_prev A) (pend +
+ * e_s f(x)) scaled to e_{s-1} at A = 0 (see ds_linear_init), max'ed into g->est. */
+static void linear_fsal_estimate(ds_group *g, const ds_lin_slot *prev, double e_s,
+                                 const double *N, double h_prev)
+{
+    const ds_linear *lin = g->lin;
+    const int64_t nd = lin->nd;
+    const double *W = prev->W + lin->est_pair * nd * nd;
+    double *v = lin->f1;   /* free between Jacobian updates */
+    for (int64_t k = 0; k < nd; k++)
+        v[k] = g->pend[k] + e_s * N[k];
+    for (int64_t r = 0; r < nd; r++) {
+        double acc = 0.0;
+        for (int64_t c = 0; c < nd; c++)
+            acc += W[r * nd + c] * v[c];
+        const double e = fabs(h_prev * lin->est_scale * acc) * g->inv_scale[r];
+        if (e > g->est)
+            g->est = e;
+    }
+}
+
+/* one_step with the dense linear part (its weights for h in slot, the last step's in prev). */
+static int one_step_linear(const ds_method *me, ds_group *g, const ds_lin_slot *slot,
+                           const ds_lin_slot *prev, const double *x, const double *u, double h,
+                           double h_prev)
+{
+    const ds_model *m = g->m;
+    const int64_t nx = m->n_state, s = me->n_stages, s0 = g->s0, s1 = g->s1;
+    double *N = g->N, *X = g->X;
+    for (int64_t i = 0; i < s + 1; i++) {
+        stage_row_linear(me, g->lin, slot, x, N, g->coef, g->e_c, h, i, X, nx, s0, s1);
+        if (i == s)
+            break;
+        double *Ni = N + i * nx;
+        const int status = ds_rhs(m, X, u, Ni, &g->w, g->quasi_static);
+        if (status != DS_OK)
+            return status;
+        linear_remainder(g, X, Ni, s0, s1);
+        if (i == 0 && h_prev > 0.0)
+            linear_fsal_estimate(g, prev, me->embedded[s], N, h_prev);
+    }
+    for (int64_t k = 0; k < nx; k++)
+        if (!isfinite(X[k]))
+            return DS_NON_FINITE;
+    return DS_OK;
+}
+
+/* advance_core with the dense linear part over q, qdot (taken by ds_linear_update at the
+ * period's start): x' = A x + L x + N(x), A on q, qdot and the stiff diagonal L on the charge
+ * integrated exactly, the remainder N by the table's stages. */
+int ds_advance_linear(const ds_stepper *st, ds_group *g, double *x, const double *u, double h,
+                      int64_t n_steps, double growth)
+{
+    const ds_method *me = &st->method;
+    const ds_model *m = g->m;
+    const int64_t nx = m->n_state, nmech = 2 * m->n_q, s = me->n_stages;
+    for (int64_t k = 0; k < nx; k++)
+        if (!isfinite(x[k]))
+            return DS_NON_FINITE;
+    memcpy(g->x_start, x, (size_t)nx * sizeof(double));
+    if (g->quasi_static)
+        ds_shift_charge(m, x, u, -1.0, &g->w);
+    int status = DS_OK;
+    double h_prev = 0.0;
+    const ds_lin_slot *prev = NULL;   /* the last step's weights (the ring keeps them) */
+    for (int64_t step = 0; step < n_steps && status == DS_OK; step++) {
+        status = ds_stiff_rates(m, x, g->L, &g->w, (int)me->exponential);
+        if (status != DS_OK)
+            break;
+        stiff_weights(me, g->L, h, g->phis, g->coef, g->e_c, nx, s, g->s0, g->s1);
+        const ds_lin_slot *slot = ds_linear_weights(me, g->lin, h);
+        status = one_step_linear(me, g, slot, prev, x, u, h, h_prev);
+        prev = slot;
+        if (status != DS_OK)
+            break;
+        memcpy(x, g->X, (size_t)nx * sizeof(double));
+        if (me->n_embedded > 0) {
+            pending_estimate(me->embedded, g->N, g->pend, nmech, nx, s);
+            h_prev = h;
+        }
+        h *= growth;
+    }
+    if (status == DS_OK && h_prev > 0.0) {
+        status = ds_rhs(m, x, u, g->N, &g->w, g->quasi_static);
+        linear_remainder(g, x, g->N, g->s0, g->s1);
+        linear_fsal_estimate(g, prev, me->embedded[s], g->N, h_prev);
+    }
+    if (status != DS_OK) {
+        memcpy(x, g->x_start, (size_t)nx * sizeof(double));
+        return status;
+    }
+    g->steps += (double)n_steps;
+    if (g->quasi_static)
+        ds_shift_charge(m, x, u, 1.0, &g->w);
+    return DS_OK;
 }

@@ -144,6 +144,9 @@ void ds_stepper_free(ds_stepper *st)
         free(g->view_cells);
         free(g->view_ints);
         free(g->view_mi);
+        if (g->lin)
+            ds_linear_free(g->lin);
+        free(g->lin);
     }
     free(st->group);
     st->group = NULL;
@@ -191,6 +194,17 @@ int ds_stepper_init(ds_stepper *st, const ds_model *m, double dt, double z_tol, 
             g->inv_scale[k] = inv_scale[g->q_first + k];
             g->inv_scale[nq + k] = inv_scale[m->n_q + g->q_first + k];
         }
+        if (st->linearized) {
+            g->lin = malloc(sizeof(ds_linear));
+            if (!g->lin)
+                return -1;
+            const int rc = ds_linear_init(g->lin, &st->method, g->m);
+            if (rc < 0) {
+                free(g->lin);
+                g->lin = NULL;
+                return rc;
+            }
+        }
     }
     return 0;
 }
@@ -200,5 +214,7 @@ void ds_reset_control(ds_stepper *st)
     for (int64_t gi = 0; gi < st->n_groups; gi++) {
         st->group[gi].ctl = st->group[gi].ctl_initial;
         st->group[gi].est = 0.0;
+        if (st->group[gi].lin)
+            ds_linear_reset(st->group[gi].lin);
     }
 }

@@ -6,6 +6,8 @@
 #include "binding.h"
 
 #include <math.h>
+#include <stdlib.h>
+#include <string.h>
 
 typedef struct {
     PyObject_HEAD
@@ -42,22 +44,25 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
 {
     static char *kwlist[] = {"model", "c", "terms", "embedded", "error_weights", "dt",
                              "z_tol", "fine", "substeps", "tolerance", "min_substeps",
-                             "max_substeps", "exponent", "jump_ref", NULL};
+                             "max_substeps", "exponent", "jump_ref", "linearized",
+                             "lin_refresh", NULL};
     PyObject *model, *c, *terms, *embedded, *weights;
-    double dt, z_tol, fine, tol, exponent, jump_ref = 0.0;
+    double dt, z_tol, fine, tol, exponent, jump_ref = 0.0, lin_refresh = 0.0;
     long long n0, n_min, n_max;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O!OOOOdddLdLLd|d", kwlist, &ModelType, &model,
-                                     &c, &terms, &embedded, &weights, &dt, &z_tol, &fine, &n0,
-                                     &tol, &n_min, &n_max, &exponent, &jump_ref))
+    int linearized = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O!OOOOdddLdLLd|dpd", kwlist, &ModelType,
+                                     &model, &c, &terms, &embedded, &weights, &dt, &z_tol, &fine,
+                                     &n0, &tol, &n_min, &n_max, &exponent, &jump_ref,
+                                     &linearized, &lin_refresh))
         return -1;
     if (self->ready) {
         PyErr_SetString(PyExc_RuntimeError, "Stepper already initialised");
         return -1;
     }
     if (!(dt > 0.0) || n0 < 1 || n_min < 1 || n_max < n_min || !(exponent > 0.0)
-        || !(jump_ref >= 0.0 && jump_ref < INFINITY)) {
+        || !(jump_ref >= 0.0 && jump_ref < INFINITY) || !(lin_refresh >= 0.0)) {
         PyErr_SetString(PyExc_ValueError, "Stepper: need dt > 0, 1 <= min <= max substeps, "
-                                          "a finite jump_ref >= 0");
+                                          "a finite jump_ref >= 0, lin_refresh >= 0");
         return -1;
     }
     ModelObject *mo = (ModelObject *)model;
@@ -80,10 +85,16 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
     } else {
         ds_control ctl = {n0, n_min, n_max, tol, exponent};
         self->st.jump_ref = jump_ref;
-        if (ds_stepper_init(&self->st, &mo->m, dt, z_tol, fine, &ctl, bw.buf) < 0
-            || ds_work_init(&self->out_work, &mo->m) < 0) {
+        self->st.linearized = linearized;
+        self->st.lin_refresh = lin_refresh;
+        const int init = ds_stepper_init(&self->st, &mo->m, dt, z_tol, fine, &ctl, bw.buf);
+        if (init < 0 || ds_work_init(&self->out_work, &mo->m) < 0) {
             ds_stepper_free(&self->st);
-            PyErr_NoMemory();
+            if (init == -2)
+                PyErr_SetString(PyExc_ValueError, "a dense linear part needs every stage node "
+                                                  "c_i and 1 among the table's phi arguments");
+            else
+                PyErr_NoMemory();
         } else {
             Py_INCREF(model);
             self->model = mo;
@@ -123,8 +134,12 @@ static PyObject *Stepper_advance(StepperObject *self, PyObject *const *args, Py_
     buf b[2];
     if (get_buffers(args, specs, 2, b) < 0)
         return NULL;
-    int status = ds_advance(&self->st, &self->st.group[0], b[0].view.buf, b[1].view.buf, h,
-                            steps, growth);
+    ds_group *g = &self->st.group[0];
+    int status = DS_OK;
+    if (g->lin)   /* the dense linear part at the start state */
+        status = ds_linear_update(&self->st, g, b[0].view.buf, b[1].view.buf);
+    if (status == DS_OK)
+        status = ds_advance(&self->st, g, b[0].view.buf, b[1].view.buf, h, steps, growth);
     release_buffers(b, 2);
     return PyLong_FromLong(status);
 }
@@ -200,6 +215,83 @@ static PyObject *Stepper_run(StepperObject *self, PyObject *const *args, Py_ssiz
     Py_END_ALLOW_THREADS
     release_buffers(b, 6);
     return Py_BuildValue("(iL)", status, (long long)k);
+}
+
+/* linear_part(x, u, A) -> status: the dense linear part taken at (x, u) into A (n_q 2 x 2 n_q,
+ * a model of one group); the stepper takes it anew at its next period. */
+static PyObject *Stepper_linear_part(StepperObject *self, PyObject *const *args, Py_ssize_t n)
+{
+    NEED_READY(self);
+    ds_group *g = &self->st.group[0];
+    if (n != 3 || !g->lin || self->st.n_groups != 1) {
+        PyErr_SetString(PyExc_TypeError, "linear_part(x, u, A): a linearized stepper of one "
+                                         "coupled group");
+        return NULL;
+    }
+    const ds_model *m = &self->model->m;
+    const int64_t nd = g->lin->nd;
+    const spec specs[] = {{'d', m->n_state, 0, "x"}, U_SPEC(m, "u"), {'d', nd * nd, 1, "A"}};
+    buf b[3];
+    if (get_buffers(args, specs, 3, b) < 0)
+        return NULL;
+    ds_linear_reset(g->lin);
+    const int status = ds_linear_update(&self->st, g, b[0].view.buf, b[1].view.buf);
+    memcpy(b[2].view.buf, g->lin->A, (size_t)(nd * nd) * sizeof(double));
+    ds_linear_reset(g->lin);
+    release_buffers(b, 3);
+    return PyLong_FromLong(status);
+}
+
+/* matrix_phis(Z, scale, full, half): phi_k(scale Z) and phi_k(scale Z / 2), k = 0..kmax, of
+ * an n x n matrix into (kmax + 1) n x n blocks (matrix_phi.c). */
+PyObject *matrix_phis(PyObject *module, PyObject *const *args, Py_ssize_t n)
+{
+    (void)module;
+    if (n != 4) {
+        PyErr_SetString(PyExc_TypeError, "matrix_phis(Z, scale, full, half)");
+        return NULL;
+    }
+    const double scale = PyFloat_AsDouble(args[1]);
+    if (PyErr_Occurred())
+        return NULL;
+    PyObject *const arrays[] = {args[0], args[2], args[3]};
+    const spec specs[] = {{'d', -1, 0, "Z"}, {'d', -1, 1, "full"}, {'d', -1, 1, "half"}};
+    buf b[3];
+    if (get_buffers(arrays, specs, 3, b) < 0)
+        return NULL;
+    const Py_ssize_t nn = b[0].view.len / 8, dim = (Py_ssize_t)llround(sqrt((double)nn));
+    const Py_ssize_t blocks = nn > 0 ? b[1].view.len / 8 / nn : 0;
+    double *work = NULL;
+    if (dim < 1 || dim * dim != nn || blocks < 1 || blocks * nn != b[1].view.len / 8
+        || b[2].view.len != b[1].view.len) {
+        PyErr_SetString(PyExc_ValueError, "matrix_phis: Z n x n, full and half (kmax+1) n n");
+    } else if (!(work = malloc((size_t)ds_matrix_phi_work(dim, blocks - 1) * sizeof(double)))) {
+        PyErr_NoMemory();
+    } else {
+        ds_matrix_phis(b[0].view.buf, scale, dim, blocks - 1, b[1].view.buf, b[2].view.buf,
+                       work);
+    }
+    free(work);
+    release_buffers(b, 3);
+    if (PyErr_Occurred())
+        return NULL;
+    Py_RETURN_NONE;
+}
+
+/* linear_counts() -> (Jacobians taken, weight sets computed) summed over the groups. */
+static PyObject *Stepper_linear_counts(StepperObject *self, PyObject *unused)
+{
+    (void)unused;
+    NEED_READY(self);
+    long long refreshes = 0, fills = 0;
+    for (int64_t gi = 0; gi < self->st.n_groups; gi++) {
+        const ds_linear *lin = self->st.group[gi].lin;
+        if (lin) {
+            refreshes += lin->refreshes;
+            fills += lin->fills;
+        }
+    }
+    return Py_BuildValue("(LL)", refreshes, fills);
 }
 
 static PyObject *Stepper_reset_control(StepperObject *self, PyObject *unused)
@@ -294,6 +386,10 @@ static PyMethodDef Stepper_methods[] = {
      "period(x, u_old, u, out) -> status: one control period, then the outputs"},
     {"run", (PyCFunction)(void (*)(void))Stepper_run, METH_FASTCALL,
      "run(x, u_held, u_last, U, X, Y) -> (status, periods): many periods, GIL released"},
+    {"linear_part", (PyCFunction)(void (*)(void))Stepper_linear_part, METH_FASTCALL,
+     "linear_part(x, u, A) -> status: the dense linear part at (x, u) into A"},
+    {"linear_counts", (PyCFunction)Stepper_linear_counts, METH_NOARGS,
+     "linear_counts() -> (Jacobians taken, weight sets computed) of a linearized stepper"},
     {"reset_control", (PyCFunction)Stepper_reset_control, METH_NOARGS,
      "step counts and error estimates back to their initial values"},
     {"group_substeps", (PyCFunction)Stepper_group_substeps, METH_NOARGS,

@@ -111,6 +111,24 @@ static int fixed_period(const ds_stepper *st, ds_group *g, double *x, const doub
     return ds_advance(st, g, x, u, h, n_sub, 1.0);
 }
 
+/* With a dense linear part, step counts are rounded up to 1, 2, 3, 4, 5, 6, 8, 10, 12, 16,
+ * 20, 24, 32, ... (at most 4/3 apart): the step sizes then repeat from period to period, and
+ * so do their weights, which cost ~50 small matrix products each (linear_part.c). */
+static int64_t count_ladder(int64_t n)
+{
+    if (n <= 6)
+        return n;
+    int64_t base = 4;
+    while (base * 2 < n)
+        base *= 2;
+    /* n in (base, 2 base]: the rungs 1.25, 1.5, 2 times base */
+    if (n <= base + base / 4)
+        return base + base / 4;
+    if (n <= base + base / 2)
+        return base + base / 2;
+    return 2 * base;
+}
+
 /*
  * One control period of one group in g->ctl.n steps (plus a charge transient's graded steps).
  * With a local tolerance ctl.tol > 0 the count adapts from period to period (fixed steps inside
@@ -124,6 +142,11 @@ int ds_period_core(const ds_stepper *st, ds_group *g, double *x, const double *u
 {
     ds_control *ctl = &g->ctl;
     const double dt = st->dt;
+    if (g->lin) {   /* the dense linear part, taken anew if the state has moved */
+        const int status = ds_linear_update(st, g, x, u);
+        if (status != DS_OK)
+            return status;
+    }
     if (ctl->tol <= 0.0)
         return fixed_period(st, g, x, u_old, u, dt / (double)ctl->n, ctl->n);
     const int64_t nx = g->m->n_state;
@@ -138,6 +161,8 @@ int ds_period_core(const ds_stepper *st, ds_group *g, double *x, const double *u
             int64_t next = (int64_t)ceil((double)n * grow);
             if (next < n + 1)
                 next = n + 1;
+            if (g->lin)
+                next = count_ladder(next);
             ctl->n = next < ctl->n_max ? next : ctl->n_max;
             memcpy(x, g->x_keep, (size_t)nx * sizeof(double));
             continue;
@@ -150,6 +175,8 @@ int ds_period_core(const ds_stepper *st, ds_group *g, double *x, const double *u
             next = (n + 1) / 2;
         if (next < ctl->n_min)
             next = ctl->n_min;
+        if (g->lin)
+            next = count_ladder(next);
         ctl->n = next < ctl->n_max ? next : ctl->n_max;
         return DS_OK;
     }

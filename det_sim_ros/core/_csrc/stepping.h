@@ -11,6 +11,7 @@
 #define DETSIM_STEPPING_H
 
 #include "detsim.h"
+#include "linear_part.h"
 
 /* A method table decoded for the core (see det_sim_ros/sim/integrators.py; method.c). */
 typedef struct {
@@ -57,6 +58,7 @@ typedef struct {
     int64_t s0, s1;                     /* states with a stiff rate: [s0, s1) */
     int64_t q_first, c_first;           /* first coordinate and cell in the whole model */
     int quasi_static;
+    ds_linear *lin;                     /* dense linear part over q, qdot (NULL: none) */
     int status;                         /* of the last period (batch) */
     /* stepping scratch (one allocation) */
     double *N, *X, *L, *e_c, *x_start, *pend, *x0, *x_keep, *phis, *coef, *inv_scale, *x_local;
@@ -79,6 +81,8 @@ typedef struct {
     ds_group *group;
     double *arena;                      /* every group's scratch, in group order (locality) */
     int threads;
+    int linearized;                     /* a dense linear part over q, qdot per group */
+    double lin_refresh;                 /* weighted state change that renews it */
 } ds_stepper;
 
 /* st->method must be initialised (ds_method_init) before. */
@@ -92,6 +96,12 @@ int ds_period(ds_stepper *st, double *x, const double *u_old, const double *u);
 int ds_period_core(const ds_stepper *st, ds_group *g, double *x, const double *u_old,
                    const double *u);
 void ds_reset_control(ds_stepper *st);
+/* linear_part.c: the dense linear part of a group (see linear_part.h) */
+int ds_linear_init(ds_linear *lin, const ds_method *me, const ds_model *m);
+void ds_linear_free(ds_linear *lin);
+void ds_linear_reset(ds_linear *lin);
+int ds_linear_update(const ds_stepper *st, ds_group *g, const double *x, const double *u);
+const ds_lin_slot *ds_linear_weights(const ds_method *me, ds_linear *lin, double h);
 int ds_run(ds_stepper *st, ds_work *ow, double *x, const double *u_held, const double *u_last,
            const double *U, int64_t n, double *X, double *Y, int64_t *done);
 
