@@ -4,8 +4,10 @@ Pin the adaptive step counts of a fixed voltage profile on four scenes.
 The adaptive step counts, pinned: the internal steps taken per stretch of a fixed voltage
 profile on four scenes at tolerance 1e-6. They follow from the step-size control's constants
 (det_sim_ros.sim.integrators: LOCAL_TOLERANCE, MAX_SUBSTEPS_FACTOR, ERROR_CONSTANT,
-TRANSIENT_FINE, TRANSIENT_CHARGE, MAX_STEP, STABLE_STEP; CTL_SAFETY and the growth rules in
-core/_csrc/stepping.c), so a change to any of them shows here by name rather than only as a
+TRANSIENT_FINE, TRANSIENT_CHARGE, MAX_STEP, STABLE_STEP, LINEAR_REFRESH, LINEARIZED_MAX_FACTOR;
+CTL_SAFETY, the growth rules and the count ladder of linearized methods in
+core/_csrc/stepping.c; 'exact_n3' steps with 'etdrk4_linearized', the others with 'etdrk4'
+or 'dp5'), so a change to any of them shows here by name rather than only as a
 changed fingerprint in bench/behaviour_hashes.py.
 
 When a deliberate change moves these numbers: check that the accuracy tests still pass
@@ -31,7 +33,7 @@ SCENES = {
 STEPS = {
     'default': [85, 2655, 2561],
     'plate': [85, 2787, 2952],
-    'exact_n3': [223, 3014, 3174],
+    'exact_n3': [85, 1563, 1050],
     'ideal_dp5': [66, 693, 720],
 }
 

@@ -69,8 +69,9 @@ class Simulator:
 
     :param scene: a :class:`Scene`, a scene file/name, or a built :class:`Model`.
     :param method: stepper name (default: the scene's ``integrator.method``; 'auto' picks
-        'etdrk4' when the scene has a stiff charge state and 'dp5' otherwise: the cheapest
-        per accuracy in bench/work_precision.py).
+        'etdrk4' when the scene has a stiff charge state, 'etdrk4_linearized' when its beams
+        also have more than one Ritz term (stiff beam modes), and 'dp5' otherwise: the
+        cheapest per accuracy in bench/work_precision.py and bench/stiff_speed.py).
     :param substeps: internal steps per control period (default: the scene's; 0 = adaptive
         from the scene's tolerance when the method has an embedded estimate, else a fixed count
         from the tolerance).
@@ -106,8 +107,11 @@ class Simulator:
 
     def _pick_method(self, name: str) -> Method:
         if name == 'auto':
-            stiff = self.scene.source == 'rc'
-            return get_method('etdrk4' if stiff else 'dp5')
+            if self.scene.source != 'rc':
+                return get_method('dp5')
+            # beams with more than one Ritz term have stiff, heavily damped modes
+            modes = np.diff(self.model.arrays.cell_q)
+            return get_method('etdrk4_linearized' if np.any(modes > 1) else 'etdrk4')
         try:
             return get_method(name)
         except ValueError as exc:   # a scene value: one line naming the key and the choices
