@@ -1,14 +1,16 @@
 /*
  * det_sim_ros compiled kernel: the model as named records and its physics. The kernel's files:
  *
- * physics.c      right-hand side, stiff rates, outputs, input-jump bookkeeping (the equations
- *                are derived and documented in det_sim_ros/physics/model.py;
+ * physics.c      right-hand side, stiff rates, input-jump bookkeeping (the equations are
+ *                derived and documented in det_sim_ros/physics/model.py;
  *                det_sim_ros/physics/reference.py is the same physics in readable numpy, and
- *                the tests hold this code to it)
+ *                the tests hold this code to it); outputs.c the named outputs
  * stepping.h     the stepping core: method.c (method tables and the phi functions), stages.c
  *                (the exponential Runge-Kutta stages), stepping.c (one group's control period:
  *                charge transients, step-count controller), stepper.c (set-up of the per-group
- *                steppers), batch.c (the whole model's periods and offline runs)
+ *                steppers), batch.c (the whole model's periods and offline runs),
+ *                linear_part.h (a dense linear part over the beams: linear_part.c,
+ *                matrix_phi.c)
  * wire.h         the node's I/O path, not physics: frames.c (marker frames of one-coordinate
  *                cells) and wire.c (sample messages in CDR, MCAP message records)
  * binding.h      the Python binding (buffer protocol only: no numpy C API, no ABI coupling)

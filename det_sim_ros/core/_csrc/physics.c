@@ -71,7 +71,8 @@ static inline double one_term_shortening(const ds_cell *cell, double q)
  * bending beyond EI int w''^2 is EI int w''^2 w'^2 / (1 - w'^2) (curvature^2 = w''^2/(1 - w'^2));
  * |w'| >= 1 gives NaN, which the callers report as a slope domain error.
  */
-void ds_kinematics(const ds_model *m, const double *x, ds_work *w, int with_bending)
+static void kinematics_cells(const ds_model *m, const double *x, ds_work *w, int with_bending,
+                             int exact_too)
 {
     const int64_t nq = m->n_q, R = m->r_max;
     const double *qd = x + nq;
@@ -79,6 +80,8 @@ void ds_kinematics(const ds_model *m, const double *x, ds_work *w, int with_bend
         const ds_cell *cell = &m->cell[c];
         const int64_t o = cell->q0, r = cell->nr;
         const int exact = cell->kinematics == KIN_EXACT;
+        if (exact && !exact_too)
+            continue;
         if (r == 1 && !exact) {   /* one term: polynomials in q, ~5x cheaper than quadrature */
             const double c2 = cell->c2, c4 = cell->kappa * cell->c4;
             const double qc = x[o], q2 = qc * qc;
@@ -126,15 +129,91 @@ void ds_kinematics(const ds_model *m, const double *x, ds_work *w, int with_bend
     }
 }
 
-/* F -= gradient of the bending energy beyond EI int w''^2: EI int w''^2 g, g = w'^2 (eq 51) or,
- * exact, g = w'^2 / (1 - w'^2). */
-static void quartic_force(const ds_model *m, const double *x, double *F)
+void ds_kinematics(const ds_model *m, const double *x, ds_work *w, int with_bending)
+{
+    kinematics_cells(m, x, w, with_bending, 1);
+}
+
+/* The end shortenings y alone (into w->y), as ds_kinematics computes them: what the stiff
+ * rates, the stretches and the charge shift need, once or twice per step. */
+static void end_shortenings(const ds_model *m, const double *x, ds_work *w)
 {
     const int64_t R = m->r_max;
     for (int64_t c = 0; c < m->n_cells; c++) {
         const ds_cell *cell = &m->cell[c];
         const int64_t o = cell->q0, r = cell->nr;
         const int exact = cell->kinematics == KIN_EXACT;
+        if (r == 1 && !exact) {
+            w->y[c] = one_term_shortening(cell, x[o]);
+            continue;
+        }
+        double yc = 0.0;
+        for (int64_t g = cell->g0; g < cell->g1; g++) {
+            const double *b1 = m->B1 + g * R;
+            double wp = 0.0;
+            for (int64_t j = 0; j < r; j++)
+                wp += b1[j] * x[o + j];
+            const double wg = m->W[g], wp2 = wp * wp;
+            if (exact)
+                yc += wg * (1.0 - sqrt(1.0 - wp2));
+            else
+                yc += wg * (0.5 * wp2 + 0.125 * cell->kappa * wp2 * wp2);
+        }
+        w->y[c] = yc;
+    }
+}
+
+/*
+ * An exact cell's kinematics (as ds_kinematics) and its bending force beyond EI int w''^2 (as
+ * quartic_force, into F) in one pass over its quadrature nodes: w' and w'' once per node, the
+ * same operations in the same order as the two separate passes (the same bits).
+ */
+static void exact_cell_pass(const ds_model *m, const ds_cell *cell, int64_t c, const double *x,
+                            ds_work *w, double *F)
+{
+    const int64_t R = m->r_max, o = cell->q0, r = cell->nr;
+    const double *qd = x + m->n_q;
+    const double EI2 = 2.0 * cell->EI;
+    double yc = 0.0, hc = 0.0;
+    for (int64_t j = 0; j < r; j++)
+        w->J[o + j] = 0.0;
+    for (int64_t g = cell->g0; g < cell->g1; g++) {
+        const double *b1 = m->B1 + g * R, *b2 = m->B2 + g * R;
+        double wp = 0.0, wd = 0.0, wpp = 0.0;
+        for (int64_t j = 0; j < r; j++) {
+            wp += b1[j] * x[o + j];
+            wd += b1[j] * qd[o + j];
+            wpp += b2[j] * x[o + j];
+        }
+        const double wg = m->W[g], wp2 = wp * wp;
+        const double cos2 = 1.0 - wp2, cs = sqrt(cos2);
+        yc += wg * (1.0 - cs);
+        hc += wg * wd * wd / (cos2 * cs);
+        const double gy = wg * wp / cs;
+        const double s1 = EI2 * m->W[g] * wpp * wpp * wp / (cos2 * cos2);
+        const double s2 = EI2 * m->W[g] * wpp * wp * wp / cos2;
+        for (int64_t j = 0; j < r; j++) {
+            w->J[o + j] += gy * b1[j];
+            F[o + j] -= s1 * b1[j] + s2 * b2[j];
+        }
+    }
+    w->y[c] = yc;
+    w->h[c] = hc;
+}
+
+/* F -= gradient of the bending energy beyond EI int w''^2: EI int w''^2 g, g = w'^2 (eq 51) or,
+ * exact, g = w'^2 / (1 - w'^2). */
+static void quartic_force(const ds_model *m, const double *x, double *F, ds_work *w)
+{
+    const int64_t R = m->r_max;
+    for (int64_t c = 0; c < m->n_cells; c++) {
+        const ds_cell *cell = &m->cell[c];
+        const int64_t o = cell->q0, r = cell->nr;
+        const int exact = cell->kinematics == KIN_EXACT;
+        if (exact) {   /* with its kinematics, which the callers left to this pass */
+            exact_cell_pass(m, cell, c, x, w, F);
+            continue;
+        }
         if (r == 1 && !exact) {
             F[o] -= 4.0 * cell->e4 * x[o] * x[o] * x[o];
             continue;
@@ -318,7 +397,7 @@ static double structure_forces(const ds_model *m, const double *x, ds_work *w)
                 Mt[i * ld + col + k] = m->Mb[i * R + k];
         }
     }
-    quartic_force(m, x, F);
+    quartic_force(m, x, F, w);
     /* Interface mass on the end shortenings: T_I = 1/2 ydot' MI ydot with ydot_c = J_c . qdot */
     for (int64_t e = 0; e < m->n_mi; e++) {
         const int64_t c = m->mi_row[e], c2 = m->mi_col[e];
@@ -403,7 +482,7 @@ rhs_general(const ds_model *m, const double *x, const double *u, double *dx, ds_
     const int64_t nq = m->n_q, nc = m->n_cells, ld = m->mass_block;
     const double *qd = x + nq;
     double *F = w->F, *Mt = w->Mt;
-    ds_kinematics(m, x, w, 0);
+    kinematics_cells(m, x, w, 0, 0);   /* exact cells: in structure_forces' bending pass */
     det_power pw = {0.0, 0.0, 0.0};
     pw.p_diss = structure_forces(m, x, w);
     int status = DS_OK;
@@ -455,7 +534,7 @@ int ds_stiff_rates(const ds_model *m, const double *x, double *L, ds_work *w, in
     if (m->one_term)   /* once per step: only y is needed, not the whole kinematics */
         w->y[0] = one_term_shortening(&m->cell[0], x[0]);
     else
-        ds_kinematics(m, x, w, 0);
+        end_shortenings(m, x, w);
     for (int64_t i = 0; i < m->n_cells; i++) {
         const ds_det *d = &m->det[i];
         const double lam = (m->cell[i].length - w->y[i]) / d->l0;
@@ -469,7 +548,7 @@ int ds_stiff_rates(const ds_model *m, const double *x, double *L, ds_work *w, in
 /* DET stretches lambda_c = (l_c - y_c(q)) / l0_c. */
 void ds_stretches(const ds_model *m, const double *x, ds_work *w, double *lam)
 {
-    ds_kinematics(m, x, w, 0);
+    end_shortenings(m, x, w);
     for (int64_t i = 0; i < m->n_cells; i++)
         lam[i] = (m->cell[i].length - w->y[i]) / m->det[i].l0;
 }
@@ -486,7 +565,7 @@ void ds_stretches(const ds_model *m, const double *x, ds_work *w, double *lam)
  */
 void ds_shift_charge(const ds_model *m, double *x, const double *u, double sign, ds_work *w)
 {
-    ds_kinematics(m, x, w, 0);
+    end_shortenings(m, x, w);
     double work_in = 0.0, work_out = 0.0;   /* v q_p before the shift, after it */
     for (int64_t i = 0; i < m->n_cells; i++) {
         const ds_det *d = &m->det[i];
@@ -521,104 +600,4 @@ void ds_book_input_jump(const ds_model *m, double *x, const double *u_old, const
         x[m->i_power] += u_new[i] * cap * dv;
         x[m->i_power + 1] += 0.5 * cap * dv * dv;
     }
-}
-
-/* The beams' kinetic and elastic energy (J), with the interface mass's kinetic energy; the
- * end-shortening rates dy/dt into w->ydot (w->J, w->Us4 from ds_kinematics with bending). */
-static double mechanical_energy(const ds_model *m, const double *x, ds_work *w)
-{
-    const int64_t R = m->r_max;
-    const double *qd = x + m->n_q;
-    double energy = 0.0;
-    for (int64_t c = 0; c < m->n_cells; c++) {
-        const int64_t o = m->cell[c].q0, r = m->cell[c].nr;
-        w->ydot[c] = 0.0;
-        for (int64_t i = o; i < o + r; i++)
-            for (int64_t k = 0; k < r; k++)
-                energy += 0.5 * qd[i] * m->Mb[i * R + k] * qd[o + k]
-                          + 0.5 * x[i] * m->K[i * R + k] * x[o + k];
-        energy += w->Us4[c];
-        for (int64_t j = o; j < o + r; j++)
-            w->ydot[c] += w->J[j] * qd[j];
-    }
-    for (int64_t e = 0; e < m->n_mi; e++)
-        energy += 0.5 * m->mi_val[e] * w->ydot[m->mi_row[e]] * w->ydot[m->mi_col[e]];
-    return energy;
-}
-
-/* The structure outputs: rows of P applied to the end shortenings y. */
-static void structure_outputs(const ds_model *m, const double *y, double *out)
-{
-    const int64_t nc = m->n_cells;
-    for (int64_t r = 0; r < m->n_structure; r++) {
-        double value = 0.0;
-        for (int64_t c = 0; c < nc; c++)
-            value += m->P[r * nc + c] * y[c];
-        out[r] = value;
-    }
-}
-
-/*
- * The named outputs (det_sim_ros.physics.model.output_names); returns a status code.
- * Per cell: q_ref, qdot_ref, y, lambda, q_p, v_p, i_DE, C, eps_E; then the structure outputs
- * (rows of P applied to y), H, P_in, P_diss.
- */
-int ds_outputs(const ds_model *m, const double *x, const double *u, double *out, ds_work *w)
-{
-    const int64_t nq = m->n_q, nc = m->n_cells;
-    const double *qd = x + nq;
-    int status = DS_OK;
-    for (int64_t k = 0; k < m->n_state; k++)
-        if (!isfinite(x[k]))
-            status = DS_NON_FINITE;
-    const int rhs_status = ds_rhs(m, x, u, w->dx, w, 0);
-    if (status == DS_OK)
-        status = rhs_status;
-    const double p_in = w->p_in, p_diss = w->p_diss;
-    ds_kinematics(m, x, w, 1);
-    double energy = mechanical_energy(m, x, w);
-    for (int64_t c = 0; c < nc; c++) {
-        const ds_det *d = &m->det[c];
-        const double lam = (m->cell[c].length - w->y[c]) / d->l0, lam2 = lam * lam;
-        const double cap = d->C0 * lam2;
-        double qp, vp, i_de;
-        if (m->rc_source) {
-            qp = x[m->i_qp + c];
-            vp = qp / cap;
-            i_de = (u[c] - vp) / d->Rs;
-        } else {
-            vp = u[c];
-            qp = cap * vp;
-            i_de = 2.0 * d->C0 * lam * (-w->ydot[c] / d->l0) * vp + vp / d->Rp;
-        }
-        const double eps = m->creep ? x[m->i_eps + c] : 0.0;
-        energy += d->VY / 6.0 * (lam2 + 1.0 / lam2 - 2.0) + 0.5 * qp * qp / cap;
-        energy += 0.5 * d->volume * d->E_M * eps * eps;
-        double qr = 0.0, qdr = 0.0;
-        for (int64_t j = m->cell[c].q0; j < m->cell[c].q0 + m->cell[c].nr; j++) {
-            qr += m->ref[j] * x[j];
-            qdr += m->ref[j] * qd[j];
-        }
-        double *o = out + c * DS_CELL_OUTPUTS;
-        o[0] = qr;
-        o[1] = qdr;
-        o[2] = w->y[c];
-        o[3] = lam;
-        o[4] = qp;
-        o[5] = vp;
-        o[6] = i_de;
-        o[7] = cap;
-        o[8] = eps;
-    }
-    int64_t k = nc * DS_CELL_OUTPUTS;
-    structure_outputs(m, w->y, out + k);
-    k += m->n_structure;
-    out[k] = energy;
-    out[k + 1] = p_in;
-    out[k + 2] = p_diss;
-    const int64_t n_out = ds_n_outputs(m);
-    for (k = 0; k < n_out; k++)
-        if (!isfinite(out[k]) && status == DS_OK)
-            status = DS_NON_FINITE;
-    return status;
 }

@@ -6,6 +6,7 @@
  * stepping.c one group's control period: charge transient, step-count controller
  * stepper.c  the stepper's set-up: a model view and scratch per coupled group
  * batch.c    the whole model's control periods (groups one by one or over threads), runs
+ * linear_part.c, matrix_phi.c  a dense linear part over the beams' q, qdot (linear_part.h)
  */
 #ifndef DETSIM_STEPPING_H
 #define DETSIM_STEPPING_H
