@@ -8,11 +8,13 @@ the integration error (max |Delta-y - Delta-y_ref| over the run relative to the 
 the same model solved with 'etdrk4' at tolerance 1e-10; cached in --ref-dir). Each exact level
 runs with 'auto' ('etdrk4_linearized') and with 'etdrk4' (the beams' stiff modes in the explicit
 stages) for a measured ratio; scipy's Radau on the kernel's rhs at rtol 1e-6 (restarted every
-sample, as the project's reference solutions) gives the scipy column (--scipy: all rows, worst case only, or none).
---baseline DIR times the paper level through another checkout's kernel in a subprocess,
-interleaved with this one, for a same-host ratio.
+sample, as the project's reference solutions) gives the scipy column (--scipy: all rows, the
+worst case only, or none). --baseline DIR times the paper level through another checkout's
+kernel in a subprocess, interleaved with this one, for a same-host ratio. One case takes ~2 min
+on a shared 2-core host:
 
-    flock /work/bench.lock python bench/stiff_speed.py [--scipy worst] [--baseline /work/main]
+    flock /work/bench.lock python bench/stiff_speed.py --cases simply_supported0.20 \
+        [--scipy worst] [--baseline /work/main] [--ref-dir DIR]
 """
 
 from __future__ import annotations
@@ -24,8 +26,8 @@ import subprocess
 import sys
 import time
 
-from det_sim_ros.analysis.scenarios import reference_solution, step_error, step_scene, \
-    step_voltage, STEP_END
+from det_sim_ros.analysis.scenarios import reference_solution, STEP_END, step_error, \
+    step_scene, step_voltage
 from det_sim_ros.sim.simulator import simulate, Simulator
 import numpy as np
 
@@ -34,7 +36,7 @@ LEVELS = (('exact', 3), ('exact', 5), ('exact', 7), ('paper', 1))
 TOLERANCE = 1e-6
 N_PERIODS = int(round(STEP_END * 1000))
 
-_PAPER_SNIPPET = '''
+_PAPER_SNIPPET = """
 import sys, time
 from det_sim_ros.analysis.scenarios import step_scene, step_voltage
 from det_sim_ros.sim.simulator import simulate, Simulator
@@ -47,7 +49,7 @@ for _ in range(5):
     simulate(sim, step_voltage(scene.physics.v_max), 4.5)
     best.append(time.process_time() - t0)
 print(min(best) / 4500 * 1e6)
-'''
+"""
 
 
 def _scene(beam, eps_b, fidelity, n_ritz, method, tolerance=TOLERANCE):

@@ -236,12 +236,16 @@ static void fill_slot(const ds_method *me, ds_linear *lin, ds_lin_slot *slot, do
     slot->h = h;
 }
 
-/* The weights of step size h: a kept slot, or the next slot in turn filled anew. */
-const ds_lin_slot *ds_linear_weights(const ds_method *me, ds_linear *lin, double h)
+/* The weights of step size h: a kept slot, or the next slot in turn filled anew (never
+ * ``keep``, the last step's, whose weights its error estimate still needs). */
+const ds_lin_slot *ds_linear_weights(const ds_method *me, ds_linear *lin, double h,
+                                     const ds_lin_slot *keep)
 {
     for (int k = 0; k < DS_LIN_SLOTS; k++)
         if (lin->slot[k].h == h)
             return &lin->slot[k];
+    if (&lin->slot[lin->next_slot] == keep)
+        lin->next_slot = (lin->next_slot + 1) % DS_LIN_SLOTS;
     ds_lin_slot *slot = &lin->slot[lin->next_slot];
     lin->next_slot = (lin->next_slot + 1) % DS_LIN_SLOTS;
     fill_slot(me, lin, slot, h);

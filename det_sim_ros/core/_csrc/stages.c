@@ -321,7 +321,7 @@ int ds_advance_linear(const ds_stepper *st, ds_group *g, double *x, const double
         if (status != DS_OK)
             break;
         stiff_weights(me, g->L, h, g->phis, g->coef, g->e_c, nx, s, g->s0, g->s1);
-        const ds_lin_slot *slot = ds_linear_weights(me, g->lin, h);
+        const ds_lin_slot *slot = ds_linear_weights(me, g->lin, h, prev);
         status = one_step_linear(me, g, slot, prev, x, u, h, h_prev);
         prev = slot;
         if (status != DS_OK)

@@ -102,7 +102,8 @@ int ds_linear_init(ds_linear *lin, const ds_method *me, const ds_model *m);
 void ds_linear_free(ds_linear *lin);
 void ds_linear_reset(ds_linear *lin);
 int ds_linear_update(const ds_stepper *st, ds_group *g, const double *x, const double *u);
-const ds_lin_slot *ds_linear_weights(const ds_method *me, ds_linear *lin, double h);
+const ds_lin_slot *ds_linear_weights(const ds_method *me, ds_linear *lin, double h,
+                                     const ds_lin_slot *keep);
 int ds_run(ds_stepper *st, ds_work *ow, double *x, const double *u_held, const double *u_last,
            const double *U, int64_t n, double *X, double *Y, int64_t *done);
 
