@@ -31,7 +31,7 @@ def add_arguments(parser) -> None:
 
 def main(args) -> int:
     """Sweep every beam, write the CSV files (and PNGs), print the critical pre-strains."""
-    base = common.base_scene(args)
+    base = common.paper_level(common.base_scene(args), args)
     beams = args.beams or [base.beam]
     out = common.out_dir(args)
     voltages = (0.0, base.physics.v_max)

@@ -31,7 +31,7 @@ def add_arguments(parser) -> None:
 
 def main(args) -> int:
     """Run every beam and pre-strain, write step.csv and the paper comparison (and the PNG)."""
-    base = common.base_scene(args)
+    base = common.paper_level(common.base_scene(args), args)
     out = common.out_dir(args)
     if not common.user_set(args, 'rate_hz'):
         base = base.replace(rate_hz=1000.0)          # scenarios.md: 1 ms samples
