@@ -15,6 +15,10 @@ scene's integrator (auto, tolerance 1e-6, adaptive):
 - CPU seconds per simulated second (time.process_time, median of 3 runs when a run takes under
   2 s, else one) and the real-time factor (simulated s per CPU s); internal steps per period.
 
+Then the shipped scenes (default, plate, array of 100 on two threads) at the paper's level and
+as shipped, 1 s at rest and 1 s through a 3 kV step: real-time factor (wall clock) and steps
+per period per coupled group.
+
 Prints the smallest 'exact' n_r within 1 % on all three cases (by either scale) and writes the
 "How to choose" section of docs/fidelity.md (between its markers) with date, commit and machine.
 Run it under the bench lock on a quiet host:
@@ -35,11 +39,14 @@ import time
 from continuum_reference import (case_name, CASES, load_reference, peak_displacement, stroke,
                                  stroke_error, switched)
 from det_sim_ros.analysis.scenarios import delta_y, STEP_END, step_scene, step_voltage
+from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import simulate, Simulator
 import numpy as np
 
 LEVELS = (('paper', 1), ('consistent', 3), ('consistent', 5), ('exact', 3), ('exact', 5),
           ('exact', 7))
+SCENES = (('default', 1), ('plate', 1), ('array', 2))   # shipped scenes, stepping threads
+SCENE_RUN = 1.0         # s simulated per shipped-scene run
 LIMIT = 0.01            # of the stroke: the default level must stay within it on every case
 MACHINE = '2-core shared host'
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -85,6 +92,41 @@ def study(reference):
                   f'{steps:.1f} steps/period', flush=True)
         rows.append(row)
     return rows
+
+
+def _scene_run(name, overrides, volts, threads):
+    """Return (wall s per simulated s, steps per period per group) of 1 s of a shipped scene."""
+    scene = load_scene(name, overrides)
+    sim = Simulator(scene, threads=threads)
+    profile = np.array([volts(k * scene.dt) for k in range(round(SCENE_RUN / scene.dt))])
+    start = time.perf_counter()
+    simulate(sim, np.repeat(profile[:, None], scene.n_dets, axis=1), SCENE_RUN)
+    wall = (time.perf_counter() - start) / SCENE_RUN
+    return wall, sim.steps_taken / len(profile) / sim.model.arrays.n_groups
+
+
+def scene_costs():
+    """Return markdown rows: each shipped scene at rest and through a 3 kV step, both levels."""
+    profiles = (lambda t: 0.0, lambda t: 3000.0 * (0.2 <= t < 0.6))   # at rest; a 3 kV step
+    lines = []
+    for name, threads in SCENES:
+        for level, overrides in (('paper', {'scene.fidelity': 'paper'}), ('shipped', {})):
+            cells = []
+            for volts in profiles:
+                wall, steps = _scene_run(name, overrides, volts, threads)
+                cells.append(f'{1 / wall:.3g} | {steps:.0f}')
+            label = level if level == 'paper' else load_scene(name).fidelity_label
+            print(f'  {name} {label}: ' + '; '.join(cells), flush=True)
+            lines.append(f'| {name} ({threads} thread{"s" if threads > 1 else ""}) | {label} | '
+                         + ' | '.join(cells) + ' |')
+    head = ['', f'The shipped scenes themselves ({SCENE_RUN:g} s simulated through '
+            '`simulate()`, wall clock; × real time is what a free-running node could reach; '
+            'steps per period per coupled group: the plate is one, each copy of the array one):',
+            '',
+            '| scene | level | × real time at rest | steps | × real time, 3 kV 0.2–0.6 s '
+            '| steps |',
+            '|---|---|---|---|---|---|']
+    return '\n'.join(head + lines)
 
 
 def choice(rows, key='error'):
@@ -167,7 +209,8 @@ def main(argv=None) -> int:
     reference = load_reference()
     simulate(Simulator(step_scene('fixed', 0.20)), np.zeros(10), 0.01)   # warm up
     rows = study(reference)
-    text = table(rows, reference) + '\n\n' + convergence_table(reference['meta'])
+    text = (table(rows, reference) + '\n' + scene_costs() + '\n\n'
+            + convergence_table(reference['meta']))
     print(text)
     print(f'smallest exact n_r within {LIMIT:.0%} of the stroke on all cases: '
           f'{choice(rows)}; of the peak displacement: {choice(rows, "error_peak")}')

@@ -411,7 +411,8 @@ def _write_samples(path, fast, background=False, stress=False):
     from det_sim_ros.io.contract import encode_float64_multi_array, encode_joint_state, TOPIC_TYPES
     options = {'flush_sim_s': 2e-5, 'split_s': 1.5e-4, 'max_queue': 5} if stress else {}
     recorder = Recorder(path, load_scene('default', PAPER), chunk_size=2048,
-                        background=background, flush_period_s=1e9, packing=fast,   # False: mcap's add_message path
+                        background=background,
+                        flush_period_s=1e9, packing=fast,   # False: mcap's add_message path
                         **options)   # no wall-clock flushes: comparable
     topics = ['deflection', 'displacement', 'charge', 'current']
     for k in range(500):
