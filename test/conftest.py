@@ -100,6 +100,10 @@ class Harness:
 
         from det_sim_ros.ros.node import make_executor, SimNode
 
+        # node I/O, pacing, lockstep, recording: the fidelity is not their subject, and the
+        # paper's one-term model keeps them fast; scene.fidelity=None keeps the scene's own
+        if params.setdefault('scene.fidelity', 'paper') is None:
+            del params['scene.fidelity']
         params.setdefault('real_time', False)
         params.setdefault('info_period', 0.0)
         params.setdefault('log.enabled', 'log.path' in params)  # no MCAP files unless asked

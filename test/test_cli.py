@@ -14,6 +14,10 @@ import numpy as np
 import pytest
 import yaml
 
+# the statics and step verbs run the paper's one-term model (the paper's scenarios): the
+# scenes these tests compare them with set it too
+PAPER = {'scene.fidelity': 'paper'}
+
 
 def read_csv(path):
     with open(path, newline='', encoding='utf-8') as stream:
@@ -62,7 +66,7 @@ def test_statics_branches_are_symmetric_and_switch_where_statics_says(statics_ou
             for r in read_csv(statics_out / 'statics_critical.csv')}
     assert set(crit) == {(b, v) for b in ('fixed', 'simply_supported') for v in (0.0, 3000.0)}
     for (beam, v), e_min in crit.items():
-        scene = load_scene('default', {'scene.beam': beam})
+        scene = load_scene('default', {**PAPER, 'scene.beam': beam})
         assert e_min == pytest.approx(statics.critical_prestrain(scene, v), rel=1e-8)
         rows = [r for r in branches if r['beam'] == beam and float(r['voltage_V']) == v]
         for r in rows:
@@ -105,7 +109,7 @@ def test_step_files_and_columns(step_out):
     assert dy[i0] == 0.0                                     # y0 = y at the end of the 0 V phase
     # the rest state before the step is the statics' stable buckled state
     y0 = float(run[i0]['y_m'])
-    scene = load_scene('default', {'scene.beam': 'fixed', 'scene.eps_b': 0.2})
+    scene = load_scene('default', {**PAPER, 'scene.beam': 'fixed', 'scene.eps_b': 0.2})
     assert y0 == pytest.approx(statics.rest_shortening(scene), rel=2e-3)
     if has_matplotlib():
         png = step_out / 'step.png'
@@ -142,7 +146,7 @@ def test_without_matplotlib_csv_is_still_written(tmp_path, monkeypatch, capsys):
 
 
 def test_scene_file_and_set_overrides(tmp_path, capsys):
-    scene = load_scene('default', {'scene.beam': 'simply_supported'})
+    scene = load_scene('default', {**PAPER, 'scene.beam': 'simply_supported'})
     path = tmp_path / 'my_scene.yaml'
     path.write_text(yaml.safe_dump(scene_to_dict(scene, wrap=True)))
     out = tmp_path / 'out'
@@ -298,3 +302,15 @@ def test_any_error_of_a_verb_is_one_line(monkeypatch, capsys, error, code, line)
     if isinstance(error, RuntimeError):
         with pytest.raises(RuntimeError):
             cli.main(['fleet', 'any.yaml'])
+
+
+def test_the_paper_verbs_run_the_paper_model_unless_a_fidelity_is_set():
+    """Check `det_sim statics` and `step` take the paper's level unless --set names one."""
+    import argparse
+    from det_sim_ros.cli import common
+    args = argparse.Namespace(scene='default', overrides=[('scene.eps_b', 0.15)])
+    scene = common.paper_level(common.base_scene(args), args)
+    assert (scene.fidelity, scene.n_ritz, scene.eps_b) == ('paper', 1, 0.15)
+    args.overrides.append(('scene.fidelity', 'exact'))
+    scene = common.paper_level(common.base_scene(args), args)
+    assert (scene.fidelity, scene.n_ritz) == ('exact', 5)    # the shipped default's n_ritz

@@ -11,6 +11,7 @@ import math
 
 from det_sim_ros.cli.det_sim import main
 from det_sim_ros.physics.linearize import LinearizationError, linearize
+from det_sim_ros.physics.model import build_model
 from det_sim_ros.physics.statics import rest_shortening
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import Simulator
@@ -57,28 +58,35 @@ def state_scales(lin):
     return scales
 
 
-def fd_jacobians(lin):
-    model = lin.model
+def fd_jacobians(lin, model=None):
+    """Return A and B by differences of ``model``'s rhs (default: the linearization's model)."""
+    model = model or lin.model
     A = richardson_jacobian(lambda x: model.f(0.0, x, lin.u0), lin.x0, state_scales(lin))
     B = richardson_jacobian(lambda u: model.f(0.0, lin.x0, u), lin.u0,
                             np.full(len(lin.u0), 100.0))
     return A, B
 
 
-CASES = [('default', {}, 0.0), ('default', {}, 1500.0),
-         ('default', {'scene.beam': 'simply_supported', 'scene.eps_b': 0.15}, 3000.0),
+PAPER = {'scene.fidelity': 'paper'}
+CASES = [('default', {}, 0.0),         # the shipped default: exact kinematics, 5 Ritz terms
+         ('default', PAPER, 0.0), ('default', PAPER, 1500.0),
+         ('default', {**PAPER, 'scene.beam': 'simply_supported', 'scene.eps_b': 0.15}, 3000.0),
          ('default', {'scene.fidelity': 'consistent', 'scene.n_ritz': 3}, 1500.0),
          ('default', {'scene.fidelity': 'exact', 'scene.n_ritz': 3}, 1500.0),
-         ('array', {'structure.copies': 3, 'structure.spread': 0.05}, 1000.0),
-         ('default', {'scene.source': 'ideal', 'scene.creep': False}, 2000.0),
-         ('plate', {}, [1500.0, 500.0])]
+         ('array', {**PAPER, 'structure.copies': 3, 'structure.spread': 0.05}, 1000.0),
+         ('default', {**PAPER, 'scene.source': 'ideal', 'scene.creep': False}, 2000.0),
+         ('plate', PAPER, [1500.0, 500.0])]
 
 
 @pytest.mark.parametrize('name, overrides, volts', CASES)
 def test_equilibrium_and_jacobians_match_finite_differences(name, overrides, volts):
     scene = load_scene(name, overrides)
     lin = linearize(scene, volts)
-    model, a = lin.model, lin.model.arrays
+    # the scene's own level: differences of the model built here from the scene, not of the
+    # linearization's model
+    model = build_model(scene.replace(**{'scene.monitor_power': False}))
+    a = model.arrays
+    assert a.n_q == scene.n_ritz * scene.n_dets
     # an equilibrium of the compiled model: dx/dt = 0 (relative to the rates' scale)
     rate = model.f(0.0, lin.x0, lin.u0)
     assert np.max(np.abs(rate) / (state_scales(lin) * 1e3)) < 1e-9
@@ -87,7 +95,7 @@ def test_equilibrium_and_jacobians_match_finite_differences(name, overrides, vol
         caps = [out['C']] if model.n_inputs == 1 else [out[f'C[{d}]'] for d in model.input_names]
         np.testing.assert_allclose(lin.x0[-a.n_cells:],
                                    np.array(caps) * lin.u0 * a.Rp / (a.Rs + a.Rp), rtol=1e-12)
-    A_fd, B_fd = fd_jacobians(lin)
+    A_fd, B_fd = fd_jacobians(lin, model)
     for exact, fd in ((lin.A, A_fd), (lin.B, B_fd)):
         scale = np.max(np.abs(fd), axis=0, keepdims=True)     # per column
         scale[scale == 0.0] = 1.0
@@ -103,14 +111,14 @@ def test_equilibrium_and_jacobians_match_finite_differences(name, overrides, vol
     assert lin.D.shape == (2 * model.n_inputs, model.n_inputs) and not lin.D.any()
 
 
-def test_poles_of_the_default_scene_at_0V_match_fd_eigenvalues():
+def test_poles_of_the_paper_model_at_0V_match_fd_eigenvalues():
     """
     Check that the poles at 0 V match the eigenvalues of a finite-difference Jacobian.
 
     The poles equal the eigenvalues of a finite-difference Jacobian of the nonlinear model to
     1e-6 relative.
     """
-    lin = linearize(load_scene('default'), 0.0)
+    lin = linearize(load_scene('default', PAPER), 0.0)
     A_fd, _ = fd_jacobians(lin)
     poles = lin.poles()
     fd = list(np.linalg.eigvals(A_fd))
@@ -160,7 +168,8 @@ def test_linear_step_response_matches_the_nonlinear_one_to_first_order():
     A small voltage step from the 1500 V equilibrium: the nonlinear response minus the linear
     one is second order in the step (relative error ~ proportional to it).
     """
-    scene = load_scene('default', {'scene.monitor_power': False, 'integrator.tolerance': 1e-9})
+    scene = load_scene('default', {**PAPER, 'scene.monitor_power': False,
+                                   'integrator.tolerance': 1e-9})
     lin = linearize(scene, 1500.0)
     n = 200   # 0.2 s: the beam's ringing (85 Hz) and most of its decay
     errors = []
@@ -177,7 +186,7 @@ def test_linear_step_response_matches_the_nonlinear_one_to_first_order():
 
 def test_python_control_statespace():
     control = pytest.importorskip('control')
-    lin = linearize(load_scene('default'), 1500.0)
+    lin = linearize(load_scene('default', PAPER), 1500.0)
     sys = lin.to_statespace()
     assert isinstance(sys, control.StateSpace)
     np.testing.assert_allclose(np.sort_complex(control.poles(sys)), np.sort_complex(lin.poles()),
@@ -187,16 +196,16 @@ def test_python_control_statespace():
 
 
 def test_equilibria_and_their_errors():
-    scene = load_scene('default')
+    scene = load_scene('default', PAPER)
     plus, minus = linearize(scene, 1500.0, 'buckled+'), linearize(scene, 1500.0, 'buckled-')
     assert plus.z0[1] > 0 > minus.z0[1] and plus.z0[0] == pytest.approx(minus.z0[0])
     straight = linearize(scene, 0.0, 'straight')
     assert straight.z0[1] == 0.0 and np.max(straight.poles().real) > 0    # unstable
     assert linearize(scene, 0.0).z0[0] == pytest.approx(0.0, abs=1e-12)  # Delta-y = 0 at rest
     with pytest.raises(LinearizationError, match='branch ends near'):
-        linearize(load_scene('default', {'scene.eps_b': 0.10}), 3000.0)
+        linearize(load_scene('default', {**PAPER, 'scene.eps_b': 0.10}), 3000.0)
     with pytest.raises(LinearizationError, match="no 'buckled\\+' equilibrium"):
-        linearize(load_scene('default', {'scene.eps_b': 0.03}), 0.0)
+        linearize(load_scene('default', {**PAPER, 'scene.eps_b': 0.03}), 0.0)
     with pytest.raises(LinearizationError, match='outside'):
         linearize(scene, -1.0)
     with pytest.raises(LinearizationError, match='unknown branch'):

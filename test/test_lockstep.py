@@ -144,7 +144,8 @@ def test_two_lockstep_runs_give_identical_logs_even_with_every_core_busy(
     for n_busy in (0, os.cpu_count() or 2):
         busy = _busy(n_busy)
         try:
-            sim = det_sim('default', params={'log.path': str(tmp_path / f'run{n_busy}.mcap')})
+            sim = det_sim('default', {'scene.fidelity': 'paper'},
+                          params={'log.path': str(tmp_path / f'run{n_busy}.mcap')})
             sim.run(until=0.8, nodes=[make_pi(sim.context, joint=True)])
             recorder = sim.node.recorder
             sim.close()

@@ -16,6 +16,10 @@ from det_sim_ros.sim.simulator import Simulator
 import numpy as np
 import pytest
 
+# the paper's one-term model: the fidelity is not the subject of these tests, and it keeps
+# them light
+PAPER = {'scene.fidelity': 'paper'}
+
 
 def make_log(path, scene, commands, n_steps, joint=False):
     sim = Simulator(scene)
@@ -72,7 +76,7 @@ def test_read_log_gives_the_published_values(tmp_path, name, overrides, joint):
 
 
 def test_refused_commands_hold_the_voltage(tmp_path):
-    scene = load_scene('plate')
+    scene = load_scene('plate', PAPER)
     commands = {0: [1000.0, 1000.0], 10: [math.nan, 5.0], 20: [2000.0, 2000.0, 1.0]}
     sim = Simulator(scene)
     log = tmp_path / 'bad.mcap'
@@ -93,7 +97,7 @@ def test_refused_commands_hold_the_voltage(tmp_path):
 
 
 def test_cli_plot_writes_png_and_summary(tmp_path, capsys):
-    scene = load_scene('plate')
+    scene = load_scene('plate', PAPER)
     log = make_log(tmp_path / 'plate_run.mcap', scene, {0: [3000.0, 0.0]}, 100)
     out = tmp_path / 'plots'
     assert main(['plot', str(log), '--out', str(out)]) == 0
@@ -104,7 +108,7 @@ def test_cli_plot_writes_png_and_summary(tmp_path, capsys):
 
 
 def test_unfinished_log_plots_its_readable_part(tmp_path):
-    scene = load_scene('default')
+    scene = load_scene('default', PAPER)
     log = make_log(tmp_path / 'run.mcap', scene, {0: [3000.0]}, 3000)
     raw = log.read_bytes()
     cut = tmp_path / 'cut.mcap'
@@ -124,7 +128,7 @@ def test_odd_payloads_take_the_slow_path(tmp_path):
     by one and, not having the node's channel set, left out.
     """
     from sensor_msgs.msg import JointState
-    scene = load_scene('default')
+    scene = load_scene('default', PAPER)
     log = tmp_path / 'odd.mcap'
     with Recorder(str(log), scene) as rec:
         sim = Simulator(scene)
@@ -156,7 +160,7 @@ def test_a_killed_run_is_read_up_to_its_last_flush_and_marked_unfinished(tmp_pat
     read by the same path as LogReader: its samples, and complete False.
     """
     import shutil
-    scene = load_scene('default')
+    scene = load_scene('default', PAPER)
     live = tmp_path / 'live.mcap'
     rec = Recorder(str(live), scene, flush_sim_s=0.02)
     simulate_to_log(rec, Simulator(scene), {0: [3000.0]}, 110)

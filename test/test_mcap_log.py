@@ -23,6 +23,10 @@ from det_sim_ros.sim.simulator import Simulator
 import pytest
 import yaml
 
+# the paper's one-term model: the fidelity is not the subject of these tests, and it keeps
+# them light
+PAPER = {'scene.fidelity': 'paper'}
+
 N_STEPS = 300
 OUTPUT_TOPICS = ['/' + t for t in OUTPUT_FIELDS]
 
@@ -34,7 +38,7 @@ def _command(k):
 @pytest.fixture(scope='module')
 def logged_run(tmp_path_factory):
     """Return a run of the default scene logged in-process, plus the expected values."""
-    scene = load_scene('default')
+    scene = load_scene('default', PAPER)
     sim = Simulator(scene)
     path = str(tmp_path_factory.mktemp('log') / 'run.mcap')
     recorder = Recorder(path, scene, metadata={'method': sim.method.name,
@@ -193,7 +197,7 @@ def test_disk_full_reports_and_never_raises():
 
 def test_split_by_size_and_duration(tmp_path):
     from std_msgs.msg import Float64MultiArray
-    scene = load_scene('default')
+    scene = load_scene('default', PAPER)
     recorder = Recorder(tmp_path, scene, split_mb=0.002, chunk_size=1024)
     for k in range(400):
         recorder.record('voltage_command', Float64MultiArray(data=[float(k)] * 4), k * 1000)
@@ -406,7 +410,8 @@ def _write_samples(path, fast, background=False, stress=False):
     """
     from det_sim_ros.io.contract import encode_float64_multi_array, encode_joint_state, TOPIC_TYPES
     options = {'flush_sim_s': 2e-5, 'split_s': 1.5e-4, 'max_queue': 5} if stress else {}
-    recorder = Recorder(path, load_scene('default'), chunk_size=2048, background=background,
+    recorder = Recorder(path, load_scene('default', PAPER), chunk_size=2048,
+                        background=background,
                         flush_period_s=1e9, packing=fast,   # False: mcap's add_message path
                         **options)   # no wall-clock flushes: comparable
     topics = ['deflection', 'displacement', 'charge', 'current']

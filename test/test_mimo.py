@@ -9,7 +9,10 @@ import pytest
 from scipy.integrate import solve_ivp
 
 # the paper's start (q = q0, released): these tests exercise the buckling transient
-RELEASED = {'scene.initial_state': 'released'}
+# the paper's one-term model: the fidelity is not the subject of these tests, and its
+# numbers are the ones pinned here
+PAPER = {'scene.fidelity': 'paper'}
+RELEASED = {'scene.initial_state': 'released', **PAPER}
 
 
 def _step(t):

@@ -109,7 +109,8 @@ def test_unwritable_log_path_refuses_to_start(tmp_path):
     """Check that a log.path that cannot be written gives one FATAL line and exit 1."""
     for path in _unwritable_paths(tmp_path):
         result = run_entry(['--ros-args', '-p', f'log.path:={path}', '-p', 'real_time:=false',
-                            '-p', 'allow_duplicate_name:=true'], cwd=tmp_path)
+                            '-p', 'allow_duplicate_name:=true', '-p', 'scene.fidelity:=paper'],
+                           cwd=tmp_path)
         assert result.returncode == 1, (path, result.stderr)
         problems = [line for line in result.stderr.splitlines() if '[INFO]' not in line]
         assert len(problems) == 1, (path, result.stderr)
@@ -123,7 +124,8 @@ def test_duplicate_name_refused_unless_allowed(tmp_path):
             '-p', 'info_period:=0.0']
     first = Node(tmp_path, *args)
     try:
-        first.wait_for(READY)
+        # the start line names the level: the shipped default is the exact kinematics, 5 terms
+        assert 'fidelity exact n_r=5' in first.wait_for(READY)
         second = run_entry(args, cwd=tmp_path)
         assert second.returncode == 1, second.stderr
         fatal = [line for line in second.stderr.splitlines() if '[FATAL]' in line]

@@ -15,6 +15,10 @@ from det_sim_ros.sim.simulator import Simulator
 import numpy as np
 import pytest
 
+# the paper's one-term model: the fidelity is not the subject of these tests, and it keeps
+# them light
+PAPER = {'scene.fidelity': 'paper'}
+
 SCREEN_LINES = 24
 
 
@@ -28,7 +32,8 @@ def _log(path, scene, n_steps=20):
 
 @pytest.fixture(scope='module')
 def array_log(tmp_path_factory):
-    return _log(tmp_path_factory.mktemp('array') / 'array_run.mcap', load_scene('array'))
+    return _log(tmp_path_factory.mktemp('array') / 'array_run.mcap',
+                load_scene('array', PAPER))
 
 
 @pytest.fixture(autouse=True)
@@ -66,7 +71,7 @@ def test_all_prints_every_channel(array_log, tmp_path, capsys):
 
 
 def test_a_few_dets_print_every_channel(tmp_path, capsys):
-    log = _log(tmp_path / 'plate.mcap', load_scene('plate'))
+    log = _log(tmp_path / 'plate.mcap', load_scene('plate', PAPER))
     assert main(['plot', log, '--out', str(tmp_path)]) == 0
     lines = _summary_lines(capsys.readouterr().out)
     assert lines == (tmp_path / 'plate_summary.txt').read_text().splitlines()

@@ -88,7 +88,8 @@ def start_node(tmp, name, *params):
     log_dir = os.path.join(tmp, name)
     out = os.path.join(tmp, name + '.txt')
     args = [sys.executable, '-m', 'det_sim_ros.cli.sim_node', '--ros-args',
-            '-r', f'__ns:=/{name}', '-p', f'log.path:={log_dir}', '-p', 'info_period:=0.0']
+            '-r', f'__ns:=/{name}', '-p', f'log.path:={log_dir}', '-p', 'info_period:=0.0',
+            '-p', 'scene.fidelity:=paper']   # the stop, not the fidelity, is the subject
     for p in params:
         args += ['-p', p]
     with open(out, 'w') as stream:

@@ -43,6 +43,18 @@ def test_a_file_that_names_two_keys_is_the_defaults_with_those_two(tmp_path):
     assert load_scene(str(path)) == expected
 
 
+def test_the_fidelity_is_inherited_and_paper_is_one_term(tmp_path):
+    """Check a file without a level gets the default's; one that picks 'paper' gets one term."""
+    default = load_scene('default')
+    plain = load_scene(str(_write(tmp_path, 'plain.yaml', 'scene: {eps_b: 0.15}\n')))
+    assert (plain.fidelity, plain.n_ritz) == (default.fidelity, default.n_ritz) == ('exact', 5)
+    paper = load_scene(str(_write(tmp_path, 'paper.yaml', 'scene: {fidelity: paper}\n')))
+    assert (paper.fidelity, paper.n_ritz) == ('paper', 1)
+    assert load_scene('default', {'scene.fidelity': 'paper', 'scene.n_ritz': 7}).n_ritz == 1
+    exact = load_scene(str(_write(tmp_path, 'exact.yaml', 'scene: {n_ritz: 3}\n')))
+    assert (exact.fidelity, exact.n_ritz) == ('exact', 3)
+
+
 def test_a_bare_mapping_file_and_overrides_inherit_too(tmp_path):
     path = _write(tmp_path, 'fast.yaml', """\
         physics: {Rs: 1.0e+3}
@@ -137,8 +149,10 @@ def test_a_log_of_an_inheriting_scene_holds_the_resolved_scene(tmp_path):
 
 def test_the_node_logs_the_resolved_scene_of_an_inheriting_file(tmp_path, harness):
     path = _write(tmp_path, 'soft.yaml', 'scene: {beam: simply_supported, eps_b: 0.15}\n')
-    h = harness(scene_file=str(path), **{'log.path': str(tmp_path / 'logs')})
+    h = harness(scene_file=str(path), **{'log.path': str(tmp_path / 'logs'),
+                                         'scene.fidelity': None})
     assert h.node.scene == load_scene(str(path))
+    assert h.node.scene.fidelity_label == 'exact n_r=5'    # the default's level, inherited
     recorder = h.node.recorder
     h.command([2000.0])
     h.spin_until_sim_time(h.node.simulator.t + 0.05)

@@ -314,10 +314,24 @@ def test_malformed_scene_exits_with_one_line(tmp_path):
 
 
 def test_scene_loads_by_default():
-    """Check the default scene: fixed beam, eps_b = 0.20, full model, 1 kHz."""
+    """Check the default scene: fixed beam, eps_b = 0.20, exact with 5 terms, full model, 1 kHz."""
     scene = load_scene('default')
     assert scene.beam == 'fixed' and scene.eps_b == 0.20 and scene.rate_hz == 1000.0
     assert scene.creep and scene.source == 'rc'
+    assert scene.fidelity == 'exact' and scene.n_ritz == 5
+
+
+def test_diagnostics_and_the_log_name_the_fidelity(harness, tmp_path):
+    """Check /diagnostics and the MCAP log's metadata name the scene's model level."""
+    from det_sim_ros.io.mcap_log import LogReader
+    h = harness(**{'scene.fidelity': 'exact', 'scene.n_ritz': 3, 'diagnostics_period': 0.05,
+                   'log.path': str(tmp_path / 'logs')})
+    h.spin_until(lambda: h.diagnostics, 'a diagnostics message')
+    values = {kv.key: kv.value for kv in h.diagnostics[-1].status[0].values}
+    assert values['fidelity'] == 'exact n_r=3'
+    recorder = h.node.recorder
+    h.close()
+    assert LogReader(recorder.paths[0]).info['fidelity'] == 'exact n_r=3'
 
 
 # -- several DETs: the two-DET plate -----------------------------------------------------------

@@ -11,9 +11,10 @@ V_MAX = 3000.0
 
 
 def scene_for(beam, eps_b=0.20, **more):
-    # released from q0, the paper's start (the dynamic checks below settle from it)
+    # the paper's model released from q0, its start (the dynamic checks below settle from it)
     return load_scene('default', {'scene.beam': beam, 'scene.eps_b': eps_b,
-                                  'scene.initial_state': 'released', **more})
+                                  'scene.initial_state': 'released', 'scene.fidelity': 'paper',
+                                  **more})
 
 
 @pytest.fixture(scope='module')

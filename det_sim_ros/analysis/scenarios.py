@@ -31,9 +31,14 @@ def step_voltage(v_max: float):
 
 
 def step_scene(beam: str = 'fixed', eps_b: float = 0.20, **overrides):
-    """Return the default scene for the 'step' scenario (1 kHz sampling, released from q0)."""
+    """
+    Return the default scene for the 'step' scenario (1 kHz sampling, released from q0).
+
+    At the paper's fidelity (its one-term model) unless ``overrides`` name another.
+    """
     return load_scene('default', {'scene.beam': beam, 'scene.eps_b': eps_b, 'rate_hz': 1000.0,
-                                  'scene.initial_state': 'released', **overrides})
+                                  'scene.initial_state': 'released', 'scene.fidelity': 'paper',
+                                  **overrides})
 
 
 def delta_y(t, y, l_beam):

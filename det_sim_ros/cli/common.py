@@ -160,6 +160,18 @@ def user_set(args, *keys) -> bool:
     return any(k in keys for k, _ in args.overrides)
 
 
+def paper_level(scene, args):
+    """
+    Return ``scene`` at the paper's fidelity unless --set names a fidelity.
+
+    The paper's scenarios (``det_sim statics``, ``det_sim step``) compare with the paper, so
+    they run its one-term model whatever the scene file's level.
+    """
+    if user_set(args, 'scene.fidelity', 'fidelity'):
+        return scene
+    return scene.replace(**{'scene.fidelity': 'paper'})
+
+
 # -- output files -----------------------------------------------------------------------------
 def out_dir(args) -> str:
     """Return the --out folder, created if needed."""

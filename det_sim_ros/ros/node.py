@@ -116,6 +116,7 @@ class SimNode(Node):
         qos.update({COMMAND_TOPIC: in_qos, JOINT_COMMAND_TOPIC: in_qos})
         self._recorder = open_recorder(self._p, self.scene, qos, {
             'method': self._sim.method.name, 'substeps': self._sim.substeps_setting,
+            'fidelity': self.scene.fidelity_label,
             'y0': repr(self.y0[0]) if len(self.y0) == 1 else repr(self.y0),
             'initial_state': self._initial_text,
             'x0': repr(self._sim.x0.tolist()),   # what ~/reset returns to
@@ -132,7 +133,8 @@ class SimNode(Node):
                      f'subscriber(s) of {self._gate.topic} matched')
         self.get_logger().info(
             f'scene {scene_file!r}: {self.scene.beam} beam, eps_b = {self.scene.eps_b:g}, '
-            f'{self.scene.rate_hz:g} Hz, {self._sim.describe_stepper()}; '
+            f'fidelity {self.scene.fidelity_label}, {self.scene.rate_hz:g} Hz, '
+            f'{self._sim.describe_stepper()}; '
             f'{self._pacing.label()}{", paused" if self.paused else ""}{gate_text}; initial state '
             f'{self._initial_text}; {len(self.det_names)} DET(s), '
             f'voltage command order: [{", ".join(self.det_names)}]'

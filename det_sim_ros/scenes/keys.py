@@ -55,7 +55,8 @@ SCENE_SPEC = {
     'beam': ('choice', BEAMS, 'mechanical interface'),
     'eps_b': ('float', -1.0, False, 2.0, '-', 'pre-strain, eq 77 (l = l0 (1 + eps_b) > 0)'),
     'fidelity': ('choice', FIDELITIES, 'model fidelity'),
-    'n_ritz': ('int', 1, True, 12, '-', 'Ritz terms per beam'),
+    'n_ritz': ('int', 1, True, 12, '-', "Ritz terms per beam ('consistent', 'exact'; "
+               "'paper' is the one-term model and takes 1)"),
     'creep': ('bool', 'Maxwell creep state'),
     'source': ('choice', SOURCES, 'electrical source model'),
     'monitor_power': ('bool', 'integrate the power balance'),

@@ -2,7 +2,8 @@
 ``det_sim statics``: equilibrium branches, potential and delta-y against pre-strain.
 
 The equilibrium branches against pre-strain, the potential (eq 82) and delta-y, at 0 V and
-v_max (the paper's Fig. 5); CSV files and one PNG per beam.
+v_max (the paper's Fig. 5); CSV files and one PNG per beam. The paper's one-term model
+(``fidelity: paper``) unless ``--set scene.fidelity=...`` names another level.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ def add_arguments(parser) -> None:
 
 def main(args) -> int:
     """Sweep every beam, write the CSV files (and PNGs), print the critical pre-strains."""
-    base = common.base_scene(args)
+    base = common.paper_level(common.base_scene(args), args)
     beams = args.beams or [base.beam]
     out = common.out_dir(args)
     voltages = (0.0, base.physics.v_max)

@@ -2,7 +2,8 @@
 ``det_sim step``: the paper's 'step' scenario per beam and pre-strain.
 
 The scenario is 0 V, v_max from 1.5 s to 3 s, 0 V (Fig. 6); the verb writes the time series,
-a comparison with the paper, and a PNG.
+a comparison with the paper, and a PNG. It runs the paper's one-term model (``fidelity:
+paper``) unless ``--set scene.fidelity=...`` names another level.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ def add_arguments(parser) -> None:
 
 def main(args) -> int:
     """Run every beam and pre-strain, write step.csv and the paper comparison (and the PNG)."""
-    base = common.base_scene(args)
+    base = common.paper_level(common.base_scene(args), args)
     out = common.out_dir(args)
     if not common.user_set(args, 'rate_hz'):
         base = base.replace(rate_hz=1000.0)          # scenarios.md: 1 ms samples
