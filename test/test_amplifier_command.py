@@ -1,6 +1,7 @@
 """
-The amplifier's command side: DAC levels, delay in whole periods and offset, the same through
-Simulator.step, simulate() and a log's re-simulation.
+The amplifier's command side: DAC levels, delay in whole periods and offset.
+
+The same through Simulator.step, simulate() and a log's re-simulation.
 """
 
 from det_sim_ros.io.mcap_log import LogReader, Recorder
@@ -15,7 +16,7 @@ V_MAX = 3000.0
 
 
 def _profile(n=60):
-    """A ramp, a step and a hold: every DAC code boundary region is visited."""
+    """Return a ramp, a step and a hold (commands per period, V)."""
     k = np.arange(n)
     return np.where(k < 20, k * 97.3, np.where(k < 40, 2345.6, 612.5))
 

@@ -1,6 +1,8 @@
 """
-The scene's amplifier section: defaults off, per-DET overrides, one-line refusals before any
-preparation, and its keys among the node's read-only scene parameters.
+The scene's amplifier section: defaults off, per-DET overrides, one-line refusals.
+
+The refusals come before any preparation; the keys are among the node's read-only scene
+parameters.
 """
 
 from det_sim_ros.ros.params import scene_parameters

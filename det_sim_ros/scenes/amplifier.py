@@ -94,7 +94,7 @@ def check_amplifiers(scene) -> None:
                              f'{periods:g} periods)')
         if amp.acts_in_circuit and scene.source != 'rc':
             raise SceneError(f"DET {name!r}: the amplifier's slew_rate, current_limit and "
-                             "bandwidth act in the RC supply circuit: they need scene.source "
+                             'bandwidth act in the RC supply circuit: they need scene.source '
                              f"'rc' (got {scene.source!r})")
         leakage = physics.v_max / physics.Rp
         if 0.0 < amp.current_limit <= leakage:

@@ -27,7 +27,8 @@ import yaml
 
 from .amplifier import Amplifier, check_amplifier_section, check_amplifiers
 from .files import find_config, read_scene_file, resolve_base, unwrap_ros_params
-from .keys import (AMPLIFIER_DEFAULTS, AMPLIFIER_SPEC, BEAMS, check_value, FIDELITIES, INITIAL_STATES, INTEGRATOR_SPEC,
+from .keys import (AMPLIFIER_DEFAULTS, AMPLIFIER_SPEC, BEAMS, check_value, FIDELITIES,
+                   INITIAL_STATES, INTEGRATOR_SPEC,
                    PHYSICS_SPEC, REST_BRANCHES, SCENE_SPEC, SceneError, SECTION_DEFAULTS,
                    SECTIONS, SOURCES, STRUCTURE_DEFAULTS, STRUCTURE_SPEC, STRUCTURES, TOP_SPEC)
 

@@ -3,7 +3,7 @@ The amplifier's command side: DAC quantization, transport delay and output offse
 
 The command a controller holds for period k reaches the supply circuit as
 
-    applied_k = Q(command_{k - d}) + offset,    Q(v) = rint(v / lsb) lsb,  lsb = v_max / (2^bits - 1)
+    applied_k = Q(command_{k - d}) + offset,  Q(v) = rint(v / lsb) lsb,  lsb = v_max / (2^bits - 1)
 
 per DET (d its delay in whole control periods; before the first command the delay line holds
 the scene's initial voltage, 0 V). The amplifier's bandwidth, slew rate and current limit act
