@@ -336,7 +336,7 @@ static double structure_forces(const ds_model *m, const double *x, ds_work *w)
 
 /* What the DETs supply and dissipate, summed over the cells in order (W). */
 typedef struct {
-    double p_in, p_leak_in, p_diss;     /* p_leak_in: v v_p / Rp summed */
+    double p_in, p_leak_in, p_diss;     /* p_leak_in: the rate of W_in - v q_p (quasi-static) */
 } det_power;
 
 /* The DET of cell i: its force on the cell's coordinates (into w->F), the rates of its creep
@@ -351,12 +351,14 @@ static int det_cell(const ds_model *m, int64_t i, const double *x, const double 
     if (!(lam > 0.0))   /* NaN: exact kinematics past |w'| = 1 (states are finite) */
         return lam == lam ? DS_BAD_STRETCH : DS_BAD_SLOPE;
     const double inv_lam = 1.0 / lam, inv_lam2 = inv_lam * inv_lam;
-    double vp, bracket;
+    double vp, bracket, qp = 0.0;
+    /* the voltage the charge relaxes towards (times Rp/(Rs+Rp)): with an amplifier, its v_a */
+    const double v_relax = m->amp_state ? ds_amp_source(m, i, x, u) : u[i];
     /* dU_DE/dlambda without the sign of dlambda/dq = -J/l0 (eq 53, corrected eq 71) */
     if (m->rc_source) {
-        double qp = x[m->i_qp + i];
+        qp = x[m->i_qp + i];
         if (quasi_static)
-            qp += d->C0 * lam * lam * u[i] * d->share;
+            qp += d->C0 * lam * lam * v_relax * d->share;
         vp = qp * d->inv_C0 * inv_lam2;
         bracket = d->VY / 3.0 * (lam - inv_lam2 * inv_lam) - qp * vp * inv_lam;
     } else {
@@ -375,8 +377,23 @@ static int det_cell(const ds_model *m, int64_t i, const double *x, const double 
         w->F[j] += coef * J[j];
     if (m->creep)
         dx[m->i_eps + i] = lzd - d->relax_M * eps;
-    double i_de;
-    if (m->rc_source) {
+    double i_de, v_out = u[i];   /* supply current, A; the source's terminal voltage, V */
+    if (m->amp) {   /* the amplifier's laws of this step (amplifier.c) */
+        const ds_amp_supply s = ds_amp_supply_of(m, i, x, u, vp);
+        i_de = s.current;
+        v_out = s.v_out;
+        dx[m->i_qp + i] = i_de - vp * d->inv_Rp;
+        if (m->amp_state)
+            dx[m->i_va + i] = s.v_src_rate;
+        if (quasi_static)   /* minus d(C v_a Rp/(Rs+Rp))/dt */
+            dx[m->i_qp + i] += (2.0 * d->C0 * lam * jqd * d->inv_l0 * v_relax
+                                - d->C0 * lam * lam * s.v_src_rate) * d->share;
+        pw->p_diss += (v_out - vp) * i_de;
+        /* quasi-static: the rate of W_in - v_src q_p (see ds_shift_charge) */
+        pw->p_leak_in += (v_out - s.v_src) * i_de + s.v_src * vp * d->inv_Rp
+                         - s.v_src_rate * qp;
+        pw->p_in += v_out * i_de;
+    } else if (m->rc_source) {
         i_de = (u[i] - vp) * d->inv_Rs;
         dx[m->i_qp + i] = u[i] * d->inv_Rs - (d->inv_Rs + d->inv_Rp) * vp;
         if (quasi_static)   /* minus d(C v_inf)/dt, dC/dt = 2 C0 lam dlam/dt */
@@ -386,8 +403,10 @@ static int det_cell(const ds_model *m, int64_t i, const double *x, const double 
         /* q_p = C0 lam^2 v: i = dq_p/dt + v/Rp with dlambda/dt = -J.qdot / l0 */
         i_de = -2.0 * d->C0 * lam * jqd * d->inv_l0 * vp + vp * d->inv_Rp;
     }
-    pw->p_in += u[i] * i_de;
-    pw->p_leak_in += u[i] * vp * d->inv_Rp;
+    if (!m->amp) {
+        pw->p_in += u[i] * i_de;
+        pw->p_leak_in += u[i] * vp * d->inv_Rp;
+    }
     pw->p_diss += vp * vp * d->inv_Rp + d->volume * d->eta_v * lzd * lzd;
     if (m->creep)
         pw->p_diss += d->volume * d->E_M * d->relax_M * eps * eps;
@@ -461,7 +480,11 @@ int ds_stiff_rates(const ds_model *m, const double *x, double *L, ds_work *w, in
         const double lam = (m->cell[i].length - w->y[i]) / d->l0;
         if (!(lam > 0.0))
             return lam == lam ? DS_BAD_STRETCH : DS_BAD_SLOPE;
-        L[m->i_qp + i] = -(d->inv_Rs + d->inv_Rp) * d->inv_C0 / (lam * lam);
+        /* at the amplifier's current limit the charge relaxes through Rp only */
+        const double g = d->i_law == AMP_LINEAR ? d->inv_Rs + d->inv_Rp : d->inv_Rp;
+        L[m->i_qp + i] = -g * d->inv_C0 / (lam * lam);
+        if (m->amp_state)   /* v_a: exact in each law (a first-order lag, a ramp, held) */
+            L[m->i_va + i] = d->v_law == VA_FOLLOW ? -1.0 / d->amp_tau : 0.0;
     }
     return DS_OK;
 }
@@ -491,9 +514,11 @@ void ds_shift_charge(const ds_model *m, double *x, const double *u, double sign,
     for (int64_t i = 0; i < m->n_cells; i++) {
         const ds_det *d = &m->det[i];
         const double lam = (m->cell[i].length - w->y[i]) / d->l0;
-        work_in += u[i] * x[m->i_qp + i];
-        x[m->i_qp + i] += sign * d->C0 * lam * lam * u[i] * d->share;
-        work_out += u[i] * x[m->i_qp + i];
+        /* with an amplifier's output lag: the charge v_a relaxes it to, the energy against v_a */
+        const double v = m->amp_state ? ds_amp_source(m, i, x, u) : u[i];
+        work_in += v * x[m->i_qp + i];
+        x[m->i_qp + i] += sign * d->C0 * lam * lam * v * d->share;
+        work_out += v * x[m->i_qp + i];
     }
     if (m->power)
         x[m->i_power] += sign < 0.0 ? -work_in : work_out;
@@ -571,6 +596,8 @@ int ds_outputs(const ds_model *m, const double *x, const double *u, double *out,
     for (int64_t k = 0; k < m->n_state; k++)
         if (!isfinite(x[k]))
             status = DS_NON_FINITE;
+    if (m->amp && status == DS_OK)
+        ds_amp_laws(m, x, u, w);
     const int rhs_status = ds_rhs(m, x, u, w->dx, w, 0);
     if (status == DS_OK)
         status = rhs_status;
@@ -585,7 +612,11 @@ int ds_outputs(const ds_model *m, const double *x, const double *u, double *out,
         if (m->rc_source) {
             qp = x[m->i_qp + c];
             vp = qp / cap;
-            i_de = (u[c] - vp) / d->Rs;
+            if (m->amp) {
+                i_de = ds_amp_supply_of(m, c, x, u, vp).current;
+            } else {
+                i_de = (u[c] - vp) / d->Rs;
+            }
         } else {
             vp = u[c];
             qp = cap * vp;

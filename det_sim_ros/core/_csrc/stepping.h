@@ -92,6 +92,10 @@ int ds_period(ds_stepper *st, double *x, const double *u_old, const double *u);
 int ds_period_core(const ds_stepper *st, ds_group *g, double *x, const double *u_old,
                    const double *u);
 void ds_reset_control(ds_stepper *st);
+/* One control period of one group of an amplified model (amplifier.c): steps of at most h
+ * (n_sub of them without switches), split where a law of the amplifier switches. */
+int ds_amp_period(const ds_stepper *st, ds_group *g, double *x, const double *u_old,
+                  const double *u, double h, int64_t n_sub);
 int ds_run(ds_stepper *st, ds_work *ow, double *x, const double *u_held, const double *u_last,
            const double *U, int64_t n, double *X, double *Y, int64_t *done);
 
