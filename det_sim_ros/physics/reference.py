@@ -22,9 +22,12 @@ import dataclasses
 import numpy as np
 from scipy.linalg import expm
 
-__all__ = ['kinematics', 'rhs', 'stiff_rates', 'outputs', 'phi', 'step']
+__all__ = ['kinematics', 'rhs', 'stiff_rates', 'outputs', 'phi', 'step', 'amplifier_laws',
+           'LIMIT_MARGIN']
 
 EXACT = 2
+LIMIT_MARGIN = 1e-6   # the current-limit law starts at |i| = I (1 - LIMIT_MARGIN)
+SLEW_MARGIN = 1e-9    # a gap within S tau_a (1 + SLEW_MARGIN) is followed, not slewed
 
 
 @dataclasses.dataclass
@@ -110,7 +113,62 @@ def _charge_offset(a, x, u):
 def _index(a):
     i_eps = 2 * a.n_q
     i_qp = i_eps + a.n_cells * a.creep
-    return i_eps, i_qp, i_qp + a.n_cells * a.rc_source
+    return i_eps, i_qp, i_qp + a.n_cells * (a.rc_source + a.amp_state)
+
+
+def _source_voltage(a, x, u):
+    """Return the voltage behind Rs per DET: the amplifier's v_a where it lags, else u."""
+    if not a.amp_state:
+        return u
+    i_va = _index(a)[1] + a.n_cells
+    lags = (a.amp_tau > 0.0) | (a.amp_slew > 0.0)
+    return np.where(lags, x[i_va:i_va + a.n_cells], u)
+
+
+def amplifier_laws(a, x, u):
+    """
+    Return each DET's amplifier laws at (x, u) (charge slots holding q_p): (v_law, i_law).
+
+    v_law: 'follow' (dv_a/dt = (u - v_a)/tau_a), 'up' / 'down' (dv_a/dt = +-S while
+    |u - v_a| > S tau_a), 'hold' (no output lag, or a slew without bandwidth that arrived);
+    i_law: 'linear' (i = (v_a - v_p)/Rs), '+limit' / '-limit' (i = +-I once |i_lin| reaches
+    I (1 - LIMIT_MARGIN)).
+    """
+    nc, i_qp = a.n_cells, _index(a)[1]
+    lam = (a.length - kinematics(a, x).y) / a.l0
+    v_src = _source_voltage(a, x, u)
+    share = (v_src - x[i_qp:i_qp + nc] / (a.C0 * lam ** 2)) / a.Rs / np.where(
+        a.amp_imax > 0.0, a.amp_imax, 1.0)
+    v_laws, i_laws = [], []
+    for c in range(nc):
+        gap, band = u[c] - v_src[c], a.amp_slew[c] * a.amp_tau[c]
+        if not (a.amp_tau[c] > 0.0 or a.amp_slew[c] > 0.0):
+            v_laws.append('hold')
+        elif a.amp_slew[c] > 0.0 and abs(gap) > band * (1.0 + SLEW_MARGIN):
+            v_laws.append('up' if gap > 0.0 else 'down')
+        else:
+            v_laws.append('follow' if a.amp_tau[c] > 0.0 else 'hold')
+        limited = a.amp_imax[c] > 0.0 and abs(share[c]) >= 1.0 - LIMIT_MARGIN
+        i_laws.append(('+limit' if share[c] > 0.0 else '-limit') if limited else 'linear')
+    return v_laws, i_laws
+
+
+def _amplified_supply(a, x, u, vp, laws):
+    """
+    Return (current, v_out, v_src, dv_src/dt) per DET under the amplifier's ``laws``.
+
+    The current through Rs, the amplifier's terminal voltage (v_a, or v_p + Rs i at the
+    limit), the voltage behind Rs and its rate.
+    """
+    v_laws, i_laws = laws
+    v_src = _source_voltage(a, x, u)
+    rate = np.array([{'follow': (u[c] - v_src[c]) / a.amp_tau[c] if a.amp_tau[c] else 0.0,
+                      'up': a.amp_slew[c], 'down': -a.amp_slew[c], 'hold': 0.0}[law]
+                     for c, law in enumerate(v_laws)])
+    limit = np.array([{'+limit': 1.0, '-limit': -1.0, 'linear': 0.0}[law] for law in i_laws])
+    current = np.where(limit != 0.0, limit * a.amp_imax, (v_src - vp) / a.Rs)
+    v_out = np.where(limit != 0.0, vp + a.Rs * current, v_src)
+    return current, v_out, v_src, rate
 
 
 def _numbers(v):
@@ -119,7 +177,7 @@ def _numbers(v):
     return v if np.iscomplexobj(v) else v.astype(float)
 
 
-def rhs(a, x, u, quasi_static: bool = False):
+def rhs(a, x, u, quasi_static: bool = False, laws=None):
     """
     Return (dx/dt, P_in, P_diss) at (x, u).
 
@@ -128,6 +186,9 @@ def rhs(a, x, u, quasi_static: bool = False):
     - V (E_M eps + eta_v dlz/dt) dlz/dq, with the creep and circuit equations.
     ``quasi_static``: the charge slots hold z = q_p - C(q) v_inf and receive dz/dt, and the
     supplied-energy slot receives the rate of W_in - u q_p, u v_p / Rp (see :func:`step`).
+    With an amplifier (``a.amplifier``) its ``laws`` (default: :func:`amplifier_laws` at this
+    state) set the current and v_a's rate, v_a replaces u in z and in the supplied-energy slot,
+    and the supplied power is v_out i at the amplifier's terminal.
     """
     x, u = _numbers(x), _numbers(u)
     kind = np.result_type(x, u, float)
@@ -149,16 +210,35 @@ def rhs(a, x, u, quasi_static: bool = False):
     lzd = ydot / (a.l0 * lam ** 2)           # d(1/lambda)/dt
     eps = x[i_eps:i_eps + nc] if a.creep else np.zeros(nc)
     dx = np.zeros(x.shape, kind)
+    v_out = u
     if a.rc_source:
-        qp = x[i_qp:i_qp + nc] + (_charge_offset(a, x, u) if quasi_static else 0.0)
+        v_src = _source_voltage(a, x, u)
+        qp = x[i_qp:i_qp + nc] + (_charge_offset(a, x, v_src) if quasi_static else 0.0)
         vp = qp / (a.C0 * lam ** 2)
         dU_dlam = a.VY / 3.0 * (lam - lam ** -3) - qp ** 2 / (a.C0 * lam ** 3)
         i_de = (u - vp) / a.Rs
+    if a.amplifier:
+        if laws is None:
+            normal = np.real(x).copy()
+            normal[i_qp:i_qp + nc] = np.real(qp)
+            laws = amplifier_laws(a, normal, np.real(u))
+        i_de, v_out, v_src, v_rate = _amplified_supply(a, x, u, vp, laws)
+        dqp = i_de - vp / a.Rp
+        if quasi_static:   # dz/dt = dq_p/dt - d(C v_a Rp/(Rs+Rp))/dt
+            dqp = dqp + (2.0 * a.C0 * lam * ydot / a.l0 * v_src
+                         - a.C0 * lam ** 2 * v_rate) * a.Rp / (a.Rs + a.Rp)
+        dx[i_qp:i_qp + nc] = dqp
+        if a.amp_state:
+            dx[i_qp + nc:i_qp + 2 * nc] = v_rate
+        p_diss += (v_out - vp) @ i_de
+        p_relative = (v_out - v_src) @ i_de + v_src @ (vp / a.Rp) - v_rate @ qp
+    elif a.rc_source:
         dqp = u / a.Rs - (1.0 / a.Rs + 1.0 / a.Rp) * vp
         if quasi_static:   # dz/dt = dq_p/dt - d(C v_inf)/dt, dlambda/dt = -ydot/l0
             dqp = dqp + 2.0 * a.C0 * lam * ydot / a.l0 * u * a.Rp / (a.Rs + a.Rp)
         dx[i_qp:i_qp + nc] = dqp
         p_diss += (u - vp) @ i_de
+        p_relative = u @ (vp / a.Rp)
     else:
         vp = u
         dU_dlam = a.VY / 3.0 * (lam - lam ** -3) - a.C0 * lam * vp ** 2
@@ -169,26 +249,35 @@ def rhs(a, x, u, quasi_static: bool = False):
         relax = np.where(a.eta_M > 0.0, a.E_M / np.where(a.eta_M > 0.0, a.eta_M, 1.0), 0.0)
         dx[i_eps:i_eps + nc] = lzd - relax * eps
         p_diss += np.sum(a.volume * a.E_M * relax * eps ** 2)
-    p_in = u @ i_de
+    p_in = v_out @ i_de
     p_diss += np.sum(vp ** 2 / a.Rp + a.volume * a.eta_v * lzd ** 2)
     dx[:nq] = qd
     dx[nq:2 * nq] = np.linalg.solve(M, F)
-    if a.power_monitor:   # quasi-static: the rate of W_in - u q_p (see step)
-        dx[i_w:i_w + 2] = (u @ (vp / a.Rp) if quasi_static and a.rc_source else p_in), p_diss
+    if a.power_monitor:   # quasi-static: the rate of W_in - v q_p (see step)
+        dx[i_w:i_w + 2] = (p_relative if quasi_static and a.rc_source else p_in), p_diss
     return dx, p_in, p_diss
 
 
-def stiff_rates(a, x) -> np.ndarray:
+def stiff_rates(a, x, laws=None) -> np.ndarray:
     """
     Return the diagonal stiff part (1/s).
 
-    -1/(C (Rs || Rp)) at the charge states, 0 elsewhere.
+    -1/(C (Rs || Rp)) at the charge states, 0 elsewhere; with an amplifier, each law's own:
+    -1/(C Rp) at the current limit, -1/tau_a at a following v_a (``laws``: see
+    :func:`amplifier_laws`).
     """
     L = np.zeros(a.n_state)
     if a.rc_source:
-        i_qp = _index(a)[1]
+        i_qp, nc = _index(a)[1], a.n_cells
         lam = (a.length - kinematics(a, x).y) / a.l0
-        L[i_qp:i_qp + a.n_cells] = -(1.0 / a.Rs + 1.0 / a.Rp) / (a.C0 * lam ** 2)
+        g = np.full(nc, 1.0 / a.Rs + 1.0 / a.Rp)
+        if a.amplifier:
+            v_laws, i_laws = laws
+            g = np.where(np.array(i_laws) == 'linear', g, 1.0 / a.Rp)
+            if a.amp_state:
+                L[i_qp + nc:i_qp + 2 * nc] = [-1.0 / a.amp_tau[c] if law == 'follow' else 0.0
+                                              for c, law in enumerate(v_laws)]
+        L[i_qp:i_qp + nc] = -g / (a.C0 * lam ** 2)
     return L
 
 
@@ -213,6 +302,8 @@ def outputs(a, x, u) -> np.ndarray:
         qp = x[i_qp:i_qp + nc]
         vp = qp / cap
         i_de = (u - vp) / a.Rs
+        if a.amplifier:
+            i_de = _amplified_supply(a, x, u, vp, amplifier_laws(a, x, u))[0]
     else:
         vp = u
         qp = cap * vp
@@ -256,16 +347,18 @@ def step(a, method, x, u, h: float) -> np.ndarray:
     x = np.asarray(x, dtype=float)
     u = np.asarray(u, dtype=float)
     s = method.n_stages
-    L = stiff_rates(a, x) if method.exponential else np.zeros(a.n_state)
+    laws = amplifier_laws(a, x, u) if a.amplifier else None   # held for the step
+    L = stiff_rates(a, x, laws) if method.exponential else np.zeros(a.n_state)
     quasi = bool(method.exponential and a.rc_source)
     i_qp = _index(a)[1]
     charge = slice(i_qp, i_qp + a.n_cells)
     x = x.copy()
     i_w = _index(a)[2]
-    if quasi:   # the stages integrate z and, with the power monitor, xi = W_in - u q_p
+    if quasi:   # the stages integrate z and, with the power monitor, xi = W_in - v q_p
+        v = _source_voltage(a, x, u)
         if a.power_monitor:
-            x[i_w] -= u @ x[charge]
-        x[charge] -= _charge_offset(a, x, u)
+            x[i_w] -= v @ x[charge]
+        x[charge] -= _charge_offset(a, x, v)
 
     def weight(term):
         _, _, k, c_arg, w = term
@@ -282,9 +375,10 @@ def step(a, method, x, u, h: float) -> np.ndarray:
                 X = X + h * weight(term) * N[int(term[1])]
         if i == s:
             break
-        N.append(rhs(a, X, u, quasi)[0] - L * X)
+        N.append(rhs(a, X, u, quasi, laws)[0] - L * X)
     if quasi:
-        X[charge] += _charge_offset(a, X, u)
+        v = _source_voltage(a, X, u)
+        X[charge] += _charge_offset(a, X, v)
         if a.power_monitor:
-            X[i_w] += u @ X[charge]
+            X[i_w] += v @ X[charge]
     return X
