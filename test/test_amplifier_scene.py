@@ -71,3 +71,12 @@ def test_the_knobs_are_scene_parameters_of_the_node_also_when_off():
         names = dict(scene_parameters(load_scene('default', overrides)))
         assert all(f'amplifier.{key}' in names for key in KNOBS)
     assert dict(scene_parameters(load_scene('default')))['amplifier.dac_bits'] == 0
+
+
+@pytest.mark.parametrize('name', ['amplifier_lab', 'amplifier_dcdc'])
+def test_the_presets_are_the_default_scene_with_an_amplifier(name):
+    scene = load_scene(name)
+    default = load_scene('default')
+    assert scene.physics == default.physics and scene.structure == default.structure
+    amp, = scene.cell_amplifiers()
+    assert amp.acts_in_circuit and amp.acts_on_command and amp.current_limit > 0.0

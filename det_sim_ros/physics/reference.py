@@ -125,6 +125,13 @@ def _source_voltage(a, x, u):
     return np.where(lags, x[i_va:i_va + a.n_cells], u)
 
 
+def _relax_voltage(a, x, u, laws):
+    """Return what the charge relaxes towards per DET: v_src while linear, 0 at the limit."""
+    if not a.amplifier:
+        return u
+    return np.where(np.array(laws[1]) == 'linear', _source_voltage(a, x, u), 0.0)
+
+
 def amplifier_laws(a, x, u):
     """
     Return each DET's amplifier laws at (x, u) (charge slots holding q_p): (v_law, i_law).
@@ -186,9 +193,10 @@ def rhs(a, x, u, quasi_static: bool = False, laws=None):
     - V (E_M eps + eta_v dlz/dt) dlz/dq, with the creep and circuit equations.
     ``quasi_static``: the charge slots hold z = q_p - C(q) v_inf and receive dz/dt, and the
     supplied-energy slot receives the rate of W_in - u q_p, u v_p / Rp (see :func:`step`).
-    With an amplifier (``a.amplifier``) its ``laws`` (default: :func:`amplifier_laws` at this
-    state) set the current and v_a's rate, v_a replaces u in z and in the supplied-energy slot,
-    and the supplied power is v_out i at the amplifier's terminal.
+    With an amplifier (``a.amplifier``) its ``laws`` (default: :func:`amplifier_laws` at x as
+    given) set the current and v_a's rate; z and the supplied-energy slot count against the
+    voltage the charge relaxes towards (v_a while linear, 0 at the limit); the supplied power is
+    v_out i at the amplifier's terminal.
     """
     x, u = _numbers(x), _numbers(u)
     kind = np.result_type(x, u, float)
@@ -211,27 +219,26 @@ def rhs(a, x, u, quasi_static: bool = False, laws=None):
     eps = x[i_eps:i_eps + nc] if a.creep else np.zeros(nc)
     dx = np.zeros(x.shape, kind)
     v_out = u
+    if a.amplifier and laws is None:   # as the slots hold them (the kernel's Model.rhs)
+        laws = amplifier_laws(a, np.real(x), np.real(u))
     if a.rc_source:
-        v_src = _source_voltage(a, x, u)
-        qp = x[i_qp:i_qp + nc] + (_charge_offset(a, x, v_src) if quasi_static else 0.0)
+        v_rel = _relax_voltage(a, x, u, laws)
+        qp = x[i_qp:i_qp + nc] + (_charge_offset(a, x, v_rel) if quasi_static else 0.0)
         vp = qp / (a.C0 * lam ** 2)
         dU_dlam = a.VY / 3.0 * (lam - lam ** -3) - qp ** 2 / (a.C0 * lam ** 3)
         i_de = (u - vp) / a.Rs
     if a.amplifier:
-        if laws is None:
-            normal = np.real(x).copy()
-            normal[i_qp:i_qp + nc] = np.real(qp)
-            laws = amplifier_laws(a, normal, np.real(u))
         i_de, v_out, v_src, v_rate = _amplified_supply(a, x, u, vp, laws)
+        rel_rate = np.where(np.array(laws[1]) == 'linear', v_rate, 0.0)
         dqp = i_de - vp / a.Rp
-        if quasi_static:   # dz/dt = dq_p/dt - d(C v_a Rp/(Rs+Rp))/dt
-            dqp = dqp + (2.0 * a.C0 * lam * ydot / a.l0 * v_src
-                         - a.C0 * lam ** 2 * v_rate) * a.Rp / (a.Rs + a.Rp)
+        if quasi_static:   # dz/dt = dq_p/dt - d(C v_rel Rp/(Rs+Rp))/dt
+            dqp = dqp + (2.0 * a.C0 * lam * ydot / a.l0 * v_rel
+                         - a.C0 * lam ** 2 * rel_rate) * a.Rp / (a.Rs + a.Rp)
         dx[i_qp:i_qp + nc] = dqp
         if a.amp_state:
             dx[i_qp + nc:i_qp + 2 * nc] = v_rate
         p_diss += (v_out - vp) @ i_de
-        p_relative = (v_out - v_src) @ i_de + v_src @ (vp / a.Rp) - v_rate @ qp
+        p_relative = (v_out - v_rel) @ i_de + v_rel @ (vp / a.Rp) - rel_rate @ qp
     elif a.rc_source:
         dqp = u / a.Rs - (1.0 / a.Rs + 1.0 / a.Rp) * vp
         if quasi_static:   # dz/dt = dq_p/dt - d(C v_inf)/dt, dlambda/dt = -ydot/l0
@@ -355,7 +362,7 @@ def step(a, method, x, u, h: float) -> np.ndarray:
     x = x.copy()
     i_w = _index(a)[2]
     if quasi:   # the stages integrate z and, with the power monitor, xi = W_in - v q_p
-        v = _source_voltage(a, x, u)
+        v = _relax_voltage(a, x, u, laws)
         if a.power_monitor:
             x[i_w] -= v @ x[charge]
         x[charge] -= _charge_offset(a, x, v)
@@ -377,7 +384,7 @@ def step(a, method, x, u, h: float) -> np.ndarray:
             break
         N.append(rhs(a, X, u, quasi, laws)[0] - L * X)
     if quasi:
-        v = _source_voltage(a, X, u)
+        v = _relax_voltage(a, X, u, laws)
         X[charge] += _charge_offset(a, X, v)
         if a.power_monitor:
             X[i_w] += v @ X[charge]

@@ -128,9 +128,10 @@ ds_amp_supply ds_amp_supply_of(const ds_model *m, int64_t i, const double *x, co
     return s;
 }
 
-double ds_amp_source(const ds_model *m, int64_t i, const double *x, const double *u)
+double ds_amp_relax(const ds_model *m, int64_t i, const double *x, const double *u)
 {
-    return source_voltage(m, &m->det[i], i, x, u);
+    const ds_det *d = &m->det[i];
+    return d->i_law == AMP_LINEAR ? source_voltage(m, d, i, x, u) : 0.0;
 }
 
 /* How far past its switch the current law of any DET ended (>= 0: a switch was passed). */

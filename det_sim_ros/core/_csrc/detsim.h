@@ -116,10 +116,12 @@ typedef struct {
 } ds_amp_supply;
 
 /* amplifier.c: the laws at (x, u) into each DET's i_law, v_law; one DET's supply (v_p: its
- * voltage); the voltage behind Rs of DET i. */
+ * voltage); the voltage DET i's charge relaxes towards (times Rp/(Rs+Rp)) in its current law,
+ * against which the quasi-static coordinates count charge and energy: v_src while linear, 0 at
+ * the limit (where the charge does not relax). */
 void ds_amp_laws(const ds_model *m, const double *x, const double *u, ds_work *w);
 ds_amp_supply ds_amp_supply_of(const ds_model *m, int64_t i, const double *x, const double *u,
                                double vp);
-double ds_amp_source(const ds_model *m, int64_t i, const double *x, const double *u);
+double ds_amp_relax(const ds_model *m, int64_t i, const double *x, const double *u);
 
 #endif

@@ -352,8 +352,8 @@ static int det_cell(const ds_model *m, int64_t i, const double *x, const double 
         return lam == lam ? DS_BAD_STRETCH : DS_BAD_SLOPE;
     const double inv_lam = 1.0 / lam, inv_lam2 = inv_lam * inv_lam;
     double vp, bracket, qp = 0.0;
-    /* the voltage the charge relaxes towards (times Rp/(Rs+Rp)): with an amplifier, its v_a */
-    const double v_relax = m->amp_state ? ds_amp_source(m, i, x, u) : u[i];
+    /* the voltage the charge relaxes towards (times Rp/(Rs+Rp)); see ds_amp_relax */
+    const double v_relax = m->amp ? ds_amp_relax(m, i, x, u) : u[i];
     /* dU_DE/dlambda without the sign of dlambda/dq = -J/l0 (eq 53, corrected eq 71) */
     if (m->rc_source) {
         qp = x[m->i_qp + i];
@@ -380,18 +380,19 @@ static int det_cell(const ds_model *m, int64_t i, const double *x, const double 
     double i_de, v_out = u[i];   /* supply current, A; the source's terminal voltage, V */
     if (m->amp) {   /* the amplifier's laws of this step (amplifier.c) */
         const ds_amp_supply s = ds_amp_supply_of(m, i, x, u, vp);
+        const double relax_rate = d->i_law == AMP_LINEAR ? s.v_src_rate : 0.0;
         i_de = s.current;
         v_out = s.v_out;
         dx[m->i_qp + i] = i_de - vp * d->inv_Rp;
         if (m->amp_state)
             dx[m->i_va + i] = s.v_src_rate;
-        if (quasi_static)   /* minus d(C v_a Rp/(Rs+Rp))/dt */
+        if (quasi_static)   /* minus d(C v_relax Rp/(Rs+Rp))/dt */
             dx[m->i_qp + i] += (2.0 * d->C0 * lam * jqd * d->inv_l0 * v_relax
-                                - d->C0 * lam * lam * s.v_src_rate) * d->share;
+                                - d->C0 * lam * lam * relax_rate) * d->share;
         pw->p_diss += (v_out - vp) * i_de;
-        /* quasi-static: the rate of W_in - v_src q_p (see ds_shift_charge) */
-        pw->p_leak_in += (v_out - s.v_src) * i_de + s.v_src * vp * d->inv_Rp
-                         - s.v_src_rate * qp;
+        /* quasi-static: the rate of W_in - v_relax q_p (see ds_shift_charge) */
+        pw->p_leak_in += (v_out - v_relax) * i_de + v_relax * vp * d->inv_Rp
+                         - relax_rate * qp;
         pw->p_in += v_out * i_de;
     } else if (m->rc_source) {
         i_de = (u[i] - vp) * d->inv_Rs;
@@ -514,8 +515,8 @@ void ds_shift_charge(const ds_model *m, double *x, const double *u, double sign,
     for (int64_t i = 0; i < m->n_cells; i++) {
         const ds_det *d = &m->det[i];
         const double lam = (m->cell[i].length - w->y[i]) / d->l0;
-        /* with an amplifier's output lag: the charge v_a relaxes it to, the energy against v_a */
-        const double v = m->amp_state ? ds_amp_source(m, i, x, u) : u[i];
+        /* with an amplifier: against what its current law relaxes the charge to */
+        const double v = m->amp ? ds_amp_relax(m, i, x, u) : u[i];
         work_in += v * x[m->i_qp + i];
         x[m->i_qp + i] += sign * d->C0 * lam * lam * v * d->share;
         work_out += v * x[m->i_qp + i];
