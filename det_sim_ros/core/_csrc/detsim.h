@@ -68,7 +68,7 @@ typedef struct {
     int64_t n_q, n_cells, n_state, r_max, n_nodes, n_mi, n_groups, n_structure, mass_block;
     int creep, rc_source, power;
     int amp, amp_state;                /* an amplifier shapes the supply; its v_a are states */
-    int one_term;                      /* one cell, one Ritz term, not exact, no amplifier */
+    int one_term;                      /* one cell, one Ritz term, not exact: scalar rhs */
     int64_t i_eps, i_qp, i_va, i_power; /* offsets of eps_E, q_p, v_a, (W_in, W_diss) in x */
     ds_cell *cell;                     /* n_cells */
     ds_det *det;                       /* n_cells */

@@ -214,8 +214,7 @@ static int Model_init(ModelObject *self, PyObject *args, PyObject *kwds)
     if (read_layout(m, src) < 0 || copy_arrays(m, &self->mem, src, &index) < 0
         || build_cells(m, &self->mem, src, &index) < 0 || check_interface_mass(m) < 0)
         return -1;
-    m->one_term = m->n_cells == 1 && m->cell[0].nr == 1 && m->cell[0].kinematics != KIN_EXACT
-                  && !m->amp;
+    m->one_term = m->n_cells == 1 && m->cell[0].nr == 1 && m->cell[0].kinematics != KIN_EXACT;
     if (ds_work_init(&self->w, m) < 0) {
         PyErr_NoMemory();
         return -1;

@@ -97,8 +97,7 @@ static int view_tables(ds_group *g, const ds_model *m, int64_t gi, int64_t c0, i
         g->view_cells[c - c0] = cell;
     }
     v->cell = g->view_cells;
-    v->one_term = v->n_cells == 1 && v->cell[0].nr == 1 && v->cell[0].kinematics != KIN_EXACT
-                  && !v->amp;
+    v->one_term = v->n_cells == 1 && v->cell[0].nr == 1 && v->cell[0].kinematics != KIN_EXACT;
     v->group_q = g->view_ints;
     v->group_q[0] = 0;
     v->group_q[1] = v->n_q;
