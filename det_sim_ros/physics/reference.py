@@ -184,6 +184,58 @@ def _numbers(v):
     return v if np.iscomplexobj(v) else v.astype(float)
 
 
+def _beams(a, x, kin, kind):
+    """
+    Return the beams' part of Lagrange's equations: (Jc, M, F, qd' D qd).
+
+    Jc (row c: dy_c/dq), the mass matrix Mb + Jc' MI Jc, the forces without the DETs'
+    -K q - D qd - dU4/dq - Jc' MI (qd' H_y qd), and the beams' damping power.
+    """
+    nq, nc = a.n_q, a.n_cells
+    q, qd = x[:nq], x[nq:2 * nq]
+    K, D, Mb = _blocks(a, a.K), _blocks(a, a.D), _blocks(a, a.Mb)
+    MI = _interface_mass(a)
+    Jc = np.zeros((nc, nq), kind)
+    for c in range(nc):
+        s = a.cell_slice(c)
+        Jc[c, s] = kin.J[s]
+    F = -K @ q - D @ qd - kin.dU4 - Jc.T @ (MI @ kin.h)
+    return Jc, Mb + Jc.T @ MI @ Jc, F, qd @ D @ qd
+
+
+def _rc_circuit(a, u, lam, ydot, vp, quasi_static, dx):
+    """Set dq_p/dt of the RC circuit fed by u in dx; return (i, Rs i^2, u v_p / Rp)."""
+    i_qp, nc = _index(a)[1], a.n_cells
+    dqp = u / a.Rs - (1.0 / a.Rs + 1.0 / a.Rp) * vp
+    if quasi_static:   # dz/dt = dq_p/dt - d(C v_inf)/dt, dlambda/dt = -ydot/l0
+        dqp = dqp + 2.0 * a.C0 * lam * ydot / a.l0 * u * a.Rp / (a.Rs + a.Rp)
+    dx[i_qp:i_qp + nc] = dqp
+    i_de = (u - vp) / a.Rs
+    return i_de, (u - vp) @ i_de, u @ (vp / a.Rp)
+
+
+def _amplified_circuit(a, x, u, laws, det, quasi_static, dx):
+    """
+    Set the amplified circuit's rates in dx; return (i, v_out, Rs i^2, quasi-static energy rate).
+
+    ``det`` holds lambda, dy/dt, q_p, v_p and the voltage the charge relaxes towards per DET;
+    the energy rate is that of W_in - v_relax q_p (see :func:`rhs`).
+    """
+    lam, ydot, qp, vp, v_rel = det
+    nc, i_qp = a.n_cells, _index(a)[1]
+    i_de, v_out, _, v_rate = _amplified_supply(a, x, u, vp, laws)
+    rel_rate = np.where(np.array(laws[1]) == 'linear', v_rate, 0.0)
+    dqp = i_de - vp / a.Rp
+    if quasi_static:   # dz/dt = dq_p/dt - d(C v_rel Rp/(Rs+Rp))/dt
+        dqp = dqp + (2.0 * a.C0 * lam * ydot / a.l0 * v_rel
+                     - a.C0 * lam ** 2 * rel_rate) * a.Rp / (a.Rs + a.Rp)
+    dx[i_qp:i_qp + nc] = dqp
+    if a.amp_state:
+        dx[i_qp + nc:i_qp + 2 * nc] = v_rate
+    p_relative = (v_out - v_rel) @ i_de + v_rel @ (vp / a.Rp) - rel_rate @ qp
+    return i_de, v_out, (v_out - vp) @ i_de, p_relative
+
+
 def rhs(a, x, u, quasi_static: bool = False, laws=None):
     """
     Return (dx/dt, P_in, P_diss) at (x, u).
@@ -202,17 +254,9 @@ def rhs(a, x, u, quasi_static: bool = False, laws=None):
     kind = np.result_type(x, u, float)
     nq, nc = a.n_q, a.n_cells
     i_eps, i_qp, i_w = _index(a)
-    q, qd = x[:nq], x[nq:2 * nq]
+    qd = x[nq:2 * nq]
     kin = kinematics(a, x)
-    K, D, Mb = _blocks(a, a.K), _blocks(a, a.D), _blocks(a, a.Mb)
-    MI = _interface_mass(a)
-    Jc = np.zeros((nc, nq), kind)            # row c: dy_c/dq
-    for c in range(nc):
-        s = a.cell_slice(c)
-        Jc[c, s] = kin.J[s]
-    M = Mb + Jc.T @ MI @ Jc
-    F = -K @ q - D @ qd - kin.dU4 - Jc.T @ (MI @ kin.h)
-    p_diss = qd @ D @ qd
+    Jc, M, F, p_diss = _beams(a, x, kin, kind)
     lam = (a.length - kin.y) / a.l0
     ydot = Jc @ qd
     lzd = ydot / (a.l0 * lam ** 2)           # d(1/lambda)/dt
@@ -226,26 +270,13 @@ def rhs(a, x, u, quasi_static: bool = False, laws=None):
         qp = x[i_qp:i_qp + nc] + (_charge_offset(a, x, v_rel) if quasi_static else 0.0)
         vp = qp / (a.C0 * lam ** 2)
         dU_dlam = a.VY / 3.0 * (lam - lam ** -3) - qp ** 2 / (a.C0 * lam ** 3)
-        i_de = (u - vp) / a.Rs
     if a.amplifier:
-        i_de, v_out, v_src, v_rate = _amplified_supply(a, x, u, vp, laws)
-        rel_rate = np.where(np.array(laws[1]) == 'linear', v_rate, 0.0)
-        dqp = i_de - vp / a.Rp
-        if quasi_static:   # dz/dt = dq_p/dt - d(C v_rel Rp/(Rs+Rp))/dt
-            dqp = dqp + (2.0 * a.C0 * lam * ydot / a.l0 * v_rel
-                         - a.C0 * lam ** 2 * rel_rate) * a.Rp / (a.Rs + a.Rp)
-        dx[i_qp:i_qp + nc] = dqp
-        if a.amp_state:
-            dx[i_qp + nc:i_qp + 2 * nc] = v_rate
-        p_diss += (v_out - vp) @ i_de
-        p_relative = (v_out - v_rel) @ i_de + v_rel @ (vp / a.Rp) - rel_rate @ qp
+        i_de, v_out, p_rs, p_relative = _amplified_circuit(
+            a, x, u, laws, (lam, ydot, qp, vp, v_rel), quasi_static, dx)
+        p_diss += p_rs
     elif a.rc_source:
-        dqp = u / a.Rs - (1.0 / a.Rs + 1.0 / a.Rp) * vp
-        if quasi_static:   # dz/dt = dq_p/dt - d(C v_inf)/dt, dlambda/dt = -ydot/l0
-            dqp = dqp + 2.0 * a.C0 * lam * ydot / a.l0 * u * a.Rp / (a.Rs + a.Rp)
-        dx[i_qp:i_qp + nc] = dqp
-        p_diss += (u - vp) @ i_de
-        p_relative = u @ (vp / a.Rp)
+        i_de, p_rs, p_relative = _rc_circuit(a, u, lam, ydot, vp, quasi_static, dx)
+        p_diss += p_rs
     else:
         vp = u
         dU_dlam = a.VY / 3.0 * (lam - lam ** -3) - a.C0 * lam * vp ** 2
