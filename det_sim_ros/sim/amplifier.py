@@ -14,6 +14,8 @@ so the node, ``simulate`` and a log's re-simulation) runs every command through 
 
 from __future__ import annotations
 
+import collections
+
 import numpy as np
 
 __all__ = ['CommandStage']
@@ -31,6 +33,10 @@ class CommandStage:
         self.offset = np.array([amp.offset for amp in amplifiers], dtype=float)
         self.delays = np.array([amp.delay_periods(dt) for amp in amplifiers], dtype=np.int64)
         self._depth = int(self.delays.max(initial=0))
+        # per DET, for one period at a time in plain floats (a numpy round trip costs tens of
+        # microseconds, more than the period's physics): the same operations as _shape
+        self._per_det = list(zip(self.lsb.tolist(), self.offset.tolist(),
+                                 (self._depth - self.delays).tolist()))
         self.reset()
 
     @classmethod
@@ -44,7 +50,8 @@ class CommandStage:
 
     def reset(self) -> None:
         """Empty the delay line: it holds the initial voltage, 0 V."""
-        self._past = np.zeros((self._depth, len(self.delays)))
+        zeros = [0.0] * len(self.delays)
+        self._line = collections.deque([zeros] * self._depth, maxlen=self._depth or None)
 
     def _shape(self, commands: np.ndarray) -> np.ndarray:
         """Return the DAC's levels of ``commands`` plus the offset (rows: periods)."""
@@ -62,14 +69,25 @@ class CommandStage:
         commands = np.asarray(commands, dtype=float).reshape(-1, len(self.delays))
         n, depth = len(commands), self._depth
         if depth:
-            line = np.vstack([self._past, commands])
+            past = np.array(list(self._line), dtype=float).reshape(depth, len(self.delays))
+            line = np.vstack([past, commands])
             rows = (depth - self.delays)[None, :] + np.arange(n)[:, None]
             delayed = np.take_along_axis(line, rows, axis=0)
-            self._past = line[len(line) - depth:].copy()
+            self._line.extend(line[len(line) - depth:].tolist())
         else:
             delayed = commands
         return self._shape(delayed)
 
     def apply(self, command) -> np.ndarray:
         """Return the applied input of the next period given its held command."""
-        return self.run(command)[0]
+        row = [float(v) for v in command]
+        line = list(self._line) + [row] if self._depth else [row]
+        applied = []
+        for i, (lsb, offset, back) in enumerate(self._per_det):
+            v = line[back][i]
+            if lsb > 0.0:
+                v = float(round(v / lsb)) * lsb
+            applied.append(v + offset)
+        if self._depth:
+            self._line.append(row)
+        return np.array(applied)

@@ -245,7 +245,8 @@ class Simulator:
         u = self.u
         if self.command_stage is not None:
             u = self.command_stage.apply(u)
-            self.model.apply_input_jump(self.x, self._u_prev, u)
+            if self.scene.source == 'ideal':   # (an RC source books nothing)
+                self.model.apply_input_jump(self.x, self._u_prev, u)
         # in place: on failure the kernel leaves x at the period's start (the last good state)
         status = self.stepper.period(self.x, self._u_prev, u, self._out)
         if status != kernel.OK:
