@@ -54,8 +54,9 @@ scene file) and every key of the loaded scene under its section. They are fixed 
 giving one on the command line overrides the file, e.g. `-p physics.Rs:=1.0e+3` or
 `-p structure.type:=array -p structure.copies:=4`. The offline tools take the same keys
 (`det_sim ... --set physics.Rs=1e3`, `load_scene('default', {'physics.Rs': 1e3})`). Units are
-SI. `dets.<DET name>.<physics key>` overrides one physics value for one DET. "default scene" is
-the value in `config/default.yaml` (the `structure` section is optional; its defaults are shown).
+SI. `dets.<DET name>.<key>` overrides one physics or amplifier value for one DET. "default scene"
+is the value in `config/default.yaml` (the `structure` and `amplifier` sections are optional;
+their defaults are shown; every amplifier knob is off by default, docs/realism.md).
 
 | key | type | range or choices | unit | default scene | meaning |
 | --- | --- | --- | --- | --- | --- |
@@ -141,11 +142,14 @@ def scene_row(key: str, spec: tuple, default) -> str:
 def scene_rows() -> list:
     """Return the rows of every scene key, section by section, with the default scene's values."""
     from det_sim_ros.scenes import scene
+    from det_sim_ros.scenes.keys import AMPLIFIER_DEFAULTS, AMPLIFIER_SPEC
     with open(DEFAULT_SCENE, encoding='utf-8') as f:
         values = yaml.safe_load(f)['sim_node']['ros__parameters']
     values['structure'] = dict(scene.STRUCTURE_DEFAULTS)
+    values['amplifier'] = dict(AMPLIFIER_DEFAULTS)
     sections = {'scene': scene.SCENE_SPEC, 'physics': scene.PHYSICS_SPEC,
-                'integrator': scene.INTEGRATOR_SPEC, 'structure': scene.STRUCTURE_SPEC}
+                'integrator': scene.INTEGRATOR_SPEC, 'structure': scene.STRUCTURE_SPEC,
+                'amplifier': AMPLIFIER_SPEC}
     rows = [scene_row(f'{section}.{key}', spec, values[section].get(key))
             for section, specs in sections.items() for key, spec in specs.items()]
     rows += [scene_row(key, spec, values.get(key)) for key, spec in scene.TOP_SPEC.items()]

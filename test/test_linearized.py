@@ -3,7 +3,7 @@ The dense linear part of 'etdrk4_linearized' against its numpy references.
 
 The kernel's matrix phi functions (matrix_phi.c) against det_sim_ros.physics.matrix_phi (the same
 algorithm) and the augmented matrix exponential; its Jacobian against complex steps; one step
-and its error estimate against det_sim_ros.physics.reference.step_linearized; determinism
+and its error estimate against det_sim_ros.physics.reference_linearized.step_linearized; determinism
 (runs, resets, threads); the step count following the error, not the stiff beam modes.
 """
 
@@ -12,7 +12,7 @@ import os
 from det_sim_ros.core import kernel
 from det_sim_ros.io.mcap_log import Recorder
 from det_sim_ros.io.replay import resimulate, simulate_to_log
-from det_sim_ros.physics import matrix_phi, reference
+from det_sim_ros.physics import matrix_phi, reference, reference_linearized
 from det_sim_ros.physics.model import build_model
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.integrators import get_method, make_stepper, StepControl
@@ -80,7 +80,7 @@ def test_jacobian_matches_complex_steps(overrides):
     model = _model(3, **overrides)
     x, u = _random_state(model, np.random.default_rng(11))
     A = _jacobian(model, x, u)
-    exact = reference.mechanical_jacobian(model.arrays, x, u)
+    exact = reference_linearized.mechanical_jacobian(model.arrays, x, u)
     for j in range(A.shape[1]):
         assert np.abs(A[:, j] - exact[:, j]).max() <= 1e-6 * np.abs(exact[:, j]).max() + 1e-6
 
@@ -96,7 +96,7 @@ def test_linearized_step_matches_the_reference(h, overrides):
     ours = x.copy()
     stepper.estimate = 0.0
     assert stepper.advance(ours, u, h, 1) == kernel.OK
-    expected, error = reference.step_linearized(model.arrays, METHOD, x, u, h, A)
+    expected, error = reference_linearized.step_linearized(model.arrays, METHOD, x, u, h, A)
     scale = np.maximum(np.abs(expected), np.abs(x)) + 1e-300
     assert np.all(np.abs(ours - expected) <= 1e-9 * scale + 1e-18)
     a, nq = model.arrays, model.arrays.n_q
@@ -160,3 +160,24 @@ def test_step_count_follows_the_error_not_the_stiff_modes():
     stroke = np.ptp(y_tight)
     assert np.max(np.abs(runs['linearized'][1]['y'] - y_tight)) <= 1e-6 * stroke
     assert runs['linearized'][0].steps_taken < 0.7 * runs['explicit'][0].steps_taken
+
+
+def test_the_amplified_circuit_under_the_linearized_method_meets_the_tolerance():
+    # the lab amplifier preset (every law: bandwidth, slew rate, current limit) on the default
+    # scene, against the plain etdrk4 at a 1000x tighter tolerance
+    def run(method, tolerance):
+        sim = Simulator(load_scene('amplifier_lab', {'integrator.method': method,
+                                                     'integrator.tolerance': tolerance}))
+        y = []
+        for k in range(1200):
+            sim.set_input([3000.0 if 200 <= k < 800 else 0.0])
+            sim.step()
+            y.append(sim.outputs()['y'])
+        assert not sim.fault
+        return sim, np.array(y)
+
+    sim, y = run('auto', 1e-6)
+    assert sim.describe_stepper().startswith('etdrk4_linearized')
+    _, y_ref = run('etdrk4', 1e-9)
+    assert np.ptp(y_ref) > 1e-3                       # it snapped through and back
+    assert np.abs(y - y_ref).max() < 1e-6 * np.ptp(y_ref)

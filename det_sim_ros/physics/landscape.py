@@ -30,14 +30,14 @@ class Landscape:
     """
     U_pot of one scene's structure and its equilibria.
 
-    The model is built with an ideal source, no creep and no power monitor: at q_dot = 0 its
-    energy output is H of the statics.
+    The model is built with an ideal source, no creep, no power monitor and no amplifier: at
+    q_dot = 0 its energy output is H of the statics.
     """
 
     def __init__(self, scene: Scene):
         self.scene = scene
         ideal = scene.replace(**{'scene.source': 'ideal', 'scene.creep': False,
-                                 'scene.monitor_power': False})
+                                 'scene.monitor_power': False, 'amplifier': None})
         self.model = build_model(ideal)
         self.nq = self.model.n_states // 2
         names = self.model.output_names

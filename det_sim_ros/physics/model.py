@@ -88,7 +88,8 @@ class ModelArrays:
     units. Built by :func:`build_model`.
 
     The state is q (n_q Ritz coordinates, cell by cell), qdot (n_q), eps_E (n_cells, if
-    ``creep``), q_p (n_cells, if ``rc_source``), then W_in, W_diss (if ``power_monitor``).
+    ``creep``), q_p (n_cells, if ``rc_source``), the amplifiers' output voltages v_a (n_cells,
+    if ``amp_state``), then W_in, W_diss (if ``power_monitor``).
     Beam matrices are stored as block rows by cell: row j holds its cell's block row, column k
     is relative to the cell's first coordinate.
     """
@@ -132,6 +133,12 @@ class ModelArrays:
     eta_v: np.ndarray          # Kelvin-Voigt viscosity, Pa s
     Rs: np.ndarray             # series resistance, Ohm
     Rp: np.ndarray             # leakage resistance, Ohm
+    # the amplifier in the supply circuit (core/_csrc/amplifier.c), read when ``amplifier``
+    amplifier: int = 0         # 1: a bandwidth, slew rate or current limit shapes the supply
+    amp_state: int = 0         # 1: the outputs v_a are states (a bandwidth or slew rate)
+    amp_tau: np.ndarray = None   # output time constant 1/(2 pi bandwidth), s (0: ideal)
+    amp_slew: np.ndarray = None  # slew-rate limit, V/s (0: none)
+    amp_imax: np.ndarray = None  # current limit, A (0: none)
 
     @property
     def n_groups(self) -> int:
@@ -387,9 +394,23 @@ def _state_names(scene, nq, nc):
         names += [f'eps_E[{i}]' for i in range(nc)]
     if scene.source == 'rc':
         names += [f'q_p[{i}]' for i in range(nc)]
+    if _amplifier_fields(scene)['amp_state']:
+        names += [f'v_a[{i}]' for i in range(nc)]
     if scene.monitor_power:
         names += ['W_in', 'W_diss']
     return names
+
+
+def _amplifier_fields(scene) -> dict:
+    """Return the ModelArrays fields of the amplifiers' circuit side (all off: none)."""
+    amps = scene.cell_amplifiers()
+    if scene.source != 'rc' or not any(amp.acts_in_circuit for amp in amps):
+        return {'amplifier': 0, 'amp_state': 0}
+    column = lambda values: np.ascontiguousarray(values, dtype=float)  # noqa: E731
+    return {'amplifier': 1, 'amp_state': int(any(amp.has_output_state for amp in amps)),
+            'amp_tau': column([amp.time_constant for amp in amps]),
+            'amp_slew': column([amp.slew_rate for amp in amps]),
+            'amp_imax': column([amp.current_limit for amp in amps])}
 
 
 def _assemble(scene, cells, MI, det_physics, P, structure_names):
@@ -419,7 +440,8 @@ def _assemble(scene, cells, MI, det_physics, P, structure_names):
         **{key: blocks[key] for key in ('B1', 'B2', 'W', 'Mb', 'K', 'D', 'ref')},
         mi_val=np.ascontiguousarray(MI[MI != 0.0], dtype=float),
         mi_row=ints(mi_idx[:, 0]), mi_col=ints(mi_idx[:, 1]),
-        P=np.ascontiguousarray(P, dtype=float), **blocks['cell'], **blocks['det'])
+        P=np.ascontiguousarray(P, dtype=float), **blocks['cell'], **blocks['det'],
+        **_amplifier_fields(scene))
     det_names = scene.det_names
     if nc == 1:
         out_names = CELL_OUTPUTS

@@ -22,10 +22,12 @@ import dataclasses
 import numpy as np
 from scipy.linalg import expm
 
-__all__ = ['kinematics', 'rhs', 'stiff_rates', 'outputs', 'phi', 'step', 'mechanical_jacobian',
-           'step_linearized']
+__all__ = ['kinematics', 'rhs', 'stiff_rates', 'outputs', 'phi', 'step', 'amplifier_laws',
+           'LIMIT_MARGIN']
 
 EXACT = 2
+LIMIT_MARGIN = 1e-6   # the current-limit law starts at |i| = I (1 - LIMIT_MARGIN)
+SLEW_MARGIN = 1e-9    # a gap within S tau_a (1 + SLEW_MARGIN) is followed, not slewed
 
 
 @dataclasses.dataclass
@@ -111,7 +113,69 @@ def _charge_offset(a, x, u):
 def _index(a):
     i_eps = 2 * a.n_q
     i_qp = i_eps + a.n_cells * a.creep
-    return i_eps, i_qp, i_qp + a.n_cells * a.rc_source
+    return i_eps, i_qp, i_qp + a.n_cells * (a.rc_source + a.amp_state)
+
+
+def _source_voltage(a, x, u):
+    """Return the voltage behind Rs per DET: the amplifier's v_a where it lags, else u."""
+    if not a.amp_state:
+        return u
+    i_va = _index(a)[1] + a.n_cells
+    lags = (a.amp_tau > 0.0) | (a.amp_slew > 0.0)
+    return np.where(lags, x[i_va:i_va + a.n_cells], u)
+
+
+def _relax_voltage(a, x, u, laws):
+    """Return what the charge relaxes towards per DET: v_src while linear, 0 at the limit."""
+    if not a.amplifier:
+        return u
+    return np.where(np.array(laws[1]) == 'linear', _source_voltage(a, x, u), 0.0)
+
+
+def amplifier_laws(a, x, u):
+    """
+    Return each DET's amplifier laws at (x, u) (charge slots holding q_p): (v_law, i_law).
+
+    v_law: 'follow' (dv_a/dt = (u - v_a)/tau_a), 'up' / 'down' (dv_a/dt = +-S while
+    |u - v_a| > S tau_a), 'hold' (no output lag, or a slew without bandwidth that arrived);
+    i_law: 'linear' (i = (v_a - v_p)/Rs), '+limit' / '-limit' (i = +-I once |i_lin| reaches
+    I (1 - LIMIT_MARGIN)).
+    """
+    nc, i_qp = a.n_cells, _index(a)[1]
+    lam = (a.length - kinematics(a, x).y) / a.l0
+    v_src = _source_voltage(a, x, u)
+    share = (v_src - x[i_qp:i_qp + nc] / (a.C0 * lam ** 2)) / a.Rs / np.where(
+        a.amp_imax > 0.0, a.amp_imax, 1.0)
+    v_laws, i_laws = [], []
+    for c in range(nc):
+        gap, band = u[c] - v_src[c], a.amp_slew[c] * a.amp_tau[c]
+        if not (a.amp_tau[c] > 0.0 or a.amp_slew[c] > 0.0):
+            v_laws.append('hold')
+        elif a.amp_slew[c] > 0.0 and abs(gap) > band * (1.0 + SLEW_MARGIN):
+            v_laws.append('up' if gap > 0.0 else 'down')
+        else:
+            v_laws.append('follow' if a.amp_tau[c] > 0.0 else 'hold')
+        limited = a.amp_imax[c] > 0.0 and abs(share[c]) >= 1.0 - LIMIT_MARGIN
+        i_laws.append(('+limit' if share[c] > 0.0 else '-limit') if limited else 'linear')
+    return v_laws, i_laws
+
+
+def _amplified_supply(a, x, u, vp, laws):
+    """
+    Return (current, v_out, v_src, dv_src/dt) per DET under the amplifier's ``laws``.
+
+    The current through Rs, the amplifier's terminal voltage (v_a, or v_p + Rs i at the
+    limit), the voltage behind Rs and its rate.
+    """
+    v_laws, i_laws = laws
+    v_src = _source_voltage(a, x, u)
+    rate = np.array([{'follow': (u[c] - v_src[c]) / a.amp_tau[c] if a.amp_tau[c] else 0.0,
+                      'up': a.amp_slew[c], 'down': -a.amp_slew[c], 'hold': 0.0}[law]
+                     for c, law in enumerate(v_laws)])
+    limit = np.array([{'+limit': 1.0, '-limit': -1.0, 'linear': 0.0}[law] for law in i_laws])
+    current = np.where(limit != 0.0, limit * a.amp_imax, (v_src - vp) / a.Rs)
+    v_out = np.where(limit != 0.0, vp + a.Rs * current, v_src)
+    return current, v_out, v_src, rate
 
 
 def _numbers(v):
@@ -120,7 +184,59 @@ def _numbers(v):
     return v if np.iscomplexobj(v) else v.astype(float)
 
 
-def rhs(a, x, u, quasi_static: bool = False):
+def _beams(a, x, kin, kind):
+    """
+    Return the beams' part of Lagrange's equations: (Jc, M, F, qd' D qd).
+
+    Jc (row c: dy_c/dq), the mass matrix Mb + Jc' MI Jc, the forces without the DETs'
+    -K q - D qd - dU4/dq - Jc' MI (qd' H_y qd), and the beams' damping power.
+    """
+    nq, nc = a.n_q, a.n_cells
+    q, qd = x[:nq], x[nq:2 * nq]
+    K, D, Mb = _blocks(a, a.K), _blocks(a, a.D), _blocks(a, a.Mb)
+    MI = _interface_mass(a)
+    Jc = np.zeros((nc, nq), kind)
+    for c in range(nc):
+        s = a.cell_slice(c)
+        Jc[c, s] = kin.J[s]
+    F = -K @ q - D @ qd - kin.dU4 - Jc.T @ (MI @ kin.h)
+    return Jc, Mb + Jc.T @ MI @ Jc, F, qd @ D @ qd
+
+
+def _rc_circuit(a, u, lam, ydot, vp, quasi_static, dx):
+    """Set dq_p/dt of the RC circuit fed by u in dx; return (i, Rs i^2, u v_p / Rp)."""
+    i_qp, nc = _index(a)[1], a.n_cells
+    dqp = u / a.Rs - (1.0 / a.Rs + 1.0 / a.Rp) * vp
+    if quasi_static:   # dz/dt = dq_p/dt - d(C v_inf)/dt, dlambda/dt = -ydot/l0
+        dqp = dqp + 2.0 * a.C0 * lam * ydot / a.l0 * u * a.Rp / (a.Rs + a.Rp)
+    dx[i_qp:i_qp + nc] = dqp
+    i_de = (u - vp) / a.Rs
+    return i_de, (u - vp) @ i_de, u @ (vp / a.Rp)
+
+
+def _amplified_circuit(a, x, u, laws, det, quasi_static, dx):
+    """
+    Set the amplified circuit's rates in dx; return (i, v_out, Rs i^2, quasi-static energy rate).
+
+    ``det`` holds lambda, dy/dt, q_p, v_p and the voltage the charge relaxes towards per DET;
+    the energy rate is that of W_in - v_relax q_p (see :func:`rhs`).
+    """
+    lam, ydot, qp, vp, v_rel = det
+    nc, i_qp = a.n_cells, _index(a)[1]
+    i_de, v_out, _, v_rate = _amplified_supply(a, x, u, vp, laws)
+    rel_rate = np.where(np.array(laws[1]) == 'linear', v_rate, 0.0)
+    dqp = i_de - vp / a.Rp
+    if quasi_static:   # dz/dt = dq_p/dt - d(C v_rel Rp/(Rs+Rp))/dt
+        dqp = dqp + (2.0 * a.C0 * lam * ydot / a.l0 * v_rel
+                     - a.C0 * lam ** 2 * rel_rate) * a.Rp / (a.Rs + a.Rp)
+    dx[i_qp:i_qp + nc] = dqp
+    if a.amp_state:
+        dx[i_qp + nc:i_qp + 2 * nc] = v_rate
+    p_relative = (v_out - v_rel) @ i_de + v_rel @ (vp / a.Rp) - rel_rate @ qp
+    return i_de, v_out, (v_out - vp) @ i_de, p_relative
+
+
+def rhs(a, x, u, quasi_static: bool = False, laws=None):
     """
     Return (dx/dt, P_in, P_diss) at (x, u).
 
@@ -129,37 +245,38 @@ def rhs(a, x, u, quasi_static: bool = False):
     - V (E_M eps + eta_v dlz/dt) dlz/dq, with the creep and circuit equations.
     ``quasi_static``: the charge slots hold z = q_p - C(q) v_inf and receive dz/dt, and the
     supplied-energy slot receives the rate of W_in - u q_p, u v_p / Rp (see :func:`step`).
+    With an amplifier (``a.amplifier``) its ``laws`` (default: :func:`amplifier_laws` at x as
+    given) set the current and v_a's rate; z and the supplied-energy slot count against the
+    voltage the charge relaxes towards (v_a while linear, 0 at the limit); the supplied power is
+    v_out i at the amplifier's terminal.
     """
     x, u = _numbers(x), _numbers(u)
     kind = np.result_type(x, u, float)
     nq, nc = a.n_q, a.n_cells
     i_eps, i_qp, i_w = _index(a)
-    q, qd = x[:nq], x[nq:2 * nq]
+    qd = x[nq:2 * nq]
     kin = kinematics(a, x)
-    K, D, Mb = _blocks(a, a.K), _blocks(a, a.D), _blocks(a, a.Mb)
-    MI = _interface_mass(a)
-    Jc = np.zeros((nc, nq), kind)            # row c: dy_c/dq
-    for c in range(nc):
-        s = a.cell_slice(c)
-        Jc[c, s] = kin.J[s]
-    M = Mb + Jc.T @ MI @ Jc
-    F = -K @ q - D @ qd - kin.dU4 - Jc.T @ (MI @ kin.h)
-    p_diss = qd @ D @ qd
+    Jc, M, F, p_diss = _beams(a, x, kin, kind)
     lam = (a.length - kin.y) / a.l0
     ydot = Jc @ qd
     lzd = ydot / (a.l0 * lam ** 2)           # d(1/lambda)/dt
     eps = x[i_eps:i_eps + nc] if a.creep else np.zeros(nc)
     dx = np.zeros(x.shape, kind)
+    v_out = u
+    if a.amplifier and laws is None:   # as the slots hold them (the kernel's Model.rhs)
+        laws = amplifier_laws(a, np.real(x), np.real(u))
     if a.rc_source:
-        qp = x[i_qp:i_qp + nc] + (_charge_offset(a, x, u) if quasi_static else 0.0)
+        v_rel = _relax_voltage(a, x, u, laws)
+        qp = x[i_qp:i_qp + nc] + (_charge_offset(a, x, v_rel) if quasi_static else 0.0)
         vp = qp / (a.C0 * lam ** 2)
         dU_dlam = a.VY / 3.0 * (lam - lam ** -3) - qp ** 2 / (a.C0 * lam ** 3)
-        i_de = (u - vp) / a.Rs
-        dqp = u / a.Rs - (1.0 / a.Rs + 1.0 / a.Rp) * vp
-        if quasi_static:   # dz/dt = dq_p/dt - d(C v_inf)/dt, dlambda/dt = -ydot/l0
-            dqp = dqp + 2.0 * a.C0 * lam * ydot / a.l0 * u * a.Rp / (a.Rs + a.Rp)
-        dx[i_qp:i_qp + nc] = dqp
-        p_diss += (u - vp) @ i_de
+    if a.amplifier:
+        i_de, v_out, p_rs, p_relative = _amplified_circuit(
+            a, x, u, laws, (lam, ydot, qp, vp, v_rel), quasi_static, dx)
+        p_diss += p_rs
+    elif a.rc_source:
+        i_de, p_rs, p_relative = _rc_circuit(a, u, lam, ydot, vp, quasi_static, dx)
+        p_diss += p_rs
     else:
         vp = u
         dU_dlam = a.VY / 3.0 * (lam - lam ** -3) - a.C0 * lam * vp ** 2
@@ -170,26 +287,35 @@ def rhs(a, x, u, quasi_static: bool = False):
         relax = np.where(a.eta_M > 0.0, a.E_M / np.where(a.eta_M > 0.0, a.eta_M, 1.0), 0.0)
         dx[i_eps:i_eps + nc] = lzd - relax * eps
         p_diss += np.sum(a.volume * a.E_M * relax * eps ** 2)
-    p_in = u @ i_de
+    p_in = v_out @ i_de
     p_diss += np.sum(vp ** 2 / a.Rp + a.volume * a.eta_v * lzd ** 2)
     dx[:nq] = qd
     dx[nq:2 * nq] = np.linalg.solve(M, F)
-    if a.power_monitor:   # quasi-static: the rate of W_in - u q_p (see step)
-        dx[i_w:i_w + 2] = (u @ (vp / a.Rp) if quasi_static and a.rc_source else p_in), p_diss
+    if a.power_monitor:   # quasi-static: the rate of W_in - v q_p (see step)
+        dx[i_w:i_w + 2] = (p_relative if quasi_static and a.rc_source else p_in), p_diss
     return dx, p_in, p_diss
 
 
-def stiff_rates(a, x) -> np.ndarray:
+def stiff_rates(a, x, laws=None) -> np.ndarray:
     """
     Return the diagonal stiff part (1/s).
 
-    -1/(C (Rs || Rp)) at the charge states, 0 elsewhere.
+    -1/(C (Rs || Rp)) at the charge states, 0 elsewhere; with an amplifier, each law's own:
+    -1/(C Rp) at the current limit, -1/tau_a at a following v_a (``laws``: see
+    :func:`amplifier_laws`).
     """
     L = np.zeros(a.n_state)
     if a.rc_source:
-        i_qp = _index(a)[1]
+        i_qp, nc = _index(a)[1], a.n_cells
         lam = (a.length - kinematics(a, x).y) / a.l0
-        L[i_qp:i_qp + a.n_cells] = -(1.0 / a.Rs + 1.0 / a.Rp) / (a.C0 * lam ** 2)
+        g = np.full(nc, 1.0 / a.Rs + 1.0 / a.Rp)
+        if a.amplifier:
+            v_laws, i_laws = laws
+            g = np.where(np.array(i_laws) == 'linear', g, 1.0 / a.Rp)
+            if a.amp_state:
+                L[i_qp + nc:i_qp + 2 * nc] = [-1.0 / a.amp_tau[c] if law == 'follow' else 0.0
+                                              for c, law in enumerate(v_laws)]
+        L[i_qp:i_qp + nc] = -g / (a.C0 * lam ** 2)
     return L
 
 
@@ -214,6 +340,8 @@ def outputs(a, x, u) -> np.ndarray:
         qp = x[i_qp:i_qp + nc]
         vp = qp / cap
         i_de = (u - vp) / a.Rs
+        if a.amplifier:
+            i_de = _amplified_supply(a, x, u, vp, amplifier_laws(a, x, u))[0]
     else:
         vp = u
         qp = cap * vp
@@ -257,18 +385,21 @@ def step(a, method, x, u, h: float) -> np.ndarray:
     x = np.asarray(x, dtype=float)
     u = np.asarray(u, dtype=float)
     if method.linearized:   # the dense linear part taken at x
+        from .reference_linearized import mechanical_jacobian, step_linearized
         return step_linearized(a, method, x, u, h, mechanical_jacobian(a, x, u))[0]
     s = method.n_stages
-    L = stiff_rates(a, x) if method.exponential else np.zeros(a.n_state)
+    laws = amplifier_laws(a, x, u) if a.amplifier else None   # held for the step
+    L = stiff_rates(a, x, laws) if method.exponential else np.zeros(a.n_state)
     quasi = bool(method.exponential and a.rc_source)
     i_qp = _index(a)[1]
     charge = slice(i_qp, i_qp + a.n_cells)
     x = x.copy()
     i_w = _index(a)[2]
-    if quasi:   # the stages integrate z and, with the power monitor, xi = W_in - u q_p
+    if quasi:   # the stages integrate z and, with the power monitor, xi = W_in - v q_p
+        v = _relax_voltage(a, x, u, laws)
         if a.power_monitor:
-            x[i_w] -= u @ x[charge]
-        x[charge] -= _charge_offset(a, x, u)
+            x[i_w] -= v @ x[charge]
+        x[charge] -= _charge_offset(a, x, v)
 
     def weight(term):
         _, _, k, c_arg, w = term
@@ -285,103 +416,11 @@ def step(a, method, x, u, h: float) -> np.ndarray:
                 X = X + h * weight(term) * N[int(term[1])]
         if i == s:
             break
-        N.append(rhs(a, X, u, quasi)[0] - L * X)
+        N.append(rhs(a, X, u, quasi, laws)[0] - L * X)
     if quasi:
-        X[charge] += _charge_offset(a, X, u)
+        v = _relax_voltage(a, X, u, laws)
+        X[charge] += _charge_offset(a, X, v)
         if a.power_monitor:
-            X[i_w] += u @ X[charge]
+            X[i_w] += v @ X[charge]
     return X
 
-
-def _to_quasi(a, x, u):
-    """Return x in the quasi-static charge coordinates (see :func:`step`)."""
-    x = x.copy()
-    i_qp, i_w = _index(a)[1:]
-    charge = slice(i_qp, i_qp + a.n_cells)
-    if a.power_monitor:
-        x[i_w] -= u @ x[charge]
-    x[charge] -= _charge_offset(a, x, u)
-    return x
-
-
-def _from_quasi(a, X, u):
-    i_qp, i_w = _index(a)[1:]
-    charge = slice(i_qp, i_qp + a.n_cells)
-    X = X.copy()
-    X[charge] += _charge_offset(a, X, u)
-    if a.power_monitor:
-        X[i_w] += u @ X[charge]
-    return X
-
-
-def mechanical_jacobian(a, x, u) -> np.ndarray:
-    """
-    Return d(dq/dt, dqd/dt)/d(q, qd) at (x, u), by complex steps (exact to round-off).
-
-    In the coordinates the exponential stages integrate (quasi-static charge on RC scenes):
-    the dense linear part of a linearized method.
-    """
-    x = np.asarray(x, dtype=float)
-    u = np.asarray(u, dtype=float)
-    nd = 2 * a.n_q
-    z = _to_quasi(a, x, u) if a.rc_source else x
-    J = np.empty((nd, nd))
-    step = 1e-30
-    for j in range(nd):
-        zc = z.astype(complex)
-        zc[j] += 1j * step
-        J[:, j] = rhs(a, zc, u, bool(a.rc_source))[0][:nd].imag / step
-    return J
-
-
-def step_linearized(a, method, x, u, h: float, A):
-    """
-    Return (x+, error vector) of one step of an exponential method with a dense linear part.
-
-    As :func:`step` with x' = A x + L x + N(x): A (2 n_q x 2 n_q) on q, qd, the stiff diagonal L
-    on the charge; the weights of q, qd are matrices weight * phi_k(c_arg h A) (from the
-    augmented matrix exponential). The error vector over q, qd is the embedded estimate
-    h b_{s-1}(hA) (N_{s-1} - N(x+)) / (6 b_{s-1}(0)) * 6 e_{s-1}, the kernel's.
-    """
-    from .matrix_phi import augmented_phis
-    x = np.asarray(x, dtype=float)
-    u = np.asarray(u, dtype=float)
-    s, nd, k_max = method.n_stages, 2 * a.n_q, max(t[2] for t in method.terms)
-    A = np.asarray(A, dtype=float)
-    L = stiff_rates(a, x)
-    quasi = bool(a.rc_source)
-    x = _to_quasi(a, x, u) if quasi else x.copy()
-    phis = {c: augmented_phis(c * h * A, int(k_max)) for c in {t[3] for t in method.terms}}
-
-    def remainder(X):
-        f = rhs(a, X, u, quasi)[0] - L * X
-        f[:nd] -= A @ X[:nd]
-        return f
-
-    def weights(term):
-        _, _, k, c_arg, w = term
-        diag = np.full(a.n_state, w) if k < 0 else w * np.array(
-            [phi(int(k), c_arg * h * rate) for rate in L])
-        block = w * np.eye(nd) if k < 0 else w * phis[c_arg][int(k)]
-        return diag, block
-
-    N = []
-    for i in range(s + 1):
-        ci = method.c[i] if i < s else 1.0
-        X = np.exp(ci * h * L) * x
-        X[:nd] = (phis[ci][0] if ci else np.eye(nd)) @ x[:nd]
-        for term in method.terms:
-            if term[0] == i:
-                diag, block = weights(term)
-                Nj = N[int(term[1])]
-                X[nd:] += h * diag[nd:] * Nj[nd:]
-                X[:nd] += h * block @ Nj[:nd]
-        if i == s:
-            break
-        N.append(remainder(X))
-    e = method.embedded
-    last = [t for t in method.terms if t[0] == s and t[1] == s - 1]
-    b_last = sum(weights(t)[1] for t in last)
-    b0 = sum(t[4] * (1.0 if t[2] < 0 else 1.0 / np.prod(np.arange(1, t[2] + 1))) for t in last)
-    error = h * e[s - 1] / b0 * b_last @ (N[s - 1][:nd] - remainder(X)[:nd])
-    return (_from_quasi(a, X, u) if quasi else X), error

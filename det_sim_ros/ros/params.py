@@ -21,7 +21,7 @@ __all__ = ['NODE_PARAMS', 'Param', 'SCENE_PARAM_DESCRIPTION', 'SCENE_SECTIONS',
            'check_node_value', 'flatten', 'node_parameter_values', 'runtime_refusal',
            'scene_parameters']
 
-SCENE_SECTIONS = ('scene', 'physics', 'integrator', 'structure', 'dets')
+SCENE_SECTIONS = ('scene', 'physics', 'integrator', 'structure', 'dets', 'amplifier')
 SCENE_PARAM_DESCRIPTION = 'scene value (read-only; set in the scene file or with -p at start)'
 
 
@@ -122,9 +122,12 @@ def scene_parameters(scene) -> Iterator[tuple[str, Any]]:
     """
     Yield the loaded scene's values as (parameter name, value).
 
-    Its ``node:`` section is left out (those are the node parameters).
+    Its ``node:`` section is left out (those are the node parameters); the ``amplifier``
+    section is there even when every knob is off.
     """
-    for name, value in flatten(scene_to_dict(scene)):
+    data = scene_to_dict(scene)
+    data.setdefault('amplifier', dict(scene.amplifier))
+    for name, value in flatten(data):
         if not name.startswith('node.'):
             yield name, value
 

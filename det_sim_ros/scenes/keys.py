@@ -12,7 +12,8 @@ import math
 
 __all__ = ['SceneError', 'BEAMS', 'FIDELITIES', 'SOURCES', 'STRUCTURES', 'INITIAL_STATES',
            'REST_BRANCHES', 'PHYSICS_SPEC', 'SCENE_SPEC', 'INTEGRATOR_SPEC', 'STRUCTURE_SPEC',
-           'STRUCTURE_DEFAULTS', 'SECTION_DEFAULTS', 'TOP_SPEC', 'SECTIONS', 'check_value']
+           'STRUCTURE_DEFAULTS', 'SECTION_DEFAULTS', 'TOP_SPEC', 'SECTIONS', 'check_value',
+           'AMPLIFIER_SPEC', 'AMPLIFIER_DEFAULTS']
 
 BEAMS = ('simply_supported', 'fixed')
 FIDELITIES = ('paper', 'consistent', 'exact')
@@ -95,6 +96,25 @@ STRUCTURE_SPEC = {
 STRUCTURE_DEFAULTS = {'type': 'single', 'dets': [], 'copies': 1, 'plate_width': 0.06,
                       'plate_mass': 4.0e-3, 'plate_inertia': 1.2e-6, 'spread': 0.0,
                       'spread_keys': ['Y', 'E_b', 'Rs', 'm'], 'seed': 0}
+# Optional section: the high-voltage amplifier between the command and each DET (every knob off
+# by default: an ideal source). Its keys apply to every DET; ``dets.<name>`` may override them
+# per DET like physics keys.
+AMPLIFIER_SPEC = {
+    'slew_rate': ('float', 0.0, True, math.inf, 'V/s', 'amplifier: output slew-rate limit '
+                  '(0 = none)'),
+    'current_limit': ('float', 0.0, True, math.inf, 'A', 'amplifier: output current limit, '
+                      'at least the leakage current v_max/Rp (0 = none)'),
+    'bandwidth': ('float', 0.0, True, math.inf, 'Hz', 'amplifier: first-order small-signal '
+                  'bandwidth (0 = ideal)'),
+    'dac_bits': ('int', 0, True, 32, '-', 'amplifier: command DAC resolution over [0, v_max] '
+                 '(0 = ideal)'),
+    'delay': ('float', 0.0, True, 3600.0, 's', 'amplifier: transport delay of the command, a '
+              'whole number of control periods (0 = none)'),
+    'offset': ('float', -math.inf, False, math.inf, 'V', 'amplifier: output offset added to '
+               'the command'),
+}
+AMPLIFIER_DEFAULTS = {'slew_rate': 0.0, 'current_limit': 0.0, 'bandwidth': 0.0, 'dac_bits': 0,
+                      'delay': 0.0, 'offset': 0.0}
 TOP_SPEC = {
     'rate_hz': ('float', 0.0, False, 1.0e6, 'Hz', 'control rate'),
 }

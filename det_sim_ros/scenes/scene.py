@@ -3,7 +3,9 @@ Scenes: the validated, typed description of one simulation.
 
 A scene file is a ROS 2 parameter file (``sim_node: ros__parameters: ...``) with the sections
 ``scene`` (structure and model switches), ``physics`` (the parameter set, SI units), ``integrator``
-and ``rate_hz``; an optional ``node`` section belongs to the ROS node and is passed through.
+and ``rate_hz``; optional sections describe the ``structure``, per-DET overrides (``dets``) and
+the high-voltage ``amplifier`` (:mod:`.amplifier`); an optional ``node`` section belongs to the
+ROS node and is passed through.
 A file names only what it changes from its base (``base:``, else config/default.yaml; see
 :mod:`.files`), so the scene checked here is the file laid over its base. Every key is
 checked at load: a missing or unknown key, a wrong type, or a value out of range is refused
@@ -23,8 +25,10 @@ from typing import Any, Mapping
 import numpy as np
 import yaml
 
+from .amplifier import Amplifier, check_amplifier_section, check_amplifiers
 from .files import find_config, read_scene_file, resolve_base, unwrap_ros_params
-from .keys import (BEAMS, check_value, FIDELITIES, INITIAL_STATES, INTEGRATOR_SPEC,
+from .keys import (AMPLIFIER_DEFAULTS, AMPLIFIER_SPEC, BEAMS, check_value, FIDELITIES,
+                   INITIAL_STATES, INTEGRATOR_SPEC,
                    PHYSICS_SPEC, REST_BRANCHES, SCENE_SPEC, SceneError, SECTION_DEFAULTS,
                    SECTIONS, SOURCES, STRUCTURE_DEFAULTS, STRUCTURE_SPEC, STRUCTURES, TOP_SPEC)
 
@@ -102,6 +106,8 @@ class Scene:
     dets: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
     initial_state: str = 'rest'     # 'rest' | 'released' (INITIAL_STATES)
     rest_branch: str = 'buckled+'   # 'buckled+' | 'buckled-' (REST_BRANCHES)
+    amplifier: Mapping[str, Any] = dataclasses.field(
+        default_factory=lambda: dict(AMPLIFIER_DEFAULTS))
 
     @property
     def det_names(self) -> tuple:
@@ -131,9 +137,26 @@ class Scene:
                 factors = np.clip(rng.standard_normal(len(keys)), -3.0, 3.0) * spread + 1.0
                 for key, factor in zip(keys, factors):
                     values[key] = values[key] * float(factor)
-            values.update(self.dets.get(name, {}))
+            values.update({key: value for key, value in self.dets.get(name, {}).items()
+                           if key in PHYSICS_SPEC})
             cells.append(Physics(**values))
         return tuple(cells)
+
+    def cell_amplifiers(self) -> tuple:
+        """Return each DET's :class:`~.amplifier.Amplifier`: the section, then dets.<name>."""
+        amps = []
+        for name in self.det_names:
+            values = dict(self.amplifier)
+            values.update({key: value for key, value in self.dets.get(name, {}).items()
+                           if key in AMPLIFIER_SPEC})
+            amps.append(Amplifier(**values))
+        return tuple(amps)
+
+    @property
+    def amplified(self) -> bool:
+        """Return True if any DET's amplifier has a knob on (else the source is ideal)."""
+        return any(amp.acts_on_command or amp.acts_in_circuit
+                   for amp in self.cell_amplifiers())
 
     def cell_scene(self, index: int) -> 'Scene':
         """Return cell ``index`` alone as a single-cell scene (its physics; for statics)."""
@@ -203,11 +226,12 @@ def _override_value(value):
 
 def _checked_values(data):
     """Return (section, key) -> checked value of every section key and top-level key ('', key)."""
-    unknown = set(data) - set(SECTIONS) - set(TOP_SPEC) - {'node', 'structure', 'dets'}
+    unknown = set(data) - set(SECTIONS) - set(TOP_SPEC) - {'node', 'structure', 'dets',
+                                                           'amplifier'}
     if unknown:
         raise SceneError(f'unknown scene key {sorted(unknown)[0]!r}; known sections: '
                          + ', '.join(list(SECTIONS) + list(TOP_SPEC)
-                                     + ['structure', 'dets', 'node']))
+                                     + ['structure', 'dets', 'amplifier', 'node']))
     values = {}
     for section, spec in SECTIONS.items():
         content = data.get(section)
@@ -285,8 +309,10 @@ def load_scene(source: Any = 'default', overrides: Mapping[str, Any] | None = No
     physics = Physics(**{k: values[('physics', k)] for k in PHYSICS_SPEC})
     scene = Scene(**{k: values[('scene', k)] for k in SCENE_SPEC}, physics=physics,
                   **{k: values[('integrator', k)] for k in INTEGRATOR_SPEC},
-                  rate_hz=values[('', 'rate_hz')], node=node, structure=structure, dets=dets)
+                  rate_hz=values[('', 'rate_hz')], node=node, structure=structure, dets=dets,
+                  amplifier=check_amplifier_section(data.get('amplifier')))
     _check_consistency(scene)
+    check_amplifiers(scene)
     return scene
 
 
@@ -327,10 +353,11 @@ def _check_structure(data):
             raise SceneError(f'scene key dets.{name!r}: must be a mapping of physics keys')
         checked[name] = {}
         for key, value in overrides.items():
-            if key not in PHYSICS_SPEC:
+            spec = PHYSICS_SPEC.get(key) or AMPLIFIER_SPEC.get(key)
+            if spec is None:
                 raise SceneError(f'unknown scene key dets.{name}.{key!r}; allowed: '
-                                 + ', '.join(PHYSICS_SPEC))
-            checked[name][key] = check_value(f'dets.{name}.{key}', value, PHYSICS_SPEC[key])
+                                 + ', '.join(list(PHYSICS_SPEC) + list(AMPLIFIER_SPEC)))
+            checked[name][key] = check_value(f'dets.{name}.{key}', value, spec)
     return structure, checked
 
 
@@ -343,6 +370,8 @@ def scene_to_dict(scene: Scene, wrap: bool = False) -> dict:
         'rate_hz': scene.rate_hz,
     }
     data['structure'] = copy.deepcopy(dict(scene.structure))
+    if scene.amplifier != AMPLIFIER_DEFAULTS:   # absent when off: logs stay as without it
+        data['amplifier'] = dict(scene.amplifier)
     if scene.dets:
         data['dets'] = copy.deepcopy({k: dict(v) for k, v in scene.dets.items()})
     if scene.node:

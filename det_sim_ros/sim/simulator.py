@@ -22,6 +22,7 @@ from typing import Callable
 
 import numpy as np
 
+from .amplifier import CommandStage
 from .integrators import get_method, make_stepper, Method, step_control, transient_settings
 from ..core import kernel
 from ..physics.model import build_model, Model, ModelDomainError
@@ -100,6 +101,8 @@ class Simulator:
         self.stepper = make_stepper(self.model, self.method, self.control, self.dt,
                                     self.transient)
         self.stepper.threads = threads
+        # the amplifier's DAC, delay and offset (None when off: the command goes straight in)
+        self.command_stage = CommandStage.for_scene(self.scene)
         self.output_names = self.model.output_names
         self._out = np.empty(len(self.output_names))
         self.x0 = initial_state(self.model)   # the scene's initial state (reset returns here)
@@ -127,11 +130,23 @@ class Simulator:
             raise ValueError(f'x0 must have {self.model.n_states} entries')
         self.u = np.zeros(self.model.n_inputs)
         self._u_prev = self.u.copy()    # input of the last period: a jump starts a transient
+        if self.command_stage is not None:
+            self.command_stage.reset()
         self.fault = ''
-        status = self.model.kernel.outputs(self.x, self.u, self._out)
+        status = self.model.kernel.outputs(self.x, self.applied_input, self._out)
         if status != kernel.OK:
             raise ModelDomainError(status, 'in the initial state')
         self.initial_energy = float(self._out[self.output_names.index('H')])
+
+    @property
+    def applied_input(self) -> np.ndarray:
+        """
+        Return the voltages the supply circuit receives, V.
+
+        The held command ``u``; with the amplifier's DAC, delay or offset on, what they made of
+        the commands (that of the last period run).
+        """
+        return self.u if self.command_stage is None else self._u_prev
 
     @property
     def t(self) -> float:
@@ -200,7 +215,8 @@ class Simulator:
             # trip (the general path below costs ~8 us, more than a whole control period)
             if values != self.u.tolist():
                 new = np.array(values)
-                self.model.apply_input_jump(self.x, self.u, new)
+                if self.command_stage is None:   # else booked when the amplifier applies it
+                    self.model.apply_input_jump(self.x, self.u, new)
                 self.u = new
             return _ACCEPTED
         try:
@@ -213,7 +229,8 @@ class Simulator:
         if not np.all(np.isfinite(v)):
             return InputCheck(False, False, f'non-finite voltage {v.tolist()}')
         clamped = np.clip(v, 0.0, v_max)
-        self.model.apply_input_jump(self.x, self.u, clamped)
+        if self.command_stage is None:
+            self.model.apply_input_jump(self.x, self.u, clamped)
         self.u = clamped
         if np.any(clamped != v):
             return InputCheck(True, True, f'voltage {v.tolist()} clamped to [0, {v_max:g}] V')
@@ -229,21 +246,26 @@ class Simulator:
         """
         if self.fault:
             raise ModelDomainError(kernel.NON_FINITE, f'(faulted: {self.fault})')
+        u = self.u
+        if self.command_stage is not None:
+            u = self.command_stage.apply(u)
+            if self.scene.source == 'ideal':   # (an RC source books nothing)
+                self.model.apply_input_jump(self.x, self._u_prev, u)
         # in place: on failure the kernel leaves x at the period's start (the last good state)
-        status = self.stepper.period(self.x, self._u_prev, self.u, self._out)
+        status = self.stepper.period(self.x, self._u_prev, u, self._out)
         if status != kernel.OK:
             error = ModelDomainError(status, f'at t = {self.t + self.dt:.6g} s')
             self.fault = str(error)
             # leave the outputs buffer at the last good state so nothing faulty can be read
-            self.model.kernel.outputs(self.x, self.u, self._out)
+            self.model.kernel.outputs(self.x, self.applied_input, self._out)
             raise error
-        self._u_prev = self.u
+        self._u_prev = u
         self.k += 1
         return self._out
 
     def outputs(self) -> dict:
         """Return the named outputs at the current state and input."""
-        status = self.model.kernel.outputs(self.x, self.u, self._out)
+        status = self.model.kernel.outputs(self.x, self.applied_input, self._out)
         if status != kernel.OK:
             raise ModelDomainError(status)
         return dict(zip(self.output_names, self._out.tolist()))
@@ -330,9 +352,13 @@ def simulate(scene, voltage: Callable[[float], float] | np.ndarray, t_end: float
     X[0] = sim.x
     # the whole run in one compiled call (same periods as n calls of Simulator.step)
     x = sim.x.copy()
-    status, done = sim.stepper.run(x, sim.u, sim._u_prev, U, X, Y)
+    if sim.command_stage is None:
+        applied, u_held = U, sim.u
+    else:   # the amplifier's DAC, delay and offset: the inputs the circuit receives
+        applied, u_held = np.ascontiguousarray(sim.command_stage.run(U)), sim._u_prev
+    status, done = sim.stepper.run(x, u_held, sim._u_prev, applied, X, Y)
     if done:
-        sim.x, sim.u, sim._u_prev = X[done].copy(), U[done - 1].copy(), U[done - 1].copy()
+        sim.x, sim.u, sim._u_prev = X[done].copy(), U[done - 1].copy(), applied[done - 1].copy()
         sim.k += done
     if status != kernel.OK:
         error = ModelDomainError(status, f'at t = {sim.t + sim.dt:.6g} s')

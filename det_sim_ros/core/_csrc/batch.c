@@ -24,6 +24,8 @@ static void gather(const ds_model *m, const ds_group *g, const double *x, double
         memcpy(xl + v->i_eps, x + m->i_eps + g->c_first, (size_t)nc * sizeof(double));
     if (m->rc_source)
         memcpy(xl + v->i_qp, x + m->i_qp + g->c_first, (size_t)nc * sizeof(double));
+    if (m->amp_state)
+        memcpy(xl + v->i_va, x + m->i_va + g->c_first, (size_t)nc * sizeof(double));
     if (m->power)
         xl[v->i_power] = xl[v->i_power + 1] = 0.0;
 }
@@ -38,6 +40,8 @@ static void scatter(const ds_model *m, const ds_group *g, const double *xl, doub
         memcpy(x + m->i_eps + g->c_first, xl + v->i_eps, (size_t)nc * sizeof(double));
     if (m->rc_source)
         memcpy(x + m->i_qp + g->c_first, xl + v->i_qp, (size_t)nc * sizeof(double));
+    if (m->amp_state)
+        memcpy(x + m->i_va + g->c_first, xl + v->i_va, (size_t)nc * sizeof(double));
 }
 
 /*

@@ -1,6 +1,8 @@
 /*
  * det_sim_ros compiled kernel: the model as named records and its physics. The kernel's files:
  *
+ * amplifier.c    the high-voltage amplifier in the supply circuit: its laws (bandwidth, slew
+ *                rate, current limit) and the control period that locates their switches
  * physics.c      right-hand side, stiff rates, input-jump bookkeeping (the equations are
  *                derived and documented in det_sim_ros/physics/model.py;
  *                det_sim_ros/physics/reference.py is the same physics in readable numpy, and
@@ -44,19 +46,32 @@ typedef struct {
     double c2, c4, e4;
 } ds_cell;
 
+/* The laws the amplifier follows during one step (amplifier.c sets them at each step's start):
+ * its output current, linear (through Rs) or at the limit, and its output voltage v_a. */
+enum { AMP_LINEAR = 0, AMP_LIMIT_POS = 1, AMP_LIMIT_NEG = 2 };
+enum { VA_FOLLOW = 0, VA_SLEW_UP = 1, VA_SLEW_DOWN = 2, VA_HOLD = 3 };
+
 /* The DET spanning a cell (eqs 53-57, 66-67) and its supply circuit. */
 typedef struct {
     double l0, VY, C0, volume, E_M, eta_M, eta_v, Rs, Rp;
     /* derived once: the rhs multiplies instead of dividing */
     double inv_l0, inv_C0, inv_Rs, inv_Rp, share /* Rp/(Rs+Rp) */, relax_M /* E_M/eta_M */;
+    /* the amplifier (0: off): output time constant 1/(2 pi bandwidth) (s), slew-rate limit
+     * (V/s), current limit (A); the laws of the current step (AMP_*, VA_*) */
+    double amp_tau, amp_slew, amp_imax;
+    int i_law, v_law;
+    /* amplifier.c's scratch in a control period: the charge's and the output's last transient
+     * (start time in the period, s; time constant, s; size, V) */
+    double charge_t0, charge_tau, charge_dv, output_t0, output_dv;
 } ds_det;
 
 /* A model (or one coupled group of a model: a view with local indices). */
 typedef struct {
     int64_t n_q, n_cells, n_state, r_max, n_nodes, n_mi, n_groups, n_structure, mass_block;
     int creep, rc_source, power;
+    int amp, amp_state;                /* an amplifier shapes the supply; its v_a are states */
     int one_term;                      /* one cell, one Ritz term, not exact: scalar rhs */
-    int64_t i_eps, i_qp, i_power;      /* offsets of eps_E, q_p, (W_in, W_diss) in x */
+    int64_t i_eps, i_qp, i_va, i_power; /* offsets of eps_E, q_p, v_a, (W_in, W_diss) in x */
     ds_cell *cell;                     /* n_cells */
     ds_det *det;                       /* n_cells */
     const double *B1, *B2, *W;         /* S_j'(x_g), S_j''(x_g) (n_nodes x r_max), weights */
@@ -94,5 +109,21 @@ void ds_shift_charge(const ds_model *m, double *x, const double *u, double sign,
 void ds_book_input_jump(const ds_model *m, double *x, const double *u_old, const double *u_new,
                         ds_work *w);
 int64_t ds_n_outputs(const ds_model *m);
+
+/* One DET's supply under its amplifier's laws: the current through Rs (A), the amplifier's
+ * terminal voltage v_out and the voltage behind Rs v_src (V; v_a, or the command without an
+ * output lag) with its rate (V/s). */
+typedef struct {
+    double current, v_out, v_src, v_src_rate;
+} ds_amp_supply;
+
+/* amplifier.c: the laws at (x, u) into each DET's i_law, v_law; one DET's supply (v_p: its
+ * voltage); the voltage DET i's charge relaxes towards (times Rp/(Rs+Rp)) in its current law,
+ * against which the quasi-static coordinates count charge and energy: v_src while linear, 0 at
+ * the limit (where the charge does not relax). */
+void ds_amp_laws(const ds_model *m, const double *x, const double *u, ds_work *w);
+ds_amp_supply ds_amp_supply_of(const ds_model *m, int64_t i, const double *x, const double *u,
+                               double vp);
+double ds_amp_relax(const ds_model *m, int64_t i, const double *x, const double *u);
 
 #endif

@@ -18,15 +18,18 @@ static void Model_dealloc(ModelObject *self)
 /* The sizes and switches of the state layout, and the offsets in x they give. */
 static int read_layout(ds_model *m, PyObject *src)
 {
-    int64_t creep, rc, power;
+    int64_t creep, rc, power, amp, amp_state;
     if (int_field(src, "n_q", &m->n_q) < 0 || int_field(src, "n_cells", &m->n_cells) < 0
         || int_field(src, "n_state", &m->n_state) < 0 || int_field(src, "r_max", &m->r_max) < 0
         || int_field(src, "creep", &creep) < 0 || int_field(src, "rc_source", &rc) < 0
-        || int_field(src, "power_monitor", &power) < 0)
+        || int_field(src, "power_monitor", &power) < 0 || int_field(src, "amplifier", &amp) < 0
+        || int_field(src, "amp_state", &amp_state) < 0)
         return -1;
     m->creep = (int)creep;
     m->rc_source = (int)rc;
     m->power = (int)power;
+    m->amp = (int)(amp && rc);
+    m->amp_state = (int)(amp_state && m->amp);
     const int64_t nq = m->n_q, nc = m->n_cells, R = m->r_max;
     if (nq < 1 || nc < 1 || R < 1) {
         PyErr_SetString(PyExc_ValueError, "a model needs at least one cell and coordinate");
@@ -34,7 +37,8 @@ static int read_layout(ds_model *m, PyObject *src)
     }
     m->i_eps = 2 * nq;
     m->i_qp = m->i_eps + nc * m->creep;
-    m->i_power = m->i_qp + nc * m->rc_source;
+    m->i_va = m->i_qp + nc * m->rc_source;
+    m->i_power = m->i_va + nc * m->amp_state;
     if (m->n_state != m->i_power + 2 * m->power) {
         PyErr_SetString(PyExc_ValueError, "n_state does not match the state layout");
         return -1;
@@ -136,6 +140,23 @@ static void set_constants(ds_cell *cell, ds_det *d, double *const *cell_f, doubl
     d->relax_M = d->eta_M > 0.0 ? d->E_M / d->eta_M : 0.0;
 }
 
+/* Each DET's amplifier (amplifier.c): its output time constant, slew rate and current limit. */
+static int read_amplifier(ds_model *m, arena *mem, PyObject *src)
+{
+    const int64_t nc = m->n_cells;
+    double *tau, *slew, *imax;
+    if (!(tau = copy_field(mem, src, "amp_tau", 'd', nc, NULL))
+        || !(slew = copy_field(mem, src, "amp_slew", 'd', nc, NULL))
+        || !(imax = copy_field(mem, src, "amp_imax", 'd', nc, NULL)))
+        return -1;
+    for (int64_t c = 0; c < nc; c++) {
+        m->det[c].amp_tau = tau[c];
+        m->det[c].amp_slew = slew[c];
+        m->det[c].amp_imax = imax[c];
+    }
+    return 0;
+}
+
 /* The cells and DETs (m->cell, m->det) from the index and the per-cell constants. */
 static int build_cells(ds_model *m, arena *mem, PyObject *src, const cell_index *index)
 {
@@ -162,7 +183,7 @@ static int build_cells(ds_model *m, arena *mem, PyObject *src, const cell_index 
             return -1;
         set_constants(&m->cell[c], &m->det[c], cell_f, det_f, c);
     }
-    return 0;
+    return m->amp ? read_amplifier(m, mem, src) : 0;
 }
 
 /* The interface mass couples cells of one group only (groups step independently). */
@@ -213,6 +234,8 @@ static PyObject *Model_rhs(ModelObject *self, PyObject *const *args, Py_ssize_t 
     if (get_buffers(args, specs, 3, b) < 0)
         return NULL;
     int qs = n == 4 ? PyObject_IsTrue(args[3]) : 0;
+    if (m->amp)   /* the amplifier's laws at this state (while stepping: at each step's start) */
+        ds_amp_laws(m, b[0].view.buf, b[1].view.buf, &self->w);
     int status = ds_rhs(m, b[0].view.buf, b[1].view.buf, b[2].view.buf, &self->w, qs > 0);
     release_buffers(b, 3);
     return Py_BuildValue("(idd)", status, self->w.p_in, self->w.p_diss);

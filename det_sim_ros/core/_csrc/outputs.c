@@ -56,6 +56,8 @@ int ds_outputs(const ds_model *m, const double *x, const double *u, double *out,
     for (int64_t k = 0; k < m->n_state; k++)
         if (!isfinite(x[k]))
             status = DS_NON_FINITE;
+    if (m->amp && status == DS_OK)
+        ds_amp_laws(m, x, u, w);
     const int rhs_status = ds_rhs(m, x, u, w->dx, w, 0);
     if (status == DS_OK)
         status = rhs_status;
@@ -70,7 +72,7 @@ int ds_outputs(const ds_model *m, const double *x, const double *u, double *out,
         if (m->rc_source) {
             qp = x[m->i_qp + c];
             vp = qp / cap;
-            i_de = (u[c] - vp) / d->Rs;
+            i_de = m->amp ? ds_amp_supply_of(m, c, x, u, vp).current : (u[c] - vp) / d->Rs;
         } else {
             vp = u[c];
             qp = cap * vp;

@@ -275,6 +275,51 @@ static void solve_spd(double *Mt, int64_t ld, const double *F, double *out, int6
     }
 }
 
+/* What the DETs supply and dissipate, summed over the cells in order (W). */
+typedef struct {
+    double p_in, p_leak_in, p_diss;     /* p_leak_in: the rate of W_in - v q_p (quasi-static) */
+} det_power;
+
+/* A DET's electrical state in the rhs: stretch, dy/dt (m/s), charge (C) and voltage (V), and
+ * the voltage its charge relaxes towards in the quasi-static coordinates (ds_amp_relax). */
+typedef struct {
+    double lam, jqd, qp, vp, v_relax;
+} det_state;
+
+/* The RC circuit fed by the command v: the current through Rs (returned), dq_p/dt (into *dqp)
+ * and Rs i^2 (added to *p_diss). */
+static inline __attribute__((always_inline)) double
+rc_circuit(const ds_det *d, double v, const det_state *s, int quasi_static, double *dqp,
+           double *p_diss)
+{
+    const double i_de = (v - s->vp) * d->inv_Rs;
+    *dqp = v * d->inv_Rs - (d->inv_Rs + d->inv_Rp) * s->vp;
+    if (quasi_static)   /* minus d(C v_inf)/dt, dC/dt = 2 C0 lam dlam/dt */
+        *dqp += 2.0 * d->C0 * s->lam * s->jqd * d->inv_l0 * v * d->share;
+    *p_diss += (v - s->vp) * i_de;
+    return i_de;
+}
+
+/* The supply circuit of DET i under its amplifier's laws (amplifier.c): dq_p/dt, dv_a/dt into
+ * dx; the supplied power v_out i, the rate of W_in - v_relax q_p and Rs i^2 added to *pw. */
+static void amplified_circuit(const ds_model *m, int64_t i, const double *x, const double *u,
+                              const det_state *s, int quasi_static, double *dx, det_power *pw)
+{
+    const ds_det *d = &m->det[i];
+    const ds_amp_supply a = ds_amp_supply_of(m, i, x, u, s->vp);
+    const double relax_rate = d->i_law == AMP_LINEAR ? a.v_src_rate : 0.0;
+    dx[m->i_qp + i] = a.current - s->vp * d->inv_Rp;
+    if (m->amp_state)
+        dx[m->i_va + i] = a.v_src_rate;
+    if (quasi_static)   /* minus d(C v_relax Rp/(Rs+Rp))/dt */
+        dx[m->i_qp + i] += (2.0 * d->C0 * s->lam * s->jqd * d->inv_l0 * s->v_relax
+                            - d->C0 * s->lam * s->lam * relax_rate) * d->share;
+    pw->p_in += a.v_out * a.current;
+    pw->p_leak_in += (a.v_out - s->v_relax) * a.current + s->v_relax * s->vp * d->inv_Rp
+                     - relax_rate * s->qp;
+    pw->p_diss += (a.v_out - s->vp) * a.current;
+}
+
 /* The beam of a one-term cell: its end shortening y, dy/dq J and the force F (N) and mass Mt
  * (kg) of its coordinate without the DET, with their damping power p_diss (W). */
 typedef struct {
@@ -324,11 +369,12 @@ static int rhs_one_term(const ds_model *m, const double *x, const double *u, dou
         return lam == lam ? DS_BAD_STRETCH : DS_BAD_SLOPE;
     const double inv_lam = 1.0 / lam, inv_lam2 = inv_lam * inv_lam;
     const double v = u[0];
-    double vp, bracket;
+    const double v_relax = m->amp ? ds_amp_relax(m, 0, x, u) : v;
+    double vp, bracket, qp = 0.0;
     if (m->rc_source) {
-        double qp = x[m->i_qp];
+        qp = x[m->i_qp];
         if (quasi_static)
-            qp += d->C0 * lam * lam * v * d->share;
+            qp += d->C0 * lam * lam * v_relax * d->share;
         vp = qp * d->inv_C0 * inv_lam2;
         bracket = d->VY / 3.0 * (lam - inv_lam2 * inv_lam) - qp * vp * inv_lam;
     } else {
@@ -343,17 +389,19 @@ static int rhs_one_term(const ds_model *m, const double *x, const double *u, dou
     F += coef * J;
     if (m->creep)
         dx[m->i_eps] = lzd - d->relax_M * eps;
-    double i_de, p_in = 0.0;
-    if (m->rc_source) {
-        i_de = (v - vp) * d->inv_Rs;
-        dx[m->i_qp] = v * d->inv_Rs - (d->inv_Rs + d->inv_Rp) * vp;
-        if (quasi_static)
-            dx[m->i_qp] += 2.0 * d->C0 * lam * jqd * d->inv_l0 * v * d->share;
-        p_diss += (v - vp) * i_de;
+    const det_state s = {lam, jqd, qp, vp, v_relax};
+    det_power pw = {0.0, v * vp * d->inv_Rp, 0.0};
+    if (m->amp) {
+        pw.p_leak_in = 0.0;
+        amplified_circuit(m, 0, x, u, &s, quasi_static, dx, &pw);
+        p_diss += pw.p_diss;
     } else {
-        i_de = -2.0 * d->C0 * lam * jqd * d->inv_l0 * vp + vp * d->inv_Rp;
+        const double i_de = m->rc_source
+            ? rc_circuit(d, v, &s, quasi_static, &dx[m->i_qp], &p_diss)
+            : -2.0 * d->C0 * lam * jqd * d->inv_l0 * vp + vp * d->inv_Rp;
+        pw.p_in += v * i_de;
     }
-    p_in += v * i_de;
+    const double p_in = pw.p_in;
     p_diss += vp * vp * d->inv_Rp + d->volume * d->eta_v * lzd * lzd;
     if (m->creep)
         p_diss += d->volume * d->E_M * d->relax_M * eps * eps;
@@ -362,7 +410,7 @@ static int rhs_one_term(const ds_model *m, const double *x, const double *u, dou
     w->p_in = p_in;
     w->p_diss = p_diss;
     if (m->power) {   /* quasi-static: the rate of W_in - v q_p (see ds_shift_charge) */
-        dx[m->i_power] = quasi_static && m->rc_source ? v * vp * d->inv_Rp : p_in;
+        dx[m->i_power] = quasi_static && m->rc_source ? pw.p_leak_in : p_in;
         dx[m->i_power + 1] = p_diss;
     }
     return DS_OK;
@@ -413,11 +461,6 @@ static double structure_forces(const ds_model *m, const double *x, ds_work *w)
     return p_diss;
 }
 
-/* What the DETs supply and dissipate, summed over the cells in order (W). */
-typedef struct {
-    double p_in, p_leak_in, p_diss;     /* p_leak_in: v v_p / Rp summed */
-} det_power;
-
 /* The DET of cell i: its force on the cell's coordinates (into w->F), the rates of its creep
  * strain and charge (into dx), its powers (added to *pw). Returns a status code. */
 static int det_cell(const ds_model *m, int64_t i, const double *x, const double *u, double *dx,
@@ -430,12 +473,14 @@ static int det_cell(const ds_model *m, int64_t i, const double *x, const double 
     if (!(lam > 0.0))   /* NaN: exact kinematics past |w'| = 1 (states are finite) */
         return lam == lam ? DS_BAD_STRETCH : DS_BAD_SLOPE;
     const double inv_lam = 1.0 / lam, inv_lam2 = inv_lam * inv_lam;
-    double vp, bracket;
+    double vp, bracket, qp = 0.0;
+    /* the voltage the charge relaxes towards (times Rp/(Rs+Rp)); see ds_amp_relax */
+    const double v_relax = m->amp ? ds_amp_relax(m, i, x, u) : u[i];
     /* dU_DE/dlambda without the sign of dlambda/dq = -J/l0 (eq 53, corrected eq 71) */
     if (m->rc_source) {
-        double qp = x[m->i_qp + i];
+        qp = x[m->i_qp + i];
         if (quasi_static)
-            qp += d->C0 * lam * lam * u[i] * d->share;
+            qp += d->C0 * lam * lam * v_relax * d->share;
         vp = qp * d->inv_C0 * inv_lam2;
         bracket = d->VY / 3.0 * (lam - inv_lam2 * inv_lam) - qp * vp * inv_lam;
     } else {
@@ -454,19 +499,18 @@ static int det_cell(const ds_model *m, int64_t i, const double *x, const double 
         w->F[j] += coef * J[j];
     if (m->creep)
         dx[m->i_eps + i] = lzd - d->relax_M * eps;
-    double i_de;
-    if (m->rc_source) {
-        i_de = (u[i] - vp) * d->inv_Rs;
-        dx[m->i_qp + i] = u[i] * d->inv_Rs - (d->inv_Rs + d->inv_Rp) * vp;
-        if (quasi_static)   /* minus d(C v_inf)/dt, dC/dt = 2 C0 lam dlam/dt */
-            dx[m->i_qp + i] += 2.0 * d->C0 * lam * jqd * d->inv_l0 * u[i] * d->share;
-        pw->p_diss += (u[i] - vp) * i_de;
+    const det_state s = {lam, jqd, qp, vp, v_relax};
+    if (m->amp) {   /* the amplifier's laws of this step (amplifier.c) */
+        amplified_circuit(m, i, x, u, &s, quasi_static, dx, pw);
     } else {
-        /* q_p = C0 lam^2 v: i = dq_p/dt + v/Rp with dlambda/dt = -J.qdot / l0 */
-        i_de = -2.0 * d->C0 * lam * jqd * d->inv_l0 * vp + vp * d->inv_Rp;
+        double i_de;
+        if (m->rc_source)
+            i_de = rc_circuit(d, u[i], &s, quasi_static, &dx[m->i_qp + i], &pw->p_diss);
+        else   /* q_p = C0 lam^2 v: i = dq_p/dt + v/Rp with dlambda/dt = -J.qdot / l0 */
+            i_de = -2.0 * d->C0 * lam * jqd * d->inv_l0 * vp + vp * d->inv_Rp;
+        pw->p_in += u[i] * i_de;
+        pw->p_leak_in += u[i] * vp * d->inv_Rp;
     }
-    pw->p_in += u[i] * i_de;
-    pw->p_leak_in += u[i] * vp * d->inv_Rp;
     pw->p_diss += vp * vp * d->inv_Rp + d->volume * d->eta_v * lzd * lzd;
     if (m->creep)
         pw->p_diss += d->volume * d->E_M * d->relax_M * eps * eps;
@@ -540,7 +584,11 @@ int ds_stiff_rates(const ds_model *m, const double *x, double *L, ds_work *w, in
         const double lam = (m->cell[i].length - w->y[i]) / d->l0;
         if (!(lam > 0.0))
             return lam == lam ? DS_BAD_STRETCH : DS_BAD_SLOPE;
-        L[m->i_qp + i] = -(d->inv_Rs + d->inv_Rp) * d->inv_C0 / (lam * lam);
+        /* at the amplifier's current limit the charge relaxes through Rp only */
+        const double g = d->i_law == AMP_LINEAR ? d->inv_Rs + d->inv_Rp : d->inv_Rp;
+        L[m->i_qp + i] = -g * d->inv_C0 / (lam * lam);
+        if (m->amp_state)   /* v_a: exact in each law (a first-order lag, a ramp, held) */
+            L[m->i_va + i] = d->v_law == VA_FOLLOW ? -1.0 / d->amp_tau : 0.0;
     }
     return DS_OK;
 }
@@ -570,9 +618,11 @@ void ds_shift_charge(const ds_model *m, double *x, const double *u, double sign,
     for (int64_t i = 0; i < m->n_cells; i++) {
         const ds_det *d = &m->det[i];
         const double lam = (m->cell[i].length - w->y[i]) / d->l0;
-        work_in += u[i] * x[m->i_qp + i];
-        x[m->i_qp + i] += sign * d->C0 * lam * lam * u[i] * d->share;
-        work_out += u[i] * x[m->i_qp + i];
+        /* with an amplifier: against what its current law relaxes the charge to */
+        const double v = m->amp ? ds_amp_relax(m, i, x, u) : u[i];
+        work_in += v * x[m->i_qp + i];
+        x[m->i_qp + i] += sign * d->C0 * lam * lam * v * d->share;
+        work_out += v * x[m->i_qp + i];
     }
     if (m->power)
         x[m->i_power] += sign < 0.0 ? -work_in : work_out;

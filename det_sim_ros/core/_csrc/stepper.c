@@ -41,7 +41,7 @@ static void group_attach(ds_group *g, const ds_method *me, double *mem)
             g->coef[t * nx + k] = me->coef0[t];
     const ds_model *m = g->m;
     g->s0 = 2 * m->n_q + m->n_cells * m->creep;
-    g->s1 = g->s0 + (me->exponential && m->rc_source ? m->n_cells : 0);
+    g->s1 = g->s0 + (me->exponential && m->rc_source ? m->n_cells * (1 + m->amp_state) : 0);
     g->quasi_static = me->exponential && m->rc_source;
 }
 
@@ -58,7 +58,8 @@ static void view_arrays(ds_model *v, const ds_model *m, int64_t a, int64_t b, in
     v->mass_block = b - a;
     v->i_eps = 2 * v->n_q;
     v->i_qp = v->i_eps + v->n_cells * v->creep;
-    v->i_power = v->i_qp + v->n_cells * v->rc_source;
+    v->i_va = v->i_qp + v->n_cells * v->rc_source;
+    v->i_power = v->i_va + v->n_cells * v->amp_state;
     v->n_state = v->i_power + 2 * v->power;
     const int64_t g0 = m->cell[c0].g0;
     v->n_nodes = m->cell[c1 - 1].g1 - g0;

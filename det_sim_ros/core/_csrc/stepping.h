@@ -104,6 +104,10 @@ void ds_linear_reset(ds_linear *lin);
 int ds_linear_update(const ds_stepper *st, ds_group *g, const double *x, const double *u);
 const ds_lin_slot *ds_linear_weights(const ds_method *me, ds_linear *lin, double h,
                                      const ds_lin_slot *keep);
+/* One control period of one group of an amplified model (amplifier.c): steps of at most h
+ * (n_sub of them without switches), split where a law of the amplifier switches. */
+int ds_amp_period(const ds_stepper *st, ds_group *g, double *x, const double *u_old,
+                  const double *u, double h, int64_t n_sub);
 int ds_run(ds_stepper *st, ds_work *ow, double *x, const double *u_held, const double *u_last,
            const double *U, int64_t n, double *X, double *Y, int64_t *done);
 

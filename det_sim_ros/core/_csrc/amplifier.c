@@ -1,0 +1,352 @@
+/*
+ * The high-voltage amplifier in the supply circuit (det_sim_ros/scenes/amplifier.py, the
+ * numpy reference in det_sim_ros/physics/reference.py):
+ *
+ *   output voltage  dv_a/dt = clip((u - v_a) / tau_a, -S, S)   (tau_a = 1/(2 pi bandwidth);
+ *                   without a bandwidth v_a ramps at +-S to u; without either v_a = u)
+ *   supply current  i = clip((v_a - v_p) / Rs, -I, I),  dq_p/dt = i - v_p / Rp
+ *
+ * Both are piecewise smooth: each DET follows one law per step (ds_det.v_law: following,
+ * slewing up or down, held; ds_det.i_law: linear or at the limit), set at the step's start,
+ * and the steps end where a law switches. A slew ends at a time known in advance (v_a does not
+ * depend on the load); the current limit's switches depend on the state and are located: a step
+ * that ends with a DET's current past the switch is retried shorter (regula falsi on the step
+ * size) until it ends within LIMIT_MARGIN of the switch, on its far side. The limit law starts at
+ * |i| = I (1 - LIMIT_MARGIN) and holds while the linear law's current i_lin is beyond that on
+ * its own side, so the current never exceeds I, and at a switch it moves by at most
+ * 2 LIMIT_MARGIN I. (A step that leaves the limit and comes back within itself, e.g. a DET
+ * discharged through 0 V, is caught by the signed test.) Within a law everything is smooth, and each law's own linear part goes
+ * to the exponential stages (physics.c, ds_stiff_rates): at the limit the charge relaxes through
+ * Rp only, and v_a's rate is -1/tau_a when following, 0 otherwise; so no stiff term is left to
+ * the explicit stages. The supplied power is v_out i at the amplifier's terminal, v_out = v_a
+ * (linear) or v_p + Rs i (at the limit): what the amplifier delivers into Rs and the DET.
+ */
+#include <math.h>
+#include <string.h>
+
+#include "detsim.h"
+#include "stepping.h"
+
+#define LIMIT_MARGIN 1e-6   /* relative: the limit law starts at |i| = I (1 - LIMIT_MARGIN) */
+#define SLEW_MARGIN 1e-9    /* relative: a gap within S tau_a (1 + SLEW_MARGIN) is followed */
+#define MAX_LOCATE 60       /* regula falsi iterations to locate a current-limit switch */
+
+static inline int has_output_state(const ds_det *d)
+{
+    return d->amp_tau > 0.0 || d->amp_slew > 0.0;
+}
+
+/* The voltage behind Rs: the amplifier's output v_a, or the command when it has no lag. */
+static inline double source_voltage(const ds_model *m, const ds_det *d, int64_t i,
+                                    const double *x, const double *u)
+{
+    return m->amp_state && has_output_state(d) ? x[m->i_va + i] : u[i];
+}
+
+static int output_law(const ds_det *d, double u, double va)
+{
+    if (!has_output_state(d))
+        return VA_HOLD;
+    const double gap = u - va;
+    if (d->amp_slew > 0.0 && fabs(gap) > d->amp_slew * d->amp_tau * (1.0 + SLEW_MARGIN))
+        return gap > 0.0 ? VA_SLEW_UP : VA_SLEW_DOWN;
+    return d->amp_tau > 0.0 ? VA_FOLLOW : VA_HOLD;
+}
+
+static double output_rate(const ds_det *d, double u, double va)
+{
+    switch (d->v_law) {
+    case VA_FOLLOW: return (u - va) / d->amp_tau;
+    case VA_SLEW_UP: return d->amp_slew;
+    case VA_SLEW_DOWN: return -d->amp_slew;
+    default: return 0.0;
+    }
+}
+
+/* v_p of cell i from x (w->y from ds_kinematics), and its capacitance *cap. */
+static inline double det_voltage(const ds_model *m, int64_t i, const double *x,
+                                 const ds_work *w, double *cap)
+{
+    const ds_det *d = &m->det[i];
+    const double lam = (m->cell[i].length - w->y[i]) * d->inv_l0;
+    *cap = d->C0 * lam * lam;
+    return x[m->i_qp + i] / *cap;
+}
+
+/* The linear law's current over the limit, i_lin / I. */
+static inline double linear_share(const ds_model *m, int64_t i, const double *x,
+                                  const double *u, const ds_work *w)
+{
+    const ds_det *d = &m->det[i];
+    double cap;
+    const double vp = det_voltage(m, i, x, w, &cap);
+    return (source_voltage(m, d, i, x, u) - vp) * d->inv_Rs / d->amp_imax;
+}
+
+/* How far past the switch out of DET i's current law the state is (< 0: the law holds; the
+ * limit law holds while i_lin is beyond I (1 - LIMIT_MARGIN) on its own side). */
+static inline double past_switch(const ds_model *m, int64_t i, const double *x,
+                                 const double *u, const ds_work *w)
+{
+    const double s = linear_share(m, i, x, u, w), edge = 1.0 - LIMIT_MARGIN;
+    switch (m->det[i].i_law) {
+    case AMP_LIMIT_POS: return edge - s;
+    case AMP_LIMIT_NEG: return s + edge;
+    default: return fabs(s) - edge;
+    }
+}
+
+void ds_amp_laws(const ds_model *m, const double *x, const double *u, ds_work *w)
+{
+    ds_kinematics(m, x, w, 0);
+    for (int64_t i = 0; i < m->n_cells; i++) {
+        ds_det *d = &m->det[i];
+        d->v_law = m->amp_state ? output_law(d, u[i], x[m->i_va + i]) : VA_HOLD;
+        d->i_law = AMP_LINEAR;
+        if (d->amp_imax > 0.0) {
+            const double s = linear_share(m, i, x, u, w);
+            if (fabs(s) >= 1.0 - LIMIT_MARGIN)
+                d->i_law = s > 0.0 ? AMP_LIMIT_POS : AMP_LIMIT_NEG;
+        }
+    }
+}
+
+ds_amp_supply ds_amp_supply_of(const ds_model *m, int64_t i, const double *x, const double *u,
+                               double vp)
+{
+    const ds_det *d = &m->det[i];
+    ds_amp_supply s;
+    s.v_src = source_voltage(m, d, i, x, u);
+    s.v_src_rate = m->amp_state && has_output_state(d) ? output_rate(d, u[i], s.v_src) : 0.0;
+    if (d->i_law != AMP_LINEAR) {
+        s.current = d->i_law == AMP_LIMIT_POS ? d->amp_imax : -d->amp_imax;
+        s.v_out = vp + d->Rs * s.current;
+    } else {
+        s.current = (s.v_src - vp) * d->inv_Rs;
+        s.v_out = s.v_src;
+    }
+    return s;
+}
+
+double ds_amp_relax(const ds_model *m, int64_t i, const double *x, const double *u)
+{
+    const ds_det *d = &m->det[i];
+    return d->i_law == AMP_LINEAR ? source_voltage(m, d, i, x, u) : 0.0;
+}
+
+/* How far past its switch the current law of any DET ended (>= 0: a switch was passed). */
+static double passed_switch(const ds_model *m, const double *x, const double *u, ds_work *w)
+{
+    double worst = -INFINITY;
+    ds_kinematics(m, x, w, 0);
+    for (int64_t i = 0; i < m->n_cells; i++) {
+        const ds_det *d = &m->det[i];
+        if (!(d->amp_imax > 0.0))
+            continue;
+        const double past = past_switch(m, i, x, u, w);
+        if (past > worst)
+            worst = past;
+    }
+    return worst;
+}
+
+/* The time (from now) at which the first slewing output reaches its target band. */
+static double slew_end(const ds_model *m, const double *x, const double *u)
+{
+    double t = INFINITY;
+    for (int64_t i = 0; i < m->n_cells; i++) {
+        const ds_det *d = &m->det[i];
+        if (d->v_law != VA_SLEW_UP && d->v_law != VA_SLEW_DOWN)
+            continue;
+        const double ti = (fabs(u[i] - x[m->i_va + i]) - d->amp_slew * d->amp_tau)
+                          / d->amp_slew;
+        if (ti < t)
+            t = ti;
+    }
+    return t;
+}
+
+/* The slewing outputs whose ramp ends within this step of length h from x_start: exactly at
+ * their band's edge (the ramp is exact but for rounding); the charge follows a new slope. */
+static void finish_slews(const ds_model *m, double *x, const double *x_start, const double *u,
+                         double h, double t_now)
+{
+    for (int64_t i = 0; i < m->n_cells; i++) {
+        ds_det *d = &m->det[i];
+        if (d->v_law != VA_SLEW_UP && d->v_law != VA_SLEW_DOWN)
+            continue;
+        const double band = d->amp_slew * d->amp_tau;
+        const double ti = (fabs(u[i] - x_start[m->i_va + i]) - band) / d->amp_slew;
+        if (ti > h * (1.0 + 1e-12))
+            continue;
+        x[m->i_va + i] = d->v_law == VA_SLEW_UP ? u[i] - band : u[i] + band;
+        if (d->amp_tau == 0.0) {   /* held from here: the ramp's slope stops */
+            d->charge_t0 = t_now;
+            d->charge_dv = d->amp_slew * d->charge_tau;
+        } else {                   /* following from here: v_a bends on tau_a */
+            d->output_t0 = t_now;
+            d->output_dv = band;
+        }
+    }
+}
+
+/*
+ * The transients a control period starts with (see stepping.c, charge_transient): a command
+ * jump du moves the charge's target at once (no output lag) or through v_a (a bandwidth: v_a
+ * itself relaxes on tau_a, and the charge lags by about du tau/(tau + tau_a); a slew: the
+ * charge lags the ramp by S tau). w->y from ds_amp_laws.
+ */
+static void start_transients(const ds_model *m, const double *x, const double *u_old,
+                             const double *u, const ds_work *w)
+{
+    for (int64_t i = 0; i < m->n_cells; i++) {
+        ds_det *d = &m->det[i];
+        double cap;
+        det_voltage(m, i, x, w, &cap);
+        d->charge_tau = cap * d->Rs * d->share;   /* C (Rs || Rp) */
+        d->charge_t0 = d->output_t0 = 0.0;
+        d->charge_dv = d->output_dv = 0.0;
+        if (u[i] == u_old[i])
+            continue;
+        if (!m->amp_state || !has_output_state(d)) {
+            d->charge_dv = fabs(u[i] - u_old[i]);
+            continue;
+        }
+        const double gap = fabs(u[i] - x[m->i_va + i]);
+        if (d->v_law == VA_FOLLOW) {
+            d->output_dv = gap;
+            d->charge_dv = gap * d->charge_tau / (d->charge_tau + d->amp_tau);
+        } else if (d->v_law != VA_HOLD) {
+            d->charge_dv = fmin(gap, d->amp_slew * d->charge_tau);
+        }
+    }
+}
+
+/* The largest step a transient of size dv (V) on the time scale tau allows, ``since`` its start
+ * (the graded steps of stepping.c: fine tau (jump_ref/dv)^(1/5), growing like exp(t/(5 tau)),
+ * until the charge lag cap_share dv exp(-t/tau) is below z_tol). */
+static double graded(const ds_stepper *st, double tau, double dv, double cap_share,
+                     double since)
+{
+    if (!(tau > 0.0) || !(dv * cap_share > st->z_tol))
+        return INFINITY;
+    if (since >= tau * log(dv * cap_share / st->z_tol))
+        return INFINITY;
+    double fine = st->fine;
+    if (st->jump_ref > 0.0 && dv < st->jump_ref)
+        fine *= pow(st->jump_ref / dv, 0.2);
+    return fine * tau * exp(since / (5.0 * tau));
+}
+
+/* The largest step the transients still under way at time t of the period allow. */
+static double transient_bound(const ds_stepper *st, const ds_model *m, double t)
+{
+    double bound = INFINITY;
+    if (st->z_tol <= 0.0)
+        return bound;
+    for (int64_t i = 0; i < m->n_cells; i++) {
+        const ds_det *d = &m->det[i];
+        const double cap_share = d->charge_tau * d->inv_Rs;
+        if (d->i_law == AMP_LINEAR)
+            bound = fmin(bound, graded(st, d->charge_tau, d->charge_dv, cap_share,
+                                       t - d->charge_t0));
+        if (d->v_law == VA_FOLLOW)
+            bound = fmin(bound, graded(st, d->amp_tau, d->output_dv, cap_share,
+                                       t - d->output_t0));
+    }
+    return bound;
+}
+
+/* Retry the step just taken from x_start (ending past a current-limit switch) shorter until it
+ * ends at most LIMIT_MARGIN past the switch (Illinois regula falsi on the step size); *h
+ * receives its length. A DET that left its limit starts a charge transient (a lag of Rs I). */
+static int locate_switch(const ds_stepper *st, ds_group *g, double *x, const double *x_start,
+                         const double *u, double *h, double t)
+{
+    ds_model *m = g->m;
+    const size_t bytes = (size_t)m->n_state * sizeof(double);
+    double hi = *h, past_hi = passed_switch(m, x, u, &g->w);
+    if (past_hi < 0.0)
+        return DS_OK;
+    double lo = 0.0, f_lo = fmin(passed_switch(m, x_start, u, &g->w), 0.0), f_hi = past_hi;
+    int at_hi = 1, side = 0, status = DS_OK;
+    for (int it = 0; it < MAX_LOCATE && past_hi > LIMIT_MARGIN && hi - lo > 1e-15 * hi; it++) {
+        double h_try = lo - f_lo * (hi - lo) / (f_hi - f_lo);
+        if (!(h_try > lo && h_try < hi))
+            h_try = 0.5 * (lo + hi);
+        memcpy(x, x_start, bytes);
+        status = ds_advance(st, g, x, u, h_try, 1, 1.0);
+        if (status != DS_OK)
+            return status;
+        const double past = passed_switch(m, x, u, &g->w);
+        if (past >= 0.0) {
+            hi = h_try;
+            f_hi = past_hi = past;
+            if (side == 1)
+                f_lo *= 0.5;
+            side = 1;
+        } else {
+            lo = h_try;
+            f_lo = past;
+            if (side == -1)
+                f_hi *= 0.5;
+            side = -1;
+        }
+        at_hi = past >= 0.0;
+    }
+    if (!at_hi) {
+        memcpy(x, x_start, bytes);
+        status = ds_advance(st, g, x, u, hi, 1, 1.0);
+    }
+    *h = hi;
+    ds_kinematics(m, x, &g->w, 0);
+    for (int64_t i = 0; i < m->n_cells && status == DS_OK; i++) {
+        ds_det *d = &m->det[i];
+        if (d->i_law != AMP_LINEAR && past_switch(m, i, x, u, &g->w) >= 0.0) {
+            d->charge_t0 = t + hi;
+            d->charge_dv = d->Rs * d->amp_imax;
+        }
+    }
+    return status;
+}
+
+int ds_amp_period(const ds_stepper *st, ds_group *g, double *x, const double *u_old,
+                  const double *u, double h, int64_t n_sub)
+{
+    ds_model *m = g->m;
+    const size_t bytes = (size_t)m->n_state * sizeof(double);
+    const double dt = h * (double)n_sub;
+    double *x_start = g->w.dx;   /* free while stepping (the rate buffer of ds_outputs) */
+    int limited = 0;
+    for (int64_t i = 0; i < m->n_cells; i++)
+        limited |= m->det[i].amp_imax > 0.0;
+    memcpy(g->x0, x, bytes);
+    ds_amp_laws(m, x, u, &g->w);
+    start_transients(m, x, u_old, u, &g->w);
+    double t = 0.0;
+    int status = DS_OK;
+    while (status == DS_OK && dt - t > 1e-9 * h) {
+        ds_amp_laws(m, x, u, &g->w);
+        const double rest = dt - t, n_rest = ceil(rest / h - 1e-9);
+        double hs = rest / n_rest;
+        const double bound = transient_bound(st, m, t), t_slew = slew_end(m, x, u);
+        if (!limited && bound >= hs && t_slew >= rest * (1.0 + 1e-12)) {
+            /* no law can switch before the period's end and the graded bounds only grow:
+             * the rest in one call (the state-dependent current limit needs every step) */
+            status = ds_advance(st, g, x, u, hs, (int64_t)n_rest, 1.0);
+            break;
+        }
+        hs = fmin(hs, bound);
+        hs = fmin(hs, t_slew);
+        memcpy(x_start, x, bytes);
+        status = ds_advance(st, g, x, u, hs, 1, 1.0);
+        if (status == DS_OK && limited)
+            status = locate_switch(st, g, x, x_start, u, &hs, t);
+        if (status == DS_OK && m->amp_state)
+            finish_slews(m, x, x_start, u, hs, t + hs);
+        t += hs;
+    }
+    if (status != DS_OK)
+        memcpy(x, g->x0, bytes);
+    return status;
+}
