@@ -56,6 +56,9 @@ giving one on the command line overrides the file, e.g. `-p physics.Rs:=1.0e+3` 
 (`det_sim ... --set physics.Rs=1e3`, `load_scene('default', {'physics.Rs': 1e3})`). Units are
 SI. `dets.<DET name>.<physics key>` overrides one physics value for one DET. "default scene" is
 the value in `config/default.yaml` (the `structure` section is optional; its defaults are shown).
+The optional `sensors` section has one subsection per output topic whose `position` a sensor
+measures, `<topic>` = `displacement`, `deflection`, `charge` or `current`, its values in that
+channel's unit; every key is off by default ([realism.md](realism.md#sensors)).
 
 | key | type | range or choices | unit | default scene | meaning |
 | --- | --- | --- | --- | --- | --- |
@@ -149,6 +152,10 @@ def scene_rows() -> list:
     rows = [scene_row(f'{section}.{key}', spec, values[section].get(key))
             for section, specs in sections.items() for key, spec in specs.items()]
     rows += [scene_row(key, spec, values.get(key)) for key, spec in scene.TOP_SPEC.items()]
+    from det_sim_ros.scenes import sensors
+    rows.append(scene_row('sensors.seed', sensors.SEED_SPEC, 0))
+    rows += [scene_row(f'sensors.<topic>.{key}', spec, sensors.SENSOR_DEFAULTS[key])
+             for key, spec in sensors.SENSOR_SPEC.items()]
     return rows
 
 

@@ -27,6 +27,7 @@ from .files import find_config, read_scene_file, resolve_base, unwrap_ros_params
 from .keys import (BEAMS, check_value, FIDELITIES, INITIAL_STATES, INTEGRATOR_SPEC,
                    PHYSICS_SPEC, REST_BRANCHES, SCENE_SPEC, SceneError, SECTION_DEFAULTS,
                    SECTIONS, SOURCES, STRUCTURE_DEFAULTS, STRUCTURE_SPEC, STRUCTURES, TOP_SPEC)
+from .sensors import check_sensors, Sensors, sensors_to_dict
 
 __all__ = ['SceneError', 'Physics', 'Scene', 'load_scene', 'scene_to_dict', 'find_config',
            'BEAMS', 'FIDELITIES', 'SOURCES', 'STRUCTURES', 'INITIAL_STATES', 'REST_BRANCHES']
@@ -102,6 +103,7 @@ class Scene:
     dets: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
     initial_state: str = 'rest'     # 'rest' | 'released' (INITIAL_STATES)
     rest_branch: str = 'buckled+'   # 'buckled+' | 'buckled-' (REST_BRANCHES)
+    sensors: Sensors = Sensors()    # what each output topic's sensor does (default: nothing)
 
     @property
     def det_names(self) -> tuple:
@@ -196,11 +198,11 @@ def _override_value(value):
 
 def _checked_values(data):
     """Return (section, key) -> checked value of every section key and top-level key ('', key)."""
-    unknown = set(data) - set(SECTIONS) - set(TOP_SPEC) - {'node', 'structure', 'dets'}
+    optional = ['structure', 'dets', 'sensors', 'node']
+    unknown = set(data) - set(SECTIONS) - set(TOP_SPEC) - set(optional)
     if unknown:
         raise SceneError(f'unknown scene key {sorted(unknown)[0]!r}; known sections: '
-                         + ', '.join(list(SECTIONS) + list(TOP_SPEC)
-                                     + ['structure', 'dets', 'node']))
+                         + ', '.join(list(SECTIONS) + list(TOP_SPEC) + optional))
     values = {}
     for section, spec in SECTIONS.items():
         content = data.get(section)
@@ -274,10 +276,12 @@ def load_scene(source: Any = 'default', overrides: Mapping[str, Any] | None = No
         raise SceneError(f"scene key 'node': must be a mapping (got {node!r})")
 
     structure, dets = _check_structure(data)
+    sensors = check_sensors(data.get('sensors'))
     physics = Physics(**{k: values[('physics', k)] for k in PHYSICS_SPEC})
     scene = Scene(**{k: values[('scene', k)] for k in SCENE_SPEC}, physics=physics,
                   **{k: values[('integrator', k)] for k in INTEGRATOR_SPEC},
-                  rate_hz=values[('', 'rate_hz')], node=node, structure=structure, dets=dets)
+                  rate_hz=values[('', 'rate_hz')], node=node, structure=structure, dets=dets,
+                  sensors=sensors)
     _check_consistency(scene)
     return scene
 
@@ -337,6 +341,9 @@ def scene_to_dict(scene: Scene, wrap: bool = False) -> dict:
     data['structure'] = copy.deepcopy(dict(scene.structure))
     if scene.dets:
         data['dets'] = copy.deepcopy({k: dict(v) for k, v in scene.dets.items()})
+    sensors = sensors_to_dict(scene.sensors)
+    if sensors:   # (only when set: a scene without sensors reads and logs as before)
+        data['sensors'] = sensors
     if scene.node:
         data['node'] = copy.deepcopy(dict(scene.node))
     return {'sim_node': {'ros__parameters': data}} if wrap else data
