@@ -1,0 +1,166 @@
+"""
+Sensed outputs: the messages of a sample as the scene's sensors read it, and the truth beside it.
+
+With sensors in the scene (:mod:`det_sim_ros.scenes.sensors`) every output topic carries what
+its sensor reads (:class:`~det_sim_ros.sim.sensors.SensorBank`), and each sensed topic's true
+values go on ``~/truth/<topic>`` (the node's private namespace: ``sim_node/truth/<topic>``
+relative to its namespace), the same type. A sample a sensor drops is not published on that
+topic; its truth still is. Without sensors the outputs are the plain contract's
+(:class:`PlainOutputs`), byte for byte as before. No ROS here: the node, the offline recorder
+(:func:`det_sim_ros.io.replay.simulate_to_log`) and re-simulation use the same objects.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .contract import JOINT_STATE, OutputContract, RELATIVE_TO_Y0, TOPIC_TYPES
+from ..core.kernel import SampleCodec
+from ..sim.sensors import SensorBank
+
+__all__ = ['TRUTH', 'truth_topic', 'is_truth_topic', 'PlainOutputs', 'SensedOutputs',
+           'make_outputs', 'SensorReadings', 'measured_run']
+
+TRUTH = 'truth'
+
+
+def truth_topic(topic: str, node_name: str = 'sim_node') -> str:
+    """Return the truth topic of an output, relative to the node's namespace (~/truth/topic)."""
+    return f'{node_name}/{TRUTH}/{topic}'
+
+
+def is_truth_topic(name: str) -> bool:
+    """Return True if a logged topic name is a truth topic ('/ns/sim_node/truth/charge')."""
+    parts = name.strip('/').split('/')
+    return len(parts) >= 2 and parts[-2] == TRUTH
+
+
+class PlainOutputs:
+    """A sample's messages without sensors: the contract's bytes of every output topic."""
+
+    sensed = ()
+    truth_topics = ()
+
+    def __init__(self, contract: OutputContract):
+        self._encoder = contract.encoder()
+        self.topics = tuple(self._encoder.topics)
+
+    def encode(self, k: int, out, t_ns: int) -> list:
+        """Return the bytes of each output topic (then truth topic) for sample ``k``."""
+        return self._encoder.encode(out, t_ns)
+
+    def record(self, recorder, t_ns: int, samples) -> None:
+        """Hand a sample's messages to the MCAP recorder."""
+        recorder.record_sample(t_ns, self.topics, samples, TOPIC_TYPES)
+
+
+class SensedOutputs:
+    """
+    A sample's messages with sensors: measured output topics, then the sensed topics' truth.
+
+    :meth:`encode` returns the bytes per output topic (None where the sensor dropped the
+    sample), then per sensed topic its truth's bytes. The measured bytes are one compiled call
+    (the contract's :class:`~det_sim_ros.io.contract.SampleWire` reading the sensed positions
+    from the readings appended to the output vector), as are the truth's.
+
+    :param n_outputs: the length of the simulator's output vector.
+    """
+
+    def __init__(self, contract: OutputContract, sensors, dt: float, n_outputs: int,
+                 node_name: str = 'sim_node'):
+        truth = contract.encoder()
+        self.topics = tuple(truth.topics)
+        self.sensed = tuple(sensors.active)
+        n = len(contract.det_names)
+        self.bank = SensorBank(sensors, [(topic, n) for topic in self.sensed], dt)
+        self.truth_topics = tuple(truth_topic(topic, node_name) for topic in self.sensed)
+        self.types = {**TOPIC_TYPES, **{topic: JOINT_STATE for topic in self.truth_topics}}
+        self._truth = truth
+        self._truth_index = [self.topics.index(topic) for topic in self.sensed]
+        wire = truth.wire
+        source, op = wire.source.copy(), wire.op.copy()
+        channels = []   # per sensed channel: (output index, y0 or None)
+        for topic in self.sensed:
+            slot = truth.slots[(topic, 'position')]
+            for i in range(slot.start, slot.stop):
+                channels.append((int(wire.source[i]), float(wire.a[i]) if wire.op[i] else None))
+                source[i], op[i] = n_outputs + len(channels) - 1, 0
+        self._channels = channels
+        self._source = np.array([i for i, _ in channels], dtype=np.intp)
+        self._relative = np.array([y0 is not None for _, y0 in channels])
+        self._y0 = np.array([y0 or 0.0 for _, y0 in channels])
+        self._measured = SampleCodec(dataclasses.replace(wire, source=source, op=op))
+        self._sensed_index = [self.topics.index(topic) for topic in self.sensed]
+        self._logged = {}   # dropped flags -> (topics, indices) of the logged messages
+
+    def true_values(self, out):
+        """Return the sensed channels' true published values (a list, or an array if many)."""
+        if self.bank.vectorised:
+            values = np.asarray(out)[self._source]
+            return np.where(self._relative, self._y0 - values, values)
+        values = out.tolist() if hasattr(out, 'tolist') else list(out)
+        return [values[i] if y0 is None else y0 - values[i] for i, y0 in self._channels]
+
+    def encode(self, k: int, out, t_ns: int) -> list:
+        """Return sample ``k``'s measured bytes per output topic (None: dropped), then truth."""
+        readings, dropped = self.bank.measure(k, self.true_values(out))
+        vector = np.concatenate((out, readings))
+        measured = self._measured.encode(vector, t_ns)
+        for i, gone in zip(self._sensed_index, dropped):
+            if gone:
+                measured[i] = None
+        truth = self._truth.encode(out, t_ns)
+        return measured + [truth[i] for i in self._truth_index]
+
+    def record(self, recorder, t_ns: int, samples) -> None:
+        """Hand a sample's messages (the published measured ones and the truth) to the log."""
+        key = tuple(data is None for data in samples)
+        plan = self._logged.get(key)
+        if plan is None:
+            names = self.topics + self.truth_topics
+            indices = [i for i, gone in enumerate(key) if not gone]
+            plan = self._logged[key] = (tuple(names[i] for i in indices), indices)
+        topics, indices = plan
+        recorder.record_sample(t_ns, topics, [samples[i] for i in indices], self.types)
+
+
+def make_outputs(contract: OutputContract, scene, n_outputs: int, node_name: str = 'sim_node'):
+    """Return the scene's sample messages: :class:`SensedOutputs` with sensors, else plain."""
+    if not scene.sensors:
+        return PlainOutputs(contract)
+    return SensedOutputs(contract, scene.sensors, scene.dt, n_outputs, node_name)
+
+
+@dataclasses.dataclass
+class SensorReadings:
+    """One sensed topic over an offline run: per sample and DET, true and measured, received."""
+
+    truth: np.ndarray      # (samples, DETs), the channel's unit
+    measured: np.ndarray   # (samples, DETs): what the sensor read (also where dropped)
+    received: np.ndarray   # (samples,) bool: False where the sample was not published
+
+
+def measured_run(sim, result) -> dict:
+    """
+    Return topic -> :class:`SensorReadings` of an offline run (:func:`simulate`'s result).
+
+    The same readings the node publishes for the same run (samples from ``result.t[0]``).
+    """
+    sensors = sim.scene.sensors
+    contract = OutputContract(sim.model)
+    outputs = np.column_stack([result[name] for name in sim.output_names])
+    n = len(contract.det_names)
+    topics = list(sensors.active)
+    columns = [np.zeros((len(outputs), 0))]
+    for topic in topics:
+        values = outputs[:, contract.index[(topic, 'position')]]
+        columns.append(contract.y0 - values if (topic, 'position') in RELATIVE_TO_Y0 else values)
+    truth = np.hstack(columns)
+    bank = SensorBank(sensors, [(topic, n) for topic in topics], sim.dt)
+    k0 = int(round(result.t[0] / sim.dt))
+    measured, dropped = bank.measure_run(truth, k0)
+    return {topic: SensorReadings(truth[:, j * n:(j + 1) * n], measured[:, j * n:(j + 1) * n],
+                                  ~dropped[:, j])
+            for j, topic in enumerate(topics)}
