@@ -2,12 +2,11 @@
 
 import math
 
-import numpy as np
-import pytest
-
 from det_sim_ros.scenes.scene import load_scene, scene_to_dict, SceneError
 from det_sim_ros.sim import sensors as sensor_module
 from det_sim_ros.sim.sensors import BLOCK, NoiseStreams, SensorBank
+import numpy as np
+import pytest
 
 N = 60000
 DT = 1e-3
@@ -70,7 +69,7 @@ def test_quantization_bias_and_saturation_are_exact():
 
 
 def test_same_seed_identical_other_seed_different():
-    knobs = dict(noise_std=1e-6, correlation_time=0.01, dropout=0.2)
+    knobs = {'noise_std': 1e-6, 'correlation_time': 0.01, 'dropout': 0.2}
     layout = (('displacement', 2), ('charge', 2))
     runs = [bank(layout, seed, **knobs).measure_run(np.zeros((3000, 4))) for seed in (5, 5, 6)]
     assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
@@ -98,8 +97,8 @@ def test_draws_are_keyed_by_sample_index_not_by_call_order():
 
 
 def test_list_and_array_paths_give_the_same_readings(monkeypatch):
-    knobs = dict(noise_std=1e-6, correlation_time=0.003, quantization=1e-7, bias=2e-7,
-                 delay_samples=3, dropout=0.05, range_min=-2e-6, range_max=2e-6)
+    knobs = {'noise_std': 1e-6, 'correlation_time': 0.003, 'quantization': 1e-7, 'bias': 2e-7,
+             'delay_samples': 3, 'dropout': 0.05, 'range_min': -2e-6, 'range_max': 2e-6}
     layout = (('displacement', 2), ('current', 2))
     truth = np.random.default_rng(1).normal(size=(3000, 4)) * 1e-6
     listed = bank(layout, **knobs)

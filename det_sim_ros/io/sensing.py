@@ -55,6 +55,11 @@ class PlainOutputs:
         """Hand a sample's messages to the MCAP recorder."""
         recorder.record_sample(t_ns, self.topics, samples, TOPIC_TYPES)
 
+    @staticmethod
+    def heard(samples) -> bool:
+        """Return True if the sample's displacement is published (a controller answers it)."""
+        return True
+
 
 class SensedOutputs:
     """
@@ -93,6 +98,7 @@ class SensedOutputs:
         self._y0 = np.array([y0 or 0.0 for _, y0 in channels])
         self._measured = SampleCodec(dataclasses.replace(wire, source=source, op=op))
         self._sensed_index = [self.topics.index(topic) for topic in self.sensed]
+        self._displacement = self.topics.index('displacement')
         self._logged = {}   # dropped flags -> (topics, indices) of the logged messages
 
     def true_values(self, out):
@@ -113,6 +119,10 @@ class SensedOutputs:
                 measured[i] = None
         truth = self._truth.encode(out, t_ns)
         return measured + [truth[i] for i in self._truth_index]
+
+    def heard(self, samples) -> bool:
+        """Return True if the sample's displacement is published (a controller answers it)."""
+        return samples[self._displacement] is not None
 
     def record(self, recorder, t_ns: int, samples) -> None:
         """Hand a sample's messages (the published measured ones and the truth) to the log."""

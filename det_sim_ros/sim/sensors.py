@@ -186,6 +186,7 @@ class SensorBank:
             self._path.block(self._offset, self._dropped)
             row = k - self._block * BLOCK
         return self._path.measure(k, row, values)
+
     def measure_run(self, values: np.ndarray, k0: int = 0):
         """
         Return (readings, dropped) of a whole run: ``values`` (n, channels) from sample ``k0``.
