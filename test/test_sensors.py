@@ -192,3 +192,12 @@ def test_every_knob_off_logs_the_same_bytes(tmp_path):
         logs.append([(m.topic, m.log_time, bytes(m.data))
                      for m in LogReader(str(tmp_path / f'{name}.mcap')).messages()])
     assert logs[0] == logs[1]
+
+
+def test_laser_preset_is_the_default_scene_read_by_a_laser_sensor():
+    preset, default = load_scene('sensor_laser'), load_scene('default')
+    assert preset.physics == default.physics and preset.rate_hz == default.rate_hz
+    assert list(preset.sensors.active) == ['displacement']
+    laser = preset.sensors.displacement
+    assert laser.quantization * 2 ** 16 == laser.range_max - laser.range_min == 0.01
+    assert 0 < laser.noise_std < laser.quantization * 10 and laser.delay_samples == 1
