@@ -185,10 +185,8 @@ class _Resim:
         """Read the current sample through the scene's sensors (each sample once, in order)."""
         if self.sensing is None:
             return
-        import numpy as np
-        values, dropped = self.sensing.bank.measure(
-            self.sim.k, self.sensing.true_values(self.current))
-        values, n = np.asarray(values, dtype=float), len(self.det_names)
+        values, dropped = self.sensing.bank.measure(self.sim.k, self.current)
+        values, n = values.copy(), len(self.det_names)
         self.readings = {topic: (values[j * n:(j + 1) * n], dropped[j])
                          for j, topic in enumerate(self.sensing.sensed)}
 

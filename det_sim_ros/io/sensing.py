@@ -16,7 +16,7 @@ import dataclasses
 
 import numpy as np
 
-from .contract import JOINT_STATE, OutputContract, RELATIVE_TO_Y0, TOPIC_TYPES
+from .contract import JOINT_STATE, OutputContract, RELATIVE_TO_Y0, SampleWire, TOPIC_TYPES
 from ..core.kernel import SampleCodec
 from ..sim.sensors import SensorBank
 
@@ -79,10 +79,8 @@ class SensedOutputs:
         self.topics = tuple(truth.topics)
         self.sensed = tuple(sensors.active)
         n = len(contract.det_names)
-        self.bank = SensorBank(sensors, [(topic, n) for topic in self.sensed], dt)
         self.truth_topics = tuple(truth_topic(topic, node_name) for topic in self.sensed)
         self.types = {**TOPIC_TYPES, **{topic: JOINT_STATE for topic in self.truth_topics}}
-        self._truth = truth
         self._truth_index = [self.topics.index(topic) for topic in self.sensed]
         wire = truth.wire
         source, op = wire.source.copy(), wire.op.copy()
@@ -92,33 +90,24 @@ class SensedOutputs:
             for i in range(slot.start, slot.stop):
                 channels.append((int(wire.source[i]), float(wire.a[i]) if wire.op[i] else None))
                 source[i], op[i] = n_outputs + len(channels) - 1, 0
-        self._channels = channels
-        self._source = np.array([i for i, _ in channels], dtype=np.intp)
-        self._relative = np.array([y0 is not None for _, y0 in channels])
-        self._y0 = np.array([y0 or 0.0 for _, y0 in channels])
-        self._measured = SampleCodec(dataclasses.replace(wire, source=source, op=op))
+        self.bank = SensorBank(sensors, [(topic, n) for topic in self.sensed], dt,
+                               [i for i, _ in channels], [y0 for _, y0 in channels], n_outputs)
+        measured = dataclasses.replace(wire, source=source, op=op)
+        self._codec = SampleCodec(_with_messages_of(measured, wire, self._truth_index))
         self._sensed_index = [self.topics.index(topic) for topic in self.sensed]
         self._displacement = self.topics.index('displacement')
         self._logged = {}   # dropped flags -> (topics, indices) of the logged messages
 
-    def true_values(self, out):
-        """Return the sensed channels' true published values (a list, or an array if many)."""
-        if self.bank.vectorised:
-            values = np.asarray(out)[self._source]
-            return np.where(self._relative, self._y0 - values, values)
-        values = out.tolist() if hasattr(out, 'tolist') else list(out)
-        return [values[i] if y0 is None else y0 - values[i] for i, y0 in self._channels]
-
     def encode(self, k: int, out, t_ns: int) -> list:
         """Return sample ``k``'s measured bytes per output topic (None: dropped), then truth."""
-        readings, dropped = self.bank.measure(k, self.true_values(out))
-        vector = np.concatenate((out, readings))
-        measured = self._measured.encode(vector, t_ns)
-        for i, gone in zip(self._sensed_index, dropped):
-            if gone:
-                measured[i] = None
-        truth = self._truth.encode(out, t_ns)
-        return measured + [truth[i] for i in self._truth_index]
+        bank = self.bank
+        _, dropped = bank.measure(k, out)
+        samples = self._codec.encode(bank.vector, t_ns)   # measured, then truth: one call
+        if True in dropped:
+            for i, gone in zip(self._sensed_index, dropped):
+                if gone:
+                    samples[i] = None
+        return samples
 
     def heard(self, samples) -> bool:
         """Return True if the sample's displacement is published (a controller answers it)."""
@@ -134,6 +123,27 @@ class SensedOutputs:
             plan = self._logged[key] = (tuple(names[i] for i in indices), indices)
         topics, indices = plan
         recorder.record_sample(t_ns, topics, [samples[i] for i in indices], self.types)
+
+
+def _with_messages_of(wire: SampleWire, other: SampleWire, messages) -> SampleWire:
+    """Return ``wire`` with messages ``messages`` of ``other`` appended (bytes and values)."""
+    template, starts = [wire.template], list(wire.message_start)
+    stamps = list(wire.stamp_position)
+    extra = {name: [getattr(wire, name)] for name in ('source', 'op', 'a', 'b', 'position')}
+    for m in messages:
+        begin, end = int(other.message_start[m]), int(other.message_start[m + 1])
+        shift = starts[-1] - begin
+        template.append(other.template[begin:end])
+        starts.append(starts[-1] + end - begin)
+        stamps.append(int(other.stamp_position[m]) + shift)
+        inside = (other.position >= begin) & (other.position < end)
+        for name in ('source', 'op', 'a', 'b'):
+            extra[name].append(getattr(other, name)[inside])
+        extra['position'].append(other.position[inside] + shift)
+    return SampleWire(template=b''.join(template),
+                      message_start=np.array(starts, dtype=np.int64),
+                      stamp_position=np.array(stamps, dtype=np.int64),
+                      **{name: np.concatenate(parts) for name, parts in extra.items()})
 
 
 def make_outputs(contract: OutputContract, scene, n_outputs: int, node_name: str = 'sim_node'):
@@ -169,7 +179,7 @@ def measured_run(sim, result) -> dict:
         columns.append(contract.y0 - values if (topic, 'position') in RELATIVE_TO_Y0 else values)
     truth = np.hstack(columns)
     bank = SensorBank(sensors, [(topic, n) for topic in topics], sim.dt)
-    k0 = int(round(result.t[0] / sim.dt))
+    k0 = int(round(result.t[0] / sim.dt))   # (the true values are given: source j = value j)
     measured, dropped = bank.measure_run(truth, k0)
     return {topic: SensorReadings(truth[:, j * n:(j + 1) * n], measured[:, j * n:(j + 1) * n],
                                   ~dropped[:, j])

@@ -16,22 +16,20 @@ sample is a few vector operations.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Sequence
 
 import numpy as np
 
-__all__ = ['BLOCK', 'NoiseStreams', 'SensorBank']
+from ..core.kernel import SensorReader
+
+__all__ = ['BLOCK', 'NoiseStreams', 'SensorBank', 'ReaderFields']
 
 BLOCK = 1024                    # sample indices per block of variates (aligned: k // BLOCK)
 _KEY_TAG = 0x6465745f73656e73   # the key's second word ('det_sens'): streams of this model
 _DROPOUT_DET = 0                # a message's dropout draw: word 2 of its topic's DET 0 stream
 _TO_UNIT = 2.0 ** -53
-# up to this many channels a sample is read in Python floats (a numpy operation on a few values
-# costs about 1 us, 20x a float operation); above, in numpy vectors. Both do the same IEEE
-# operations in the same order, so they give the same readings bit for bit.
-_LIST_LIMIT = 8
-_WHOLE = 2.0 ** 52   # beyond it a float is a whole number: nothing to round (and no overflow)
 
 
 class NoiseStreams:
@@ -61,17 +59,43 @@ class NoiseStreams:
         return normals, (words[:, 2] >> np.uint64(11)) * _TO_UNIT
 
 
+@dataclasses.dataclass(frozen=True)
+class ReaderFields:
+    """
+    The named fields the compiled reader (``_ckernel.SensorReader``) is built from.
+
+    Per channel: the output it reads (``source``), whether the value is ``y0 - output``
+    (``relative``, the displacement), its ``delay`` in samples, quantization ``step`` (0: none)
+    and saturation range [``low``, ``high``]; the output vector's length ``n_outputs``.
+    """
+
+    source: np.ndarray     # int64
+    relative: np.ndarray   # int64, 0 or 1
+    delay: np.ndarray      # int64
+    y0: np.ndarray         # float64
+    step: np.ndarray       # float64
+    low: np.ndarray        # float64
+    high: np.ndarray       # float64
+    n_outputs: int
+
+
 class SensorBank:
     """
     The sensors of the sensed topics, over one vector of channels.
 
     :param sensors: the scene's :class:`~det_sim_ros.scenes.sensors.Sensors`.
-    :param layout: (topic, channels) of each sensed topic, in the order their values are
-        concatenated in the vectors given to :meth:`measure` (channel j of a topic is DET j).
+    :param layout: (topic, channels) of each sensed topic, in channel order (channel j of a
+        topic is DET j).
     :param dt: the control period, s (for the correlation time).
+    :param source: per channel, the index of its true value in the vectors given to
+        :meth:`measure` (default: channel j is value j).
+    :param y0: per channel, None, or y0 when the true value is y0 - the vector's value.
+    :param n_outputs: the length of the vectors given to :meth:`measure` (default: channels).
     """
 
-    def __init__(self, sensors, layout: Sequence[tuple[str, int]], dt: float):
+    def __init__(self, sensors, layout: Sequence[tuple[str, int]], dt: float,
+                 source: Sequence[int] | None = None, y0: Sequence | None = None,
+                 n_outputs: int | None = None):
         from ..scenes.sensors import SENSOR_TOPICS
         self.topics = [topic for topic, _ in layout]
         specs = [(SENSOR_TOPICS[topic], getattr(sensors, topic), n) for topic, n in layout]
@@ -90,23 +114,28 @@ class SensorBank:
         self._drive = np.sqrt(-np.expm1(-2.0 * ratio))      # sqrt(1 - a^2)
         self._noisy = self._sigma > 0.0
         quant = column(lambda s: s.quantization)
-        self._quantized = quant > 0.0
-        self._step = np.where(self._quantized, quant, 1.0)
-        self._low = column(lambda s: s.range_min if s.saturates else -math.inf)
-        self._high = column(lambda s: s.range_max if s.saturates else math.inf)
-        self._saturates = bool(np.isfinite(self._low).any())
-        self._delay = column(lambda s: s.delay_samples).astype(np.intp)
-        self._max_delay = int(self._delay.max()) if self._delay.size else 0
+        size = len(self._channels)
+        n_outputs = size if n_outputs is None else int(n_outputs)
+        y0 = [None] * size if y0 is None else list(y0)
+        self.fields = ReaderFields(
+            source=np.arange(size, dtype=np.int64) if source is None
+            else np.array(source, dtype=np.int64),
+            relative=np.array([v is not None for v in y0], dtype=np.int64),
+            delay=column(lambda s: s.delay_samples).astype(np.int64),
+            y0=np.array([0.0 if v is None else float(v) for v in y0]),
+            step=np.where(quant > 0.0, quant, 0.0),
+            low=column(lambda s: s.range_min if s.saturates else -math.inf),
+            high=column(lambda s: s.range_max if s.saturates else math.inf),
+            n_outputs=n_outputs)
+        self._reader = SensorReader(self.fields)
+        self.vector = np.zeros(n_outputs + size)   # read(): the output vector, the readings
+        self.readings = self.vector[n_outputs:]
         self._dropout = np.array([spec.dropout for _, spec, _ in specs])
         self._drops = bool((self._dropout > 0.0).any())
         self._topic_first = np.cumsum([0] + [n for _, _, n in specs])[:-1]
-        self._no_drop = np.zeros(len(specs), dtype=bool)
-        self._columns = np.arange(len(self._channels))
+        self._no_drop = (False,) * len(specs)
         self._block = -1
-        self.vectorised = self.size > _LIST_LIMIT
-        self._path = (_ArrayPath if self.vectorised else _ListPath)(self)
         self._ou_end: dict[int, np.ndarray] = {}   # block -> coloured noise at its last sample
-        self._last_k = None
 
     @property
     def size(self) -> int:
@@ -118,21 +147,26 @@ class SensorBank:
         """Make the offsets (bias + noise) and dropout flags of every sample of ``block``."""
         start = block * BLOCK
         normals = np.zeros((BLOCK, self.size))
+        draws = {}   # (det, topic) -> (normals, uniforms): one Philox run per stream and block
         for j, (topic_id, det) in enumerate(self._channels):
             if self._noisy[j]:
-                normals[:, j] = self._streams.draws(det, topic_id, start, BLOCK)[0]
+                draws[det, topic_id] = self._streams.draws(det, topic_id, start, BLOCK)
+                normals[:, j] = draws[det, topic_id][0]
         noise = normals * self._sigma
         if self._coloured.any():
             previous = self._ou_state_before(block)
             noise[:, self._coloured] = self._coloured_block(
                 normals[:, self._coloured], previous, block)
-        self._offset = noise + self._bias
-        self._dropped = np.zeros((BLOCK, len(self.topics)), dtype=bool)
-        for i, p in enumerate(self._dropout):
-            if p > 0.0:
+        self._offset = np.ascontiguousarray(noise + self._bias)
+        if self._drops:
+            columns = []
+            for i, p in enumerate(self._dropout):
                 topic_id = self._channels[self._topic_first[i]][0]
-                uniforms = self._streams.draws(_DROPOUT_DET, topic_id, start, BLOCK)[1]
-                self._dropped[:, i] = uniforms < p
+                key = (_DROPOUT_DET, topic_id)
+                if key not in draws and p > 0.0:
+                    draws[key] = self._streams.draws(*key, start, BLOCK)
+                columns.append((draws[key][1] < p).tolist() if p > 0.0 else [False] * BLOCK)
+            self._dropped = list(zip(*columns))   # per sample: a tuple of flags per topic
         self._block = block
 
     def _ou_state_before(self, block: int):
@@ -169,115 +203,33 @@ class SensorBank:
         return x
 
     # -- samples ---------------------------------------------------------------------------------
-    def measure(self, k: int, values):
+    def measure(self, k: int, out):
         """
-        Return (the readings, dropped) for sample ``k`` of the channels' true ``values``.
+        Return (the readings, dropped) for sample ``k`` of the output vector ``out``.
 
-        ``dropped``: per sensed topic, True if sample k is not published. Calls go in sample
-        order; a ``k`` that does not follow the last call starts the delay line over (a reset).
-        With :attr:`vectorised` values and readings are arrays, else lists of floats.
+        The readings are :attr:`readings`, a view that the next call overwrites (and
+        :attr:`vector` holds ``out`` before them); ``dropped``: per sensed topic, True if
+        sample k is not published. Calls go in sample order; a ``k`` that does not follow the
+        last call starts the delay line over (a reset). One compiled call per sample.
         """
-        if self._last_k is None or k != self._last_k + 1:
-            self._path.restart(k, values)
-        self._last_k = k
         row = k - self._block * BLOCK
         if not 0 <= row < BLOCK:
             self._fill(k // BLOCK)
-            self._path.block(self._offset, self._dropped)
             row = k - self._block * BLOCK
-        return self._path.measure(k, row, values)
+        self._reader.read(out, k, self._offset, row, self.vector)
+        return self.readings, (self._dropped[row] if self._drops else self._no_drop)
 
     def measure_run(self, values: np.ndarray, k0: int = 0):
         """
-        Return (readings, dropped) of a whole run: ``values`` (n, channels) from sample ``k0``.
+        Return (readings, dropped) of a whole run: ``values`` (n, inputs) from sample ``k0``.
 
-        ``dropped`` is (n, topics); the same numbers as n calls of :meth:`measure`.
+        ``dropped`` is (n, topics); the same numbers as n calls of :meth:`measure` (a run of
+        its own: the delay line starts at ``k0``).
         """
-        values = np.asarray(values, dtype=float)
-        readings = np.empty_like(values)
+        values = np.ascontiguousarray(values, dtype=float)
+        readings = np.empty((len(values), self.size))
         dropped = np.empty((len(values), len(self.topics)), dtype=bool)
-        self._last_k = None
+        self._reader = SensorReader(self.fields)   # a run of its own
         for i, row in enumerate(values):
             readings[i], dropped[i] = self.measure(k0 + i, row)
-        self._last_k = None
         return readings, dropped
-
-
-def _quantized(reading: float, step: float) -> float:
-    """Return ``reading`` rounded to a multiple of ``step`` (half to even), as _ArrayPath."""
-    levels = reading / step
-    return round(levels) * step if abs(levels) < _WHOLE else reading
-
-
-class _ListPath:
-    """A sample's reading in Python floats (few channels)."""
-
-    def __init__(self, bank: SensorBank):
-        self.delays = bank._delay.tolist()
-        self.max_delay = bank._max_delay
-        # per channel: (step or 0, lower limit, upper limit)
-        self.channels = list(zip([float(q) if on else 0.0
-                                  for q, on in zip(bank._step, bank._quantized)],
-                                 bank._low.tolist(), bank._high.tolist()))
-        self.no_drop = tuple(bank._no_drop.tolist())
-        self.drops = bank._drops
-
-    def restart(self, k: int, values) -> None:
-        self.first = k
-        self.rows = self.max_delay + 1
-        self.history = [list(values)] * self.rows
-
-    def block(self, offset, dropped) -> None:
-        self.offset = offset.tolist()
-        self.dropped = [tuple(row) for row in dropped.tolist()] if self.drops else None
-
-    def measure(self, k: int, row: int, values):
-        if type(values) is not list:
-            values = values.tolist() if hasattr(values, 'tolist') else list(values)
-        if self.max_delay:
-            history, rows, first = self.history, self.rows, self.first
-            history[k % rows] = values
-            values = [history[max(k - d, first) % rows][j] for j, d in enumerate(self.delays)]
-        reading = []
-        for value, offset, (step, low, high) in zip(values, self.offset[row], self.channels):
-            value += offset
-            if step:
-                value = _quantized(value, step)
-            reading.append(low if value < low else high if value > high else value)
-        return reading, (self.dropped[row] if self.drops else self.no_drop)
-
-
-class _ArrayPath:
-    """A sample's reading in numpy vectors (many channels)."""
-
-    def __init__(self, bank: SensorBank):
-        self.bank = bank
-        b = bank
-        self.any_quantized = bool(b._quantized.any())
-        self.steps = b._step
-
-    def restart(self, k: int, values) -> None:
-        b = self.bank
-        self.first = k
-        self.rows = b._max_delay + 1
-        self.history = np.empty((self.rows, b.size))
-        self.history[:] = values
-
-    def block(self, offset, dropped) -> None:
-        self.offset, self.dropped = offset, dropped
-
-    def measure(self, k: int, row: int, values):
-        b = self.bank
-        values = np.asarray(values, dtype=float)
-        if b._max_delay:
-            self.history[k % self.rows] = values
-            rows = np.maximum(k - b._delay, self.first) % self.rows
-            values = self.history[rows, b._columns]
-        reading = values + self.offset[row]
-        if self.any_quantized:
-            levels = reading / self.steps
-            reading = np.where(b._quantized & (np.abs(levels) < _WHOLE),
-                               np.rint(levels) * self.steps, reading)
-        if b._saturates:
-            reading = np.minimum(np.maximum(reading, b._low), b._high)
-        return reading, (self.dropped[row] if b._drops else b._no_drop)
