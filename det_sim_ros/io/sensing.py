@@ -21,7 +21,7 @@ from ..core.kernel import SampleCodec
 from ..sim.sensors import SensorBank
 
 __all__ = ['TRUTH', 'truth_topic', 'is_truth_topic', 'PlainOutputs', 'SensedOutputs',
-           'make_outputs', 'SensorReadings', 'measured_run']
+           'make_outputs', 'MeasuredOutputs', 'SensorReadings', 'measured_run']
 
 TRUTH = 'truth'
 
@@ -151,6 +151,33 @@ def make_outputs(contract: OutputContract, scene, n_outputs: int, node_name: str
     if not scene.sensors:
         return PlainOutputs(contract)
     return SensedOutputs(contract, scene.sensors, scene.dt, n_outputs, node_name)
+
+
+class MeasuredOutputs:
+    """
+    What sim_node's output topics carry at each sample of an offline run, read sample by sample.
+
+    For a closed loop offline: ``read(k, out)`` with the simulator's sample index and output
+    vector gives topic -> the published positions (the sensor's readings on a sensed topic,
+    None where it dropped the sample; the contract's values elsewhere), the same numbers the
+    node publishes for the same run. Samples go in order from 0 (or from a reset).
+    """
+
+    def __init__(self, sim):
+        self.contract = OutputContract(sim.model)
+        self._sensed = (SensedOutputs(self.contract, sim.scene.sensors, sim.dt,
+                                      len(sim.output_names)) if sim.scene.sensors else None)
+
+    def read(self, k: int, out) -> dict:
+        """Return topic -> positions (an array per DET, or None: not published) at sample k."""
+        values = {topic: self.contract.values(out, topic, 'position')
+                  for topic in self.contract.fields}
+        if self._sensed is not None:
+            readings, dropped = self._sensed.bank.measure(k, np.ascontiguousarray(out))
+            n = len(self.contract.det_names)
+            for j, topic in enumerate(self._sensed.sensed):
+                values[topic] = None if dropped[j] else readings[j * n:(j + 1) * n].copy()
+        return values
 
 
 @dataclasses.dataclass
