@@ -97,6 +97,7 @@ class SensedOutputs:
         self._sensed_index = [self.topics.index(topic) for topic in self.sensed]
         self._displacement = self.topics.index('displacement')
         self._logged = {}   # dropped flags -> (topics, indices) of the logged messages
+        self._all_topics = self.topics + self.truth_topics
 
     def encode(self, k: int, out, t_ns: int) -> list:
         """Return sample ``k``'s measured bytes per output topic (None: dropped), then truth."""
@@ -115,12 +116,14 @@ class SensedOutputs:
 
     def record(self, recorder, t_ns: int, samples) -> None:
         """Hand a sample's messages (the published measured ones and the truth) to the log."""
+        if None not in samples:   # (the same topics object each time: the log's fast path)
+            recorder.record_sample(t_ns, self._all_topics, samples, self.types)
+            return
         key = tuple(data is None for data in samples)
         plan = self._logged.get(key)
         if plan is None:
-            names = self.topics + self.truth_topics
             indices = [i for i, gone in enumerate(key) if not gone]
-            plan = self._logged[key] = (tuple(names[i] for i in indices), indices)
+            plan = self._logged[key] = (tuple(self._all_topics[i] for i in indices), indices)
         topics, indices = plan
         recorder.record_sample(t_ns, topics, [samples[i] for i in indices], self.types)
 
