@@ -193,3 +193,21 @@ def test_laser_preset_is_the_default_scene_read_by_a_laser_sensor():
     laser = preset.sensors.displacement
     assert laser.quantization * 2 ** 16 == laser.range_max - laser.range_min == 0.01
     assert 0 < laser.noise_std < laser.quantization * 10 and laser.delay_samples == 1
+
+
+def test_noisy_array_logs_the_same_with_one_or_two_threads(tmp_path):
+    from det_sim_ros.io.log_reader import LogReader
+    from det_sim_ros.io.mcap_log import Recorder
+    from det_sim_ros.io.replay import simulate_to_log
+    from det_sim_ros.sim.simulator import Simulator
+    scene = load_scene('array', {'structure.copies': 4, **NOISY})
+    logs = []
+    for threads in (1, 2):
+        path = tmp_path / f'threads{threads}.mcap'
+        sim = Simulator(scene, threads=threads)
+        with Recorder(str(path), scene) as recorder:
+            simulate_to_log(recorder, sim, {0: [2000.0] * 4, 60: [900.0] * 4}, 120)
+        logs.append([(m.topic, m.log_time, bytes(m.data))
+                     for m in LogReader(str(path)).messages()])
+    topics = {topic for topic, _, _ in logs[0]}
+    assert logs[0] == logs[1] and len(topics) == 8 and '/sim_node/truth/charge' in topics

@@ -199,7 +199,7 @@ class SensorBank:
             x[shift:] = x[shift:] + power * x[:-shift]
             power = power * power
             shift *= 2
-        self._ou_end[block] = x[-1].copy()
+        self._ou_end = {block: x[-1].copy()}   # (only the latest: a long run keeps one)
         return x
 
     # -- samples ---------------------------------------------------------------------------------
