@@ -5,9 +5,11 @@ The same PI controller against the ideal plant and a realistic one, offline; a p
 The ideal plant is the default scene: every sample is the exact state, on time. The realistic
 plant is the default scene read through the presets in PRESETS (their ``sensors`` and
 ``amplifier`` sections laid over the default): the controller sees what sim_node would
-publish (noise, quantization, delay, dropped samples: it keeps its last value then), and the
+publish (noise, quantization, delay, dropped samples), and the
 plot shows both the true Δy and what the controller measured. One closed loop per plant,
-sample k -> command -> period k + 1, as in sim_node's lockstep mode (bit for bit the same run).
+sample k -> command -> period k + 1, as in sim_node's lockstep mode: a controller that answers
+each sample it receives (a dropped one is not answered and the voltage holds), the same run
+bit for bit as through sim_node (test/test_sensors_node.py).
 
 Usage: python bench/realistic_plant.py [--png docs/figures/realistic_plant.png]
 """
@@ -44,16 +46,16 @@ def closed_loop(scene):
     t = np.arange(n + 1) * sim.dt
     true_dy, seen_dy, volts = np.empty(n + 1), np.full(n + 1, np.nan), np.zeros(n + 1)
     out = np.array(list(sim.outputs().values()))
-    integral, last_seen, v = 0.0, 0.0, 0.0
+    integral, v = 0.0, 0.0
     for k in range(n + 1):
         true_dy[k] = outputs.contract.values(out, 'displacement', 'position')[0]
         reading = outputs.read(k, out)['displacement']
-        if reading is not None:   # a dropped sample: the controller keeps its last value
-            last_seen = seen_dy[k] = reading[0]
-        if k * sim.dt >= T_STEP - 1e-12:
-            error = TARGET - last_seen
-            integral += error * sim.dt
-            v = min(3000.0, max(0.0, KP * error + KI * integral))
+        if reading is not None:   # (a dropped sample reaches no controller: the voltage holds)
+            seen_dy[k] = reading[0]
+            if k * sim.dt >= T_STEP - 1e-12:
+                error = TARGET - reading[0]
+                integral += error * sim.dt
+                v = min(3000.0, max(0.0, KP * error + KI * integral))
         volts[k] = v
         if k < n:
             sim.set_input([v])

@@ -78,3 +78,30 @@ def test_noisy_lockstep_runs_give_identical_logs_idle_and_with_a_busy_core(
     first, second = (_records(p) for p in paths)
     assert len(first) > 400 * 6 and first == second
     assert os.path.getsize(paths[0]) > 0 and resimulate(paths[1]).ok(0.0)
+
+
+def test_lockstep_loop_through_the_sensors_equals_the_offline_loop(det_sim):  # noqa: F811
+    import numpy as np
+    from det_sim_ros.io.sensing import MeasuredOutputs
+    from det_sim_ros.scenes.scene import load_scene
+    from det_sim_ros.sim.simulator import Simulator
+    from test_lockstep import pi_volts
+    overrides = {'sensors.displacement.dropout': 0.05}
+    sim = det_sim('sensor_laser', overrides=overrides)
+    run = sim.run(until=0.8, nodes=[make_pi(sim.context, joint=True)])
+    # offline: a sample the sensor dropped reaches no controller: the voltage is held
+    offline = Simulator(load_scene('sensor_laser', overrides))
+    outputs = MeasuredOutputs(offline)
+    out, state, volts, dropped = np.array(list(offline.outputs().values())), {'i': 0.0}, [0.0], 0
+    for k in range(800):
+        reading = outputs.read(k, out)['displacement']
+        if reading is None:
+            dropped += 1
+        else:
+            volts_k = pi_volts(state, reading[0], k * offline.dt, offline.dt)
+            offline.set_input([volts_k])
+        volts.append(float(offline.u[0]))
+        out = offline.step().copy()
+    assert 20 < dropped < 70
+    assert run.signal('voltage').tobytes() == np.array(volts).tobytes()
+    assert sim.node.pacing.missed_deadlines == 0
