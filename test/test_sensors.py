@@ -211,3 +211,13 @@ def test_noisy_array_logs_the_same_with_one_or_two_threads(tmp_path):
                      for m in LogReader(str(path)).messages()])
     topics = {topic for topic, _, _ in logs[0]}
     assert logs[0] == logs[1] and len(topics) == 8 and '/sim_node/truth/charge' in topics
+
+
+def test_a_noisy_log_plots_its_published_outputs(tmp_path):
+    from det_sim_ros.io.logplot import read_log
+    path = tmp_path / 'noisy.mcap'
+    _noisy_log(path)
+    data = read_log(str(path))
+    lengths = {channel.title: len(channel.t) for channel in data.channels}
+    assert 200 < lengths['displacement Δy'] < 301   # the published samples, not the truth
+    assert lengths['charge q_p'] == lengths['current i_DE'] == 301
