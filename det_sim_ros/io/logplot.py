@@ -23,8 +23,8 @@ import numpy as np
 
 from .cdr import CdrError, deserialize, Reader
 from .contract import basename, COMMAND_TOPICS, JOINT_COMMAND_TOPIC
-from .sensing import is_truth_topic
 from .mcap_format import MAGIC, MESSAGE_FIELDS, MESSAGE_HEAD_LENGTH
+from .sensing import is_truth_topic
 
 __all__ = ['LogData', 'Channel', 'read_log', 'summary', 'plot_log', 'LogPlotError',
            'PANELS']
