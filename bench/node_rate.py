@@ -37,6 +37,7 @@ sample, command-to-effect p99 <= 2 ms with no sample lost and the lag not growin
 Usage: python bench/node_rate.py [--scenes default,array] [--rt-seconds 60]
        [--free-seconds 3] [--rounds 7] [--realtime-priority 0] [--controller-priority 0]
        [--paired N [--paired-no-log]] [--log-compression zstd|lz4|none]
+       [--paired-sensors N]
        [--json out.json]
 """
 
@@ -408,6 +409,10 @@ def bench_scene(scene_name, args, folder):
     finally:
         if listener is not None:
             stop(listener)
+    if args.paired_sensors > 0:   # every sensor knob on against off (bench/sensor_cost.py)
+        from sensor_cost import paired_sensors
+        report['paired_sensors_on_and_off'] = paired_sensors(
+            scene_name, args.paired_sensors, args.paired_block_s, folder, args.log_compression)
     if args.lockstep_seconds > 0:
         report['lockstep_in_process_controller'] = lockstep_in_process(scene_name,
                                                                        args.lockstep_seconds)
@@ -440,6 +445,9 @@ def main():
                         help="the node's log.compression in the paired and real-time runs")
     parser.add_argument('--paired-no-log', action='store_true',
                         help="a second paired run with the log off (the log's share)")
+    parser.add_argument('--paired-sensors', type=int, default=0,
+                        help='the node with every sensor knob on and off in this many '
+                        'interleaved pairs of blocks (bench/sensor_cost.py; 0 = off)')
     parser.add_argument('--json', help='write the numbers to this file')
     args = parser.parse_args()
     report = {'cpus': os.cpu_count(), 'load_avg_at_start': os.getloadavg()}

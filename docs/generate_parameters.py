@@ -57,6 +57,9 @@ giving one on the command line overrides the file, e.g. `-p physics.Rs:=1.0e+3` 
 SI. `dets.<DET name>.<key>` overrides one physics or amplifier value for one DET. "default scene"
 is the value in `config/default.yaml` (the `structure` and `amplifier` sections are optional;
 their defaults are shown; every amplifier knob is off by default, docs/realism.md).
+The optional `sensors` section has one subsection per output topic whose `position` a sensor
+measures, `<topic>` = `displacement`, `deflection`, `charge` or `current`, its values in that
+channel's unit; every key is off by default ([realism.md](realism.md#sensors)).
 
 | key | type | range or choices | unit | default scene | meaning |
 | --- | --- | --- | --- | --- | --- |
@@ -153,6 +156,10 @@ def scene_rows() -> list:
     rows = [scene_row(f'{section}.{key}', spec, values[section].get(key))
             for section, specs in sections.items() for key, spec in specs.items()]
     rows += [scene_row(key, spec, values.get(key)) for key, spec in scene.TOP_SPEC.items()]
+    from det_sim_ros.scenes import sensors
+    rows.append(scene_row('sensors.seed', sensors.SEED_SPEC, 0))
+    rows += [scene_row(f'sensors.<topic>.{key}', spec, sensors.SENSOR_DEFAULTS[key])
+             for key, spec in sensors.SENSOR_SPEC.items()]
     return rows
 
 

@@ -17,7 +17,8 @@ Wire and log (the bytes of det_sim_ros.io.contract and det_sim_ros.io.mcap_log):
 
 - ``SampleCodec``: one sample's output messages written from named fields in one call;
 - ``pack_records``: MCAP Message records of consecutive samples;
-- ``FrameMap``: marker frames of one-coordinate cells (det_sim_ros.ros.markers).
+- ``FrameMap``: marker frames of one-coordinate cells (det_sim_ros.ros.markers);
+- ``SensorReader``: one sample's sensor readings (det_sim_ros.sim.sensors).
 
 det_sim_ros/physics/reference.py is the same physics in readable numpy; the tests hold the
 compiled kernel to it on random states of every scene kind.
@@ -25,7 +26,7 @@ compiled kernel to it on random states of every scene kind.
 
 try:
     from ._ckernel import (BAD_SLOPE, BAD_STRETCH, CELL_OUTPUTS, FrameMap, matrix_phis, Model,
-                           NON_FINITE, OK, pack_records, SampleCodec, Stepper)
+                           NON_FINITE, OK, pack_records, SampleCodec, SensorReader, Stepper)
 except ImportError as error:  # pragma: no cover - only a broken install gets here
     raise ImportError(
         'det_sim_ros: the compiled kernel det_sim_ros.core._ckernel is missing or broken '
@@ -33,4 +34,4 @@ except ImportError as error:  # pragma: no cover - only a broken install gets he
         'compiler); in a source checkout, `python setup.py build_ext --inplace`.') from None
 
 __all__ = ['Model', 'Stepper', 'OK', 'BAD_STRETCH', 'NON_FINITE', 'BAD_SLOPE', 'CELL_OUTPUTS',
-           'SampleCodec', 'pack_records', 'FrameMap', 'matrix_phis']
+           'SampleCodec', 'pack_records', 'FrameMap', 'matrix_phis', 'SensorReader']

@@ -231,6 +231,7 @@ class SampleEncoder:
     def __init__(self, contract: OutputContract):
         self.contract = contract
         self.topics = contract.topics
+        self.slots = {}   # (topic, field) -> its doubles' slice of the published doubles
         gather, y0_slots = [], []
         structure_slot = None
         layouts = []   # per topic: (pack, parts), parts: bytes (constant) or a gather slice
@@ -258,6 +259,7 @@ class SampleEncoder:
                 if structure:
                     structure_slot = slice(start, start + n)
                 blocks.append((offset, slice(start, start + n)))
+                self.slots[(topic, field)] = slice(start, start + n)
             raw = w.to_bytes()
             messages.append(raw)
             fmt, parts, at = ['<4siI'], [], 12       # header, stamp (sec, nanosec)

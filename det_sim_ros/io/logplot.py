@@ -24,6 +24,7 @@ import numpy as np
 from .cdr import CdrError, deserialize, Reader
 from .contract import basename, COMMAND_TOPICS, JOINT_COMMAND_TOPIC
 from .mcap_format import MAGIC, MESSAGE_FIELDS, MESSAGE_HEAD_LENGTH
+from .sensing import is_truth_topic
 
 __all__ = ['LogData', 'Channel', 'read_log', 'summary', 'plot_log', 'LogPlotError',
            'PANELS']
@@ -180,7 +181,7 @@ class _Scan:
             sel = key == k
             ch, dl = int(k >> 32), int(k & 0xFFFFFFFF)
             info = channels.get(ch)
-            if info is None:
+            if info is None or is_truth_topic(info[0]):   # (the plot shows the published)
                 continue
             start = mpos[sel] + _PAYLOAD
             matrix = arr[start[:, None] + np.arange(dl)] if dl else np.zeros((len(start), 0),

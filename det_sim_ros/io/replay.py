@@ -28,6 +28,7 @@ from .contract import (CdrError, COMMAND_TOPIC, COMMAND_TOPICS, CommandDecoder,
                        JOINT_COMMAND_TOPIC, OUTPUT_FIELDS, OutputContract, rest_shortening,
                        rest_shortenings, stamp_ns, TOPIC_TYPES)
 from .mcap_log import LogReader, Recorder
+from .sensing import is_truth_topic, make_outputs, SensedOutputs
 
 __all__ = ['OUTPUT_FIELDS', 'COMMAND_TOPICS', 'ResimResult', 'resimulate', 'simulate_to_log',
            'OutputContract', 'rest_shortening', 'rest_shortenings']
@@ -174,10 +175,26 @@ class _Resim:
                                   substeps=sim.substeps_setting)
         initial = sim.outputs()
         self.current = np.array([initial[name] for name in sim.output_names])
+        # with sensors: the readings of the current sample, topic -> (positions, dropped)
+        self.sensing = (SensedOutputs(self.contract, scene.sensors, sim.dt, len(self.current))
+                        if scene.sensors else None)
+        self.readings = {}
+        self._sense()
+
+    def _sense(self) -> None:
+        """Read the current sample through the scene's sensors (each sample once, in order)."""
+        if self.sensing is None:
+            return
+        values, dropped = self.sensing.bank.measure(self.sim.k, self.current)
+        values, n = values.copy(), len(self.det_names)
+        self.readings = {topic: (values[j * n:(j + 1) * n], dropped[j])
+                         for j, topic in enumerate(self.sensing.sensed)}
 
     def feed(self, message) -> bool:
         """Take one logged message; False once the simulation failed (the rest is not read)."""
         name = _basename(message.topic)
+        if is_truth_topic(message.topic):
+            return self._output(name, message, truth=True) if name in self.fields else True
         if name in COMMAND_TOPICS:
             return self._command(name, message)
         if name in self.fields or (name == self.contract.structure_topic
@@ -194,6 +211,7 @@ class _Resim:
                 self.result.fault = str(exc)
                 return False
             self.result.steps += 1
+            self._sense()
         return sim.k == k
 
     def _reached(self, k: int) -> bool | None:
@@ -215,7 +233,7 @@ class _Resim:
         self.result.commands += 1
         return True
 
-    def _output(self, name, message) -> bool:
+    def _output(self, name, message, truth: bool = False) -> bool:
         try:
             msg = decode_joint_state(message.data)
         except CdrError:
@@ -226,8 +244,8 @@ class _Resim:
             return reached is None
         if name in self.fields:
             names = self.det_names
-            compare = [(f'{name}.{field} ({output})', field,
-                        self.contract.values(self.current, name, field))
+            compare = [(f"{'truth/' if truth else ''}{name}.{field} ({output})", field,
+                        self._expected(name, field, truth))
                        for field, output in self.fields[name].items()]
         else:
             names = list(self.contract.structure_names)
@@ -236,12 +254,19 @@ class _Resim:
             self._compare(key, getattr(msg, field), expected, list(msg.name) == names)
         return True
 
+    def _expected(self, name, field, truth):
+        """Return a field's values as published (None: the sensor dropped the sample)."""
+        if truth or field != 'position' or name not in self.readings:
+            return self.contract.values(self.current, name, field)
+        values, dropped = self.readings[name]
+        return None if dropped else values
+
     def _compare(self, key, logged, expected, same_names) -> None:
         import numpy as np
         logged = np.asarray(logged, dtype=float)
         if logged.size == 0:
             return
-        if logged.shape != expected.shape or not same_names:
+        if expected is None or logged.shape != expected.shape or not same_names:
             deviation = math.inf   # a different channel count or order
         else:
             deviation = float(np.max(np.abs(logged - expected)))
@@ -270,10 +295,10 @@ def simulate_to_log(recorder: Recorder, sim, commands: Mapping[int, Sequence[flo
     import numpy as np
     get = commands if callable(commands) else commands.get
     contract = OutputContract(sim.model)
-    encoder = contract.encoder()
+    outputs = make_outputs(contract, sim.scene, len(sim.output_names))
     t_ns = stamp_ns(sim.k, sim.dt)
     initial = np.array(list(sim.outputs().values()))
-    recorder.record_sample(t_ns, encoder.topics, encoder.encode(initial, t_ns), TOPIC_TYPES)
+    outputs.record(recorder, t_ns, outputs.encode(sim.k, initial, t_ns))
     for _ in range(n_steps):
         k = sim.k
         volts = get(k)
@@ -289,4 +314,4 @@ def simulate_to_log(recorder: Recorder, sim, commands: Mapping[int, Sequence[flo
             sim.set_input(volts)
         out = sim.step()
         t_ns = stamp_ns(sim.k, sim.dt)
-        recorder.record_sample(t_ns, encoder.topics, encoder.encode(out, t_ns), TOPIC_TYPES)
+        outputs.record(recorder, t_ns, outputs.encode(sim.k, out, t_ns))

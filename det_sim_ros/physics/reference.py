@@ -384,9 +384,9 @@ def step(a, method, x, u, h: float) -> np.ndarray:
     """
     x = np.asarray(x, dtype=float)
     u = np.asarray(u, dtype=float)
-    if method.linearized:   # the dense linear part taken at x
-        from .reference_linearized import mechanical_jacobian, step_linearized
-        return step_linearized(a, method, x, u, h, mechanical_jacobian(a, x, u))[0]
+    if method.linearized:
+        raise ValueError(f'{method.name}: a method with a dense linear part steps in '
+                         'reference_linearized.step_linearized (it takes the linear part)')
     s = method.n_stages
     laws = amplifier_laws(a, x, u) if a.amplifier else None   # held for the step
     L = stiff_rates(a, x, laws) if method.exponential else np.zeros(a.n_state)

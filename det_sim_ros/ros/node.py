@@ -34,11 +34,12 @@ from .name_check import check_unique_name, note_node_created
 from .pacing import make_pacing
 from .recording import open_recorder
 from .reports import NodeReports
+from .sensing import attach_outputs
 from .spinning import make_executor, spin, spin_until_stopped, StopRequested, StopSignals
 from .waiting import SubscriberGate
 from ..io.contract import (CLOCK_TOPIC, COMMAND_TOPIC, DIAGNOSTICS_TOPIC, encode_clock,
                            JOINT_COMMAND_TOPIC, OUTPUT_FIELDS, OutputContract, rest_shortenings,
-                           stamp_ns, structure_channels, STRUCTURE_TOPIC, TOPIC_TYPES)
+                           stamp_ns, structure_channels, STRUCTURE_TOPIC)
 from ..physics.model import ModelDomainError
 from ..scenes.scene import SceneError
 from ..sim.simulator import Simulator
@@ -86,8 +87,6 @@ class SimNode(Node):
                                'stepper, rest state)')
         self.contract = OutputContract(self._sim.model, self.y0)
         self.structure_names = self.contract.structure_names
-        self._encoder = self.contract.encoder()
-        self._topics = tuple(self._encoder.topics)
         self.steps_total = 0
         self.achieved_rtf = 0.0
         self.realtime_scheduling = False   # SCHED_FIFO in force (realtime_priority)
@@ -112,7 +111,7 @@ class SimNode(Node):
         self._reports = NodeReports(self, self._diag_pub, self._p('diagnostics_period'),
                                     self._p('info_period'),
                                     self.mode == 'lockstep' or not self._gate.open)
-        qos = {topic: out_qos for topic in self._topics}
+        qos = {topic: out_qos for topic in self._outputs.topics + self._outputs.truth_topics}
         qos.update({COMMAND_TOPIC: in_qos, JOINT_COMMAND_TOPIC: in_qos})
         self._recorder = open_recorder(self._p, self.scene, qos, {
             'method': self._sim.method.name, 'substeps': self._sim.substeps_setting,
@@ -159,11 +158,9 @@ class SimNode(Node):
             self._pacing.run(self.running)
 
     def _create_endpoints(self, in_qos, out_qos):
-        self._output_pubs = {topic: self.create_publisher(JointState, topic, out_qos)
-                             for topic in self._topics}
-        # Publisher.publish(bytes) is handle.publish_raw(bytes) behind a type check and a
-        # destroy guard (~2.5 us per call); the node publishes through the handle directly
-        self._publish_raw = [pub.handle.publish_raw for pub in self._output_pubs.values()]
+        # the sample's messages (measured by the scene's sensors, if any, and their truth)
+        self._outputs, self._output_pubs, self._truth_pubs, self._publish_raw = attach_outputs(
+            self, self.contract, out_qos)
         self._clock_pub = (self.create_publisher(ClockMsg, CLOCK_TOPIC, in_qos)
                            if self._pacing.publishes_clock else None)
         self._publish_clock = self._clock_pub.handle.publish_raw if self._clock_pub else None
@@ -195,6 +192,9 @@ class SimNode(Node):
     steady_clock = property(lambda self: self._steady, doc='The clock of the node timers.')
     output_publishers = property(lambda self: dict(self._output_pubs),
                                  doc='Topic -> the publisher of that output.')
+    truth_publishers = property(lambda self: dict(self._truth_pubs),
+                                doc='Sensed topic -> the publisher of its ~/truth topic.')
+    outputs = property(lambda self: self._outputs, doc="A sample's messages (io.sensing).")
     clock_publisher = property(lambda self: self._clock_pub,
                                doc='The /clock publisher (None in real-time mode).')
     command_subscriptions = property(lambda self: dict(self._command_subs),
@@ -260,7 +260,8 @@ class SimNode(Node):
                 if publish_clock is not None:   # first: a use_sim_time reader is at t_k
                     publish_clock(encode_clock(t_ns))
                 for publish, data in zip(publishers, samples):
-                    publish(data)
+                    if data is not None:   # (None: the sensor dropped the sample)
+                        publish(data)
                 if frame is not None:
                     self._markers.publish(frame)
         except RuntimeError:   # rclpy's RCLError: Ctrl-C shut the context down mid-tick
@@ -276,11 +277,11 @@ class SimNode(Node):
         # a non-finite output, so Simulator.step and .outputs raise before anything is sent)
         k = self._sim.k
         t_ns = stamp_ns(k, self._sim.dt)
-        samples = self._encoder.encode(out, t_ns)
+        samples = self._outputs.encode(k, out, t_ns)
         self._pacing.sample_ready(k, samples)
         recorder = self._recorder
         if recorder is not None:   # (the log's order: the sample, then its marker frame)
-            recorder.record_sample(t_ns, self._topics, samples, TOPIC_TYPES)
+            self._outputs.record(recorder, t_ns, samples)
         frame = None
         if self._markers is not None and not k % self._markers.every:
             frame = self._markers.frame_for(k, self._sim.x, self._sim.u, t_ns, recorder)

@@ -269,7 +269,8 @@ class LockstepPacing(Pacing):
     The expected sources are lockstep.sources. A JointState command answers the sample its
     header stamp names (an unset stamp, 0, the latest); a Float64MultiArray the latest sample.
     A refused command answers too (the voltages are held). Answers to older samples are
-    applied but do not count.
+    applied but do not count. A sample whose displacement a sensor dropped needs no answer
+    (nobody received it).
     """
 
     mode = 'lockstep'
@@ -291,6 +292,14 @@ class LockstepPacing(Pacing):
     def start(self, node) -> None:
         super().start(node)
         node.create_timer(self.RESEND_PERIOD_S, self._resend, clock=node.steady_clock)
+        # a sample whose displacement a sensor dropped has no answer to wait for: the next
+        # period runs from the executor (not nested in this one's publication)
+        self._unheard = node.create_timer(1.0e-6, self._run_unheard, clock=node.steady_clock)
+        self._unheard.cancel()
+
+    def _run_unheard(self) -> None:
+        self._unheard.cancel()
+        self._advance()
 
     def parameters_changed(self, get: Callable, names) -> None:
         self.sources = get('lockstep.sources')
@@ -320,6 +329,9 @@ class LockstepPacing(Pacing):
         if k == 0:
             self._last_sample = samples
             self._heard_by = self.node.subscriptions_matched()
+        if not self.node.outputs.heard(samples):
+            self.answers = self.sources
+            self._unheard.reset()
 
     def command_received(self, command) -> None:
         node = self.node

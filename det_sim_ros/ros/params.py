@@ -16,12 +16,14 @@ import math
 from typing import Any, Iterator, NamedTuple
 
 from ..scenes.scene import scene_to_dict, SceneError
+from ..scenes.sensors import sensors_to_dict
 
 __all__ = ['NODE_PARAMS', 'Param', 'SCENE_PARAM_DESCRIPTION', 'SCENE_SECTIONS',
            'check_node_value', 'flatten', 'node_parameter_values', 'runtime_refusal',
            'scene_parameters']
 
-SCENE_SECTIONS = ('scene', 'physics', 'integrator', 'structure', 'dets', 'amplifier')
+SCENE_SECTIONS = ('scene', 'physics', 'integrator', 'structure', 'dets', 'amplifier',
+                  'sensors')
 SCENE_PARAM_DESCRIPTION = 'scene value (read-only; set in the scene file or with -p at start)'
 
 
@@ -123,10 +125,11 @@ def scene_parameters(scene) -> Iterator[tuple[str, Any]]:
     Yield the loaded scene's values as (parameter name, value).
 
     Its ``node:`` section is left out (those are the node parameters); the ``amplifier``
-    section is there even when every knob is off.
+    section and the ``sensors`` keys are all there, off or not.
     """
     data = scene_to_dict(scene)
     data.setdefault('amplifier', dict(scene.amplifier))
+    data['sensors'] = sensors_to_dict(scene.sensors, full=True)
     for name, value in flatten(data):
         if not name.startswith('node.'):
             yield name, value

@@ -31,6 +31,7 @@ from .keys import (AMPLIFIER_DEFAULTS, AMPLIFIER_SPEC, BEAMS, check_value, FIDEL
                    INITIAL_STATES, INTEGRATOR_SPEC,
                    PHYSICS_SPEC, REST_BRANCHES, SCENE_SPEC, SceneError, SECTION_DEFAULTS,
                    SECTIONS, SOURCES, STRUCTURE_DEFAULTS, STRUCTURE_SPEC, STRUCTURES, TOP_SPEC)
+from .sensors import check_sensors, Sensors, sensors_to_dict
 
 __all__ = ['SceneError', 'Physics', 'Scene', 'load_scene', 'scene_to_dict', 'find_config',
            'BEAMS', 'FIDELITIES', 'SOURCES', 'STRUCTURES', 'INITIAL_STATES', 'REST_BRANCHES']
@@ -108,6 +109,7 @@ class Scene:
     rest_branch: str = 'buckled+'   # 'buckled+' | 'buckled-' (REST_BRANCHES)
     amplifier: Mapping[str, Any] = dataclasses.field(
         default_factory=lambda: dict(AMPLIFIER_DEFAULTS))
+    sensors: Sensors = Sensors()    # what each output topic's sensor does (default: nothing)
 
     @property
     def det_names(self) -> tuple:
@@ -226,12 +228,11 @@ def _override_value(value):
 
 def _checked_values(data):
     """Return (section, key) -> checked value of every section key and top-level key ('', key)."""
-    unknown = set(data) - set(SECTIONS) - set(TOP_SPEC) - {'node', 'structure', 'dets',
-                                                           'amplifier'}
+    optional = ['structure', 'dets', 'amplifier', 'sensors', 'node']
+    unknown = set(data) - set(SECTIONS) - set(TOP_SPEC) - set(optional)
     if unknown:
         raise SceneError(f'unknown scene key {sorted(unknown)[0]!r}; known sections: '
-                         + ', '.join(list(SECTIONS) + list(TOP_SPEC)
-                                     + ['structure', 'dets', 'amplifier', 'node']))
+                         + ', '.join(list(SECTIONS) + list(TOP_SPEC) + optional))
     values = {}
     for section, spec in SECTIONS.items():
         content = data.get(section)
@@ -306,11 +307,12 @@ def load_scene(source: Any = 'default', overrides: Mapping[str, Any] | None = No
         # the paper's model is its one-term shape: a scene that picks it over a base with more
         # terms (the shipped default) gets one term, whatever n_ritz it inherits
         values[('scene', 'n_ritz')] = 1
+    sensors = check_sensors(data.get('sensors'))
     physics = Physics(**{k: values[('physics', k)] for k in PHYSICS_SPEC})
     scene = Scene(**{k: values[('scene', k)] for k in SCENE_SPEC}, physics=physics,
                   **{k: values[('integrator', k)] for k in INTEGRATOR_SPEC},
                   rate_hz=values[('', 'rate_hz')], node=node, structure=structure, dets=dets,
-                  amplifier=check_amplifier_section(data.get('amplifier')))
+                  amplifier=check_amplifier_section(data.get('amplifier')), sensors=sensors)
     _check_consistency(scene)
     check_amplifiers(scene)
     return scene
@@ -374,6 +376,9 @@ def scene_to_dict(scene: Scene, wrap: bool = False) -> dict:
         data['amplifier'] = dict(scene.amplifier)
     if scene.dets:
         data['dets'] = copy.deepcopy({k: dict(v) for k, v in scene.dets.items()})
+    sensors = sensors_to_dict(scene.sensors)
+    if sensors:   # (only when set: a scene without sensors reads and logs as before)
+        data['sensors'] = sensors
     if scene.node:
         data['node'] = copy.deepcopy(dict(scene.node))
     return {'sim_node': {'ros__parameters': data}} if wrap else data

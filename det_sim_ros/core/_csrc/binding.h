@@ -106,6 +106,7 @@ DS_HIDDEN int built_fields(PyObject *self, PyObject *args, PyObject *kwds, PyObj
 DS_HIDDEN int built_ready(PyObject *self);
 
 DS_HIDDEN extern PyTypeObject ModelType, StepperType, FrameMapType, SampleCodecType;
+DS_HIDDEN extern PyTypeObject SensorReaderType;   /* sensor_type.c */
 DS_HIDDEN PyObject *pack_records(PyObject *module, PyObject *const *args, Py_ssize_t nargs);
 DS_HIDDEN PyObject *matrix_phis(PyObject *module, PyObject *const *args, Py_ssize_t nargs);
 

@@ -23,7 +23,8 @@ static struct PyModuleDef module = {
 PyMODINIT_FUNC PyInit__ckernel(void)
 {
     if (PyType_Ready(&ModelType) < 0 || PyType_Ready(&StepperType) < 0
-        || PyType_Ready(&FrameMapType) < 0 || PyType_Ready(&SampleCodecType) < 0)
+        || PyType_Ready(&FrameMapType) < 0 || PyType_Ready(&SampleCodecType) < 0
+        || PyType_Ready(&SensorReaderType) < 0)
         return NULL;
     PyObject *mod = PyModule_Create(&module);
     if (!mod)
@@ -32,10 +33,12 @@ PyMODINIT_FUNC PyInit__ckernel(void)
     Py_INCREF(&StepperType);
     Py_INCREF(&FrameMapType);
     Py_INCREF(&SampleCodecType);
+    Py_INCREF(&SensorReaderType);
     if (PyModule_AddObject(mod, "Model", (PyObject *)&ModelType) < 0
         || PyModule_AddObject(mod, "Stepper", (PyObject *)&StepperType) < 0
         || PyModule_AddObject(mod, "FrameMap", (PyObject *)&FrameMapType) < 0
         || PyModule_AddObject(mod, "SampleCodec", (PyObject *)&SampleCodecType) < 0
+        || PyModule_AddObject(mod, "SensorReader", (PyObject *)&SensorReaderType) < 0
         || PyModule_AddIntConstant(mod, "OK", DS_OK) < 0
         || PyModule_AddIntConstant(mod, "BAD_STRETCH", DS_BAD_STRETCH) < 0
         || PyModule_AddIntConstant(mod, "NON_FINITE", DS_NON_FINITE) < 0
