@@ -103,7 +103,8 @@ class FitResult:
 
 def load_measurements(logs, mapping: Mapping | None = None) -> list:
     """Return a :class:`Measurement` per log: MCAP files or directories, CSV files, or as given."""
-    from .logs import read_log
+    from .logs import parse_mapping, read_log
+    mapping = parse_mapping(mapping) if mapping else None   # a bad one fails before any read
     if isinstance(logs, (str, os.PathLike, Measurement)):
         logs = [logs]
     measurements = []
