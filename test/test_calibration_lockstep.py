@@ -3,7 +3,8 @@ Test that a log sim_node recorded with a controller in the loop, in lockstep, fi
 
 The node records its own log (its scene, each command at the period it applied to, its
 outputs); the fit replays those commands open loop, which reproduces the closed-loop run, and
-finds the modulus and the beam damping of the scene that ran from a start well off both.
+finds the modulus and the beam damping of the scene that ran from a start well off both; the
+fitted scene file runs in sim_node.
 """
 
 import det_sim_ros
@@ -50,3 +51,9 @@ def test_a_lockstep_log_with_a_controller_fits(det_sim, tmp_path):  # noqa: F811
         assert estimate.value == pytest.approx(truth[estimate.name], rel=1e-3)
     # the closed loop is reproduced: residuals at the integration's tolerance, not the noise's
     assert max(result.rms_after.values()) < 1e-3 * min(result.rms_before.values())
+    # sim_node runs the fitted scene file as it is
+    fitted = tmp_path / 'fitted.yaml'
+    result.write(str(fitted), plot=False)
+    again = det_sim(str(fitted))
+    run = again.run(until=0.05, nodes=[make_controller(again.context)])
+    assert run.t[-1] == pytest.approx(0.05) and run.signal('dy')[-1] > 0.0

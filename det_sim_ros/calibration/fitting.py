@@ -262,7 +262,8 @@ def fit(logs, params: Sequence[str] | str, scene=None, *, mapping: Mapping | Non
     :param starts: local searches (the given start and the best-scoring other candidates).
     :param candidates: candidate starts scored (one run each), the given one included.
     :param max_evaluations: residual evaluations per local search before it gives up.
-    :param parallel: 'auto', 'threads', 'processes' or 'serial' (the sensitivities' runs).
+    :param parallel: 'auto', 'threads', 'processes' or 'serial' (the sensitivities' runs;
+        'auto': threads when a run takes 0.5 s or more, see :func:`~.problem.make_evaluator`).
     :param progress: called with a line of text per iteration.
     :raises CalibrationError: bad input (one line).
     """
@@ -277,8 +278,10 @@ def fit(logs, params: Sequence[str] | str, scene=None, *, mapping: Mapping | Non
         raise CalibrationError(f'{samples} measured sample(s) for {len(parameters)} '
                                'parameter(s): a fit needs more samples than parameters')
     problem = Problem(base, measurements, parameters, sigma)
-    evaluator = make_evaluator(problem, parallel)
     z0 = to_z(parameters, [p.start for p in parameters])
+    timed = time.monotonic()
+    problem.residual(z0)   # the cost of a run decides whether threads pay
+    evaluator = make_evaluator(problem, parallel, time.monotonic() - timed)
     try:
         best, outcomes = _searches(problem, evaluator, z0, starts, candidates, seed,
                                    max_evaluations, say)
@@ -305,5 +308,5 @@ def _result(problem, z0, best, outcomes, evaluator, samples: int, wall: float) -
         dof=stats.dof, rms_before=nan if before is None else problem.rms(before),
         rms_after=nan if after is None else problem.rms(after), noise=noise,
         converged=converged, message=message, starts=outcomes,
-        simulate_calls=evaluator.calls + 2, wall_time=wall, samples=samples,
+        simulate_calls=evaluator.calls + 3, wall_time=wall, samples=samples,
         traces=_traces(problem, before, after), parallel=evaluator.kind)

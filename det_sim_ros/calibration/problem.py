@@ -19,13 +19,16 @@ import numpy as np
 from .measurement import CalibrationError, CHANNELS, noise_level
 from .parameters import from_z
 
-__all__ = ['Problem', 'Evaluator', 'make_evaluator', 'FAULT_RESIDUAL', 'FD_STEP']
+__all__ = ['Problem', 'Evaluator', 'make_evaluator', 'FAULT_RESIDUAL', 'FD_STEP',
+           'PARALLEL_MIN_CALL']
 
 # weighted residual of every sample when the model leaves its domain (a rejected trial step)
 FAULT_RESIDUAL = 1e3
 # forward-difference step in the fit coordinates: 0.1 % of a log-scale value (1 % bends the
 # beam's phase enough over a ring-down to bias the stiffness and mass columns)
 FD_STEP = 1e-3
+# 'auto' evaluates on threads when one run of the logs takes at least this long, s
+PARALLEL_MIN_CALL = 0.5
 
 
 class Problem:
@@ -165,16 +168,20 @@ class Evaluator:
             self._pool = None
 
 
-def make_evaluator(problem: Problem, parallel: str = 'auto') -> Evaluator:
+def make_evaluator(problem: Problem, parallel: str = 'auto',
+                   call_seconds: float = 0.0) -> Evaluator:
     """
     Return the evaluator ``parallel`` names: 'serial', 'threads', 'processes' or 'auto'.
 
-    'auto' is threads on every core when there is more than one (bench/fit_speed.py: the
-    compiled run releases the GIL, and threads need no copy of the measurements).
+    'auto' is threads on every core when there is more than one and a run of the logs takes at
+    least :data:`PARALLEL_MIN_CALL` (``call_seconds``, as measured), else serial: the compiled
+    run releases the GIL, but each run's Python part (scene, model, rest state: ~10 ms) does
+    not, and on the shared 2-core host threads did not pay for the 40 ms runs of a 10 s log at
+    ``fidelity: paper`` (bench/fit_speed.py, docs/calibration.md).
     """
     cores = os.cpu_count() or 1
     if parallel == 'auto':
-        parallel = 'threads' if cores > 1 else 'serial'
+        parallel = 'threads' if cores > 1 and call_seconds >= PARALLEL_MIN_CALL else 'serial'
     return Evaluator(problem, parallel, 1 if parallel == 'serial' else cores)
 
 

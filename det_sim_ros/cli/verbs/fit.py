@@ -62,7 +62,8 @@ def add_arguments(parser) -> None:
                         help='residual evaluations per local search (default: 60)')
     parser.add_argument('--parallel', default='auto',
                         choices=('auto', 'threads', 'processes', 'serial'),
-                        help='how the sensitivity runs share the cores (default: auto = threads)')
+                        help='how the sensitivity runs share the cores (default: auto = threads '
+                             'when one run takes 0.5 s or more, else serial)')
     parser.add_argument('--no-plots', action='store_true', help='write no PNG')
     parser.add_argument('--quiet', action='store_true', help='no progress on stderr')
 
