@@ -39,11 +39,11 @@ def make_controller(context):
 def test_a_lockstep_log_with_a_controller_fits(det_sim, tmp_path):  # noqa: F811
     path = tmp_path / 'lockstep.mcap'
     sim = det_sim('default', params={'log.path': str(path)})
-    sim.run(until=0.6, nodes=[make_controller(sim.context)])
+    sim.run(until=0.4, nodes=[make_controller(sim.context)])
     sim.close()
     scene = load_scene('default')
     result = det_sim_ros.fit(str(path), ['Y', 'eta_b'], start={'Y': 1.4e6, 'eta_b': 0.7e6},
-                             parallel='serial')
+                             starts=1, parallel='serial')
     assert result.converged, result.message
     truth = {'Y': scene.physics.Y, 'eta_b': scene.physics.eta_b}
     for estimate in result.estimates:
