@@ -84,7 +84,7 @@ def report_text(result) -> str:
             f'({result.parallel})',
             f'residual variance (weighted) {result.residual_variance:.4g} on {result.dof} '
             'degrees of freedom (1: residuals at the noise level)']
-    starts = ['local searches (start values -> final cost):']
+    starts = ['local searches on the 50 ms averages (start values -> cost after the probe):']
     for n, s in enumerate(result.starts, start=1):
         values = ', '.join(f'{v:.4g}' for v in s.start)
         starts.append(f'  {n}: ({values}) -> {s.cost:.6g} after {s.evaluations} evaluations')

@@ -20,7 +20,7 @@ HELP = 'fit scene parameters to measured logs (MCAP or CSV): a scene file, a rep
 DESCRIPTION = (
     'Replay the logged voltage commands through the model and fit the named parameters by '
     'weighted least squares (log scale, several starts). Writes the fitted scene (loadable by '
-    'sim_node and load_scene), a report (residuals, standard errors, 95 %% intervals, '
+    'sim_node and load_scene), a report (residuals, standard errors, 95 % intervals, '
     'correlations, parameters the log cannot identify) and a PNG of measured vs simulated. '
     'docs/calibration.md describes it.')
 
