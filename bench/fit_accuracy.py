@@ -59,8 +59,8 @@ def main():
         for name, row in rows.items():
             table[name].append(row)
     n = last - first
-    print(f'\n| parameter | well identified | within 2 % | inside 95 % interval | flagged | '
-          f'median relative se |\n|---|---|---|---|---|---|')
+    print('\n| parameter | well identified | within 2 % | inside 95 % interval | flagged | '
+          'median relative se |\n|---|---|---|---|---|---|')
     for name, rows in table.items():
         well = [r for r in rows if not r[2] and r[3] < WELL_IDENTIFIED_SE]
         within = sum(abs(r[0]) <= WITHIN for r in rows)

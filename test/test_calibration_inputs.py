@@ -79,8 +79,9 @@ def test_csv_fits(tmp_path, synthetic):
     rows = ['t (s),v (V),dy (m)'] + [f'{k * synthetic.dt:.6f},{float(v)!r},{float(d)!r}'
                                      for k, (v, d) in enumerate(zip(volts, dy))]
     path.write_text('\n'.join(rows) + '\n')
-    out, _ = _fit(tmp_path, path, '--scene', 'default')
+    out, stdout = _fit(tmp_path, path, path, '--scene', 'default')   # two logs fit together
     assert fitted_y(out) == pytest.approx(Y_TRUE, rel=0.01)
+    assert '2 log(s), ' in stdout
 
 
 def _write_rig_log(path, synthetic):

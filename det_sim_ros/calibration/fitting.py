@@ -269,6 +269,11 @@ def fit(logs, params: Sequence[str] | str, scene=None, *, mapping: Mapping | Non
     """
     began = time.monotonic()
     say = progress or (lambda text: None)
+    try:
+        import scipy.optimize  # noqa: F401 - the search and the intervals need it
+    except ImportError:
+        raise CalibrationError("det_sim_ros.fit needs scipy: pip install 'scipy>=1.11'") \
+            from None
     measurements = load_measurements(logs, mapping)
     base = _base_scene(scene, measurements)
     names = params.split(',') if isinstance(params, str) else list(params)
