@@ -6,6 +6,7 @@ checks every module's imports):
 
     cli        one ``det_sim`` command with its verbs, and the ``sim_node`` entry point
     ros        the node, its pacing and diagnostics, markers, fleets, the pytest plugin
+    calibration  scene parameters fitted to measured logs (no ROS)
     io         the topic contract and its CDR bytes, MCAP recording, reading and replay
     analysis   elastica, fidelity studies, the paper's scenarios, benchmarks
     sim        the sim-time grid, inputs held per period, the integration methods' tables
@@ -16,7 +17,7 @@ checks every module's imports):
 Importing the package has no side effects beyond making the old flat module paths
 (``det_sim_ros.scene``, ``det_sim_ros.sim_node``, ...) aliases of their new homes, which warn
 once when imported. The common entry points are here too, imported on first use:
-:func:`load_scene`, :class:`Simulator`, :func:`simulate`, :func:`linearize`.
+:func:`load_scene`, :class:`Simulator`, :func:`simulate`, :func:`linearize`, :func:`fit`.
 """
 
 from ._moved import install as _install_moved_paths
@@ -30,6 +31,7 @@ _PUBLIC = {
     'Simulator': 'det_sim_ros.sim.simulator',
     'simulate': 'det_sim_ros.sim.simulator',
     'linearize': 'det_sim_ros.physics.linearize',
+    'fit': 'det_sim_ros.calibration.fitting',
 }
 
 __all__ = ['__version__', *_PUBLIC]

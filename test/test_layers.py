@@ -18,8 +18,8 @@ import pytest
 
 PACKAGE_DIR = os.path.dirname(det_sim_ros.__file__)
 # rank of each layer: a module may import its own layer and any layer of a lower rank
-LAYERS = {'core': 0, 'scenes': 0, 'physics': 1, 'sim': 2, 'analysis': 3, 'io': 3, 'ros': 4,
-          'cli': 5}
+LAYERS = {'core': 0, 'scenes': 0, 'physics': 1, 'sim': 2, 'analysis': 3, 'io': 3,
+          'calibration': 3.5, 'ros': 4, 'cli': 5}
 ROOT_MODULES = {'det_sim_ros', 'det_sim_ros._moved'}   # the package's own plumbing
 ROS_ONLY = ('rclpy',)
 

@@ -3,8 +3,9 @@ The dense linear part of 'etdrk4_linearized' against its numpy references.
 
 The kernel's matrix phi functions (matrix_phi.c) against det_sim_ros.physics.matrix_phi (the same
 algorithm) and the augmented matrix exponential; its Jacobian against complex steps; one step
-and its error estimate against det_sim_ros.physics.reference_linearized.step_linearized; determinism
-(runs, resets, threads); the step count following the error, not the stiff beam modes.
+and its error estimate against det_sim_ros.physics.reference_linearized.step_linearized;
+determinism (runs, resets, threads); the step count following the error, not the stiff beam
+modes; the amplified circuit under the linearized method.
 """
 
 import os
@@ -12,7 +13,7 @@ import os
 from det_sim_ros.core import kernel
 from det_sim_ros.io.mcap_log import Recorder
 from det_sim_ros.io.replay import resimulate, simulate_to_log
-from det_sim_ros.physics import matrix_phi, reference, reference_linearized
+from det_sim_ros.physics import matrix_phi, reference_linearized
 from det_sim_ros.physics.model import build_model
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.integrators import get_method, make_stepper, StepControl

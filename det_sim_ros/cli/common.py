@@ -240,11 +240,12 @@ def missing_modules(names) -> list[str]:
 # -- one-line errors ----------------------------------------------------------------------------
 def _input_errors() -> tuple:
     """Return the errors that mean bad input (exit code 2), imported once an error is raised."""
+    from ..calibration.measurement import CalibrationError
     from ..io.logplot import LogPlotError
     from ..physics.linearize import LinearizationError
     from ..ros.fleet import FleetError
     from ..scenes.scene import SceneError
-    return SceneError, CliError, LinearizationError, LogPlotError, FleetError
+    return SceneError, CliError, LinearizationError, LogPlotError, FleetError, CalibrationError
 
 
 def _domain_error() -> type:

@@ -10,6 +10,8 @@ The offline verbs write data (CSV, JSON) and plots (PNG); the ROS tools are ``fl
     det_sim bench   [--quick] [--out DIR] ...   (work-precision benchmark; the 'bench' extra)
     det_sim plot LOG.mcap [--out DIR] [--all]         (every channel of a sim_node log, PNG)
     det_sim linearize [--voltage 1500] [--branch buckled+] [--json]   (A, B, C, D; Bode)
+    det_sim fit LOG [LOG ...] --params E_M,eta_M [--scene S] [-o fitted.yaml] [--map ...]
+                    (scene parameters fitted to measured logs: scene file, report, PNG)
     det_sim fleet FLEET.yaml [--host NAME] [--log-dir DIR]   (sim_node processes, one per
                     namespace; Ctrl-C stops them all; det_sim_ros.ros.fleet describes the file)
     det_sim replay {resim,play,info,recover} LOG ...   (also the command det_sim_replay)
@@ -35,13 +37,13 @@ import argparse
 import sys
 
 from . import common
-from .verbs import bench, fleet, linearize, node, plot, replay, statics, step
+from .verbs import bench, fit, fleet, linearize, node, plot, replay, statics, step
 
 __all__ = ['main', 'main_replay', 'build_parser', 'VERBS']
 
 PROG = 'det_sim'
 VERBS = {'statics': statics, 'step': step, 'bench': bench, 'plot': plot,
-         'linearize': linearize, 'fleet': fleet, 'replay': replay, **node.VERBS}
+         'linearize': linearize, 'fit': fit, 'fleet': fleet, 'replay': replay, **node.VERBS}
 
 
 def build_parser() -> argparse.ArgumentParser:

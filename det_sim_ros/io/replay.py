@@ -31,7 +31,7 @@ from .mcap_log import LogReader, Recorder
 from .sensing import is_truth_topic, make_outputs, SensedOutputs
 
 __all__ = ['OUTPUT_FIELDS', 'COMMAND_TOPICS', 'ResimResult', 'resimulate', 'simulate_to_log',
-           'OutputContract', 'rest_shortening', 'rest_shortenings']
+           'OutputContract', 'rest_shortening', 'rest_shortenings', 'scene_from_log']
 
 # The topic contract (topics, channels, y0, structure outputs, commands) is
 # det_sim_ros.io.contract; a log holds the per-DET y0 as metadata 'y0' (a float for one DET, a
@@ -100,7 +100,8 @@ class ResimResult:
         return '\n'.join(lines)
 
 
-def _scene_from_log(reader: LogReader):
+def scene_from_log(reader: LogReader):
+    """Return the scene a log recorded (its bases resolved), validated."""
     import yaml
     from ..scenes.scene import load_scene
     text = reader.scene_yaml
@@ -155,7 +156,7 @@ class _Resim:
         from ..physics.model import ModelDomainError
         from ..sim.simulator import Simulator
         self._domain_error = ModelDomainError
-        scene = _scene_from_log(reader)
+        scene = scene_from_log(reader)
         info = reader.info
         sim = Simulator(scene, method=method, substeps=substeps)
         x0 = _logged_x0(info.get('x0'), sim.model.n_states)

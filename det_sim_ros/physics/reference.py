@@ -423,4 +423,3 @@ def step(a, method, x, u, h: float) -> np.ndarray:
         if a.power_monitor:
             X[i_w] += v @ X[charge]
     return X
-

@@ -1,0 +1,174 @@
+"""
+Test what ``det_sim fit`` reads and writes, and its one-line answers to bad input.
+
+sim_node's own log (recorded offline as the node records it), a rig's rosbag2 MCAP with other
+topic names and types through the mapping (JointState, Float64MultiArray and Float64, written
+with the mcap package and the generic CDR codec) and a CSV file each fit to the parameter that
+made them; the fitted scene loads as it is; bad input is one line and a non-zero exit.
+"""
+
+import contextlib
+import io
+import os
+
+from det_sim_ros.calibration.synthetic import step_and_sine, synthetic_measurement
+from det_sim_ros.cli.det_sim import main
+from det_sim_ros.io.mcap_log import Recorder
+from det_sim_ros.io.replay import simulate_to_log
+from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.simulator import Simulator
+import numpy as np
+import pytest
+
+T_END = 0.4           # s: a step and part of a sine; enough to fix Y to well within 1 %
+Y_TRUE = 1.2e6        # Pa: the log's modulus (the default scene has 1.09e6)
+STAMP0 = 1_700_000_000_000_000_000   # ns: a rig's wall-clock stamps
+
+
+@pytest.fixture(scope='module')
+def truth():
+    return load_scene('default', {'physics.Y': Y_TRUE})
+
+
+@pytest.fixture(scope='module')
+def synthetic(truth):
+    return synthetic_measurement(truth, step_and_sine(T_END, truth.dt), noise=0.01, seed=7,
+                                 channels=('dy', 'charge'))
+
+
+def run_cli(*argv):
+    """Run ``det_sim`` in-process; return (exit code, stdout, stderr)."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main([str(a) for a in argv])
+    return code, out.getvalue(), err.getvalue()
+
+
+def fitted_y(path):
+    return load_scene(str(path)).physics.Y
+
+
+def _fit(tmp_path, *logs_and_options):
+    out = tmp_path / 'fitted.yaml'
+    code, stdout, stderr = run_cli('fit', *logs_and_options, '--params', 'Y', '--quiet',
+                                   '--starts', '1', '--parallel', 'serial', '-o', out)
+    assert code == 0, stderr
+    return out, stdout
+
+
+def test_sim_node_log_fits_and_the_scene_file_loads_as_it_is(tmp_path, truth):
+    sim = Simulator(truth)
+    volts = step_and_sine(T_END, sim.dt)
+    path = tmp_path / 'node.mcap'
+    with Recorder(path, truth, metadata={'method': sim.method.name}) as recorder:
+        simulate_to_log(recorder, sim, lambda k: [float(volts[k])], len(volts))
+    # the log's scene is the base: the start is its own Y, so start from another
+    out, stdout = _fit(tmp_path, path, '--start', 'Y=1.5e6')
+    assert fitted_y(out) == pytest.approx(Y_TRUE, rel=1e-4)   # a noise-free log
+    assert 'residual RMS per channel' in stdout and 'charge' in stdout
+    assert os.path.exists(tmp_path / 'fitted_report.txt')
+    assert os.path.exists(tmp_path / 'fitted.png')
+    # as sim_node reads a scene file: through load_scene with the node's overrides
+    assert load_scene(str(out), {'scene.initial_state': 'rest'}).physics.Y == fitted_y(out)
+
+
+def test_csv_fits(tmp_path, synthetic):
+    path = tmp_path / 'rig.csv'
+    dy = synthetic.channels['dy'].values[:, 0]
+    volts = np.append(synthetic.volts[:, 0], synthetic.volts[-1, 0])
+    rows = ['t (s),v (V),dy (m)'] + [f'{k * synthetic.dt:.6f},{float(v)!r},{float(d)!r}'
+                                     for k, (v, d) in enumerate(zip(volts, dy))]
+    path.write_text('\n'.join(rows) + '\n')
+    out, stdout = _fit(tmp_path, path, path, '--scene', 'default')   # two logs fit together
+    assert fitted_y(out) == pytest.approx(Y_TRUE, rel=0.01)
+    assert '2 log(s), ' in stdout
+
+
+def _write_rig_log(path, synthetic):
+    """Write a rig's rosbag2 MCAP: Float64 volts, JointState Δy in mm, Float64MultiArray charge."""
+    from det_sim_ros.io.cdr import serialize
+    from mcap.writer import Writer
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64, Float64MultiArray
+    with open(path, 'wb') as stream:
+        writer = Writer(stream)
+        writer.start(profile='ros2', library='test')
+        channels = {}
+        for topic, kind in (('/amp/out', 'std_msgs/msg/Float64'),
+                            ('/rig/joints', 'sensor_msgs/msg/JointState'),
+                            ('/rig/adc', 'std_msgs/msg/Float64MultiArray')):
+            schema = writer.register_schema(kind, 'ros2msg', b'')
+            channels[topic] = writer.register_channel(topic, 'cdr', schema)
+        dy = synthetic.channels['dy'].values[:, 0]
+        charge = synthetic.channels['charge'].values[:, 0]
+        for k in range(len(dy)):
+            t_ns = STAMP0 + k * 1_000_000
+            state = JointState(name=['base', 'slider'], position=[0.5, dy[k] * 1e3])
+            state.header.stamp.sec, state.header.stamp.nanosec = divmod(t_ns, 10**9)
+            messages = [('/rig/joints', state),
+                        ('/rig/adc', Float64MultiArray(data=[9.0, charge[k] * 1e6]))]
+            if k < len(synthetic.volts):
+                messages.insert(0, ('/amp/out', Float64(data=float(synthetic.volts[k, 0]))))
+            for topic, msg in messages:
+                writer.add_message(channels[topic], t_ns, serialize(msg), t_ns)
+        writer.finish()
+
+
+def test_a_rig_log_with_other_topics_fits_through_the_mapping(tmp_path, synthetic):
+    path = tmp_path / 'rig.mcap'
+    _write_rig_log(path, synthetic)
+    out, stdout = _fit(tmp_path, path, '--map', 'voltage=/amp/out',
+                       '--map', 'dy=/rig/joints.position[slider]*1e-3',
+                       '--map', 'charge=rig/adc.data[1]*1e-6')
+    assert fitted_y(out) == pytest.approx(Y_TRUE, rel=0.01)
+    assert 'charge' in stdout
+
+
+def _csv(tmp_path, text, name='bad.csv'):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def _bad_inputs(tmp_path):
+    """(case, argv after 'fit') for each kind of bad input."""
+    good = _csv(tmp_path, 't,v,dy\n' + ''.join(f'{k * 1e-3},1000.0,0.0\n' for k in range(50)),
+                'good.csv')
+    return {
+        'no command': [_csv(tmp_path, 't,dy\n0,0\n0.001,0\n'), '--params', 'Y'],
+        'no command values': [_csv(tmp_path, 't,v,dy\n0,,0\n0.001,,0\n'), '--params', 'Y'],
+        'no measured output': [_csv(tmp_path, 't,v\n0,1\n0.001,1\n'), '--params', 'Y'],
+        'fewer samples than parameters': [_csv(tmp_path, 't,v,dy\n0,1,0\n0.001,1,0\n'),
+                                          '--params', 'Y,m,eta_b'],
+        'NaN': [_csv(tmp_path, 't,v,dy\n0,1,0\n0.001,1,nan\n0.002,1,0\n'), '--params', 'Y'],
+        'unknown parameter': [good, '--params', 'Y,stiffness'],
+        'bounds exclude the start': [good, '--params', 'Y', '--bounds', 'Y=2e6:3e6'],
+        'missing file': [tmp_path / 'nothing.mcap', '--params', 'Y'],
+        'not a sim_node log without a mapping': [_csv(tmp_path, 'not mcap', 'x.mcap'),
+                                                 '--params', 'Y'],
+        'bad mapping': [good, '--params', 'Y', '--map', 'dy=/a/b[1'],
+    }
+
+
+def test_bad_input_is_one_line_and_a_non_zero_exit(tmp_path):
+    for case, argv in _bad_inputs(tmp_path).items():
+        code, stdout, stderr = run_cli('fit', *argv, '--quiet', '-o', tmp_path / 'f.yaml')
+        lines = stderr.strip().splitlines()
+        assert code == 2, (case, code, stderr)
+        assert len(lines) == 1 and lines[0].startswith('det_sim: error: '), (case, stderr)
+        assert 'Traceback' not in stderr and not os.path.exists(tmp_path / 'f.yaml'), case
+
+
+def test_a_fit_that_does_not_converge_says_so_and_writes_its_report(tmp_path, synthetic):
+    path = tmp_path / 'rig.csv'
+    dy = synthetic.channels['dy'].values[:, 0]
+    rows = ['t,v,dy'] + [f'{k * 1e-3},{v},{d}' for k, (v, d) in enumerate(zip(
+        np.append(synthetic.volts[:, 0], 0.0), dy))]
+    path.write_text('\n'.join(rows) + '\n')
+    code, stdout, stderr = run_cli('fit', path, '--params', 'Y,m', '--starts', '1',
+                                   '--max-evaluations', '2', '--quiet', '--no-plots',
+                                   '-o', tmp_path / 'f.yaml')
+    assert code == 1
+    assert 'did not converge' in stderr.strip().splitlines()[-1]
+    assert 'DID NOT CONVERGE' in (tmp_path / 'f_report.txt').read_text()
+    assert load_scene(str(tmp_path / 'f.yaml')).physics.Y > 0
