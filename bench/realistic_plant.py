@@ -3,10 +3,11 @@
 The same PI controller against the ideal plant and a realistic one, offline; a plot of both.
 
 The ideal plant is the default scene: every sample is the exact state, on time. The realistic
-plant is the default scene read through the presets in PRESETS (their ``sensors`` and
-``amplifier`` sections laid over the default): the controller sees what sim_node would
-publish (noise, quantization, delay, dropped samples), and the
-plot shows both the true Δy and what the controller measured. One closed loop per plant,
+plant is config/bench_rig.yaml, the default scene read by the laser sensor preset and driven
+through the lab amplifier preset: the controller sees what sim_node would publish (noise,
+quantization, delay, dropped samples) and commands through a DAC, a period's delay, the
+amplifier's bandwidth, slew rate and current limit; the plot shows both the true Δy and what
+the controller measured. One closed loop per plant,
 sample k -> command -> period k + 1, as in sim_node's lockstep mode: a controller that answers
 each sample it receives (a dropped one is not answered and the voltage holds), the same run
 bit for bit as through sim_node (test/test_sensors_node.py).
@@ -17,25 +18,13 @@ Usage: python bench/realistic_plant.py [--png docs/figures/realistic_plant.png]
 import argparse
 
 from det_sim_ros.io.sensing import MeasuredOutputs
-from det_sim_ros.scenes.files import find_config, read_scene_file
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import Simulator
 import numpy as np
 
-# the presets that make the plant realistic; with the amplifier: ('sensor_laser', 'amplifier_lab')
-PRESETS = ('sensor_laser',)
-KP, KI = 4.0e4, 6.0e6            # V/m, V/(m s): stable against the ideal plant
+REALISTIC = 'bench_rig'
+KP, KI = 2.0e4, 6.0e6            # V/m, V/(m s): stable against the ideal plant
 TARGET, T_STEP, T_END = 2.0e-3, 0.1, 1.0   # m, s, s
-
-
-def realistic_scene(presets=PRESETS):
-    """Return the default scene with the presets' own sections (sensors, amplifier) on it."""
-    default = read_scene_file(find_config('default'))
-    data = dict(default)
-    for name in presets:
-        preset = read_scene_file(find_config(name))
-        data.update({key: value for key, value in preset.items() if key not in default})
-    return load_scene(data)
 
 
 def closed_loop(scene):
@@ -82,7 +71,7 @@ def plot(runs, path):
     bottom.set_xlabel('t (s)')
     bottom.legend(loc='lower right', fontsize=8)
     top.set_title(f'PI (Kp = {KP:g} V/m, Ki = {KI:g} V/(m s)) to Δy = {TARGET * 1e3:g} mm; '
-                  f"realistic: {' + '.join(PRESETS)}", fontsize=9)
+                  f'realistic: {REALISTIC}', fontsize=9)
     figure.tight_layout()
     figure.savefig(path, dpi=110)
 
@@ -91,7 +80,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--png', default='docs/figures/realistic_plant.png')
     args = parser.parse_args()
-    runs = [closed_loop(load_scene('default')), closed_loop(realistic_scene())]
+    runs = [closed_loop(load_scene('default')), closed_loop(load_scene(REALISTIC))]
     for name, (t, true_dy, seen_dy, volts) in zip(('ideal', 'realistic'), runs):
         late = t >= T_END - 0.1
         print(f'{name:9s}: true Δy over the last 0.1 s {true_dy[late].mean() * 1e3:.4f} mm '

@@ -80,3 +80,10 @@ def test_the_presets_are_the_default_scene_with_an_amplifier(name):
     assert scene.physics == default.physics and scene.structure == default.structure
     amp, = scene.cell_amplifiers()
     assert amp.acts_in_circuit and amp.acts_on_command and amp.current_limit > 0.0
+
+
+def test_the_bench_rig_is_the_laser_sensor_and_the_lab_amplifier_on_the_default():
+    rig, default = load_scene('bench_rig'), load_scene('default')
+    assert rig.physics == default.physics and rig.fidelity == default.fidelity
+    assert rig.amplifier == load_scene('amplifier_lab').amplifier
+    assert rig.sensors == load_scene('sensor_laser').sensors != default.sensors

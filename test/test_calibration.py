@@ -21,7 +21,9 @@ NOT_IDENTIFIED = 'Rp'                   # leakage: a time constant of ~100 s aga
 
 @pytest.fixture(scope='module')
 def truth():
-    return load_scene('default')
+    # the paper's level: the fit's statistics do not depend on the level, and a fit at the
+    # default level takes about 20x as long (docs/calibration.md, Speed)
+    return load_scene('default', {'scene.fidelity': 'paper'})
 
 
 def _start(scene, names):
