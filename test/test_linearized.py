@@ -177,8 +177,17 @@ def test_the_amplified_circuit_under_the_linearized_method_meets_the_tolerance()
         assert not sim.fault
         return sim, np.array(y)
 
-    sim, y = run('auto', 1e-6)
-    assert sim.describe_stepper().startswith('etdrk4_linearized')
+    sim, y = run('etdrk4_linearized', 1e-6)
     _, y_ref = run('etdrk4', 1e-9)
     assert np.ptp(y_ref) > 1e-3                       # it snapped through and back
     assert np.abs(y - y_ref).max() < 1e-6 * np.ptp(y_ref)
+
+
+def test_auto_leaves_the_linearized_method_where_an_amplifier_bandwidth_lags_the_supply():
+    def picked(scene, overrides=None):
+        return Simulator(load_scene(scene, overrides or {})).method.name
+
+    assert picked('default') == 'etdrk4_linearized'
+    assert picked('amplifier_lab') == 'etdrk4'                    # bandwidth 40 kHz
+    assert picked('amplifier_lab', {'amplifier.bandwidth': 0.0}) == 'etdrk4_linearized'
+    assert picked('amplifier_lab', {'scene.fidelity': 'paper'}) == 'etdrk4'

@@ -71,7 +71,8 @@ class Simulator:
     :param scene: a :class:`Scene`, a scene file/name, or a built :class:`Model`.
     :param method: stepper name (default: the scene's ``integrator.method``; 'auto' picks
         'etdrk4' when the scene has a stiff charge state, 'etdrk4_linearized' when its beams
-        also have more than one Ritz term (stiff beam modes), and 'dp5' otherwise: the
+        also have more than one Ritz term (stiff beam modes) and no amplifier bandwidth lags
+        the supply, and 'dp5' otherwise: the
         cheapest per accuracy in bench/work_precision.py and bench/stiff_speed.py).
     :param substeps: internal steps per control period (default: the scene's; 0 = adaptive
         from the scene's tolerance when the method has an embedded estimate, else a fixed count
@@ -112,9 +113,14 @@ class Simulator:
         if name == 'auto':
             if self.scene.source != 'rc':
                 return get_method('dp5')
-            # beams with more than one Ritz term have stiff, heavily damped modes
+            # beams with more than one Ritz term have stiff, heavily damped modes; but an
+            # amplifier bandwidth's fast output transient after every new command drives the
+            # linearized method's step count up (lab preset, a new command every period: 379
+            # steps per period against etdrk4's 56, bench/amplifier_cost.py)
             modes = np.diff(self.model.arrays.cell_q)
-            return get_method('etdrk4_linearized' if np.any(modes > 1) else 'etdrk4')
+            lagging = any(amp.bandwidth > 0.0 for amp in self.scene.cell_amplifiers())
+            linearized = np.any(modes > 1) and not lagging
+            return get_method('etdrk4_linearized' if linearized else 'etdrk4')
         try:
             return get_method(name)
         except ValueError as exc:   # a scene value: one line naming the key and the choices
