@@ -10,8 +10,12 @@ ordered pairs of blocks of ``block_s`` wall seconds, one at a time, so the host'
 both alike; the figure is the process CPU (all threads) per control period of each, and their
 ratio (totals, and the mean of the per-pair ratios with its standard error).
 
+With ``--amplifier PRESET`` the /on node also takes that preset's amplifier section (e.g.
+``amplifier_lab``: DAC, delay, offset, bandwidth, slew rate, current limit): every knob of both
+models on.
+
 Usage: python bench/sensor_cost.py [--scene default] [--pairs 60] [--block-s 0.5]
-       [--topics displacement,...] [--truth-subscribed]
+       [--topics displacement,...] [--truth-subscribed] [--amplifier amplifier_lab]
        (``bench/node_rate.py --paired-sensors N`` runs the same with every topic sensed)
 """
 
@@ -59,6 +63,12 @@ def _node(context, scene_name, namespace, folder, compression, overrides):
     return SimNode(context=context, namespace=namespace, parameter_overrides=params)
 
 
+def amplifier_of(preset: str) -> dict:
+    """Return a preset's amplifier section as node parameter overrides (amplifier.<knob>)."""
+    from det_sim_ros.scenes.scene import load_scene
+    return {f'amplifier.{key}': value for key, value in load_scene(preset).amplifier.items()}
+
+
 def _spin_block(executor, block_s):
     end = time.perf_counter() + block_s
     while time.perf_counter() < end:
@@ -66,7 +76,7 @@ def _spin_block(executor, block_s):
 
 
 def paired_sensors(scene_name, pairs, block_s, folder, compression='zstd', seed=1,
-                   truth_subscribed=False, topics=TOPICS):
+                   truth_subscribed=False, topics=TOPICS, amplifier=None):
     """Measure the nodes without and with sensors in ``pairs`` random-order pairs of blocks."""
     names = [f'/{ns}/{topic}' for ns in ('off', 'on') for topic in TOPICS]
     if truth_subscribed:
@@ -76,9 +86,9 @@ def paired_sensors(scene_name, pairs, block_s, folder, compression='zstd', seed=
     for context in contexts:
         rclpy.init(context=context)
     try:
+        knobs = {**every_knob_on(topics), **(amplifier_of(amplifier) if amplifier else {})}
         nodes = [_node(contexts[0], scene_name, 'off', folder, compression, {}),
-                 _node(contexts[1], scene_name, 'on', folder, compression,
-                       every_knob_on(topics))]
+                 _node(contexts[1], scene_name, 'on', folder, compression, knobs)]
         executors = [make_executor(context) for context in contexts]
         for executor, node in zip(executors, nodes):
             executor.add_node(node)
@@ -115,7 +125,7 @@ def paired_sensors(scene_name, pairs, block_s, folder, compression='zstd', seed=
     mean = sum(ratios) / len(ratios)
     error = (sum((r - mean) ** 2 for r in ratios) / (len(ratios) - 1)) ** 0.5 / len(ratios) ** 0.5
     return {'pairs': pairs, 'block_s': block_s, 'truth_subscribed': truth_subscribed,
-            'sensed_topics': list(topics),
+            'sensed_topics': list(topics), 'amplifier': amplifier,
             'off_us_per_period': off_us, 'on_us_per_period': on_us,
             'on_over_off_totals': on_us / off_us, 'on_over_off_mean_of_pairs': mean,
             'standard_error': error, 'periods': [totals[0][1], totals[1][1]],
@@ -132,11 +142,13 @@ def main():
                         help='the sensed topics (every knob on for each)')
     parser.add_argument('--truth-subscribed', action='store_true',
                         help='the subscriber process takes the truth topics too')
+    parser.add_argument('--amplifier', default=None,
+                        help='a preset whose amplifier section the /on node takes too')
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as folder:
         result = paired_sensors(args.scene, args.pairs, args.block_s, folder,
                                 args.log_compression, truth_subscribed=args.truth_subscribed,
-                                topics=tuple(args.topics.split(',')))
+                                topics=tuple(args.topics.split(',')), amplifier=args.amplifier)
     result.update(cpus=os.cpu_count(), load_avg=os.getloadavg())
     print(json.dumps(result, indent=2))
 

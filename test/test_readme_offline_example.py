@@ -1,9 +1,9 @@
 """
-The README's offline controller example runs as printed and does what the README says.
+The README's offline examples run as printed and do what the README says.
 
-The ``python`` block under "A controller that settles" that uses Simulator is taken from
-README.md as it is and run; Δy must reach 3 mm within 1 %, and the line it prints must be the
-one its last comment shows.
+The ``python`` blocks under "A controller that settles" (the one that uses Simulator) and "A
+plant that behaves like the bench" are taken from README.md as it is and run: Δy must reach
+3 mm within 1 %, and what each prints must be what its last comment shows.
 """
 
 import contextlib
@@ -38,3 +38,17 @@ def test_the_readme_offline_controller_reaches_3_mm_and_prints_its_comment():
     print_line = next(line for line in code.splitlines() if line.startswith('print('))
     shown = print_line.split('# ', 1)[1].strip()
     assert printed.getvalue().strip() == shown
+
+
+def test_the_readme_realistic_plant_example_prints_its_comment():
+    # the same PI settles against the ideal plant and rings against the bench rig
+    with open(README, encoding='utf-8') as stream:
+        text = stream.read()
+    start = text.index('## A plant that behaves like the bench')
+    code = re.search(r'^```python\n(.*?)^```$', text[start:], re.S | re.M).group(1)
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        exec(compile(code, 'README.md (A plant that behaves like the bench)', 'exec'),
+             {'__name__': '__readme__'})
+    shown = code.rstrip().splitlines()[-1].split('# ', 1)[1].strip()
+    assert ', '.join(printed.getvalue().strip().splitlines()) == shown
