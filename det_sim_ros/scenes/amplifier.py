@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from .keys import AMPLIFIER_DEFAULTS, AMPLIFIER_SPEC, check_value, SceneError
+from .keys import AMPLIFIER_DEFAULTS, AMPLIFIER_SPEC, check_section, SceneError
 
 __all__ = ['Amplifier', 'check_amplifier_section', 'check_amplifiers', 'IDEAL']
 
@@ -64,17 +64,7 @@ IDEAL = Amplifier()
 
 def check_amplifier_section(content, where: str = 'amplifier') -> dict:
     """Return the section's values checked, missing keys at their defaults (all off)."""
-    if content is None:
-        content = {}
-    if not isinstance(content, dict):
-        raise SceneError(f'scene key {where!r}: must be a mapping of '
-                         + ', '.join(AMPLIFIER_SPEC) + f' (got {content!r})')
-    for key in content:
-        if key not in AMPLIFIER_SPEC:
-            raise SceneError(f'unknown scene key {where}.{key!r}; allowed: '
-                             + ', '.join(AMPLIFIER_SPEC))
-    return {key: check_value(f'{where}.{key}', content.get(key, default), AMPLIFIER_SPEC[key])
-            for key, default in AMPLIFIER_DEFAULTS.items()}
+    return check_section(where, content, AMPLIFIER_SPEC, AMPLIFIER_DEFAULTS)
 
 
 def check_amplifiers(scene) -> None:

@@ -121,6 +121,25 @@ TOP_SPEC = {
 SECTIONS = {'scene': SCENE_SPEC, 'physics': PHYSICS_SPEC, 'integrator': INTEGRATOR_SPEC}
 
 
+def check_section(where: str, content, spec, defaults) -> dict:
+    """
+    Return a mapping section's values checked against ``spec``, missing keys at ``defaults``.
+
+    ``where`` is the section's dotted name (``structure``, ``amplifier``, ``sensors.charge``);
+    :class:`SceneError` names a section that is not a mapping or a key it does not know.
+    """
+    if content is None:
+        content = {}
+    if not isinstance(content, dict):
+        raise SceneError(f'scene key {where!r}: must be a mapping of '
+                         + ', '.join(spec) + f' (got {content!r})')
+    for key in content:
+        if key not in spec:
+            raise SceneError(f'unknown scene key {where}.{key!r}; allowed: ' + ', '.join(spec))
+    return {key: check_value(f'{where}.{key}', content.get(key, default), spec[key])
+            for key, default in defaults.items()}
+
+
 def _fail(key, value, why):
     raise SceneError(f'scene key {key!r}: {why} (got {value!r})')
 

@@ -27,10 +27,10 @@ import yaml
 
 from .amplifier import Amplifier, check_amplifier_section, check_amplifiers
 from .files import find_config, read_scene_file, resolve_base, unwrap_ros_params
-from .keys import (AMPLIFIER_DEFAULTS, AMPLIFIER_SPEC, BEAMS, check_value, FIDELITIES,
-                   INITIAL_STATES, INTEGRATOR_SPEC,
-                   PHYSICS_SPEC, REST_BRANCHES, SCENE_SPEC, SceneError, SECTION_DEFAULTS,
-                   SECTIONS, SOURCES, STRUCTURE_DEFAULTS, STRUCTURE_SPEC, STRUCTURES, TOP_SPEC)
+from .keys import (AMPLIFIER_DEFAULTS, AMPLIFIER_SPEC, BEAMS, check_section, check_value,
+                   FIDELITIES, INITIAL_STATES, INTEGRATOR_SPEC, PHYSICS_SPEC, REST_BRANCHES,
+                   SCENE_SPEC, SceneError, SECTION_DEFAULTS, SECTIONS, SOURCES,
+                   STRUCTURE_DEFAULTS, STRUCTURE_SPEC, STRUCTURES, TOP_SPEC)
 from .sensors import check_sensors, Sensors, sensors_to_dict
 
 __all__ = ['SceneError', 'Physics', 'Scene', 'load_scene', 'scene_to_dict', 'find_config',
@@ -320,16 +320,8 @@ def load_scene(source: Any = 'default', overrides: Mapping[str, Any] | None = No
 
 def _check_structure(data):
     """Return the optional 'structure' and 'dets' sections, validated, with names filled in."""
-    content = data.get('structure', {})
-    if not isinstance(content, dict):
-        raise SceneError(f"scene key 'structure': must be a mapping (got {content!r})")
-    for key in content:
-        if key not in STRUCTURE_SPEC:
-            raise SceneError(f'unknown scene key structure.{key!r}; allowed: '
-                             + ', '.join(STRUCTURE_SPEC))
-    structure = {key: check_value(f'structure.{key}', content.get(key, default),
-                                  STRUCTURE_SPEC[key])
-                 for key, default in STRUCTURE_DEFAULTS.items()}
+    structure = check_section('structure', data.get('structure', {}), STRUCTURE_SPEC,
+                              STRUCTURE_DEFAULTS)
     kind = structure['type']
     count = {'single': 1, 'plate': 2, 'array': structure['copies']}[kind]
     names = structure['dets']

@@ -15,7 +15,7 @@ import dataclasses
 import math
 from typing import Mapping
 
-from .keys import check_value, SceneError
+from .keys import check_section, check_value, SceneError
 
 __all__ = ['SENSOR_TOPICS', 'SENSOR_SPEC', 'SENSOR_DEFAULTS', 'SEED_SPEC', 'SensorSpec',
            'Sensors', 'check_sensors', 'sensors_to_dict']
@@ -99,16 +99,7 @@ class Sensors:
 def _check_spec(topic: str, content) -> SensorSpec:
     if content is None:
         return _OFF
-    if not isinstance(content, dict):
-        raise SceneError(f"scene key 'sensors.{topic}': must be a mapping of "
-                         + ', '.join(SENSOR_SPEC) + f' (got {content!r})')
-    for key in content:
-        if key not in SENSOR_SPEC:
-            raise SceneError(f'unknown scene key sensors.{topic}.{key!r}; allowed: '
-                             + ', '.join(SENSOR_SPEC))
-    values = {key: check_value(f'sensors.{topic}.{key}', content.get(key, default),
-                               SENSOR_SPEC[key])
-              for key, default in SENSOR_DEFAULTS.items()}
+    values = check_section(f'sensors.{topic}', content, SENSOR_SPEC, SENSOR_DEFAULTS)
     if values['range_min'] > values['range_max'] or (
             values['range_min'] == values['range_max'] != 0.0):
         raise SceneError(f"scene key 'sensors.{topic}.range_min': must be below range_max "
