@@ -267,7 +267,7 @@ def test_sigkill_loses_at_most_the_last_flush_period(tmp_path, mode):
     assert not reader.complete
     assert len(values) >= flushed > 0
     assert values == [float(k) for k in range(len(values))]  # nothing before the cut is lost
-    # issue 17: the killed file is a valid MCAP up to its last flush (a provisional end after
+    # the killed file is a valid MCAP up to its last flush (a provisional end after
     # every flush): mcap's own reader and rosbags read it without a manual step
     with open(path, 'rb') as stream:
         standard = [m.data for _, _, m in make_reader(stream).iter_messages()]
@@ -302,6 +302,31 @@ def test_sigint_finishes_the_file(tmp_path, mode):
         values = [m.data for _, _, m in reader.iter_messages()]
         end = {m.name: m.metadata for m in reader.iter_metadata()}['det_sim_ros.end']
     assert count == len(values) == int(end['messages']) >= flushed
+
+
+def test_an_interrupt_right_after_a_write_still_counts_it(tmp_path, monkeypatch):
+    """SIGINT between writing a message and counting it: the end counters match the file."""
+    from mcap.reader import make_reader
+    from std_msgs.msg import Float64MultiArray
+    from det_sim_ros.io import log_file
+    path = tmp_path / 'cut.mcap'
+    recorder = Recorder(str(path), None)
+    for k in range(3):
+        recorder.record('voltage_command', Float64MultiArray(data=[float(k)]), k * 1000000)
+    write = log_file.LogFile.add
+
+    def write_then_interrupt(self, *args):
+        write(self, *args)
+        raise KeyboardInterrupt
+    monkeypatch.setattr(log_file.LogFile, 'add', write_then_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        recorder.record('voltage_command', Float64MultiArray(data=[3.0]), 3000000)
+    recorder.close()
+    with open(path, 'rb') as stream:
+        reader = make_reader(stream)
+        count = reader.get_summary().statistics.message_count
+        end = {m.name: m.metadata for m in reader.iter_metadata()}['det_sim_ros.end']
+    assert count == int(end['messages']) == 4
 
 
 def test_cdr_serializer_matches_rclpy_and_rosbags():

@@ -1,5 +1,5 @@
 /*
- * The floor for the compiled kernel's cost per internal step (issue 14): classical RK4 with
+ * The floor for the compiled kernel's cost per internal step: classical RK4 with
  * fixed steps on the same one-term DET-beam model (paper kinematics, creep, RC source, power
  * monitor), written as plain scalar C with every constant in a local: what a hand-written
  * simulator of exactly this scene would cost. bench/kernel_floor.py compiles it with the same

@@ -13,6 +13,7 @@ import os
 import time
 from typing import Mapping
 
+from . import mcap_internals
 from .mcap_format import END_METADATA_NAME, LIBRARY, METADATA_NAME, SCENE_ATTACHMENT, TailStream
 from .record_packing import RecordPacker
 from .schemas import message_definition, qos_profiles_yaml
@@ -94,6 +95,10 @@ class LogFile:
         else:
             self.writer.add_message(channel_id=channel_id, log_time=log_time, data=data,
                                     publish_time=log_time, sequence=sequence)
+
+    def message_count(self) -> int | None:
+        """Return the messages this file holds, as its summary will count them (None: unknown)."""
+        return mcap_internals.message_count(self.writer)
 
     def flush(self) -> None:
         """End the chunk and write everything (and the provisional end) to disk."""

@@ -57,6 +57,11 @@ def _missing(writer) -> list[str]:
     return missing
 
 
+def message_count(writer) -> int | None:
+    """Return the messages ``writer``'s summary will count (None if this mcap hides it)."""
+    return getattr(getattr(writer, _WRITER[0], None), 'message_count', None)
+
+
 class WriterInternals:
     """
     The private state of one started ``mcap.Writer`` (chunked).

@@ -85,6 +85,7 @@ class Recorder:
                  packing: bool = True):
         self.fault = ''
         self.messages = 0       # messages written
+        self._messages_before_file = 0
         self.bytes = 0          # serialized payload bytes written
         self.clamped = 0        # log times raised to keep them non-decreasing
         self.dropped = 0        # messages not written because of a fault
@@ -166,6 +167,7 @@ class Recorder:
             file.abandon()
             raise
         self._file = file
+        self._messages_before_file = self.messages
         self._flush_policy.restart(self._last_t)
         rotation.opened(path, file.size())
 
@@ -173,6 +175,12 @@ class Recorder:
         file, self._file = self._file, None
         if file is None:
             return
+        # the file's own count: a SIGINT between writing a message and counting it (the
+        # KeyboardInterrupt lands between any two bytecodes) must not leave the end counters
+        # one short of what the file holds
+        held = file.message_count()
+        if held is not None:
+            self.messages = self._messages_before_file + held
         file.finish(self.counters(strings=True))
         if self.paths:
             self._rotation.closed(self.paths[-1])

@@ -123,6 +123,17 @@ static int needs_refresh(const ds_stepper *st, const ds_group *g, const double *
     return 0;
 }
 
+/* Whether the q rows of A are exactly [0 I]: q' = qdot, so f - A x is exactly 0 there. */
+static int rates_are_velocities(const double *A, int64_t nd)
+{
+    const int64_t nq = nd / 2;
+    for (int64_t r = 0; r < nq; r++)
+        for (int64_t c = 0; c < nd; c++)
+            if (A[r * nd + c] != (c == nq + r ? 1.0 : 0.0))
+                return 0;
+    return 1;
+}
+
 /*
  * Take A anew at the period's start (x, u) when needed: forward differences of the
  * right-hand side in the coordinates the stages integrate (quasi-static charge on RC scenes),
@@ -155,6 +166,7 @@ int ds_linear_update(const ds_stepper *st, ds_group *g, const double *x, const d
     }
     if (status != DS_OK)
         return status;
+    lin->q_rates = rates_are_velocities(lin->A, nd);
     memcpy(lin->x_lin, x, (size_t)nd * sizeof(double));
     memcpy(lin->u_lin, u, (size_t)m->n_cells * sizeof(double));
     ds_linear_reset(lin);

@@ -29,6 +29,8 @@ typedef struct {
     double *A;                          /* nd x nd, row-major */
     double *x_lin, *u_lin;              /* the state (nd) and input where A was taken */
     int valid;
+    int q_rates;                        /* A's q rows are [0 I] (q' = qdot): the remainder
+                                           N is 0 there, bit for bit, and is skipped */
     int64_t next_slot, refreshes, fills;   /* Jacobians taken, weight sets computed */
     ds_lin_slot slot[DS_LIN_SLOTS];
     double *phis;                       /* per table argument: phi_0..k_max, full and half */

@@ -198,13 +198,14 @@ int ds_advance(const ds_stepper *st, ds_group *g, double *x, const double *u, do
 }
 
 /* Row i of the table with the dense linear part over q, qdot (states [0, nd)): there
- * X = phi_0(c_i h A) x + h sum_j W_ij N_j; the other states as stage_row. */
+ * X = phi_0(c_i h A) x + h sum_j W_ij N_j; the other states as stage_row. Terms that are 0
+ * bit for bit are skipped (phi_0(0) = I; N on q where q' = qdot is in A): same sums. */
 static void stage_row_linear(const ds_method *me, const ds_linear *lin,
                              const ds_lin_slot *slot, const double *x, const double *N,
                              const double *coef, const double *e_c, double h, int64_t i,
                              double *X, int64_t nx, int64_t s0, int64_t s1)
 {
-    const int64_t nd = lin->nd, nn = nd * nd;
+    const int64_t nd = lin->nd, nn = nd * nd, c0 = lin->q_rates ? nd / 2 : 0;
     memcpy(X, x, (size_t)nx * sizeof(double));
     for (int64_t t = me->merged_start[i]; t < me->merged_start[i + 1]; t++) {
         const double *Nj = N + me->merged_stage[t] * nx;
@@ -220,15 +221,21 @@ static void stage_row_linear(const ds_method *me, const ds_linear *lin,
             acc += h * coef[t * nx + k] * N[me->term_stage[t] * nx + k];
         X[k] = acc;
     }
+    const int identity = i < me->n_stages && me->c[i] == 0.0;   /* phi_0(0 h A) = I */
+    if (identity && lin->pair_start[i] == lin->pair_start[i + 1])
+        return;   /* X = x there (copied above) */
     const double *E = slot->E + i * nn;
     for (int64_t r = 0; r < nd; r++) {
-        double acc = 0.0;
-        for (int64_t c = 0; c < nd; c++)
-            acc += E[r * nd + c] * x[c];
+        double acc = x[r];
+        if (!identity) {
+            acc = 0.0;
+            for (int64_t c = 0; c < nd; c++)
+                acc += E[r * nd + c] * x[c];
+        }
         for (int64_t p = lin->pair_start[i]; p < lin->pair_start[i + 1]; p++) {
             const double *W = slot->W + p * nn + r * nd, *Nj = N + lin->pair_stage[p] * nx;
             double sum = 0.0;
-            for (int64_t c = 0; c < nd; c++)
+            for (int64_t c = c0; c < nd; c++)
                 sum += W[c] * Nj[c];
             acc += h * sum;
         }
@@ -236,14 +243,17 @@ static void stage_row_linear(const ds_method *me, const ds_linear *lin,
     }
 }
 
-/* N = f(X) - L X on the charge and f(X) - A X on q, qdot (N holds f(X) on entry). */
+/* N = f(X) - L X on the charge and f(X) - A X on q, qdot (N holds f(X) on entry; on q, where
+ * q' = qdot is in A, that is qdot - qdot = 0). */
 static void linear_remainder(const ds_group *g, const double *X, double *N, int64_t s0, int64_t s1)
 {
     const ds_linear *lin = g->lin;
-    const int64_t nd = lin->nd;
+    const int64_t nd = lin->nd, r0 = lin->q_rates ? nd / 2 : 0;
     for (int64_t k = s0; k < s1; k++)
         N[k] -= g->L[k] * X[k];
-    for (int64_t r = 0; r < nd; r++) {
+    for (int64_t r = 0; r < r0; r++)   /* A's row: 1 at qdot_r, 0 elsewhere */
+        N[r] -= X[nd / 2 + r];
+    for (int64_t r = r0; r < nd; r++) {
         double acc = 0.0;
         for (int64_t c = 0; c < nd; c++)
             acc += lin->A[r * nd + c] * X[c];
@@ -257,14 +267,14 @@ static void linear_fsal_estimate(ds_group *g, const ds_lin_slot *prev, double e_
                                  const double *N, double h_prev)
 {
     const ds_linear *lin = g->lin;
-    const int64_t nd = lin->nd;
+    const int64_t nd = lin->nd, c0 = lin->q_rates ? nd / 2 : 0;
     const double *W = prev->W + lin->est_pair * nd * nd;
     double *v = lin->f1;   /* free between Jacobian updates */
     for (int64_t k = 0; k < nd; k++)
         v[k] = g->pend[k] + e_s * N[k];
     for (int64_t r = 0; r < nd; r++) {
         double acc = 0.0;
-        for (int64_t c = 0; c < nd; c++)
+        for (int64_t c = c0; c < nd; c++)
             acc += W[r * nd + c] * v[c];
         const double e = fabs(h_prev * lin->est_scale * acc) * g->inv_scale[r];
         if (e > g->est)
