@@ -32,6 +32,7 @@
 
 #define LIMIT_MARGIN 1e-6   /* relative: the limit law starts at |i| = I (1 - LIMIT_MARGIN) */
 #define SLEW_MARGIN 1e-9    /* relative: a gap within S tau_a (1 + SLEW_MARGIN) is followed */
+#define SQRT_HALF 0.70710678118654752440
 #define MAX_LOCATE 60       /* regula falsi iterations to locate a current-limit switch */
 #define REACH_SHARE 0.5     /* a period whose currents stay below this share of the limit
                                steps without watching for the limit */
@@ -262,6 +263,15 @@ static double transient_bound(const ds_stepper *st, const ds_model *m, double t)
     return bound;
 }
 
+/* A graded step under the linearized method: the largest h 2^(-j/2) within ``bound``, so
+ * that the graded steps of a transient repeat a few sizes and share their weights (each new
+ * size costs a matrix phi, linear_part.c) for at most a factor sqrt(2) of their length. */
+static double graded_rung(double h, double bound)
+{
+    const int j = (int)ceil(2.0 * log2(h / bound) - 1e-9);
+    return j % 2 ? ldexp(h * SQRT_HALF, -(j - 1) / 2) : ldexp(h, -j / 2);
+}
+
 /* Retry the step just taken from x_start (ending past a current-limit switch) shorter until it
  * ends at most LIMIT_MARGIN past the switch (Illinois regula falsi on the step size); *h
  * receives its length. A DET that left its limit starts a charge transient (a lag of Rs I). */
@@ -380,7 +390,8 @@ static int period_steps(const ds_stepper *st, ds_group *g, double *x, const doub
             *whole = 1;
             return ds_advance(st, g, x, u, hs, (int64_t)n_rest, 1.0);
         }
-        hs = fmin(hs, bound);
+        if (bound < hs)
+            hs = g->lin ? graded_rung(h, bound) : bound;
         hs = fmin(hs, t_slew);
         memcpy(x_start, x, bytes);
         status = ds_advance(st, g, x, u, hs, 1, 1.0);
