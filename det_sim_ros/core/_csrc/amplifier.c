@@ -69,7 +69,7 @@ static double output_rate(const ds_det *d, double u, double va)
     }
 }
 
-/* v_p of cell i from x (w->y from ds_kinematics), and its capacitance *cap. */
+/* v_p of cell i from x (w->y from ds_stretches), and its capacitance *cap. */
 static inline double det_voltage(const ds_model *m, int64_t i, const double *x,
                                  const ds_work *w, double *cap)
 {
@@ -104,7 +104,7 @@ static inline double past_switch(const ds_model *m, int64_t i, const double *x,
 
 void ds_amp_laws(const ds_model *m, const double *x, const double *u, ds_work *w)
 {
-    ds_kinematics(m, x, w, 0);
+    ds_stretches(m, x, w, w->Us4);   /* w->y */
     for (int64_t i = 0; i < m->n_cells; i++) {
         ds_det *d = &m->det[i];
         d->v_law = m->amp_state ? output_law(d, u[i], x[m->i_va + i]) : VA_HOLD;
@@ -144,7 +144,7 @@ double ds_amp_relax(const ds_model *m, int64_t i, const double *x, const double 
 static double passed_switch(const ds_model *m, const double *x, const double *u, ds_work *w)
 {
     double worst = -INFINITY;
-    ds_kinematics(m, x, w, 0);
+    ds_stretches(m, x, w, w->Us4);   /* w->y */
     for (int64_t i = 0; i < m->n_cells; i++) {
         const ds_det *d = &m->det[i];
         if (!(d->amp_imax > 0.0))
@@ -314,7 +314,7 @@ static int locate_switch(const ds_stepper *st, ds_group *g, double *x, const dou
         status = ds_advance(st, g, x, u, hi, 1, 1.0);
     }
     *h = hi;
-    ds_kinematics(m, x, &g->w, 0);
+    ds_stretches(m, x, &g->w, g->w.Us4);   /* w->y */
     for (int64_t i = 0; i < m->n_cells && status == DS_OK; i++) {
         ds_det *d = &m->det[i];
         if (d->i_law != AMP_LINEAR && past_switch(m, i, x, u, &g->w) >= 0.0) {
@@ -359,14 +359,14 @@ static int limit_within_reach(const ds_model *m, const double *x, const double *
 /* Whether any DET ended the period with its current beyond REACH_SHARE of its limit. */
 static int ends_near_limit(const ds_model *m, const double *x, const double *u, ds_work *w)
 {
-    ds_kinematics(m, x, w, 0);
+    ds_stretches(m, x, w, w->Us4);   /* w->y */
     for (int64_t i = 0; i < m->n_cells; i++)
         if (m->det[i].amp_imax > 0.0 && !(fabs(linear_share(m, i, x, u, w)) < REACH_SHARE))
             return 1;
     return 0;
 }
 
-/* The steps of one period from x (laws and transients set): with ``limited`` each step alone
+/* The steps of one period from x (its laws and transients set): with ``limited`` each step alone
  * (a current limit's switch is located after each), else the rest of the period in one call
  * as soon as no law can switch before its end. *whole: whether that call was taken. */
 static int period_steps(const ds_stepper *st, ds_group *g, double *x, const double *u,
@@ -380,7 +380,6 @@ static int period_steps(const ds_stepper *st, ds_group *g, double *x, const doub
     int status = DS_OK;
     *whole = 0;
     while (status == DS_OK && dt - t > 1e-9 * h) {
-        ds_amp_laws(m, x, u, &g->w);
         const double rest = dt - t, n_rest = ceil(rest / h - 1e-9);
         /* h itself while the steps so far were whole steps: equal sizes share their weights */
         double hs = fabs(n_rest * h - rest) <= 1e-9 * h ? h : rest / n_rest;
@@ -400,6 +399,7 @@ static int period_steps(const ds_stepper *st, ds_group *g, double *x, const doub
         if (status == DS_OK && m->amp_state)
             finish_slews(m, x, x_start, u, hs, t + hs);
         t += hs;
+        ds_amp_laws(m, x, u, &g->w);
     }
     return status;
 }
