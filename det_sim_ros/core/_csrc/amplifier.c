@@ -416,8 +416,10 @@ int ds_amp_period(const ds_stepper *st, ds_group *g, double *x, const double *u_
     ds_amp_laws(m, x, u, &g->w);
     start_transients(m, x, u_old, u, &g->w);
     int limited = limit_within_reach(m, x, u, &g->w), whole;
+    g->watched += limited;
     int status = period_steps(st, g, x, u, h, n_sub, limited, &whole);
     if (status == DS_OK && !limited && ends_near_limit(m, x, u, &g->w)) {
+        g->watched += 1.0;
         memcpy(x, g->x0, bytes);
         ds_amp_laws(m, x, u, &g->w);
         start_transients(m, x, u_old, u, &g->w);

@@ -57,6 +57,8 @@ typedef struct {
     ds_work w;
     ds_control ctl, ctl_initial;
     double est, steps;                  /* largest error estimate since reset, steps taken */
+    double watched;                     /* amplified periods stepped one step at a time for a
+                                           current limit within reach (amplifier.c) */
     int64_t s0, s1;                     /* states with a stiff rate: [s0, s1) */
     int64_t q_first, c_first;           /* first coordinate and cell in the whole model */
     int quasi_static;
