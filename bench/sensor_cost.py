@@ -12,7 +12,7 @@ ratio (totals, and the mean of the per-pair ratios with its standard error).
 
 With ``--amplifier PRESET`` the /on node also takes that preset's amplifier section (e.g.
 ``amplifier_lab``: DAC, delay, offset, bandwidth, slew rate, current limit): every knob of both
-models on.
+models on; with ``--topics ''`` as well, the amplifier alone.
 
 Usage: python bench/sensor_cost.py [--scene default] [--pairs 60] [--block-s 0.5]
        [--topics displacement,...] [--truth-subscribed] [--amplifier amplifier_lab]
@@ -139,7 +139,7 @@ def main():
     parser.add_argument('--block-s', type=float, default=0.5)
     parser.add_argument('--log-compression', default='zstd', choices=('zstd', 'lz4', 'none'))
     parser.add_argument('--topics', default=','.join(TOPICS),
-                        help='the sensed topics (every knob on for each)')
+                        help='the sensed topics (every knob on for each; empty: none)')
     parser.add_argument('--truth-subscribed', action='store_true',
                         help='the subscriber process takes the truth topics too')
     parser.add_argument('--amplifier', default=None,
@@ -148,7 +148,8 @@ def main():
     with tempfile.TemporaryDirectory() as folder:
         result = paired_sensors(args.scene, args.pairs, args.block_s, folder,
                                 args.log_compression, truth_subscribed=args.truth_subscribed,
-                                topics=tuple(args.topics.split(',')), amplifier=args.amplifier)
+                                topics=tuple(t for t in args.topics.split(',') if t),
+                                amplifier=args.amplifier)
     result.update(cpus=os.cpu_count(), load_avg=os.getloadavg())
     print(json.dumps(result, indent=2))
 

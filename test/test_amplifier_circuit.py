@@ -115,3 +115,22 @@ def test_resim_of_a_log_with_the_circuit_knobs_on_is_bit_exact(tmp_path):
     recorder.close()
     result = resimulate(log)
     assert result.steps == 120 and result.ok(tolerance=0.0), result.table()
+
+
+def test_a_limit_no_current_can_reach_in_a_period_steps_as_without_it():
+    # a 2 mA limit (4 V across Rs) while the released beam rings at the 1 V offset: no period
+    # can reach it, so they step as without the limit (whole calls, the same bits) and none is
+    # watched step by step; the 3 kV step at 0.2 s reaches it (4.4 mA without the limit,
+    # through the 40 kHz bandwidth)
+    knobs = {'scene.initial_state': 'released', 'amplifier.bandwidth': 4.0e4,
+             'amplifier.offset': 1.0}
+    profile = _step(1e3, 0.2, 0.3, 0.3, 3000.0)
+    sim = Simulator(load_scene('default', {**knobs, 'amplifier.current_limit': LIMIT}))
+    held = simulate(sim, profile[:200], 0.2)
+    assert sim.stepper.limit_watched_periods == 0
+    _, free = _run(knobs, profile, 1e3)
+    assert np.array_equal(held.x, free.x[:201])
+    stepped = simulate(sim, profile[200:], 0.1)
+    assert sim.stepper.limit_watched_periods > 0
+    assert np.max(np.abs(stepped['i_DE'])) <= LIMIT * (1.0 + 1e-12)
+    assert np.max(np.abs(free['i_DE'])) > LIMIT

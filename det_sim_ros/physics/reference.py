@@ -370,6 +370,66 @@ def phi(k: int, z: float) -> float:
     return float(expm(A)[0, k])
 
 
+def _couplings(a, L, laws) -> list:
+    """
+    Return the charge's couplings to a following amplifier output: (i_z, i_va, M) per DET.
+
+    In the quasi-static coordinates z' = L_z z + c v_a + ..., v_a' = L_a v_a + ... with
+    c = C Rp/(Rs+Rp) / tau_a = -1/(Rs L_z tau_a) while v_a follows and the current is linear:
+    the stages integrate the block M = [[L_z, c], [0, L_a]] exactly.
+    """
+    i_qp, nc = _index(a)[1], a.n_cells
+    rs = np.broadcast_to(a.Rs, (nc,))
+    v_laws, i_laws = laws
+    return [(i_qp + c, i_qp + nc + c,
+             np.array([[L[i_qp + c], -1.0 / (rs[c] * L[i_qp + c] * a.amp_tau[c])],
+                       [0.0, L[i_qp + nc + c]]]))
+            for c in range(nc) if v_laws[c] == 'follow' and i_laws[c] == 'linear']
+
+
+def _corner(M, scale: float, k: int) -> float:
+    """Return the corner (0, 1) of phi_k(scale M) for a 2 x 2 block M."""
+    from .matrix_phi import augmented_phis   # scipy: tests only
+    return float(augmented_phis(scale * M, k)[k][0, 1])
+
+
+def _stages(a, method, x, u, h: float, L, laws, quasi: bool) -> np.ndarray:
+    """Return the new state of :func:`step` from x in the coordinates the stages integrate."""
+    s = method.n_stages
+    couplings = _couplings(a, L, laws) if quasi and a.amp_state else []
+
+    def weight(term):
+        _, _, k, c_arg, w = term
+        if k < 0:
+            return np.full(a.n_state, w), [0.0] * len(couplings)
+        return (w * np.array([phi(int(k), c_arg * h * rate) for rate in L]),
+                [w * _corner(M, c_arg * h, int(k)) for _, _, M in couplings])
+
+    def linear(X):   # the linear part times X: L X and each coupling's c v_a
+        out = L * X
+        for iz, iv, M in couplings:
+            out[iz] += M[0, 1] * X[iv]
+        return out
+
+    N = []
+    for i in range(s + 1):
+        ci = method.c[i] if i < s else 1.0
+        X = np.exp(ci * h * L) * x
+        for iz, iv, M in couplings:   # the corner of exp(c_i h M)
+            X[iz] += _corner(M, ci * h, 0) * x[iv] if ci else 0.0
+        for term in method.terms:
+            if term[0] == i:
+                diag, corners = weight(term)
+                Nj = N[int(term[1])]
+                X = X + h * diag * Nj
+                for (iz, iv, _), corner in zip(couplings, corners):
+                    X[iz] += h * corner * Nj[iv]
+        if i == s:
+            break
+        N.append(rhs(a, X, u, quasi, laws)[0] - linear(X))
+    return X
+
+
 def step(a, method, x, u, h: float) -> np.ndarray:
     """
     Return one step of size h of a :class:`det_sim_ros.sim.integrators.Method`.
@@ -380,14 +440,14 @@ def step(a, method, x, u, h: float) -> np.ndarray:
 
     with N(X) = f(X) - L X, L the stiff diagonal at x (zero for explicit methods), every a_ij,
     b_j a sum of weight * phi_k(c_arg h L); exponential methods on an RC scene work in the
-    quasi-static charge coordinates (see :func:`rhs`).
+    quasi-static charge coordinates (see :func:`rhs`), where a following amplifier output
+    couples into L (see :func:`_couplings`).
     """
     x = np.asarray(x, dtype=float)
     u = np.asarray(u, dtype=float)
     if method.linearized:
         raise ValueError(f'{method.name}: a method with a dense linear part steps in '
                          'reference_linearized.step_linearized (it takes the linear part)')
-    s = method.n_stages
     laws = amplifier_laws(a, x, u) if a.amplifier else None   # held for the step
     L = stiff_rates(a, x, laws) if method.exponential else np.zeros(a.n_state)
     quasi = bool(method.exponential and a.rc_source)
@@ -400,23 +460,7 @@ def step(a, method, x, u, h: float) -> np.ndarray:
         if a.power_monitor:
             x[i_w] -= v @ x[charge]
         x[charge] -= _charge_offset(a, x, v)
-
-    def weight(term):
-        _, _, k, c_arg, w = term
-        if k < 0:
-            return np.full(a.n_state, w)
-        return w * np.array([phi(int(k), c_arg * h * rate) for rate in L])
-
-    N = []
-    for i in range(s + 1):
-        ci = method.c[i] if i < s else 1.0
-        X = np.exp(ci * h * L) * x
-        for term in method.terms:
-            if term[0] == i:
-                X = X + h * weight(term) * N[int(term[1])]
-        if i == s:
-            break
-        N.append(rhs(a, X, u, quasi, laws)[0] - L * X)
+    X = _stages(a, method, x, u, h, L, laws, quasi)
     if quasi:
         v = _relax_voltage(a, X, u, laws)
         X[charge] += _charge_offset(a, X, v)

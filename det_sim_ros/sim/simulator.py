@@ -113,14 +113,9 @@ class Simulator:
         if name == 'auto':
             if self.scene.source != 'rc':
                 return get_method('dp5')
-            # beams with more than one Ritz term have stiff, heavily damped modes; but an
-            # amplifier bandwidth's fast output transient after every new command drives the
-            # linearized method's step count up (lab preset, a new command every period: 379
-            # steps per period against etdrk4's 56, bench/amplifier_cost.py)
+            # beams with more than one Ritz term have stiff, heavily damped modes
             modes = np.diff(self.model.arrays.cell_q)
-            lagging = any(amp.bandwidth > 0.0 for amp in self.scene.cell_amplifiers())
-            linearized = np.any(modes > 1) and not lagging
-            return get_method('etdrk4_linearized' if linearized else 'etdrk4')
+            return get_method('etdrk4_linearized' if np.any(modes > 1) else 'etdrk4')
         try:
             return get_method(name)
         except ValueError as exc:   # a scene value: one line naming the key and the choices

@@ -8,18 +8,21 @@
  *
  * Both are piecewise smooth: each DET follows one law per step (ds_det.v_law: following,
  * slewing up or down, held; ds_det.i_law: linear or at the limit), set at the step's start,
- * and the steps end where a law switches. A slew ends at a time known in advance (v_a does not
- * depend on the load); the current limit's switches depend on the state and are located: a step
- * that ends with a DET's current past the switch is retried shorter (regula falsi on the step
- * size) until it ends within LIMIT_MARGIN of the switch, on its far side. The limit law starts at
- * |i| = I (1 - LIMIT_MARGIN) and holds while the linear law's current i_lin is beyond that on
- * its own side, so the current never exceeds I, and at a switch it moves by at most
- * 2 LIMIT_MARGIN I. (A step that leaves the limit and comes back within itself, e.g. a DET
- * discharged through 0 V, is caught by the signed test.) Within a law everything is smooth, and each law's own linear part goes
- * to the exponential stages (physics.c, ds_stiff_rates): at the limit the charge relaxes through
- * Rp only, and v_a's rate is -1/tau_a when following, 0 otherwise; so no stiff term is left to
- * the explicit stages. The supplied power is v_out i at the amplifier's terminal, v_out = v_a
- * (linear) or v_p + Rs i (at the limit): what the amplifier delivers into Rs and the DET.
+ * and the steps end where a law switches. A slew ends at a time known in advance (v_a does
+ * not depend on the load); the current limit's switches depend on the state and are located:
+ * a step that ends with a DET's current past the switch is retried shorter (regula falsi on
+ * the step size) until it ends within LIMIT_MARGIN of the switch, on its far side. The limit
+ * law starts at |i| = I (1 - LIMIT_MARGIN) and holds while the linear law's current i_lin is
+ * beyond that on its own side, so the current never exceeds I, and at a switch it moves by at
+ * most 2 LIMIT_MARGIN I. (A step that leaves the limit and comes back within itself, e.g. a
+ * DET discharged through 0 V, is caught by the signed test.) A period whose currents cannot
+ * come near a limit (may_reach_limit) steps as if there were none. Within a law everything is
+ * smooth, and each law's own linear part goes to the exponential stages (physics.c,
+ * ds_stiff_rates; coupling.c): at the limit the charge relaxes through Rp only, and v_a's
+ * rate is -1/tau_a when following, 0 otherwise, with the charge's coupling to a following v_a
+ * exact; so no stiff term is left to the explicit stages. The supplied power is v_out i at the
+ * amplifier's terminal, v_out = v_a (linear) or v_p + Rs i (at the limit): what the amplifier
+ * delivers into Rs and the DET.
  */
 #include <math.h>
 #include <string.h>
@@ -29,7 +32,10 @@
 
 #define LIMIT_MARGIN 1e-6   /* relative: the limit law starts at |i| = I (1 - LIMIT_MARGIN) */
 #define SLEW_MARGIN 1e-9    /* relative: a gap within S tau_a (1 + SLEW_MARGIN) is followed */
+#define SQRT_HALF 0.70710678118654752440
 #define MAX_LOCATE 60       /* regula falsi iterations to locate a current-limit switch */
+#define REACH_SHARE 0.5     /* a period whose currents stay below this share of the limit
+                               steps without watching for the limit */
 
 static inline int has_output_state(const ds_det *d)
 {
@@ -63,7 +69,7 @@ static double output_rate(const ds_det *d, double u, double va)
     }
 }
 
-/* v_p of cell i from x (w->y from ds_kinematics), and its capacitance *cap. */
+/* v_p of cell i from x (w->y from ds_stretches), and its capacitance *cap. */
 static inline double det_voltage(const ds_model *m, int64_t i, const double *x,
                                  const ds_work *w, double *cap)
 {
@@ -98,7 +104,7 @@ static inline double past_switch(const ds_model *m, int64_t i, const double *x,
 
 void ds_amp_laws(const ds_model *m, const double *x, const double *u, ds_work *w)
 {
-    ds_kinematics(m, x, w, 0);
+    ds_stretches(m, x, w, w->Us4);   /* w->y */
     for (int64_t i = 0; i < m->n_cells; i++) {
         ds_det *d = &m->det[i];
         d->v_law = m->amp_state ? output_law(d, u[i], x[m->i_va + i]) : VA_HOLD;
@@ -138,7 +144,7 @@ double ds_amp_relax(const ds_model *m, int64_t i, const double *x, const double 
 static double passed_switch(const ds_model *m, const double *x, const double *u, ds_work *w)
 {
     double worst = -INFINITY;
-    ds_kinematics(m, x, w, 0);
+    ds_stretches(m, x, w, w->Us4);   /* w->y */
     for (int64_t i = 0; i < m->n_cells; i++) {
         const ds_det *d = &m->det[i];
         if (!(d->amp_imax > 0.0))
@@ -257,6 +263,15 @@ static double transient_bound(const ds_stepper *st, const ds_model *m, double t)
     return bound;
 }
 
+/* A graded step under the linearized method: the largest h 2^(-j/2) within ``bound``, so
+ * that the graded steps of a transient repeat a few sizes and share their weights (each new
+ * size costs a matrix phi, linear_part.c) for at most a factor sqrt(2) of their length. */
+static double graded_rung(double h, double bound)
+{
+    const int j = (int)ceil(2.0 * log2(h / bound) - 1e-9);
+    return j % 2 ? ldexp(h * SQRT_HALF, -(j - 1) / 2) : ldexp(h, -j / 2);
+}
+
 /* Retry the step just taken from x_start (ending past a current-limit switch) shorter until it
  * ends at most LIMIT_MARGIN past the switch (Illinois regula falsi on the step size); *h
  * receives its length. A DET that left its limit starts a charge transient (a lag of Rs I). */
@@ -299,7 +314,7 @@ static int locate_switch(const ds_stepper *st, ds_group *g, double *x, const dou
         status = ds_advance(st, g, x, u, hi, 1, 1.0);
     }
     *h = hi;
-    ds_kinematics(m, x, &g->w, 0);
+    ds_stretches(m, x, &g->w, g->w.Us4);   /* w->y */
     for (int64_t i = 0; i < m->n_cells && status == DS_OK; i++) {
         ds_det *d = &m->det[i];
         if (d->i_law != AMP_LINEAR && past_switch(m, i, x, u, &g->w) >= 0.0) {
@@ -310,33 +325,72 @@ static int locate_switch(const ds_stepper *st, ds_group *g, double *x, const dou
     return status;
 }
 
-int ds_amp_period(const ds_stepper *st, ds_group *g, double *x, const double *u_old,
-                  const double *u, double h, int64_t n_sub)
+/* Whether DET i's current could reach its limit: a limit law now, or a linear current that
+ * the source's range [lo, hi] over the period (v_a moves monotonically to u) could take past
+ * REACH_SHARE of the limit. With C held, v_p stays between its start and share times the
+ * source, so |v_src - v_p| stays within the gaps below; the mechanics moves v_p on its own,
+ * slower time scale, which the margin and the period's end check (ends_near_limit) cover. */
+static int may_reach_limit(const ds_model *m, int64_t i, const double *x, const double *u,
+                           const ds_work *w)
+{
+    const ds_det *d = &m->det[i];
+    if (!(d->amp_imax > 0.0))
+        return 0;
+    if (d->i_law != AMP_LINEAR)
+        return 1;
+    double cap;
+    const double vp = det_voltage(m, i, x, w, &cap), v_src = source_voltage(m, d, i, x, u);
+    const double lo = fmin(v_src, u[i]), hi = fmax(v_src, u[i]);
+    const double vp_lo = fmin(vp, d->share * lo), vp_hi = fmax(vp, d->share * hi);
+    const double gap = fmax(fabs(hi - vp_lo), fabs(vp_hi - lo));
+    return !(gap * d->inv_Rs < REACH_SHARE * d->amp_imax);
+}
+
+/* Whether any DET's current may reach its limit in the period from x (w->y from ds_amp_laws). */
+static int limit_within_reach(const ds_model *m, const double *x, const double *u,
+                              const ds_work *w)
+{
+    for (int64_t i = 0; i < m->n_cells; i++)
+        if (may_reach_limit(m, i, x, u, w))
+            return 1;
+    return 0;
+}
+
+/* Whether any DET ended the period with its current beyond REACH_SHARE of its limit. */
+static int ends_near_limit(const ds_model *m, const double *x, const double *u, ds_work *w)
+{
+    ds_stretches(m, x, w, w->Us4);   /* w->y */
+    for (int64_t i = 0; i < m->n_cells; i++)
+        if (m->det[i].amp_imax > 0.0 && !(fabs(linear_share(m, i, x, u, w)) < REACH_SHARE))
+            return 1;
+    return 0;
+}
+
+/* The steps of one period from x (its laws and transients set): with ``limited`` each step alone
+ * (a current limit's switch is located after each), else the rest of the period in one call
+ * as soon as no law can switch before its end. *whole: whether that call was taken. */
+static int period_steps(const ds_stepper *st, ds_group *g, double *x, const double *u,
+                        double h, int64_t n_sub, int limited, int *whole)
 {
     ds_model *m = g->m;
     const size_t bytes = (size_t)m->n_state * sizeof(double);
     const double dt = h * (double)n_sub;
     double *x_start = g->w.dx;   /* free while stepping (the rate buffer of ds_outputs) */
-    int limited = 0;
-    for (int64_t i = 0; i < m->n_cells; i++)
-        limited |= m->det[i].amp_imax > 0.0;
-    memcpy(g->x0, x, bytes);
-    ds_amp_laws(m, x, u, &g->w);
-    start_transients(m, x, u_old, u, &g->w);
     double t = 0.0;
     int status = DS_OK;
+    *whole = 0;
     while (status == DS_OK && dt - t > 1e-9 * h) {
-        ds_amp_laws(m, x, u, &g->w);
         const double rest = dt - t, n_rest = ceil(rest / h - 1e-9);
-        double hs = rest / n_rest;
+        /* h itself while the steps so far were whole steps: equal sizes share their weights */
+        double hs = fabs(n_rest * h - rest) <= 1e-9 * h ? h : rest / n_rest;
         const double bound = transient_bound(st, m, t), t_slew = slew_end(m, x, u);
         if (!limited && bound >= hs && t_slew >= rest * (1.0 + 1e-12)) {
-            /* no law can switch before the period's end and the graded bounds only grow:
-             * the rest in one call (the state-dependent current limit needs every step) */
-            status = ds_advance(st, g, x, u, hs, (int64_t)n_rest, 1.0);
-            break;
+            /* no law can switch before the period's end and the graded bounds only grow */
+            *whole = 1;
+            return ds_advance(st, g, x, u, hs, (int64_t)n_rest, 1.0);
         }
-        hs = fmin(hs, bound);
+        if (bound < hs)
+            hs = g->lin ? graded_rung(h, bound) : bound;
         hs = fmin(hs, t_slew);
         memcpy(x_start, x, bytes);
         status = ds_advance(st, g, x, u, hs, 1, 1.0);
@@ -345,6 +399,31 @@ int ds_amp_period(const ds_stepper *st, ds_group *g, double *x, const double *u_
         if (status == DS_OK && m->amp_state)
             finish_slews(m, x, x_start, u, hs, t + hs);
         t += hs;
+        ds_amp_laws(m, x, u, &g->w);
+    }
+    return status;
+}
+
+/* One control period: a period in which no current can reach its limit steps as without
+ * one (whole calls between the other laws' switches); one that ends near a limit after all
+ * is taken again step by step. On failure x holds the state at the period's start. */
+int ds_amp_period(const ds_stepper *st, ds_group *g, double *x, const double *u_old,
+                  const double *u, double h, int64_t n_sub)
+{
+    ds_model *m = g->m;
+    const size_t bytes = (size_t)m->n_state * sizeof(double);
+    memcpy(g->x0, x, bytes);
+    ds_amp_laws(m, x, u, &g->w);
+    start_transients(m, x, u_old, u, &g->w);
+    int limited = limit_within_reach(m, x, u, &g->w), whole;
+    g->watched += limited;
+    int status = period_steps(st, g, x, u, h, n_sub, limited, &whole);
+    if (status == DS_OK && !limited && ends_near_limit(m, x, u, &g->w)) {
+        g->watched += 1.0;
+        memcpy(x, g->x0, bytes);
+        ds_amp_laws(m, x, u, &g->w);
+        start_transients(m, x, u_old, u, &g->w);
+        status = period_steps(st, g, x, u, h, n_sub, 1, &whole);
     }
     if (status != DS_OK)
         memcpy(x, g->x0, bytes);

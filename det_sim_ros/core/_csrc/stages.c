@@ -98,6 +98,8 @@ CORE_PART int one_step(const ds_method *me, ds_group *g, const double *x, const 
     /* rows 0..s-1 of the table build the stages, row s (the weights b) the new state */
     for (int64_t i = 0; i < s + 1; i++) {
         stage_row(me, x, N, g->coef, g->e_c, h, i, X, nx, s0, s1);
+        if (g->cpl)
+            ds_coupling_row(me, g, i, x, N, h, X);
         if (i == s)
             break;
         double *Ni = N + i * nx;
@@ -106,6 +108,8 @@ CORE_PART int one_step(const ds_method *me, ds_group *g, const double *x, const 
             return status;
         for (int64_t k = s0; k < s1; k++)
             Ni[k] -= g->L[k] * X[k];
+        if (g->cpl)
+            ds_coupling_remainder(me, g, X, Ni);
         if (i == 0 && h_prev > 0.0)   /* FSAL: N_0 = f(x) completes the last estimate */
             fsal_estimate(g, g->pend, me->embedded[s], N, h_prev, 2 * m->n_q);
     }
@@ -153,6 +157,8 @@ advance_core(const ds_stepper *st, ds_group *g, double *x, const double *u, doub
         if (status != DS_OK)
             break;
         stiff_weights(me, g->L, h, g->phis, g->coef, g->e_c, nx, s, s0, s1);
+        if (g->cpl)
+            ds_coupling_weights(me, g, h);
         status = one_step(me, g, x, u, h, h_prev, nx, s, s0, s1);
         if (status != DS_OK)
             break;
@@ -292,6 +298,8 @@ static int one_step_linear(const ds_method *me, ds_group *g, const ds_lin_slot *
     double *N = g->N, *X = g->X;
     for (int64_t i = 0; i < s + 1; i++) {
         stage_row_linear(me, g->lin, slot, x, N, g->coef, g->e_c, h, i, X, nx, s0, s1);
+        if (g->cpl)
+            ds_coupling_row(me, g, i, x, N, h, X);
         if (i == s)
             break;
         double *Ni = N + i * nx;
@@ -299,6 +307,8 @@ static int one_step_linear(const ds_method *me, ds_group *g, const ds_lin_slot *
         if (status != DS_OK)
             return status;
         linear_remainder(g, X, Ni, s0, s1);
+        if (g->cpl)
+            ds_coupling_remainder(me, g, X, Ni);
         if (i == 0 && h_prev > 0.0)
             linear_fsal_estimate(g, prev, me->embedded[s], N, h_prev);
     }
@@ -331,6 +341,8 @@ int ds_advance_linear(const ds_stepper *st, ds_group *g, double *x, const double
         if (status != DS_OK)
             break;
         stiff_weights(me, g->L, h, g->phis, g->coef, g->e_c, nx, s, g->s0, g->s1);
+        if (g->cpl)
+            ds_coupling_weights(me, g, h);
         const ds_lin_slot *slot = ds_linear_weights(me, g->lin, h, prev);
         status = one_step_linear(me, g, slot, prev, x, u, h, h_prev);
         prev = slot;

@@ -8,12 +8,19 @@
 #include "detsim.h"
 #include "stepping.h"
 
+/* Whether a group's charge couples exactly to its amplifier outputs (coupling.c). */
+static int coupled(const ds_group *g, const ds_method *me)
+{
+    return g->m->amp_state && g->m->rc_source && ds_coupling_fits(me);
+}
+
 /* Doubles of a group's stepping scratch (without its rhs scratch). */
 static int64_t group_size(const ds_group *g, const ds_method *me)
 {
     const int64_t nx = g->m->n_state, s = me->n_stages, nt = me->n_terms;
     const int64_t n_phis = (me->n_args > 0 ? me->n_args : 1) * (me->k_max + 1);
-    return s * nx + 8 * nx + (s + 1) * nx + n_phis + nt * nx;
+    const int64_t n_cpl = coupled(g, me) ? g->m->n_cells * ds_coupling_size(me) : 0;
+    return s * nx + 8 * nx + (s + 1) * nx + n_phis + nt * nx + n_cpl;
 }
 
 /* Lay a group's scratch out in ``mem`` (group_size + ds_work_size doubles, zeroed). */
@@ -33,7 +40,9 @@ static void group_attach(ds_group *g, const ds_method *me, double *mem)
     g->e_c = g->x_local + nx;
     g->phis = g->e_c + (s + 1) * nx;
     g->coef = g->phis + n_phis;
-    ds_work_attach(&g->w, g->m, g->coef + nt * nx);
+    g->cpl = coupled(g, me) ? g->coef + nt * nx : NULL;
+    ds_work_attach(&g->w, g->m, g->coef + nt * nx
+                                + (g->cpl ? g->m->n_cells * ds_coupling_size(me) : 0));
     for (int64_t k = 0; k < (s + 1) * nx; k++)
         g->e_c[k] = 1.0;
     for (int64_t t = 0; t < nt; t++)

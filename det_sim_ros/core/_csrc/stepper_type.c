@@ -314,10 +314,11 @@ static PyObject *Stepper_get(StepperObject *self, void *which)
 {
     NEED_READY(self);
     const ds_stepper *st = &self->st;
-    double total = 0.0, best = 0.0;
+    double total = 0.0, best = 0.0, watched = 0.0;
     int64_t n = 0;
     for (int64_t g = 0; g < st->n_groups; g++) {
         total += st->group[g].steps;
+        watched += st->group[g].watched;
         if (st->group[g].est > best)
             best = st->group[g].est;
         if (st->group[g].ctl.n > n)
@@ -332,6 +333,7 @@ static PyObject *Stepper_get(StepperObject *self, void *which)
     case 5: return PyLong_FromLongLong(st->group[0].ctl_initial.n_min);
     case 6: return PyLong_FromLongLong(st->group[0].ctl_initial.n_max);
     case 7: return PyFloat_FromDouble(st->group[0].ctl_initial.tol);
+    case 9: return PyFloat_FromDouble(watched);
     default:
 #ifdef _OPENMP
         Py_RETURN_TRUE;
@@ -412,6 +414,9 @@ static PyGetSetDef Stepper_getset[] = {
     {"tolerance", (getter)Stepper_get, NULL, "local tolerance (0: fixed count)", (void *)7},
     {"openmp", (getter)Stepper_get, NULL, "built with OpenMP (threads > 1 possible)",
      (void *)8},
+    {"limit_watched_periods", (getter)Stepper_get, NULL,
+     "amplified periods stepped one step at a time for a current limit within reach",
+     (void *)9},
     {NULL}
 };
 

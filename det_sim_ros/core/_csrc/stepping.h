@@ -7,6 +7,7 @@
  * stepper.c  the stepper's set-up: a model view and scratch per coupled group
  * batch.c    the whole model's control periods (groups one by one or over threads), runs
  * linear_part.c, matrix_phi.c  a dense linear part over the beams' q, qdot (linear_part.h)
+ * coupling.c the charge's exact coupling to an amplifier output that follows its command
  */
 #ifndef DETSIM_STEPPING_H
 #define DETSIM_STEPPING_H
@@ -56,10 +57,14 @@ typedef struct {
     ds_work w;
     ds_control ctl, ctl_initial;
     double est, steps;                  /* largest error estimate since reset, steps taken */
+    double watched;                     /* amplified periods stepped one step at a time for a
+                                           current limit within reach (amplifier.c) */
     int64_t s0, s1;                     /* states with a stiff rate: [s0, s1) */
     int64_t q_first, c_first;           /* first coordinate and cell in the whole model */
     int quasi_static;
     ds_linear *lin;                     /* dense linear part over q, qdot (NULL: none) */
+    double *cpl;                        /* the charge's coupling to v_a (coupling.c; NULL:
+                                           none) */
     int status;                         /* of the last period (batch) */
     /* stepping scratch (one allocation) */
     double *N, *X, *L, *e_c, *x_start, *pend, *x0, *x_keep, *phis, *coef, *inv_scale, *x_local;
@@ -108,6 +113,14 @@ const ds_lin_slot *ds_linear_weights(const ds_method *me, ds_linear *lin, double
  * (n_sub of them without switches), split where a law of the amplifier switches. */
 int ds_amp_period(const ds_stepper *st, ds_group *g, double *x, const double *u_old,
                   const double *u, double h, int64_t n_sub);
+/* coupling.c: the charge's exact coupling to a following amplifier output (stages.c calls
+ * these where g->cpl is set) */
+int64_t ds_coupling_size(const ds_method *me);
+int ds_coupling_fits(const ds_method *me);
+void ds_coupling_weights(const ds_method *me, ds_group *g, double h);
+void ds_coupling_row(const ds_method *me, const ds_group *g, int64_t row, const double *x,
+                     const double *N, double h, double *X);
+void ds_coupling_remainder(const ds_method *me, const ds_group *g, const double *X, double *N);
 int ds_run(ds_stepper *st, ds_work *ow, double *x, const double *u_held, const double *u_last,
            const double *U, int64_t n, double *X, double *Y, int64_t *done);
 
