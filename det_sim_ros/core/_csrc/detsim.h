@@ -6,7 +6,8 @@
  * physics.c      right-hand side, stiff rates, input-jump bookkeeping (the equations are
  *                derived and documented in det_sim_ros/physics/model.py;
  *                det_sim_ros/physics/reference.py is the same physics in readable numpy, and
- *                the tests hold this code to it); outputs.c the named outputs
+ *                the tests hold this code to it); outputs.c the named outputs; exact.c
+ *                the exact kinematics' quadrature
  * stepping.h     the stepping core: method.c (method tables and the phi functions), stages.c
  *                (the exponential Runge-Kutta stages), stepping.c (one group's control period:
  *                charge transients, step-count controller), stepper.c (set-up of the per-group
@@ -75,6 +76,8 @@ typedef struct {
     ds_cell *cell;                     /* n_cells */
     ds_det *det;                       /* n_cells */
     const double *B1, *B2, *W;         /* S_j'(x_g), S_j''(x_g) (n_nodes x r_max), weights */
+    const double *B1T, *B2T;           /* the same by cell transposed: S_j' of cell c at its
+                                        * nodes from B1T[g0 r_max + j (g1 - g0)] (exact.c) */
     const double *Mb, *K, *D;          /* block rows by cell (n_q x r_max) */
     const double *mi_val;              /* interface mass entries MI[mi_row, mi_col] */
     int64_t *mi_row, *mi_col;
@@ -109,6 +112,18 @@ void ds_shift_charge(const ds_model *m, double *x, const double *u, double sign,
 void ds_book_input_jump(const ds_model *m, double *x, const double *u_old, const double *u_new,
                         ds_work *w);
 int64_t ds_n_outputs(const ds_model *m);
+
+/* exact.c: an exact cell's y (m), qd' H_y qd (m/s^2) and bending energy beyond EI int w''^2
+ * (J) from its coordinates q and rates qd, with dy/dq into J and, unless F is NULL, that
+ * energy's gradient subtracted from F (all of the cell's nr terms); its y alone; B1T, B2T
+ * from the rows B1, B2 (once per model). */
+typedef struct {
+    double y, h, bending;
+} ds_exact_sums;
+ds_exact_sums ds_exact_cell(const ds_model *m, const ds_cell *cell, const double *q,
+                            const double *qd, double *J, double *F);
+double ds_exact_shortening(const ds_model *m, const ds_cell *cell, const double *q);
+void ds_transpose_nodes(const ds_model *m, const double *rows, double *out);
 
 /* One DET's supply under its amplifier's laws: the current through Rs (A), the amplifier's
  * terminal voltage v_out and the voltage behind Rs v_src (V; v_a, or the command without an

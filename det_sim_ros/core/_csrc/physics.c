@@ -67,9 +67,10 @@ static inline double one_term_shortening(const ds_cell *cell, double q)
  * End shortening y_c, its gradient J = dy/dq, qd' H_y qd per cell and, with ``with_bending``,
  * the bending energy beyond EI int w''^2 (Us4), from q = x[:n_q], qd = x[n_q:2 n_q].
  *
- * paper/consistent: y = int w'^2/2 + kappa w'^4/8; exact: sin(theta) = w', y = int 1 - cos theta,
- * bending beyond EI int w''^2 is EI int w''^2 w'^2 / (1 - w'^2) (curvature^2 = w''^2/(1 - w'^2));
- * |w'| >= 1 gives NaN, which the callers report as a slope domain error.
+ * paper/consistent: y = int w'^2/2 + kappa w'^4/8; exact (exact.c): sin(theta) = w',
+ * y = int 1 - cos theta, bending beyond EI int w''^2 is EI int w''^2 w'^2 / (1 - w'^2)
+ * (curvature^2 = w''^2/(1 - w'^2)); |w'| >= 1 gives NaN, which the callers report as a slope
+ * domain error.
  */
 static void kinematics_cells(const ds_model *m, const double *x, ds_work *w, int with_bending,
                              int exact_too)
@@ -79,10 +80,17 @@ static void kinematics_cells(const ds_model *m, const double *x, ds_work *w, int
     for (int64_t c = 0; c < m->n_cells; c++) {
         const ds_cell *cell = &m->cell[c];
         const int64_t o = cell->q0, r = cell->nr;
-        const int exact = cell->kinematics == KIN_EXACT;
-        if (exact && !exact_too)
+        if (cell->kinematics == KIN_EXACT) {
+            if (!exact_too)
+                continue;
+            const ds_exact_sums s = ds_exact_cell(m, cell, x + o, qd + o, w->J + o, NULL);
+            w->y[c] = s.y;
+            w->h[c] = s.h;
+            if (with_bending)
+                w->Us4[c] = s.bending;
             continue;
-        if (r == 1 && !exact) {   /* one term: polynomials in q, ~5x cheaper than quadrature */
+        }
+        if (r == 1) {   /* one term: polynomials in q, ~5x cheaper than quadrature */
             const double c2 = cell->c2, c4 = cell->kappa * cell->c4;
             const double qc = x[o], q2 = qc * qc;
             w->y[c] = one_term_shortening(cell, qc);
@@ -97,29 +105,22 @@ static void kinematics_cells(const ds_model *m, const double *x, ds_work *w, int
             w->J[o + j] = 0.0;
         for (int64_t g = cell->g0; g < cell->g1; g++) {
             const double *b1 = m->B1 + g * R, *b2 = m->B2 + g * R;
-            double wp = 0.0, wd = 0.0, gy;
+            double wp = 0.0, wd = 0.0;
             for (int64_t j = 0; j < r; j++) {
                 wp += b1[j] * x[o + j];
                 wd += b1[j] * qd[o + j];
             }
             const double wg = m->W[g], wp2 = wp * wp;
-            if (exact) {
-                const double cos2 = 1.0 - wp2, cs = sqrt(cos2);
-                yc += wg * (1.0 - cs);
-                hc += wg * wd * wd / (cos2 * cs);
-                gy = wg * wp / cs;
-            } else {
-                yc += wg * (0.5 * wp2 + 0.125 * cell->kappa * wp2 * wp2);
-                hc += wg * (1.0 + 1.5 * cell->kappa * wp2) * wd * wd;
-                gy = wg * (wp + 0.5 * cell->kappa * wp2 * wp);
-            }
+            yc += wg * (0.5 * wp2 + 0.125 * cell->kappa * wp2 * wp2);
+            hc += wg * (1.0 + 1.5 * cell->kappa * wp2) * wd * wd;
+            const double gy = wg * (wp + 0.5 * cell->kappa * wp2 * wp);
             for (int64_t j = 0; j < r; j++)
                 w->J[o + j] += gy * b1[j];
             if (with_bending) {
                 double wpp = 0.0;
                 for (int64_t j = 0; j < r; j++)
                     wpp += b2[j] * x[o + j];
-                u4 += cell->EI * wg * wpp * wpp * (exact ? wp2 / (1.0 - wp2) : wp2);
+                u4 += cell->EI * wg * wpp * wpp * wp2;
             }
         }
         w->y[c] = yc;
@@ -142,8 +143,11 @@ static void end_shortenings(const ds_model *m, const double *x, ds_work *w)
     for (int64_t c = 0; c < m->n_cells; c++) {
         const ds_cell *cell = &m->cell[c];
         const int64_t o = cell->q0, r = cell->nr;
-        const int exact = cell->kinematics == KIN_EXACT;
-        if (r == 1 && !exact) {
+        if (cell->kinematics == KIN_EXACT) {
+            w->y[c] = ds_exact_shortening(m, cell, x + o);
+            continue;
+        }
+        if (r == 1) {
             w->y[c] = one_term_shortening(cell, x[o]);
             continue;
         }
@@ -154,86 +158,42 @@ static void end_shortenings(const ds_model *m, const double *x, ds_work *w)
             for (int64_t j = 0; j < r; j++)
                 wp += b1[j] * x[o + j];
             const double wg = m->W[g], wp2 = wp * wp;
-            if (exact)
-                yc += wg * (1.0 - sqrt(1.0 - wp2));
-            else
-                yc += wg * (0.5 * wp2 + 0.125 * cell->kappa * wp2 * wp2);
+            yc += wg * (0.5 * wp2 + 0.125 * cell->kappa * wp2 * wp2);
         }
         w->y[c] = yc;
     }
 }
 
-/*
- * An exact cell's kinematics (as ds_kinematics) and its bending force beyond EI int w''^2 (as
- * quartic_force, into F) in one pass over its quadrature nodes: w' and w'' once per node, the
- * same operations in the same order as the two separate passes (the same bits).
- */
-static void exact_cell_pass(const ds_model *m, const ds_cell *cell, int64_t c, const double *x,
-                            ds_work *w, double *F)
-{
-    const int64_t R = m->r_max, o = cell->q0, r = cell->nr;
-    const double *qd = x + m->n_q;
-    const double EI2 = 2.0 * cell->EI;
-    double yc = 0.0, hc = 0.0;
-    for (int64_t j = 0; j < r; j++)
-        w->J[o + j] = 0.0;
-    for (int64_t g = cell->g0; g < cell->g1; g++) {
-        const double *b1 = m->B1 + g * R, *b2 = m->B2 + g * R;
-        double wp = 0.0, wd = 0.0, wpp = 0.0;
-        for (int64_t j = 0; j < r; j++) {
-            wp += b1[j] * x[o + j];
-            wd += b1[j] * qd[o + j];
-            wpp += b2[j] * x[o + j];
-        }
-        const double wg = m->W[g], wp2 = wp * wp;
-        const double cos2 = 1.0 - wp2, cs = sqrt(cos2);
-        yc += wg * (1.0 - cs);
-        hc += wg * wd * wd / (cos2 * cs);
-        const double gy = wg * wp / cs;
-        const double s1 = EI2 * m->W[g] * wpp * wpp * wp / (cos2 * cos2);
-        const double s2 = EI2 * m->W[g] * wpp * wp * wp / cos2;
-        for (int64_t j = 0; j < r; j++) {
-            w->J[o + j] += gy * b1[j];
-            F[o + j] -= s1 * b1[j] + s2 * b2[j];
-        }
-    }
-    w->y[c] = yc;
-    w->h[c] = hc;
-}
-
 /* F -= gradient of the bending energy beyond EI int w''^2: EI int w''^2 g, g = w'^2 (eq 51) or,
- * exact, g = w'^2 / (1 - w'^2). */
+ * exact, g = w'^2 / (1 - w'^2); an exact cell's kinematics (into w) come with it, from the
+ * same pass over its quadrature nodes (exact.c). */
 static void quartic_force(const ds_model *m, const double *x, double *F, ds_work *w)
 {
     const int64_t R = m->r_max;
     for (int64_t c = 0; c < m->n_cells; c++) {
         const ds_cell *cell = &m->cell[c];
         const int64_t o = cell->q0, r = cell->nr;
-        const int exact = cell->kinematics == KIN_EXACT;
-        if (exact) {   /* with its kinematics, which the callers left to this pass */
-            exact_cell_pass(m, cell, c, x, w, F);
+        if (cell->kinematics == KIN_EXACT) {
+            const ds_exact_sums s = ds_exact_cell(m, cell, x + o, x + m->n_q + o, w->J + o,
+                                                  F + o);
+            w->y[c] = s.y;
+            w->h[c] = s.h;
             continue;
         }
-        if (r == 1 && !exact) {
+        if (r == 1) {
             F[o] -= 4.0 * cell->e4 * x[o] * x[o] * x[o];
             continue;
         }
         const double EI2 = 2.0 * cell->EI;
         for (int64_t g = cell->g0; g < cell->g1; g++) {
             const double *b1 = m->B1 + g * R, *b2 = m->B2 + g * R;
-            double wp = 0.0, wpp = 0.0, s1, s2;
+            double wp = 0.0, wpp = 0.0;
             for (int64_t j = 0; j < r; j++) {
                 wp += b1[j] * x[o + j];
                 wpp += b2[j] * x[o + j];
             }
-            if (exact) {
-                const double cos2 = 1.0 - wp * wp;
-                s1 = EI2 * m->W[g] * wpp * wpp * wp / (cos2 * cos2);
-                s2 = EI2 * m->W[g] * wpp * wp * wp / cos2;
-            } else {
-                s1 = EI2 * m->W[g] * wpp * wpp * wp;
-                s2 = EI2 * m->W[g] * wpp * wp * wp;
-            }
+            const double s1 = EI2 * m->W[g] * wpp * wpp * wp;
+            const double s2 = EI2 * m->W[g] * wpp * wp * wp;
             for (int64_t j = 0; j < r; j++)
                 F[o + j] -= s1 * b1[j] + s2 * b2[j];
         }
