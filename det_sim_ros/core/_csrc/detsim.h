@@ -79,6 +79,7 @@ typedef struct {
     const double *B1T, *B2T;           /* the same by cell transposed: S_j' of cell c at its
                                         * nodes from B1T[g0 r_max + j (g1 - g0)] (exact.c) */
     const double *Mb, *K, *D;          /* block rows by cell (n_q x r_max) */
+    const double *Mb_inv;              /* each cell's block of Mb inverted (as Mb) */
     const double *mi_val;              /* interface mass entries MI[mi_row, mi_col] */
     int64_t *mi_row, *mi_col;
     int64_t *group_q;                  /* coordinate offsets of the coupled groups (n_groups+1) */
@@ -124,6 +125,7 @@ ds_exact_sums ds_exact_cell(const ds_model *m, const ds_cell *cell, const double
                             const double *qd, double *J, double *F);
 double ds_exact_shortening(const ds_model *m, const ds_cell *cell, const double *q);
 void ds_transpose_nodes(const ds_model *m, const double *rows, double *out);
+void ds_mass_inverse(const ds_model *m, double *out);   /* physics.c, once per model */
 
 /* One DET's supply under its amplifier's laws: the current through Rs (A), the amplifier's
  * terminal voltage v_out and the voltage behind Rs v_src (V; v_a, or the command without an

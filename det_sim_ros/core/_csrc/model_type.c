@@ -5,6 +5,7 @@
  */
 #include "binding.h"
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -200,20 +201,29 @@ static int check_interface_mass(const ds_model *m)
     return 0;
 }
 
-/* The node-contiguous copies of B1 and B2 the exact kinematics reads (exact.c). */
-static int transpose_nodes(ds_model *m, arena *mem)
+/* What the rhs reads built once from the arrays: the node-contiguous copies of B1 and B2
+ * (exact.c) and the inverse mass blocks (one-cell groups' mass solve). */
+static int derived_tables(ds_model *m, arena *mem)
 {
     const size_t size = (size_t)(m->n_nodes * m->r_max) + 1;
     double *t1 = keep_owned(mem, calloc(size, sizeof(double)));
     double *t2 = keep_owned(mem, calloc(size, sizeof(double)));
-    if (!t1 || !t2) {
+    double *inv = keep_owned(mem, malloc(sizeof(double) * (size_t)(m->n_q * m->r_max)));
+    if (!t1 || !t2 || !inv) {
         PyErr_NoMemory();
         return -1;
     }
     ds_transpose_nodes(m, m->B1, t1);
     ds_transpose_nodes(m, m->B2, t2);
+    inv[0] = NAN;   /* stays NaN if ds_mass_inverse could not allocate its scratch */
+    ds_mass_inverse(m, inv);
+    if (inv[0] != inv[0]) {
+        PyErr_NoMemory();
+        return -1;
+    }
     m->B1T = t1;
     m->B2T = t2;
+    m->Mb_inv = inv;
     return 0;
 }
 
@@ -230,7 +240,7 @@ static int Model_init(ModelObject *self, PyObject *args, PyObject *kwds)
     cell_index index;
     if (read_layout(m, src) < 0 || copy_arrays(m, &self->mem, src, &index) < 0
         || build_cells(m, &self->mem, src, &index) < 0 || check_interface_mass(m) < 0
-        || transpose_nodes(m, &self->mem) < 0)
+        || derived_tables(m, &self->mem) < 0)
         return -1;
     m->one_term = m->n_cells == 1 && m->cell[0].nr == 1 && m->cell[0].kinematics != KIN_EXACT;
     if (ds_work_init(&self->w, m) < 0) {

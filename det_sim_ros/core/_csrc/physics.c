@@ -235,6 +235,77 @@ static void solve_spd(double *Mt, int64_t ld, const double *F, double *out, int6
     }
 }
 
+/* The inverse of each cell's block of Mb into ``out`` (block rows like Mb), once per model:
+ * the mass solve of a one-cell group needs no factorization per call (one_cell_solve). */
+void ds_mass_inverse(const ds_model *m, double *out)
+{
+    const int64_t R = m->r_max;
+    double *block = malloc(sizeof(double) * (size_t)(3 * R * R + 1));
+    if (!block)   /* the caller checks the first entry */
+        return;
+    double *unit = block + R * R, *column = unit + R * R;
+    for (int64_t c = 0; c < m->n_cells; c++) {
+        const int64_t o = m->cell[c].q0, r = m->cell[c].nr;
+        for (int64_t k = 0; k < r; k++) {
+            for (int64_t i = 0; i < r; i++) {
+                for (int64_t j = 0; j < r; j++)
+                    block[i * R + j] = m->Mb[(o + i) * R + j];
+                unit[i] = i == k ? 1.0 : 0.0;
+            }
+            solve_spd(block, R, unit, column, r);
+            for (int64_t i = 0; i < r; i++)
+                out[(o + i) * R + k] = column[i];
+        }
+    }
+    free(block);
+}
+
+/* Solve (Mb_c + mi J_c J_c') out = F_c for a cell alone in its group, mi its interface mass
+ * (Sherman-Morrison with Mb_c^-1 from ds_mass_inverse): two products with Mb_c^-1 and one
+ * division instead of a Cholesky factorization's chain of square roots and divisions. */
+static void one_cell_solve(const ds_model *m, const ds_cell *cell, const double *J,
+                           const double *F, double *out)
+{
+    const int64_t R = m->r_max, o = cell->q0, r = cell->nr;
+    double mi = 0.0, ja = 0.0, jb = 0.0, b_row[r];
+    for (int64_t e = 0; e < m->n_mi; e++)   /* one entry, MI[c, c], in a one-cell group */
+        if (m->mi_row[e] == cell - m->cell)
+            mi += m->mi_val[e];
+    for (int64_t i = 0; i < r; i++) {
+        const double *row = m->Mb_inv + (o + i) * R;
+        double a = 0.0, b = 0.0;
+        for (int64_t k = 0; k < r; k++) {
+            a += row[k] * F[o + k];
+            b += row[k] * J[o + k];
+        }
+        out[o + i] = a;
+        b_row[i] = b;
+        ja += J[o + i] * a;
+        jb += J[o + i] * b;
+    }
+    const double scale = mi * ja / (1.0 + mi * jb);
+    for (int64_t i = 0; i < r; i++)
+        out[o + i] -= scale * b_row[i];
+}
+
+/* dqdot/dt into dx[n_q:2 n_q]: each group's mass solve (one-term models: one division). */
+static void mass_solve(const ds_model *m, ds_work *w, double *dx)
+{
+    const int64_t nq = m->n_q, ld = m->mass_block;
+    if (nq == 1) {
+        dx[1] = w->F[0] / w->Mt[0];
+        return;
+    }
+    for (int64_t c = 0; c < m->n_cells; c++) {
+        const ds_cell *cell = &m->cell[c];
+        const int64_t a = m->group_q[cell->group], b = m->group_q[cell->group + 1];
+        if (b - a == cell->nr && cell->nr > 1)
+            one_cell_solve(m, cell, w->J, w->F, dx + nq);
+        else if (cell->q0 == a)   /* a coupled group or a one-term cell: by its first cell */
+            solve_spd(w->Mt + a * ld, ld, w->F + a, dx + nq + a, b - a);
+    }
+}
+
 /* What the DETs supply and dissipate, summed over the cells in order (W). */
 typedef struct {
     double p_in, p_leak_in, p_diss;     /* p_leak_in: the rate of W_in - v q_p (quasi-static) */
@@ -483,23 +554,15 @@ static int __attribute__((noinline))
 rhs_general(const ds_model *m, const double *x, const double *u, double *dx, ds_work *w,
             int quasi_static)
 {
-    const int64_t nq = m->n_q, nc = m->n_cells, ld = m->mass_block;
+    const int64_t nq = m->n_q, nc = m->n_cells;
     const double *qd = x + nq;
-    double *F = w->F, *Mt = w->Mt;
     kinematics_cells(m, x, w, 0, 0);   /* exact cells: in structure_forces' bending pass */
     det_power pw = {0.0, 0.0, 0.0};
     pw.p_diss = structure_forces(m, x, w);
     int status = DS_OK;
     for (int64_t i = 0; i < nc && status == DS_OK; i++)
         status = det_cell(m, i, x, u, dx, w, quasi_static, &pw);
-    if (nq == 1) {
-        dx[1] = F[0] / Mt[0];
-    } else {
-        for (int64_t g = 0; g < m->n_groups; g++) {
-            const int64_t a = m->group_q[g], b = m->group_q[g + 1];
-            solve_spd(Mt + a * ld, ld, F + a, dx + nq + a, b - a);
-        }
-    }
+    mass_solve(m, w, dx);
     for (int64_t i = 0; i < nq; i++)
         dx[i] = qd[i];
     w->p_in = pw.p_in;
