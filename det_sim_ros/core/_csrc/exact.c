@@ -4,32 +4,38 @@
  *
  * sin(theta) = w' at each node: y = int 1 - cos(theta), h = qd' H_y qd = int w_t'^2 / cos^3,
  * J = dy/dq = int S' w' / cos, and the bending energy beyond EI int w''^2,
- * EI int w''^2 w'^2 / cos^2 with its gradient. The nodes go in chunks of NODE_CHUNK, each in
- * three loops the compiler vectorizes: w', w_t' and w'' at every node of the chunk as sums
- * over the Ritz terms along the node-contiguous rows B1T, B2T (vectors across nodes); each
- * node's terms with one square root and one reciprocal (vectors across nodes); the sums into
- * J and F along the term-contiguous rows B1, B2 (vectors across terms). y, h and every sum
- * over the nodes run in node order, so the chunking does not change a bit.
+ * EI int w''^2 w'^2 / cos^2 with its gradient. Three passes over a cell's nodes (at most
+ * DS_MAX_CELL_NODES), each a loop the compiler vectorizes across nodes: w', w_t' and w'' as
+ * sums over the Ritz terms along the node-contiguous rows B1T, B2T; each node's terms with one
+ * square root and one reciprocal; the sums over the nodes into J and F as interleaved dot
+ * products along the same rows.
  */
 #include <math.h>
 
 #include "detsim.h"
 
-enum { NODE_CHUNK = 64 };
+/* With GCC on x86-64 glibc the two entry points are compiled twice, for AVX2 and for the
+ * baseline, and the loader picks one for the machine: the same IEEE operations in the same
+ * order on wider vectors (no reassociation, no fused multiply-add), so the same bits. */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__GLIBC__)
+#define WIDE_VECTORS __attribute__((target_clones("avx2", "default")))
+#else
+#define WIDE_VECTORS
+#endif
 
-/* Values of the cell's field at the nodes [k0, k0 + n) (w', w_t', w'': sums over the terms). */
+/* Values of the cell's field at its nodes (w', w_t', w'': sums over the terms). */
 typedef struct {
-    double wp[NODE_CHUNK], wd[NODE_CHUNK], wpp[NODE_CHUNK];
+    double wp[DS_MAX_CELL_NODES], wd[DS_MAX_CELL_NODES], wpp[DS_MAX_CELL_NODES];
 } node_fields;
 
 /* Each node's contribution: to y, h and the bending energy, and the factors of its rows of
  * B1 (gy: into J; s1: into F) and of B2 (s2: into F). */
 typedef struct {
-    double y[NODE_CHUNK], h[NODE_CHUNK], bending[NODE_CHUNK];
-    double gy[NODE_CHUNK], s1[NODE_CHUNK], s2[NODE_CHUNK];
+    double y[DS_MAX_CELL_NODES], h[DS_MAX_CELL_NODES], bending[DS_MAX_CELL_NODES];
+    double gy[DS_MAX_CELL_NODES], s1[DS_MAX_CELL_NODES], s2[DS_MAX_CELL_NODES];
 } node_terms;
 
-/* w', w_t' and w'' at nodes [0, n) of a chunk: sums over the terms j = 0 .. r - 1 in order
+/* w', w_t' and w'' at nodes [0, n): sums over the terms j = 0 .. r - 1 in order
  * along the node-contiguous rows t1, t2 (row stride ``stride``). */
 static inline void node_values(const double *restrict t1, const double *restrict t2,
                                int64_t stride, int64_t r, const double *restrict q,
@@ -51,7 +57,7 @@ static inline void node_values(const double *restrict t1, const double *restrict
     }
 }
 
-/* The node terms of nodes [0, n) of a chunk from their fields, weights wt and 2 EI. */
+/* The node terms of nodes [0, n) from their fields, weights wt and 2 EI. */
 static inline void exact_terms(const node_fields *restrict f, const double *restrict wt,
                                double EI2, int64_t n, node_terms *restrict t)
 {
@@ -99,48 +105,42 @@ static inline void exact_sums(const double *restrict t1, const double *restrict 
     }
 }
 
-ds_exact_sums ds_exact_cell(const ds_model *m, const ds_cell *cell, const double *q,
-                            const double *qd, double *J, double *F)
+WIDE_VECTORS ds_exact_sums ds_exact_cell(const ds_model *m, const ds_cell *cell,
+                                         const double *q, const double *qd, double *J,
+                                         double *F)
 {
     const int64_t R = m->r_max, r = cell->nr, n = cell->g1 - cell->g0;
     const double *t1 = m->B1T + cell->g0 * R, *t2 = m->B2T + cell->g0 * R;
     ds_exact_sums sums = {0.0, 0.0, 0.0};
     node_fields f;
     node_terms t;
+    node_values(t1, t2, n, r, q, qd, n, &f);
+    exact_terms(&f, m->W + cell->g0, 2.0 * cell->EI, n, &t);
+    for (int64_t k = 0; k < n; k++) {
+        sums.y += t.y[k];
+        sums.h += t.h[k];
+        sums.bending += t.bending[k];
+    }
     for (int64_t j = 0; j < r; j++)
         J[j] = 0.0;
-    for (int64_t k0 = 0; k0 < n; k0 += NODE_CHUNK) {
-        const int64_t len = n - k0 < NODE_CHUNK ? n - k0 : NODE_CHUNK, g = cell->g0 + k0;
-        node_values(t1 + k0, t2 + k0, n, r, q, qd, len, &f);
-        exact_terms(&f, m->W + g, 2.0 * cell->EI, len, &t);
-        for (int64_t k = 0; k < len; k++) {
-            sums.y += t.y[k];
-            sums.h += t.h[k];
-            sums.bending += t.bending[k];
-        }
-        exact_sums(t1 + k0, t2 + k0, n, r, &t, len, J, F);
-    }
+    exact_sums(t1, t2, n, r, &t, n, J, F);
     return sums;
 }
 
-double ds_exact_shortening(const ds_model *m, const ds_cell *cell, const double *q)
+WIDE_VECTORS double ds_exact_shortening(const ds_model *m, const ds_cell *cell, const double *q)
 {
     const int64_t R = m->r_max, r = cell->nr, n = cell->g1 - cell->g0;
-    const double *t1 = m->B1T + cell->g0 * R;
-    double wp[NODE_CHUNK], y = 0.0;
-    for (int64_t k0 = 0; k0 < n; k0 += NODE_CHUNK) {
-        const int64_t len = n - k0 < NODE_CHUNK ? n - k0 : NODE_CHUNK;
-        const double *wt = m->W + cell->g0 + k0;
-        for (int64_t k = 0; k < len; k++)
-            wp[k] = t1[k0 + k] * q[0];
-        for (int64_t j = 1; j < r; j++)
-            for (int64_t k = 0; k < len; k++)
-                wp[k] += t1[j * n + k0 + k] * q[j];
-        for (int64_t k = 0; k < len; k++)   /* the square roots as one vector loop */
-            wp[k] = wt[k] * (1.0 - sqrt(1.0 - wp[k] * wp[k]));
-        for (int64_t k = 0; k < len; k++)
-            y += wp[k];
-    }
+    const double *t1 = m->B1T + cell->g0 * R, *wt = m->W + cell->g0;
+    double wp[DS_MAX_CELL_NODES], y = 0.0;
+    for (int64_t k = 0; k < n; k++)
+        wp[k] = t1[k] * q[0];
+    for (int64_t j = 1; j < r; j++)
+        for (int64_t k = 0; k < n; k++)
+            wp[k] += t1[j * n + k] * q[j];
+    for (int64_t k = 0; k < n; k++)   /* the square roots as one vector loop */
+        wp[k] = wt[k] * (1.0 - sqrt(1.0 - wp[k] * wp[k]));
+    for (int64_t k = 0; k < n; k++)
+        y += wp[k];
     return y;
 }
 

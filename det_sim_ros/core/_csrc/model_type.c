@@ -105,7 +105,8 @@ static int set_cell(const ds_model *m, const cell_index *index, int64_t c, ds_ce
     cell->g1 = index->g[c + 1];
     cell->group = index->group[c];
     if (cell->nr < 1 || cell->nr > m->r_max || cell->group < 0 || cell->group >= m->n_groups
-        || kin[c] < KIN_PAPER || kin[c] > KIN_EXACT) {
+        || kin[c] < KIN_PAPER || kin[c] > KIN_EXACT
+        || cell->g1 - cell->g0 > DS_MAX_CELL_NODES || cell->g1 < cell->g0) {
         PyErr_Format(PyExc_ValueError, "cell %lld: inconsistent layout", (long long)c);
         return -1;
     }
