@@ -19,8 +19,9 @@ FINER = 24   # nodes added for the finer rule: Delta-y then moves by < 1e-9 of t
 
 def _step_run(beam, eps_b, n_ritz=5):
     """Return (model, run) of the 'step' run at fidelity exact (tolerance 1e-6)."""
-    scene = step_scene(beam, eps_b, **{'scene.fidelity': 'exact', 'scene.n_ritz': n_ritz,
-                                      'integrator.tolerance': 1e-6})
+    overrides = {'scene.fidelity': 'exact', 'scene.n_ritz': n_ritz,
+                 'integrator.tolerance': 1e-6}
+    scene = step_scene(beam, eps_b, **overrides)
     sim = Simulator(scene)
     return sim.model, simulate(sim, step_voltage(scene.physics.v_max), STEP_END)
 
