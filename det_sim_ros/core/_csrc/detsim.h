@@ -46,6 +46,7 @@ typedef struct {
     double kappa;           /* 1: the w'^4/8 end-shortening term (consistent), else 0 */
     /* one-term closed forms: 1/2 int S'^2, 1/8 int S'^4, EI int S''^2 S'^2 */
     double c2, c4, e4;
+    double mi_self;         /* interface mass on its own end shortening, MI[c, c] (kg) */
 } ds_cell;
 
 /* The laws the amplifier follows during one step (amplifier.c sets them at each step's start):

@@ -188,8 +188,9 @@ static int build_cells(ds_model *m, arena *mem, PyObject *src, const cell_index 
     return m->amp ? read_amplifier(m, mem, src) : 0;
 }
 
-/* The interface mass couples cells of one group only (groups step independently). */
-static int check_interface_mass(const ds_model *m)
+/* The interface mass couples cells of one group only (groups step independently); each
+ * cell's own entry MI[c, c] is also kept with the cell (mi_self). */
+static int read_interface_mass(const ds_model *m)
 {
     const int64_t nc = m->n_cells;
     for (int64_t e = 0; e < m->n_mi; e++) {
@@ -199,6 +200,9 @@ static int check_interface_mass(const ds_model *m)
             return -1;
         }
     }
+    for (int64_t e = 0; e < m->n_mi; e++)
+        if (m->mi_row[e] == m->mi_col[e])
+            m->cell[m->mi_row[e]].mi_self += m->mi_val[e];
     return 0;
 }
 
@@ -240,7 +244,7 @@ static int Model_init(ModelObject *self, PyObject *args, PyObject *kwds)
     memset(m, 0, sizeof(*m));
     cell_index index;
     if (read_layout(m, src) < 0 || copy_arrays(m, &self->mem, src, &index) < 0
-        || build_cells(m, &self->mem, src, &index) < 0 || check_interface_mass(m) < 0
+        || build_cells(m, &self->mem, src, &index) < 0 || read_interface_mass(m) < 0
         || derived_tables(m, &self->mem) < 0)
         return -1;
     m->one_term = m->n_cells == 1 && m->cell[0].nr == 1 && m->cell[0].kinematics != KIN_EXACT;

@@ -267,10 +267,8 @@ static void one_cell_solve(const ds_model *m, const ds_cell *cell, const double 
                            const double *F, double *out)
 {
     const int64_t R = m->r_max, o = cell->q0, r = cell->nr;
-    double mi = 0.0, ja = 0.0, jb = 0.0, b_row[r];
-    for (int64_t e = 0; e < m->n_mi; e++)   /* one entry, MI[c, c], in a one-cell group */
-        if (m->mi_row[e] == cell - m->cell)
-            mi += m->mi_val[e];
+    const double mi = cell->mi_self;   /* a one-cell group's only interface mass entry */
+    double ja = 0.0, jb = 0.0, b_row[r];
     for (int64_t i = 0; i < r; i++) {
         const double *row = m->Mb_inv + (o + i) * R;
         double a = 0.0, b = 0.0;
