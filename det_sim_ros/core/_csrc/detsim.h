@@ -127,7 +127,7 @@ ds_exact_sums ds_exact_cell(const ds_model *m, const ds_cell *cell, const double
                             const double *qd, double *J, double *F);
 double ds_exact_shortening(const ds_model *m, const ds_cell *cell, const double *q);
 void ds_transpose_nodes(const ds_model *m, const double *rows, double *out);
-void ds_mass_inverse(const ds_model *m, double *out);   /* physics.c, once per model */
+int ds_mass_inverse(const ds_model *m, double *out);   /* physics.c, once per model */
 
 /* One DET's supply under its amplifier's laws: the current through Rs (A), the amplifier's
  * terminal voltage v_out and the voltage behind Rs v_src (V; v_a, or the command without an

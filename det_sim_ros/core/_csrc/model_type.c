@@ -5,7 +5,6 @@
  */
 #include "binding.h"
 
-#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -220,9 +219,7 @@ static int derived_tables(ds_model *m, arena *mem)
     }
     ds_transpose_nodes(m, m->B1, t1);
     ds_transpose_nodes(m, m->B2, t2);
-    inv[0] = NAN;   /* stays NaN if ds_mass_inverse could not allocate its scratch */
-    ds_mass_inverse(m, inv);
-    if (inv[0] != inv[0]) {
+    if (ds_mass_inverse(m, inv) < 0) {
         PyErr_NoMemory();
         return -1;
     }

@@ -236,13 +236,14 @@ static void solve_spd(double *Mt, int64_t ld, const double *F, double *out, int6
 }
 
 /* The inverse of each cell's block of Mb into ``out`` (block rows like Mb), once per model:
- * the mass solve of a one-cell group needs no factorization per call (one_cell_solve). */
-void ds_mass_inverse(const ds_model *m, double *out)
+ * the mass solve of a one-cell group needs no factorization per call (one_cell_solve).
+ * Returns -1 when its scratch cannot be allocated. */
+int ds_mass_inverse(const ds_model *m, double *out)
 {
     const int64_t R = m->r_max;
     double *block = malloc(sizeof(double) * (size_t)(3 * R * R + 1));
-    if (!block)   /* the caller checks the first entry */
-        return;
+    if (!block)
+        return -1;
     double *unit = block + R * R, *column = unit + R * R;
     for (int64_t c = 0; c < m->n_cells; c++) {
         const int64_t o = m->cell[c].q0, r = m->cell[c].nr;
@@ -258,6 +259,7 @@ void ds_mass_inverse(const ds_model *m, double *out)
         }
     }
     free(block);
+    return 0;
 }
 
 /* Solve (Mb_c + mi J_c J_c') out = F_c for a cell alone in its group, mi its interface mass
