@@ -101,7 +101,8 @@ def paper_baseline(baseline, beam, eps_b):
         for root, out in ((os.getcwd(), here), (baseline, there)):
             env = {**os.environ, 'PYTHONPATH': root}
             text = subprocess.run([sys.executable, '-c', _PAPER_SNIPPET, beam, str(eps_b)],
-                                  env=env, capture_output=True, text=True, check=True).stdout
+                                  env=env, cwd=root, capture_output=True, text=True,
+                                  check=True).stdout
             out.append(float(text.split()[-1]))
     return statistics.median(here), statistics.median(there)
 

@@ -6,7 +6,8 @@
  * physics.c      right-hand side, stiff rates, input-jump bookkeeping (the equations are
  *                derived and documented in det_sim_ros/physics/model.py;
  *                det_sim_ros/physics/reference.py is the same physics in readable numpy, and
- *                the tests hold this code to it); outputs.c the named outputs
+ *                the tests hold this code to it); outputs.c the named outputs; exact.c
+ *                the exact kinematics' quadrature
  * stepping.h     the stepping core: method.c (method tables and the phi functions), stages.c
  *                (the exponential Runge-Kutta stages), stepping.c (one group's control period:
  *                charge transients, step-count controller), stepper.c (set-up of the per-group
@@ -31,6 +32,7 @@ enum { DS_OK = 0, DS_BAD_STRETCH = 1, DS_NON_FINITE = 2, DS_BAD_SLOPE = 3 };
 enum { KIN_PAPER = 0, KIN_CONSISTENT = 1, KIN_EXACT = 2 };
 
 #define DS_CELL_OUTPUTS 9   /* q_ref, qdot_ref, y, lambda, q_p, v_p, i_DE, C, eps_E */
+#define DS_MAX_CELL_NODES 64   /* quadrature nodes per cell (62 at 12 Ritz terms, exact) */
 
 /* One beam pair ("cell"): its Ritz coordinates, quadrature nodes and beam constants. */
 typedef struct {
@@ -44,6 +46,7 @@ typedef struct {
     double kappa;           /* 1: the w'^4/8 end-shortening term (consistent), else 0 */
     /* one-term closed forms: 1/2 int S'^2, 1/8 int S'^4, EI int S''^2 S'^2 */
     double c2, c4, e4;
+    double mi_self;         /* interface mass on its own end shortening, MI[c, c] (kg) */
 } ds_cell;
 
 /* The laws the amplifier follows during one step (amplifier.c sets them at each step's start):
@@ -75,7 +78,10 @@ typedef struct {
     ds_cell *cell;                     /* n_cells */
     ds_det *det;                       /* n_cells */
     const double *B1, *B2, *W;         /* S_j'(x_g), S_j''(x_g) (n_nodes x r_max), weights */
+    const double *B1T, *B2T;           /* the same by cell transposed: S_j' of cell c at its
+                                        * nodes from B1T[g0 r_max + j (g1 - g0)] (exact.c) */
     const double *Mb, *K, *D;          /* block rows by cell (n_q x r_max) */
+    const double *Mb_inv;              /* each cell's block of Mb inverted (as Mb) */
     const double *mi_val;              /* interface mass entries MI[mi_row, mi_col] */
     int64_t *mi_row, *mi_col;
     int64_t *group_q;                  /* coordinate offsets of the coupled groups (n_groups+1) */
@@ -109,6 +115,19 @@ void ds_shift_charge(const ds_model *m, double *x, const double *u, double sign,
 void ds_book_input_jump(const ds_model *m, double *x, const double *u_old, const double *u_new,
                         ds_work *w);
 int64_t ds_n_outputs(const ds_model *m);
+
+/* exact.c: an exact cell's y (m), qd' H_y qd (m/s^2) and bending energy beyond EI int w''^2
+ * (J) from its coordinates q and rates qd, with dy/dq into J and, unless F is NULL, that
+ * energy's gradient subtracted from F (all of the cell's nr terms); its y alone; B1T, B2T
+ * from the rows B1, B2 (once per model). */
+typedef struct {
+    double y, h, bending;
+} ds_exact_sums;
+ds_exact_sums ds_exact_cell(const ds_model *m, const ds_cell *cell, const double *q,
+                            const double *qd, double *J, double *F);
+double ds_exact_shortening(const ds_model *m, const ds_cell *cell, const double *q);
+void ds_transpose_nodes(const ds_model *m, const double *rows, double *out);
+int ds_mass_inverse(const ds_model *m, double *out);   /* physics.c, once per model */
 
 /* One DET's supply under its amplifier's laws: the current through Rs (A), the amplifier's
  * terminal voltage v_out and the voltage behind Rs v_src (V; v_a, or the command without an

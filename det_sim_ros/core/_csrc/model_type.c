@@ -104,7 +104,8 @@ static int set_cell(const ds_model *m, const cell_index *index, int64_t c, ds_ce
     cell->g1 = index->g[c + 1];
     cell->group = index->group[c];
     if (cell->nr < 1 || cell->nr > m->r_max || cell->group < 0 || cell->group >= m->n_groups
-        || kin[c] < KIN_PAPER || kin[c] > KIN_EXACT) {
+        || kin[c] < KIN_PAPER || kin[c] > KIN_EXACT
+        || cell->g1 - cell->g0 > DS_MAX_CELL_NODES || cell->g1 < cell->g0) {
         PyErr_Format(PyExc_ValueError, "cell %lld: inconsistent layout", (long long)c);
         return -1;
     }
@@ -186,8 +187,9 @@ static int build_cells(ds_model *m, arena *mem, PyObject *src, const cell_index 
     return m->amp ? read_amplifier(m, mem, src) : 0;
 }
 
-/* The interface mass couples cells of one group only (groups step independently). */
-static int check_interface_mass(const ds_model *m)
+/* The interface mass couples cells of one group only (groups step independently); each
+ * cell's own entry MI[c, c] is also kept with the cell (mi_self). */
+static int read_interface_mass(const ds_model *m)
 {
     const int64_t nc = m->n_cells;
     for (int64_t e = 0; e < m->n_mi; e++) {
@@ -197,6 +199,33 @@ static int check_interface_mass(const ds_model *m)
             return -1;
         }
     }
+    for (int64_t e = 0; e < m->n_mi; e++)
+        if (m->mi_row[e] == m->mi_col[e])
+            m->cell[m->mi_row[e]].mi_self += m->mi_val[e];
+    return 0;
+}
+
+/* What the rhs reads built once from the arrays: the node-contiguous copies of B1 and B2
+ * (exact.c) and the inverse mass blocks (one-cell groups' mass solve). */
+static int derived_tables(ds_model *m, arena *mem)
+{
+    const size_t size = (size_t)(m->n_nodes * m->r_max) + 1;
+    double *t1 = keep_owned(mem, calloc(size, sizeof(double)));
+    double *t2 = keep_owned(mem, calloc(size, sizeof(double)));
+    double *inv = keep_owned(mem, malloc(sizeof(double) * (size_t)(m->n_q * m->r_max)));
+    if (!t1 || !t2 || !inv) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    ds_transpose_nodes(m, m->B1, t1);
+    ds_transpose_nodes(m, m->B2, t2);
+    if (ds_mass_inverse(m, inv) < 0) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    m->B1T = t1;
+    m->B2T = t2;
+    m->Mb_inv = inv;
     return 0;
 }
 
@@ -212,7 +241,8 @@ static int Model_init(ModelObject *self, PyObject *args, PyObject *kwds)
     memset(m, 0, sizeof(*m));
     cell_index index;
     if (read_layout(m, src) < 0 || copy_arrays(m, &self->mem, src, &index) < 0
-        || build_cells(m, &self->mem, src, &index) < 0 || check_interface_mass(m) < 0)
+        || build_cells(m, &self->mem, src, &index) < 0 || read_interface_mass(m) < 0
+        || derived_tables(m, &self->mem) < 0)
         return -1;
     m->one_term = m->n_cells == 1 && m->cell[0].nr == 1 && m->cell[0].kinematics != KIN_EXACT;
     if (ds_work_init(&self->w, m) < 0) {

@@ -67,9 +67,10 @@ static inline double one_term_shortening(const ds_cell *cell, double q)
  * End shortening y_c, its gradient J = dy/dq, qd' H_y qd per cell and, with ``with_bending``,
  * the bending energy beyond EI int w''^2 (Us4), from q = x[:n_q], qd = x[n_q:2 n_q].
  *
- * paper/consistent: y = int w'^2/2 + kappa w'^4/8; exact: sin(theta) = w', y = int 1 - cos theta,
- * bending beyond EI int w''^2 is EI int w''^2 w'^2 / (1 - w'^2) (curvature^2 = w''^2/(1 - w'^2));
- * |w'| >= 1 gives NaN, which the callers report as a slope domain error.
+ * paper/consistent: y = int w'^2/2 + kappa w'^4/8; exact (exact.c): sin(theta) = w',
+ * y = int 1 - cos theta, bending beyond EI int w''^2 is EI int w''^2 w'^2 / (1 - w'^2)
+ * (curvature^2 = w''^2/(1 - w'^2)); |w'| >= 1 gives NaN, which the callers report as a slope
+ * domain error.
  */
 static void kinematics_cells(const ds_model *m, const double *x, ds_work *w, int with_bending,
                              int exact_too)
@@ -79,10 +80,17 @@ static void kinematics_cells(const ds_model *m, const double *x, ds_work *w, int
     for (int64_t c = 0; c < m->n_cells; c++) {
         const ds_cell *cell = &m->cell[c];
         const int64_t o = cell->q0, r = cell->nr;
-        const int exact = cell->kinematics == KIN_EXACT;
-        if (exact && !exact_too)
+        if (cell->kinematics == KIN_EXACT) {
+            if (!exact_too)
+                continue;
+            const ds_exact_sums s = ds_exact_cell(m, cell, x + o, qd + o, w->J + o, NULL);
+            w->y[c] = s.y;
+            w->h[c] = s.h;
+            if (with_bending)
+                w->Us4[c] = s.bending;
             continue;
-        if (r == 1 && !exact) {   /* one term: polynomials in q, ~5x cheaper than quadrature */
+        }
+        if (r == 1) {   /* one term: polynomials in q, ~5x cheaper than quadrature */
             const double c2 = cell->c2, c4 = cell->kappa * cell->c4;
             const double qc = x[o], q2 = qc * qc;
             w->y[c] = one_term_shortening(cell, qc);
@@ -97,29 +105,22 @@ static void kinematics_cells(const ds_model *m, const double *x, ds_work *w, int
             w->J[o + j] = 0.0;
         for (int64_t g = cell->g0; g < cell->g1; g++) {
             const double *b1 = m->B1 + g * R, *b2 = m->B2 + g * R;
-            double wp = 0.0, wd = 0.0, gy;
+            double wp = 0.0, wd = 0.0;
             for (int64_t j = 0; j < r; j++) {
                 wp += b1[j] * x[o + j];
                 wd += b1[j] * qd[o + j];
             }
             const double wg = m->W[g], wp2 = wp * wp;
-            if (exact) {
-                const double cos2 = 1.0 - wp2, cs = sqrt(cos2);
-                yc += wg * (1.0 - cs);
-                hc += wg * wd * wd / (cos2 * cs);
-                gy = wg * wp / cs;
-            } else {
-                yc += wg * (0.5 * wp2 + 0.125 * cell->kappa * wp2 * wp2);
-                hc += wg * (1.0 + 1.5 * cell->kappa * wp2) * wd * wd;
-                gy = wg * (wp + 0.5 * cell->kappa * wp2 * wp);
-            }
+            yc += wg * (0.5 * wp2 + 0.125 * cell->kappa * wp2 * wp2);
+            hc += wg * (1.0 + 1.5 * cell->kappa * wp2) * wd * wd;
+            const double gy = wg * (wp + 0.5 * cell->kappa * wp2 * wp);
             for (int64_t j = 0; j < r; j++)
                 w->J[o + j] += gy * b1[j];
             if (with_bending) {
                 double wpp = 0.0;
                 for (int64_t j = 0; j < r; j++)
                     wpp += b2[j] * x[o + j];
-                u4 += cell->EI * wg * wpp * wpp * (exact ? wp2 / (1.0 - wp2) : wp2);
+                u4 += cell->EI * wg * wpp * wpp * wp2;
             }
         }
         w->y[c] = yc;
@@ -142,8 +143,11 @@ static void end_shortenings(const ds_model *m, const double *x, ds_work *w)
     for (int64_t c = 0; c < m->n_cells; c++) {
         const ds_cell *cell = &m->cell[c];
         const int64_t o = cell->q0, r = cell->nr;
-        const int exact = cell->kinematics == KIN_EXACT;
-        if (r == 1 && !exact) {
+        if (cell->kinematics == KIN_EXACT) {
+            w->y[c] = ds_exact_shortening(m, cell, x + o);
+            continue;
+        }
+        if (r == 1) {
             w->y[c] = one_term_shortening(cell, x[o]);
             continue;
         }
@@ -154,86 +158,42 @@ static void end_shortenings(const ds_model *m, const double *x, ds_work *w)
             for (int64_t j = 0; j < r; j++)
                 wp += b1[j] * x[o + j];
             const double wg = m->W[g], wp2 = wp * wp;
-            if (exact)
-                yc += wg * (1.0 - sqrt(1.0 - wp2));
-            else
-                yc += wg * (0.5 * wp2 + 0.125 * cell->kappa * wp2 * wp2);
+            yc += wg * (0.5 * wp2 + 0.125 * cell->kappa * wp2 * wp2);
         }
         w->y[c] = yc;
     }
 }
 
-/*
- * An exact cell's kinematics (as ds_kinematics) and its bending force beyond EI int w''^2 (as
- * quartic_force, into F) in one pass over its quadrature nodes: w' and w'' once per node, the
- * same operations in the same order as the two separate passes (the same bits).
- */
-static void exact_cell_pass(const ds_model *m, const ds_cell *cell, int64_t c, const double *x,
-                            ds_work *w, double *F)
-{
-    const int64_t R = m->r_max, o = cell->q0, r = cell->nr;
-    const double *qd = x + m->n_q;
-    const double EI2 = 2.0 * cell->EI;
-    double yc = 0.0, hc = 0.0;
-    for (int64_t j = 0; j < r; j++)
-        w->J[o + j] = 0.0;
-    for (int64_t g = cell->g0; g < cell->g1; g++) {
-        const double *b1 = m->B1 + g * R, *b2 = m->B2 + g * R;
-        double wp = 0.0, wd = 0.0, wpp = 0.0;
-        for (int64_t j = 0; j < r; j++) {
-            wp += b1[j] * x[o + j];
-            wd += b1[j] * qd[o + j];
-            wpp += b2[j] * x[o + j];
-        }
-        const double wg = m->W[g], wp2 = wp * wp;
-        const double cos2 = 1.0 - wp2, cs = sqrt(cos2);
-        yc += wg * (1.0 - cs);
-        hc += wg * wd * wd / (cos2 * cs);
-        const double gy = wg * wp / cs;
-        const double s1 = EI2 * m->W[g] * wpp * wpp * wp / (cos2 * cos2);
-        const double s2 = EI2 * m->W[g] * wpp * wp * wp / cos2;
-        for (int64_t j = 0; j < r; j++) {
-            w->J[o + j] += gy * b1[j];
-            F[o + j] -= s1 * b1[j] + s2 * b2[j];
-        }
-    }
-    w->y[c] = yc;
-    w->h[c] = hc;
-}
-
 /* F -= gradient of the bending energy beyond EI int w''^2: EI int w''^2 g, g = w'^2 (eq 51) or,
- * exact, g = w'^2 / (1 - w'^2). */
+ * exact, g = w'^2 / (1 - w'^2); an exact cell's kinematics (into w) come with it, from the
+ * same pass over its quadrature nodes (exact.c). */
 static void quartic_force(const ds_model *m, const double *x, double *F, ds_work *w)
 {
     const int64_t R = m->r_max;
     for (int64_t c = 0; c < m->n_cells; c++) {
         const ds_cell *cell = &m->cell[c];
         const int64_t o = cell->q0, r = cell->nr;
-        const int exact = cell->kinematics == KIN_EXACT;
-        if (exact) {   /* with its kinematics, which the callers left to this pass */
-            exact_cell_pass(m, cell, c, x, w, F);
+        if (cell->kinematics == KIN_EXACT) {
+            const ds_exact_sums s = ds_exact_cell(m, cell, x + o, x + m->n_q + o, w->J + o,
+                                                  F + o);
+            w->y[c] = s.y;
+            w->h[c] = s.h;
             continue;
         }
-        if (r == 1 && !exact) {
+        if (r == 1) {
             F[o] -= 4.0 * cell->e4 * x[o] * x[o] * x[o];
             continue;
         }
         const double EI2 = 2.0 * cell->EI;
         for (int64_t g = cell->g0; g < cell->g1; g++) {
             const double *b1 = m->B1 + g * R, *b2 = m->B2 + g * R;
-            double wp = 0.0, wpp = 0.0, s1, s2;
+            double wp = 0.0, wpp = 0.0;
             for (int64_t j = 0; j < r; j++) {
                 wp += b1[j] * x[o + j];
                 wpp += b2[j] * x[o + j];
             }
-            if (exact) {
-                const double cos2 = 1.0 - wp * wp;
-                s1 = EI2 * m->W[g] * wpp * wpp * wp / (cos2 * cos2);
-                s2 = EI2 * m->W[g] * wpp * wp * wp / cos2;
-            } else {
-                s1 = EI2 * m->W[g] * wpp * wpp * wp;
-                s2 = EI2 * m->W[g] * wpp * wp * wp;
-            }
+            const double s1 = EI2 * m->W[g] * wpp * wpp * wp;
+            const double s2 = EI2 * m->W[g] * wpp * wp * wp;
             for (int64_t j = 0; j < r; j++)
                 F[o + j] -= s1 * b1[j] + s2 * b2[j];
         }
@@ -272,6 +232,77 @@ static void solve_spd(double *Mt, int64_t ld, const double *F, double *out, int6
         for (int64_t k = i + 1; k < n; k++)
             s -= Mt[k * ld + i] * out[k];
         out[i] = s / Mt[i * ld + i];
+    }
+}
+
+/* The inverse of each cell's block of Mb into ``out`` (block rows like Mb), once per model:
+ * the mass solve of a one-cell group needs no factorization per call (one_cell_solve).
+ * Returns -1 when its scratch cannot be allocated. */
+int ds_mass_inverse(const ds_model *m, double *out)
+{
+    const int64_t R = m->r_max;
+    double *block = malloc(sizeof(double) * (size_t)(3 * R * R + 1));
+    if (!block)
+        return -1;
+    double *unit = block + R * R, *column = unit + R * R;
+    for (int64_t c = 0; c < m->n_cells; c++) {
+        const int64_t o = m->cell[c].q0, r = m->cell[c].nr;
+        for (int64_t k = 0; k < r; k++) {
+            for (int64_t i = 0; i < r; i++) {
+                for (int64_t j = 0; j < r; j++)
+                    block[i * R + j] = m->Mb[(o + i) * R + j];
+                unit[i] = i == k ? 1.0 : 0.0;
+            }
+            solve_spd(block, R, unit, column, r);
+            for (int64_t i = 0; i < r; i++)
+                out[(o + i) * R + k] = column[i];
+        }
+    }
+    free(block);
+    return 0;
+}
+
+/* Solve (Mb_c + mi J_c J_c') out = F_c for a cell alone in its group, mi its interface mass
+ * (Sherman-Morrison with Mb_c^-1 from ds_mass_inverse): two products with Mb_c^-1 and one
+ * division instead of a Cholesky factorization's chain of square roots and divisions. */
+static void one_cell_solve(const ds_model *m, const ds_cell *cell, const double *J,
+                           const double *F, double *out)
+{
+    const int64_t R = m->r_max, o = cell->q0, r = cell->nr;
+    const double mi = cell->mi_self;   /* a one-cell group's only interface mass entry */
+    double ja = 0.0, jb = 0.0, b_row[r];
+    for (int64_t i = 0; i < r; i++) {
+        const double *row = m->Mb_inv + (o + i) * R;
+        double a = 0.0, b = 0.0;
+        for (int64_t k = 0; k < r; k++) {
+            a += row[k] * F[o + k];
+            b += row[k] * J[o + k];
+        }
+        out[o + i] = a;
+        b_row[i] = b;
+        ja += J[o + i] * a;
+        jb += J[o + i] * b;
+    }
+    const double scale = mi * ja / (1.0 + mi * jb);
+    for (int64_t i = 0; i < r; i++)
+        out[o + i] -= scale * b_row[i];
+}
+
+/* dqdot/dt into dx[n_q:2 n_q]: each group's mass solve (one-term models: one division). */
+static void mass_solve(const ds_model *m, ds_work *w, double *dx)
+{
+    const int64_t nq = m->n_q, ld = m->mass_block;
+    if (nq == 1) {
+        dx[1] = w->F[0] / w->Mt[0];
+        return;
+    }
+    for (int64_t c = 0; c < m->n_cells; c++) {
+        const ds_cell *cell = &m->cell[c];
+        const int64_t a = m->group_q[cell->group], b = m->group_q[cell->group + 1];
+        if (b - a == cell->nr && cell->nr > 1)
+            one_cell_solve(m, cell, w->J, w->F, dx + nq);
+        else if (cell->q0 == a)   /* a coupled group or a one-term cell: by its first cell */
+            solve_spd(w->Mt + a * ld, ld, w->F + a, dx + nq + a, b - a);
     }
 }
 
@@ -523,23 +554,15 @@ static int __attribute__((noinline))
 rhs_general(const ds_model *m, const double *x, const double *u, double *dx, ds_work *w,
             int quasi_static)
 {
-    const int64_t nq = m->n_q, nc = m->n_cells, ld = m->mass_block;
+    const int64_t nq = m->n_q, nc = m->n_cells;
     const double *qd = x + nq;
-    double *F = w->F, *Mt = w->Mt;
     kinematics_cells(m, x, w, 0, 0);   /* exact cells: in structure_forces' bending pass */
     det_power pw = {0.0, 0.0, 0.0};
     pw.p_diss = structure_forces(m, x, w);
     int status = DS_OK;
     for (int64_t i = 0; i < nc && status == DS_OK; i++)
         status = det_cell(m, i, x, u, dx, w, quasi_static, &pw);
-    if (nq == 1) {
-        dx[1] = F[0] / Mt[0];
-    } else {
-        for (int64_t g = 0; g < m->n_groups; g++) {
-            const int64_t a = m->group_q[g], b = m->group_q[g + 1];
-            solve_spd(Mt + a * ld, ld, F + a, dx + nq + a, b - a);
-        }
-    }
+    mass_solve(m, w, dx);
     for (int64_t i = 0; i < nq; i++)
         dx[i] = qd[i];
     w->p_in = pw.p_in;

@@ -74,8 +74,11 @@ static void view_arrays(ds_model *v, const ds_model *m, int64_t a, int64_t b, in
     v->n_nodes = m->cell[c1 - 1].g1 - g0;
     v->B1 = m->B1 + g0 * m->r_max;
     v->B2 = m->B2 + g0 * m->r_max;
+    v->B1T = m->B1T + g0 * m->r_max;
+    v->B2T = m->B2T + g0 * m->r_max;
     v->W = m->W + g0;
     v->Mb = m->Mb + a * m->r_max;
+    v->Mb_inv = m->Mb_inv + a * m->r_max;
     v->K = m->K + a * m->r_max;
     v->D = m->D + a * m->r_max;
     v->ref = m->ref + a;
