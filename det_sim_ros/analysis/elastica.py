@@ -159,11 +159,11 @@ def _solve(beam: str, ys: tuple) -> ElasticaPath:
     hist = []                             # (y, u) of the solved points, for extrapolation
     rows = []
     # continuation grid: the requested points plus enough intermediate ones (doubling from
-    # 1e-4, then steps <= 0.005) that every shooting solve starts close to its solution
+    # 1e-4, then steps <= 0.02) that every shooting solve starts close to its solution
     grid = [y_prev]
     for y in ys:
         while grid[-1] < y:
-            grid.append(min(y, 2.0 * grid[-1], grid[-1] + 0.005))
+            grid.append(min(y, 2.0 * grid[-1], grid[-1] + 0.02))
     wanted = set(ys)
     for y in grid:
         guess = u.copy()
