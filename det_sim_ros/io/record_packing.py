@@ -14,12 +14,43 @@ from . import mcap_internals
 from .mcap_format import MESSAGE_HEAD, MESSAGE_HEAD_LENGTH, OP_MESSAGE
 from ..core.kernel import pack_records
 
-__all__ = ['RecordPacker', 'sample_bytes']
+__all__ = ['RecordPacker', 'sample_bytes', 'layout_segments']
 
 
 def sample_bytes(sizes) -> int:
     """Return the bytes of one sample's Message records, for payloads of ``sizes``."""
     return sum(sizes) + MESSAGE_HEAD.size * len(sizes)
+
+
+def layout_segments(items, i: int, plans, room: int) -> list:
+    """
+    Return the queued samples from items[i] that fit in ``room`` bytes, in segments of one layout.
+
+    ``items`` are (log time, topics, payloads, types); ``plans`` map a layout (topics tuple) to
+    its plan. A segment is (plan, payload sizes, samples). A layout without a plan ends the
+    segments, and so does the first sample that does not fit; a sensor's dropped sample (a
+    layout without its topic) is a segment of its own, not the end of the run.
+    """
+    segments, n = [], len(items)
+    while i < n:
+        topics = items[i][1]
+        key = topics if type(topics) is tuple else tuple(topics)
+        plan = plans.get(key)
+        if plan is None:
+            break
+        sizes = tuple(map(len, items[i][2]))
+        step = sample_bytes(sizes)
+        end, last = i + 1, min(n, i + room // step)
+        while end < last and (items[end][1] is topics or tuple(items[end][1]) == key):
+            end += 1   # (the node gives the same topics object for a layout)
+        if end > last:   # not even one sample of this layout fits
+            break
+        segments.append((plan, sizes, items[i:end]))
+        room -= (end - i) * step
+        if end == last:
+            break
+        i = end
+    return segments
 
 
 def _cover(record, empty: bool, log_time: int) -> None:
