@@ -79,3 +79,18 @@ def test_resim_of_a_log_with_the_amplifier_on_is_bit_exact(tmp_path):
     assert stored['amplifier']['delay'] == 0.004
     result = resimulate(log)
     assert result.steps == 120 and result.ok(tolerance=0.0), result.table()
+
+
+def test_a_held_command_gives_what_the_line_makes_of_it_after_runs_and_resets():
+    scene = load_scene('default', {'amplifier.dac_bits': 8, 'amplifier.delay': 0.002,
+                                   'amplifier.offset': 4.0})
+    held, other = np.full((6, 1), 1234.5), np.full((2, 1), 50.0)
+    commands = np.concatenate([held, other, held, held[:1]])
+    reference = CommandStage.for_scene(scene).run(commands)
+    stage = CommandStage.for_scene(scene)
+    stepped = [stage.apply(row) for row in held]
+    stepped += list(stage.run(other))             # the line moves on by whole periods
+    stepped += [stage.apply(row) for row in np.concatenate([held, held[:1]])]
+    assert np.array_equal(np.array(stepped), reference)
+    stage.reset()                                 # 0 V in the line again
+    assert np.array_equal(np.array([stage.apply(row) for row in held]), reference[:6])

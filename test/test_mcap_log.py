@@ -425,13 +425,14 @@ def test_log_directory_is_bounded(tmp_path):
     big.close()
 
 
-def _write_samples(path, fast, background=False, stress=False):
+def _write_samples(path, fast, background=False, stress=False, dropouts=False):
     """
     500 samples of four topics and a command every 7th.
 
     ``stress``: what ends a run of the batched writer, often: log times that step back (clamped), a
     longer payload every 37th sample, a flush every 20 us of log time, a new file every 150 us, a
-    writer queue of 5.
+    writer queue of 5. ``dropouts``: every 9th sample lacks one topic (a sensor's dropped sample,
+    each layout one tuple as the node gives it), inside the batched writer's runs.
     """
     from det_sim_ros.io.contract import encode_float64_multi_array, encode_joint_state, TOPIC_TYPES
     options = {'flush_sim_s': 2e-5, 'split_s': 1.5e-4, 'max_queue': 5} if stress else {}
@@ -440,6 +441,8 @@ def _write_samples(path, fast, background=False, stress=False):
                         flush_period_s=1e9, packing=fast,   # False: mcap's add_message path
                         **options)   # no wall-clock flushes: comparable
     topics = ['deflection', 'displacement', 'charge', 'current']
+    layouts = [tuple(topics[:j] + topics[j + 1:]) for j in range(len(topics))]
+    written = 0
     for k in range(500):
         t = k * 1000 - (2500 if stress and k % 11 == 5 else 0)
         if k % 7 == 0:
@@ -448,32 +451,38 @@ def _write_samples(path, fast, background=False, stress=False):
         names = ['det0' + ('_long' if stress and k % 37 == 3 else '')]
         data = [encode_joint_state(names, [k + i / 10.0], stamp_ns=k * 1000)
                 for i in range(len(topics))]
-        recorder.record_sample(t, topics, data, TOPIC_TYPES)
+        if dropouts and k % 9 == 4:
+            gone = k // 9 % len(topics)
+            recorder.record_sample(t, layouts[gone], data[:gone] + data[gone + 1:], TOPIC_TYPES)
+        else:
+            recorder.record_sample(t, topics, data, TOPIC_TYPES)
+        written += len(topics) - (dropouts and k % 9 == 4)
         if fast and not background:
             assert recorder.packing
     recorder.close()
-    assert recorder.fault == '' and recorder.messages == 500 * 4 + 72
+    assert recorder.fault == '' and recorder.messages == written + 72
     assert (recorder.clamped > 0) == stress
     return recorder.paths
 
 
-@pytest.mark.parametrize('background, stress', [(False, False), (True, False),
-                                                (False, True), (True, True)])
+@pytest.mark.parametrize('background, stress, dropouts', [
+    (False, False, False), (True, False, False), (False, True, False), (True, True, False),
+    (True, False, True), (True, True, True)])
 def test_fast_sample_path_writes_the_same_file_as_add_message(tmp_path, monkeypatch, background,
-                                                              stress):
+                                                              stress, dropouts):
     """
     Check that the batched sample writer gives the bytes mcap's add_message gives.
 
     record_sample's batched writer (compiled record packing, runs of samples), record's
     single messages (and the writer thread) give the bytes mcap's own add_message gives:
     records, chunk indexes and statistics; also when clamped times, other payload sizes,
-    flushes and file splits end the runs.
+    flushes and file splits end the runs, and with samples that lack a topic inside them.
     """
     import time as time_module
     monkeypatch.setattr(time_module, 'time_ns', lambda: 1234)   # the wall start in the metadata
-    slow = _write_samples(tmp_path / 'slow.mcap', fast=False, stress=stress)
+    slow = _write_samples(tmp_path / 'slow.mcap', fast=False, stress=stress, dropouts=dropouts)
     fast = _write_samples(tmp_path / 'fast.mcap', fast=True, background=background,
-                          stress=stress)
+                          stress=stress, dropouts=dropouts)
     assert len(fast) == len(slow) == (4 if stress else 1)
     for slow_path, fast_path in zip(slow, fast):
         assert open(slow_path, 'rb').read() == open(fast_path, 'rb').read()
@@ -482,7 +491,7 @@ def test_fast_sample_path_writes_the_same_file_as_add_message(tmp_path, monkeypa
     for fast_path in fast:
         with open(fast_path, 'rb') as stream:
             count += make_reader(stream).get_summary().statistics.message_count
-    assert count == 500 * 4 + 72
+    assert count == 500 * 4 + 72 - (56 if dropouts else 0)
 
 
 def test_pack_records_is_the_records_of_one_by_one_writes():

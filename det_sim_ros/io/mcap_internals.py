@@ -117,17 +117,18 @@ try:
 
     class MessageIndex(_McapMessageIndex):
         """
-        mcap's MessageIndex, written with one pack instead of two calls per entry.
+        mcap's MessageIndex, written as one record of one pack.
 
-        With those calls, the index of a 50-sample chunk costs a quarter of the recording.
+        mcap writes an entry with two calls and a record's length by seeking back to it: then
+        the index of a 50-sample chunk costs a quarter of the recording. The length is known
+        (channel id, entries' length, 16 bytes per entry), so the head is packed with them.
         """
 
         def write(self, stream):
-            """Return the record, as mcap writes it."""
-            records = self.records
-            stream.start_record(0x07)   # Opcode.MESSAGE_INDEX
-            stream.write(struct.pack(f'<HI{2 * len(records)}Q', self.channel_id,
-                                     16 * len(records), *itertools.chain.from_iterable(records)))
-            stream.finish_record()
+            """Write the record, as mcap writes it."""
+            records, size = self.records, 16 * len(self.records)
+            stream.write(struct.pack(f'<BQHI{2 * len(records)}Q', 0x07, 6 + size,  # MESSAGE_INDEX
+                                     self.channel_id, size,
+                                     *itertools.chain.from_iterable(records)))
 except ImportError:  # pragma: no cover - mcap is a dependency; the recorder reports its absence
     MessageIndex = None

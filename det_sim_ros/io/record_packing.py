@@ -14,12 +14,43 @@ from . import mcap_internals
 from .mcap_format import MESSAGE_HEAD, MESSAGE_HEAD_LENGTH, OP_MESSAGE
 from ..core.kernel import pack_records
 
-__all__ = ['RecordPacker', 'sample_bytes']
+__all__ = ['RecordPacker', 'sample_bytes', 'layout_segments']
 
 
 def sample_bytes(sizes) -> int:
     """Return the bytes of one sample's Message records, for payloads of ``sizes``."""
     return sum(sizes) + MESSAGE_HEAD.size * len(sizes)
+
+
+def layout_segments(items, i: int, plans, room: int) -> list:
+    """
+    Return the queued samples from items[i] that fit in ``room`` bytes, in segments of one layout.
+
+    ``items`` are (log time, topics, payloads, types); ``plans`` map a layout (topics tuple) to
+    its plan. A segment is (plan, payload sizes, samples). A layout without a plan ends the
+    segments, and so does the first sample that does not fit; a sensor's dropped sample (a
+    layout without its topic) is a segment of its own, not the end of the run.
+    """
+    segments, n = [], len(items)
+    while i < n:
+        topics = items[i][1]
+        key = topics if type(topics) is tuple else tuple(topics)
+        plan = plans.get(key)
+        if plan is None:
+            break
+        sizes = tuple(map(len, items[i][2]))
+        step = sample_bytes(sizes)
+        end, last = i + 1, min(n, i + room // step)
+        while end < last and (items[end][1] is topics or tuple(items[end][1]) == key):
+            end += 1   # (the node gives the same topics object for a layout)
+        if end > last:   # not even one sample of this layout fits
+            break
+        segments.append((plan, sizes, items[i:end]))
+        room -= (end - i) * step
+        if end == last:
+            break
+        i = end
+    return segments
 
 
 def _cover(record, empty: bool, log_time: int) -> None:
@@ -45,7 +76,7 @@ class RecordPacker:
     def __init__(self, internals: mcap_internals.WriterInternals):
         self._mcap = internals
         self.chunk_size = internals.chunk_size
-        self._sample_offsets = {}   # (channel ids, payload sizes) -> record offsets
+        self._sample_offsets = {}   # (channel ids, payload sizes) -> _layout
 
     @classmethod
     def attach(cls, writer) -> 'RecordPacker | None':
@@ -90,21 +121,21 @@ class RecordPacker:
             chunk.num_messages += 1
             self._mcap.finalize()
 
-    def _offsets(self, channel_ids: tuple, sizes: tuple) -> tuple:
+    def _layout(self, channel_ids: tuple, sizes: tuple) -> tuple:
         """
-        Return ((channel id, record offset), ...) of one sample's records.
+        Return ((channel id, record offset), ...), the bytes and the messages of one sample.
 
         A sample's payload sizes are fixed for a model, so this is computed once per layout.
         """
-        offsets = self._sample_offsets.get((channel_ids, sizes))
-        if offsets is None:
+        layout = self._sample_offsets.get((channel_ids, sizes))
+        if layout is None:
             starts, at = [], 0
             for size in sizes:
                 starts.append(at)
                 at += MESSAGE_HEAD.size + size
-            offsets = self._sample_offsets[(channel_ids, sizes)] = tuple(zip(channel_ids,
-                                                                             starts))
-        return offsets
+            layout = self._sample_offsets[(channel_ids, sizes)] = (
+                tuple(zip(channel_ids, starts)), at, len(sizes))
+        return layout
 
     def add_sample(self, channel_ids: tuple, sequences, payloads, log_time: int) -> None:
         """
@@ -139,12 +170,15 @@ class RecordPacker:
         _cover(chunk, chunk.num_messages == 0, times[0])
         _cover(chunk, False, times[-1])
         buffer.write(records)
-        step, k, width = sample_bytes(sizes), len(times), len(sizes)
-        counts = stats.channel_message_counts
-        for channel_id, offset in self._offsets(channel_ids, sizes):
+        offsets, step, width = self._layout(channel_ids, sizes)
+        k, counts = len(times), stats.channel_message_counts
+        for channel_id, offset in offsets:
             start = base + offset
-            self._index(channel_id).records.extend(zip(times, range(start, start + k * step,
-                                                                    step)))
+            entries = self._index(channel_id).records
+            if k == 1:   # (add_sample, or a sensor's dropped sample inside a run)
+                entries.append((times[0], start))
+            else:
+                entries.extend(zip(times, range(start, start + k * step, step)))
             counts[channel_id] += k
         stats.message_count += k * width
         chunk.num_messages += k * width

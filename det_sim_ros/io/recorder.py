@@ -23,6 +23,7 @@ from .cdr import serialize
 from .flush_policy import FlushPolicy
 from .log_file import file_info, LogFile, package_version, scene_text
 from .log_rotation import LogRotation
+from .record_packing import layout_segments
 from .schemas import type_name_of
 from .write_modes import WriteBehind, WriteNow
 
@@ -381,26 +382,19 @@ class Recorder:
                 self._write_sample(*items[i])
                 i += 1
 
-    def _run_window(self, items, i: int, start: float):
+    def _run_window(self, items, i: int, start: float) -> list:
         """
-        Return the samples from items[i] that may go in one run.
+        Return the samples from items[i] that may go in one run, in segments of one layout.
 
-        Return (plan, payload sizes, window), or None when the sample at i needs _write_sample.
+        See :func:`~.record_packing.layout_segments`; empty: the sample at i needs _write_sample.
         """
-        file, topics = self._file, items[i][1]
-        key = topics if type(topics) is tuple else tuple(topics)
-        plan = file.sample_plans.get(key) if file is not None else None
-        if (plan is None or file.packer is None or self._rotation.file_start_t is None
+        file = self._file
+        if (file is None or file.packer is None or self._rotation.file_start_t is None
                 or self._flush_policy.wall_due(start)
                 or self._rotation.size_reached(file.size())):
-            return None
-        sizes = tuple(map(len, items[i][2]))
-        window = items[i:i + file.packer.room(sizes)]
-        for j, item in enumerate(window):   # (the node gives the same topics object)
-            if item[1] is not topics and tuple(item[1]) != key:
-                window = window[:j]
-                break
-        return (plan, sizes, window) if window else None
+            return []
+        return layout_segments(items, i, file.sample_plans,
+                               file.packer.chunk_size - file.packer.chunk_used())
 
     def _pack_run(self, items, i: int, start: float) -> int:
         """
@@ -408,31 +402,43 @@ class Recorder:
 
         See _write_sample_run; 0: the sample at i needs _write_sample.
         """
-        found = self._run_window(items, i, start)
-        if found is None:
+        segments = self._run_window(items, i, start)
+        if not segments:
             return 0
-        (names, channel_ids), sizes, window = found
-        given = [int(item[0]) for item in window]
+        given = [int(item[0]) for segment in segments for item in segment[2]]
         times = list(itertools.accumulate(given, max, initial=self._last_t))[1:]  # clamped
         # (the file splits before the first one past its span; a flush is due after the first
         # one past the sim-time period)
         end = self._flush_policy.run_end(times, self._rotation.run_end(times, len(times)))
-        if not end:
+        written = 0
+        for (names, channel_ids), sizes, samples in segments:
+            take = min(len(samples), end - written)
+            if take <= 0:
+                break
+            count = self._pack_segment(names, channel_ids, sizes, samples[:take],
+                                       given[written:written + take],
+                                       times[written:written + take])
+            written += count
+            if count < take:   # (a sample of other payload sizes: the next run starts there)
+                break
+        if not written:
             return 0
-        firsts = [self._sequence.get(name, 0) for name in names]
+        self._last_t = times[written - 1]
+        if self._flush_policy.due(start, self._last_t):
+            self._flush(start)
+        return written
+
+    def _pack_segment(self, names, channel_ids, sizes, samples, given, times) -> int:
+        """Pack samples of one layout at (clamped) ``times``; return how many were written."""
+        sequence = self._sequence
+        firsts = [sequence.get(name, 0) for name in names]
         count = self._file.packer.pack_run(channel_ids, firsts, times,
-                                           [item[2] for item in window[:end]], sizes)
-        if not count:
-            return 0
-        del times[count:]
+                                           [item[2] for item in samples], sizes)
         for name, first in zip(names, firsts):
-            self._sequence[name] = first + count
-        self._last_t = times[-1]
-        self.clamped += len(sizes) * sum(a != b for a, b in zip(given, times))
+            sequence[name] = first + count
+        self.clamped += len(sizes) * sum(a != b for a, b in zip(given[:count], times))
         self.bytes += sum(sizes) * count
         self.messages += len(names) * count
-        if self._flush_policy.due(start, times[-1]):
-            self._flush(start)
         return count
 
     # -- faults, state, closing --------------------------------------------------------------

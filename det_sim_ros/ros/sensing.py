@@ -19,10 +19,15 @@ __all__ = ['TruthPublisher', 'attach_outputs']
 
 
 class TruthPublisher:
-    """Publish a truth message's bytes while the topic has a subscriber (a matched event)."""
+    """
+    Publish a truth message's bytes while the topic has a subscriber (a matched event).
 
-    def __init__(self, node, topic: str, qos):
+    :param on_change: called after a matched event has set :attr:`heard`.
+    """
+
+    def __init__(self, node, topic: str, qos, on_change=None):
         self.heard = False
+        self._on_change = on_change
         self.publisher = node.create_publisher(
             JointState, topic, qos,
             event_callbacks=PublisherEventCallbacks(matched=self._matched))
@@ -30,6 +35,8 @@ class TruthPublisher:
 
     def _matched(self, status) -> None:
         self.heard = status.current_count > 0
+        if self._on_change is not None:
+            self._on_change()
 
     def __call__(self, data: bytes) -> None:
         """Publish ``data`` if the topic has a subscriber."""
@@ -42,7 +49,10 @@ def attach_outputs(node, contract, qos):
     Create the output publishers of ``node`` and its sample messages.
 
     Return (outputs, output topic -> publisher, truth topic -> publisher, the publish
-    functions in the order of ``outputs.encode``: the output topics, then the truth topics).
+    functions in the order of ``outputs.encode``: the output topics, then the truth topics up
+    to the last one with a subscriber). That list changes in place as truth subscribers come
+    and go, so a sample's loop over it stops after the measured messages while nobody watches
+    the truth.
     """
     sim = node.simulator
     outputs = make_outputs(contract, node.scene, len(sim.output_names), node.get_name())
@@ -50,8 +60,13 @@ def attach_outputs(node, contract, qos):
                   for topic in outputs.topics}
     # Publisher.publish(bytes) is handle.publish_raw(bytes) behind a type check and a destroy
     # guard (~2.5 us per call); the node publishes through the handle directly
-    publish = [pub.handle.publish_raw for pub in publishers.values()]
-    truth = [TruthPublisher(node, f'~/{TRUTH}/{topic}', qos) for topic in outputs.sensed]
-    publish += truth
+    measured = [pub.handle.publish_raw for pub in publishers.values()]
+    publish, truth = list(measured), []
+
+    def heard_changed():
+        last = max((j + 1 for j, t in enumerate(truth) if t.heard), default=0)
+        publish[:] = measured + truth[:last]   # (by position: truth j after the outputs)
+    truth += [TruthPublisher(node, f'~/{TRUTH}/{topic}', qos, heard_changed)
+              for topic in outputs.sensed]
     return outputs, publishers, {topic: t.publisher for topic, t in zip(outputs.sensed, truth)}, \
         publish

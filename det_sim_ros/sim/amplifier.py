@@ -52,6 +52,10 @@ class CommandStage:
         """Empty the delay line: it holds the initial voltage, 0 V."""
         zeros = [0.0] * len(self.delays)
         self._line = collections.deque([zeros] * self._depth, maxlen=self._depth or None)
+        self._forget_held()
+
+    def _forget_held(self) -> None:
+        self._held, self._held_periods, self._held_applied = None, 0, None
 
     def _shape(self, commands: np.ndarray) -> np.ndarray:
         """Return the DAC's levels of ``commands`` plus the offset (rows: periods)."""
@@ -74,13 +78,23 @@ class CommandStage:
             rows = (depth - self.delays)[None, :] + np.arange(n)[:, None]
             delayed = np.take_along_axis(line, rows, axis=0)
             self._line.extend(line[len(line) - depth:].tolist())
+            self._forget_held()
         else:
             delayed = commands
         return self._shape(delayed)
 
     def apply(self, command) -> np.ndarray:
         """Return the applied input of the next period given its held command."""
-        row = [float(v) for v in command]
+        row = (command.tolist() if type(command) is np.ndarray and command.dtype == np.float64
+               else [float(v) for v in command])
+        if row == self._held:
+            self._held_periods += 1
+        else:
+            self._held, self._held_periods, self._held_applied = row, 1, None
+        if self._held_applied is not None:   # the line holds this command only: the same input
+            if self._depth:
+                self._line.append(row)
+            return self._held_applied.copy()
         line = list(self._line) + [row] if self._depth else [row]
         applied = []
         for i, (lsb, offset, back) in enumerate(self._per_det):
@@ -90,4 +104,7 @@ class CommandStage:
             applied.append(v + offset)
         if self._depth:
             self._line.append(row)
-        return np.array(applied)
+        applied = np.array(applied)
+        if self._held_periods > self._depth:   # held for the whole line: kept for the next
+            self._held_applied = applied.copy()
+        return applied
