@@ -368,9 +368,9 @@ static int ends_near_limit(const ds_model *m, const double *x, const double *u, 
 
 /* The steps of one period from x (its laws and transients set): with ``limited`` each step alone
  * (a current limit's switch is located after each), else the rest of the period in one call
- * as soon as no law can switch before its end. *whole: whether that call was taken. */
+ * as soon as no law can switch before its end. */
 static int period_steps(const ds_stepper *st, ds_group *g, double *x, const double *u,
-                        double h, int64_t n_sub, int limited, int *whole)
+                        double h, int64_t n_sub, int limited)
 {
     ds_model *m = g->m;
     const size_t bytes = (size_t)m->n_state * sizeof(double);
@@ -378,7 +378,6 @@ static int period_steps(const ds_stepper *st, ds_group *g, double *x, const doub
     double *x_start = g->w.dx;   /* free while stepping (the rate buffer of ds_outputs) */
     double t = 0.0;
     int status = DS_OK;
-    *whole = 0;
     while (status == DS_OK && dt - t > 1e-9 * h) {
         const double rest = dt - t, n_rest = ceil(rest / h - 1e-9);
         /* h itself while the steps so far were whole steps: equal sizes share their weights */
@@ -386,7 +385,6 @@ static int period_steps(const ds_stepper *st, ds_group *g, double *x, const doub
         const double bound = transient_bound(st, m, t), t_slew = slew_end(m, x, u);
         if (!limited && bound >= hs && t_slew >= rest * (1.0 + 1e-12)) {
             /* no law can switch before the period's end and the graded bounds only grow */
-            *whole = 1;
             return ds_advance(st, g, x, u, hs, (int64_t)n_rest, 1.0);
         }
         if (bound < hs)
@@ -415,15 +413,15 @@ int ds_amp_period(const ds_stepper *st, ds_group *g, double *x, const double *u_
     memcpy(g->x0, x, bytes);
     ds_amp_laws(m, x, u, &g->w);
     start_transients(m, x, u_old, u, &g->w);
-    int limited = limit_within_reach(m, x, u, &g->w), whole;
+    const int limited = limit_within_reach(m, x, u, &g->w);
     g->watched += limited;
-    int status = period_steps(st, g, x, u, h, n_sub, limited, &whole);
+    int status = period_steps(st, g, x, u, h, n_sub, limited);
     if (status == DS_OK && !limited && ends_near_limit(m, x, u, &g->w)) {
         g->watched += 1.0;
         memcpy(x, g->x0, bytes);
         ds_amp_laws(m, x, u, &g->w);
         start_transients(m, x, u_old, u, &g->w);
-        status = period_steps(st, g, x, u, h, n_sub, 1, &whole);
+        status = period_steps(st, g, x, u, h, n_sub, 1);
     }
     if (status != DS_OK)
         memcpy(x, g->x0, bytes);

@@ -262,6 +262,13 @@ int ds_mass_inverse(const ds_model *m, double *out)
     return 0;
 }
 
+/* Whether a cell of several terms is alone in its coupled group: its mass is solved by
+ * one_cell_solve from Mb^-1, so the assembled block Mt is not needed. */
+static inline int solved_alone(const ds_model *m, const ds_cell *cell)
+{
+    return cell->nr > 1 && m->group_q[cell->group + 1] - m->group_q[cell->group] == cell->nr;
+}
+
 /* Solve (Mb_c + mi J_c J_c') out = F_c for a cell alone in its group, mi its interface mass
  * (Sherman-Morrison with Mb_c^-1 from ds_mass_inverse): two products with Mb_c^-1 and one
  * division instead of a Cholesky factorization's chain of square roots and divisions. */
@@ -299,7 +306,7 @@ static void mass_solve(const ds_model *m, ds_work *w, double *dx)
     for (int64_t c = 0; c < m->n_cells; c++) {
         const ds_cell *cell = &m->cell[c];
         const int64_t a = m->group_q[cell->group], b = m->group_q[cell->group + 1];
-        if (b - a == cell->nr && cell->nr > 1)
+        if (solved_alone(m, cell))
             one_cell_solve(m, cell, w->J, w->F, dx + nq);
         else if (cell->q0 == a)   /* a coupled group or a one-term cell: by its first cell */
             solve_spd(w->Mt + a * ld, ld, w->F + a, dx + nq + a, b - a);
@@ -447,7 +454,8 @@ static int rhs_one_term(const ds_model *m, const double *x, const double *u, dou
     return DS_OK;
 }
 
-/* The cells' blocks of K, D and Mb: F = -K q - D qd and the mass blocks Mt; then the bending
+/* The cells' blocks of K, D and Mb: F = -K q - D qd and the mass blocks Mt (not for a cell
+ * solved alone, whose solve reads Mb^-1); then the bending
  * force beyond EI int w''^2 and the interface mass's terms (w->J, w->h from ds_kinematics).
  * Returns the damping power qd' D qd. */
 static double structure_forces(const ds_model *m, const double *x, ds_work *w)
@@ -469,6 +477,8 @@ static double structure_forces(const ds_model *m, const double *x, ds_work *w)
             F[i] = -s - dq;
             p_diss += qd[i] * dq;
         }
+        if (solved_alone(m, cell))
+            continue;
         for (int64_t i = o; i < o + r; i++) {
             for (int64_t k = 0; k < size; k++)
                 Mt[i * ld + k] = 0.0;
@@ -483,9 +493,10 @@ static double structure_forces(const ds_model *m, const double *x, ds_work *w)
         const double mi = m->mi_val[e];
         const int64_t go = m->group_q[m->cell[c].group];
         const ds_cell *a = &m->cell[c], *b = &m->cell[c2];
+        const int assembled = !solved_alone(m, a);
         for (int64_t j = a->q0; j < a->q0 + a->nr; j++) {
             F[j] -= mi * J[j] * w->h[c2];
-            for (int64_t k = b->q0; k < b->q0 + b->nr; k++)
+            for (int64_t k = b->q0; assembled && k < b->q0 + b->nr; k++)
                 Mt[j * ld + k - go] += mi * J[j] * J[k];
         }
     }
