@@ -176,9 +176,8 @@ class Recorder:
         file, self._file = self._file, None
         if file is None:
             return
-        # the file's own count: a SIGINT between writing a message and counting it (the
-        # KeyboardInterrupt lands between any two bytecodes) must not leave the end counters
-        # one short of what the file holds
+        # the file's own count: a SIGINT (a KeyboardInterrupt between any two bytecodes) after
+        # a message is written but before it is counted must not leave the counters one short
         held = file.message_count()
         if held is not None:
             self.messages = self._messages_before_file + held
