@@ -6,9 +6,11 @@ entry point (``python -m det_sim_ros.cli.sim_node``) on the test domain.
 """
 
 import os
+import queue
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 from conftest import child_env
@@ -38,13 +40,25 @@ class Node:
                                      env=child_env(PYTHONUNBUFFERED='1'),
                                      stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
         self.lines = []
+        # a reader thread, so that a line that never comes fails at the deadline instead of
+        # blocking readline() for ever
+        self._queue = queue.Queue()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self):
+        for line in self.proc.stdout:
+            self._queue.put(line)
+        self._queue.put(None)
 
     def wait_for(self, text):
         """Read lines until one holds ``text``; fail if the process ends first."""
         deadline = time.monotonic() + TIMEOUT
-        while time.monotonic() < deadline:
-            line = self.proc.stdout.readline()
-            if not line:
+        while (left := deadline - time.monotonic()) > 0.0:
+            try:
+                line = self._queue.get(timeout=left)
+            except queue.Empty:
+                break
+            if line is None:
                 break
             self.lines.append(line)
             if text in line:
@@ -56,10 +70,12 @@ class Node:
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGINT)
         try:
-            self.lines += self.proc.communicate(timeout=TIMEOUT)[0].splitlines(True)
+            self.proc.wait(timeout=TIMEOUT)
         except subprocess.TimeoutExpired:
             self.proc.kill()
-            self.proc.communicate()
+            self.proc.wait()
+        while (line := self._queue.get(timeout=TIMEOUT)) is not None:
+            self.lines.append(line)
         return self.proc.returncode
 
 

@@ -4,11 +4,11 @@ Start-up check that no other node of this node's fully qualified name is in the 
 Two nodes of one name (a fleet or a node started twice) would publish on the same topics and
 answer the same services, and a controller could not tell them apart. Discovery is not
 instant. With ``sim_node``'s early announcements (det_sim_ros.ros.discovery: every 0.1 s for
-the first 10 s) a new node saw an already running one 0.23-0.27 s after its creation (6 starts,
-localhost discovery range); without them, up to 3.1 s (Fast DDS announces every 3 s). So the
-check looks until :data:`DISCOVERY_WINDOW_S` after the node's creation, the scene's preparation
-included, before anything is published; only the newcomer looks, so the running node is never
-the one refused.
+the first 10 s) a new node saw an already running one 0.24-0.64 s after its creation (17
+starts, localhost discovery range: about a quarter after more than 0.45 s); without them, up
+to 3.1 s (Fast DDS announces every 3 s). So the check looks until :data:`DISCOVERY_WINDOW_S`
+after the node's creation, the scene's preparation included, before anything is published;
+only the newcomer looks, so the running node is never the one refused.
 """
 
 from __future__ import annotations
@@ -22,8 +22,12 @@ from ..scenes.scene import SceneError
 
 __all__ = ['DISCOVERY_WINDOW_S', 'check_unique_name', 'note_node_created']
 
-DISCOVERY_WINDOW_S = 0.45  # s after the context's first node: 1.7x the discovery seen
+DISCOVERY_WINDOW_S = 0.75  # s after the context's first node: 1.2x the longest discovery seen
 POLL_S = 0.05              # s between two looks at the graph
+# an allowed duplicate is only warned about, which delays nothing: that look goes on past a
+# Fast DDS default announcement period (3 s), for a running node past its early announcements
+WARN_WINDOW_S = 3.5        # s after the context's first node
+WARN_POLL_S = 0.25         # s between two of those looks
 
 _first_node_time = weakref.WeakKeyDictionary()   # context -> monotonic time of its first node
 
@@ -51,14 +55,14 @@ def check_unique_name(node, allow: bool) -> None:
     Refuse to start (:class:`SceneError`) when another node of this name is in the graph.
 
     Without ``allow`` this looks until :data:`DISCOVERY_WINDOW_S` after the context's first
-    node (at once when a duplicate shows up); with ``allow`` it does not wait, and a one-shot
-    timer at the window's end logs a warning if there is one.
+    node (at once when a duplicate shows up); with ``allow`` it does not wait, and a timer logs
+    a warning when it finds one, until :data:`WARN_WINDOW_S`.
     """
     note_node_created(node.context)
-    deadline = _first_node_time[node.context] + DISCOVERY_WINDOW_S
     if allow:
-        _warn_at(node, deadline)
+        _warn_when_seen(node, _first_node_time[node.context] + WARN_WINDOW_S)
         return
+    deadline = _first_node_time[node.context] + DISCOVERY_WINDOW_S
     while True:
         if _others(node) > 0:
             raise SceneError(_refusal(node))
@@ -68,14 +72,15 @@ def check_unique_name(node, allow: bool) -> None:
         time.sleep(min(POLL_S, left))
 
 
-def _warn_at(node, deadline: float) -> None:
-    """Log one warning at ``deadline`` if another node of this name is in the graph then."""
+def _warn_when_seen(node, give_up: float) -> None:
+    """Log one warning when another node of this name shows up in the graph before ``give_up``."""
     timer = None
 
-    def warn():
-        timer.cancel()
+    def look():
         if _others(node) > 0:
+            timer.cancel()
             node.get_logger().warning(_refusal(node).split(';')[0] + ' (allow_duplicate_name '
                                       'is true: started anyway)')
-    timer = node.create_timer(max(deadline - time.monotonic(), 0.001), warn,
-                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+        elif time.monotonic() >= give_up:
+            timer.cancel()
+    timer = node.create_timer(WARN_POLL_S, look, clock=Clock(clock_type=ClockType.STEADY_TIME))

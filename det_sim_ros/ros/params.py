@@ -103,7 +103,7 @@ NODE_PARAMS = {
                               'DETs in this one frame, side by side', True, None),
     'allow_duplicate_name': Param(False, 'start even if another node of this fully qualified '
                                   'name is running (one warning); false: refuse to start (the '
-                                  'check looks for 0.45 s after start)', True, None),
+                                  'check looks for 0.75 s after start)', True, None),
     'wait_for_subscribers': Param(0, 'publish sample 0 and start stepping only once this many '
                                   'subscriptions of displacement have matched (and received '
                                   'sample 0); 0 = at once (docs/real_time.md: the start of a '
