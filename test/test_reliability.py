@@ -36,6 +36,7 @@ import pytest
 FULL = os.environ.get('DET_SIM_RELIABILITY', '') == 'full'
 READY = 'voltage command order'     # the node's last start-up line
 WALL_LIMIT = 120.0                  # s, a safety net only
+EXIT_LIMIT = 30.0                   # s from a stop signal to the exit: 6x the node's own bound
 
 
 def _interactive():
@@ -44,7 +45,21 @@ def _interactive():
 
 
 def _env():
-    return child_env(PYTHONUNBUFFERED='1')
+    # a process that hangs prints every thread's stack on SIGABRT (see _wait_exit)
+    return child_env(PYTHONUNBUFFERED='1', PYTHONFAULTHANDLER='1')
+
+
+def _wait_exit(proc):
+    """Return the exit code, or 'hung' after the stacks a SIGABRT made the process print."""
+    try:
+        return proc.wait(timeout=EXIT_LIMIT)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGABRT)
+        try:
+            proc.wait(timeout=10.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+        return 'hung'
 
 
 @dataclasses.dataclass
@@ -166,7 +181,7 @@ def _stop_case(tmp, case):
             run.wait_ready()
             time.sleep(delay)
         run.proc.send_signal(sig)
-        code = run.proc.wait(timeout=WALL_LIMIT)
+        code = _wait_exit(run.proc)
     finally:
         if run.proc.poll() is None:
             run.proc.kill()

@@ -117,7 +117,10 @@ def main(args=None) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _quiet_stop)
     from ..ros.node import main as run_node
-    return run_node(args)
+    from ..ros.spinning import limit_teardown
+    code = run_node(args)
+    limit_teardown()    # the interpreter's exit destroys the DDS participant
+    return code
 
 
 if __name__ == '__main__':

@@ -2,16 +2,24 @@
 How sim_node spins and stops.
 
 Its executor, and SIGINT/SIGTERM turned into a clean stop between two callbacks (see
-:class:`StopSignals`).
+:class:`StopSignals`): the log is finished first, then the middleware is taken down within
+:data:`TEARDOWN_LIMIT_S`.
 """
 
 from __future__ import annotations
 
+import faulthandler
 import signal
 
 import rclpy
 
-__all__ = ['make_executor', 'spin', 'spin_until_stopped', 'StopRequested', 'StopSignals']
+__all__ = ['limit_teardown', 'make_executor', 'spin', 'spin_until_stopped', 'StopRequested',
+           'StopSignals', 'TEARDOWN_LIMIT_S']
+
+# s: the executor's, the node's and the context's teardown after a stop (a few ms here), and the
+# interpreter's exit after it; ros2 launch, too, escalates a SIGINT that did not end a process
+# after 5 s
+TEARDOWN_LIMIT_S = 5.0
 
 
 def make_executor(context=None):
@@ -69,6 +77,7 @@ class StopSignals:
     def __exit__(self, *exc):
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
+        faulthandler.cancel_dump_traceback_later()   # torn down: an in-process caller goes on
 
     def _on_signal(self, signum, frame):
         self.requested = signum
@@ -77,13 +86,33 @@ class StopSignals:
             raise StopRequested()
 
 
+def limit_teardown(seconds: float = TEARDOWN_LIMIT_S) -> None:
+    """
+    Bound what follows a stop: a teardown still running after ``seconds`` ends the process.
+
+    The middleware's teardown (executor, node, context; the DDS participant at the
+    interpreter's exit) runs in C++, mostly holding the GIL, where no Python thread can step in;
+    faulthandler's watchdog is a C thread that needs no GIL. It writes every thread's stack to
+    stderr and exits with code 1: a stop that hangs says where. Call it once the log is
+    finished; :class:`StopSignals` cancels it on leaving.
+    """
+    faulthandler.dump_traceback_later(seconds, exit=True)
+
+
 def spin_until_stopped(node, stop) -> None:
-    """Run the node's callbacks until a stop signal (checked at least every 0.1 s)."""
+    """
+    Run the node's callbacks until a stop signal (checked at least every 0.1 s).
+
+    Then finish the node's log before anything of the middleware is taken down.
+    """
     executor = make_executor(node.context)
     executor.add_node(node)
     try:
         while not stop.requested and node.context.ok():
             executor.spin_once(timeout_sec=0.1)
     finally:
+        if node.recorder is not None:
+            node.recorder.close()
+        limit_teardown()
         executor.remove_node(node)
         executor.shutdown(timeout_sec=0.0)

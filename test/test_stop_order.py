@@ -1,0 +1,93 @@
+"""
+Test what follows a stop: the log is finished first, then the teardown is bounded in time.
+
+The process tests in test_reliability.py stop real nodes; these check the order and the bound
+themselves, with a recorder and an executor that only note what happens to them.
+"""
+
+import faulthandler
+import subprocess
+import sys
+import textwrap
+
+from det_sim_ros.ros import spinning
+import pytest
+
+
+class _Recorder:
+    def __init__(self, events):
+        self.events = events
+
+    def close(self):
+        self.events.append('log finished')
+
+
+class _Executor:
+    def __init__(self, events):
+        self.events = events
+
+    def add_node(self, node):
+        pass
+
+    def spin_once(self, timeout_sec):
+        raise AssertionError('the stop was requested before spinning')
+
+    def remove_node(self, node):
+        self.events.append('executor teardown')
+
+    def shutdown(self, timeout_sec):
+        self.events.append('executor shutdown')
+
+
+class _Node:
+    context = None
+
+    def __init__(self, events):
+        self.recorder = _Recorder(events)
+
+
+class _Stop:
+    requested = 15
+
+
+def test_the_log_is_finished_before_the_middleware_is_taken_down(monkeypatch):
+    events = []
+    monkeypatch.setattr(spinning, 'make_executor', lambda context: _Executor(events))
+    try:
+        spinning.spin_until_stopped(_Node(events), _Stop())
+    finally:
+        faulthandler.cancel_dump_traceback_later()    # (armed for the teardown)
+    assert events == ['log finished', 'executor teardown', 'executor shutdown']
+
+
+def _run(code):
+    return subprocess.run([sys.executable, '-c', textwrap.dedent(code)], capture_output=True,
+                          text=True, timeout=120)
+
+
+def test_a_teardown_that_hangs_ends_the_process_with_its_stacks():
+    result = _run("""
+        import time
+        from det_sim_ros.ros.spinning import limit_teardown
+        limit_teardown(0.2)
+        time.sleep(100)            # a teardown that never ends
+        print('not reached')
+    """)
+    assert result.returncode == 1
+    assert 'not reached' not in result.stdout
+    assert 'most recent call first' in result.stderr and 'line 5' in result.stderr
+
+
+@pytest.mark.parametrize('hang', [False, True])
+def test_leaving_stop_signals_cancels_the_bound(hang):
+    result = _run(f"""
+        import time
+        from det_sim_ros.ros.spinning import limit_teardown, StopSignals
+        with StopSignals():
+            limit_teardown(0.2)
+            time.sleep(0.5 if {hang} else 0.0)
+        time.sleep(0.5)            # an in-process caller goes on
+        print('went on')
+    """)
+    assert result.returncode == (1 if hang else 0), result.stderr
+    assert ('went on' in result.stdout) is not hang
