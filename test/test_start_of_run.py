@@ -72,8 +72,8 @@ def test_the_node_announces_itself_early_unless_the_user_has_a_dds_profile(
     Check that sim_node's own process gets the early-announcement profile, and only then.
 
     With no Fast DDS profile of the user's, a profile that announces the participant every
-    0.1 s for its first seconds is in force within the block and gone after it; with one, the
-    user's setting is kept.
+    0.1 s for its first seconds and every 0.25 s after them is in force within the block and
+    gone after it; with one, the user's setting is kept.
     """
     monkeypatch.chdir(tmp_path)
     environ = {}
@@ -81,7 +81,8 @@ def test_the_node_announces_itself_early_unless_the_user_has_a_dds_profile(
         path = environ['FASTRTPS_DEFAULT_PROFILES_FILE']
         with open(path) as stream:
             profile = stream.read()
-    assert used and '<initialAnnouncements>' in profile and '<count>100</count>' in profile
+    assert used and '<initialAnnouncements>' in profile and '<count>20</count>' in profile
+    assert '<leaseAnnouncement><sec>0</sec><nanosec>250000000</nanosec>' in profile
     assert environ == {}
     mine = {'FASTRTPS_DEFAULT_PROFILES_FILE': '/etc/my_dds.xml'}
     with announce_early(mine) as used:
