@@ -2,14 +2,15 @@
 Start-up check that no other node of this node's fully qualified name is in the ROS graph.
 
 Two nodes of one name (a fleet or a node started twice) would publish on the same topics and
-answer the same services, and a controller could not tell them apart. Discovery is not
-instant. A running ``sim_node`` announces itself every 0.1 s for its first 2 s, every 0.25 s
-after (det_sim_ros.ros.discovery); a new participant then saw it at most 0.61 s after its
-creation (190 creations, one to three at a time, the running node past its first 2 s,
-localhost discovery range). At Fast DDS's own 3 s period 12 of 60 took more than 0.75 s, one
-3.0 s, and the check would have let those duplicates start. So the check looks until
-:data:`DISCOVERY_WINDOW_S` after the node's creation, the scene's preparation included, before
-anything is published; only the newcomer looks, so the running node is never the one refused.
+answer the same services, and a controller could not tell them apart. Discovery is not instant.
+A running ``sim_node`` announces itself every 0.1 s for its first 2 s, every 0.25 s after
+(det_sim_ros.ros.discovery); a new participant then saw it at most 0.61 s after its creation
+(280 creations, one to three at a time, 90 of them beside a busy core, the running node past
+its first 2 s, localhost discovery range). At Fast DDS's own 3 s period 12 of 60 took more than
+0.75 s, one 3.0 s, and the check would have let those duplicates start. So the check looks
+until :data:`DISCOVERY_WINDOW_S` after the node's creation, the scene's preparation included,
+before anything is published; only the newcomer looks, so the running node is never the one
+refused.
 """
 
 from __future__ import annotations
