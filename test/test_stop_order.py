@@ -49,15 +49,28 @@ class _Node:
 class _Stop:
     requested = 15
 
+    def __init__(self, events):
+        self.events = events
+
+    def end(self):
+        self.events.append('teardown bounded')
+
 
 def test_the_log_is_finished_before_the_middleware_is_taken_down(monkeypatch):
     events = []
     monkeypatch.setattr(spinning, 'make_executor', lambda context: _Executor(events))
-    try:
-        spinning.spin_until_stopped(_Node(events), _Stop())
-    finally:
-        faulthandler.cancel_dump_traceback_later()    # (armed for the teardown)
-    assert events == ['log finished', 'executor teardown', 'executor shutdown']
+    spinning.spin_until_stopped(_Node(events), _Stop(events))
+    assert events == ['log finished', 'teardown bounded', 'executor teardown',
+                      'executor shutdown']
+
+
+def test_the_end_of_a_run_bounds_its_teardown_until_leaving(monkeypatch):
+    armed = []
+    monkeypatch.setattr(spinning, 'limit_teardown', lambda: armed.append(True))
+    with spinning.StopSignals() as stop:
+        stop.end()
+        assert armed and not stop.preparing
+    faulthandler.cancel_dump_traceback_later()
 
 
 def _run(code):

@@ -377,7 +377,7 @@ def main(args=None):
         except StopRequested:
             pass
         except (SceneError, ParameterException, ModelDomainError, RCLError) as exc:
-            stop.preparing = False       # one line, exit 1: an input that cannot be used
+            stop.end()                   # one line, exit 1: an input that cannot be used
             text = ' '.join(str(exc).split()) or type(exc).__name__
             rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {text}')
             code = 1
@@ -389,7 +389,7 @@ def main(args=None):
             # a stop during the preparation that a library turned into its own error (e.g. a
             # C extension's initialisation): still a stop
         finally:
-            stop.preparing = False
+            stop.end()
             if node is not None:
                 node.destroy_node()          # finishes and indexes the MCAP log
             rclpy.try_shutdown()

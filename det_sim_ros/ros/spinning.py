@@ -79,6 +79,16 @@ class StopSignals:
             signal.signal(sig, handler)
         faulthandler.cancel_dump_traceback_later()   # torn down: an in-process caller goes on
 
+    def end(self) -> None:
+        """
+        End the run, whatever ended it: bound the teardown from here on.
+
+        No signal unwinds it any more, and :func:`limit_teardown` ends a teardown (or a last
+        log line on /rosout) that hangs in the middleware; leaving cancels the bound.
+        """
+        self.preparing = False
+        limit_teardown()
+
     def _on_signal(self, signum, frame):
         self.requested = signum
         if self.preparing:
@@ -113,6 +123,6 @@ def spin_until_stopped(node, stop) -> None:
     finally:
         if node.recorder is not None:
             node.recorder.close()
-        limit_teardown()
+        stop.end()
         executor.remove_node(node)
         executor.shutdown(timeout_sec=0.0)
