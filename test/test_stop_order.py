@@ -88,6 +88,7 @@ def test_a_teardown_that_hangs_ends_the_process_with_its_stacks():
     """)
     assert result.returncode == 1
     assert 'not reached' not in result.stdout
+    assert 'Timeout (' in result.stderr      # (what test_reliability recognises as the bound)
     assert 'most recent call first' in result.stderr and 'line 5' in result.stderr
 
 
