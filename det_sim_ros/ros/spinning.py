@@ -16,9 +16,9 @@ import rclpy
 __all__ = ['limit_teardown', 'make_executor', 'spin', 'spin_until_stopped', 'StopRequested',
            'StopSignals', 'TEARDOWN_LIMIT_S']
 
-# s: the executor's, the node's and the context's teardown after a stop (a few ms here), and the
-# interpreter's exit after it; ros2 launch, too, escalates a SIGINT that did not end a process
-# after 5 s
+# s: the executor's, the node's and the context's teardown at the end of a run (a few ms
+# here), and the interpreter's exit after it; ros2 launch, too, escalates a SIGINT that did not
+# end a process after 5 s
 TEARDOWN_LIMIT_S = 5.0
 
 
@@ -98,13 +98,13 @@ class StopSignals:
 
 def limit_teardown(seconds: float = TEARDOWN_LIMIT_S) -> None:
     """
-    Bound what follows a stop: a teardown still running after ``seconds`` ends the process.
+    Bound what follows the end of a run: a teardown still running after ``seconds`` ends it.
 
     The middleware's teardown (executor, node, context; the DDS participant at the
     interpreter's exit) runs in C++, mostly holding the GIL, where no Python thread can step in;
     faulthandler's watchdog is a C thread that needs no GIL. It writes every thread's stack to
-    stderr and exits with code 1: a stop that hangs says where. Call it once the log is
-    finished; :class:`StopSignals` cancels it on leaving.
+    stderr and exits with code 1: a teardown that hangs says where. After a stop it is armed
+    once the log is finished (:meth:`StopSignals.end`); leaving StopSignals cancels it.
     """
     faulthandler.dump_traceback_later(seconds, exit=True)
 
