@@ -14,13 +14,10 @@ checks every module's imports):
     scenes     scene files (YAML): loading and validation
     core       the compiled kernel (C) behind its one facade, core.kernel
 
-Importing the package has no side effects beyond making the old flat module paths
-(``det_sim_ros.scene``, ``det_sim_ros.sim_node``, ...) aliases of their new homes, which warn
-once when imported. The common entry points are here too, imported on first use:
+Importing the package has no side effects. The common entry points are here, imported on
+first use:
 :func:`load_scene`, :class:`Simulator`, :func:`simulate`, :func:`linearize`, :func:`fit`.
 """
-
-from ._moved import install as _install_moved_paths
 
 __version__ = '0.1.0'
 
@@ -43,6 +40,3 @@ def __getattr__(name):
         raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
     import importlib
     return getattr(importlib.import_module(module), name)
-
-
-_install_moved_paths()

@@ -3,8 +3,7 @@ The package's layers, checked on every module's imports.
 
 The imports are read from the source with ast (top-level and inside functions, nothing
 imported): each layer imports only the layers below it, no module imports rclpy below the ros
-layer, and no two modules import each other, directly or round a loop. The deprecated flat
-module paths (det_sim_ros._moved) import as aliases that warn once.
+layer, and no two modules import each other, directly or round a loop.
 """
 
 import ast
@@ -13,14 +12,12 @@ import subprocess
 import sys
 
 import det_sim_ros
-from det_sim_ros._moved import MOVED
-import pytest
 
 PACKAGE_DIR = os.path.dirname(det_sim_ros.__file__)
 # rank of each layer: a module may import its own layer and any layer of a lower rank
 LAYERS = {'core': 0, 'scenes': 0, 'physics': 1, 'sim': 2, 'analysis': 3, 'io': 3,
           'calibration': 3.5, 'ros': 4, 'cli': 5}
-ROOT_MODULES = {'det_sim_ros', 'det_sim_ros._moved'}   # the package's own plumbing
+ROOT_MODULES = {'det_sim_ros'}   # the package's own plumbing
 ROS_ONLY = ('rclpy',)
 
 
@@ -150,22 +147,4 @@ def test_importing_the_package_has_no_side_effects():
             'heavy = [m for m in ("rclpy", "numpy", "det_sim_ros.core._ckernel") '
             'if m in sys.modules]\n'
             'assert not heavy, heavy\n')
-    subprocess.run([sys.executable, '-c', code], check=True)
-
-
-@pytest.mark.parametrize('old', sorted(MOVED))
-def test_old_module_paths_are_aliases_that_warn_once(old):
-    """Check that a deprecated flat module path is an alias of its module that warns once."""
-    new = f'det_sim_ros.{MOVED[old]}'
-    code = ('import importlib, warnings\n'
-            'with warnings.catch_warnings(record=True) as caught:\n'
-            '    warnings.simplefilter("always")\n'
-            f'    old = importlib.import_module("det_sim_ros.{old}")\n'
-            f'    again = importlib.import_module("det_sim_ros.{old}")\n'
-            f'new = importlib.import_module("{new}")\n'
-            'assert old is new and again is new, (old, new)\n'
-            f'assert new.__spec__.name == "{new}", new.__spec__\n'
-            'moved = [w for w in caught if issubclass(w.category, DeprecationWarning)\n'
-            f'         and "{new}" in str(w.message)]\n'
-            'assert len(moved) == 1, [str(w.message) for w in caught]\n')
     subprocess.run([sys.executable, '-c', code], check=True)

@@ -5,8 +5,6 @@ Replay of MCAP logs: bit-exact re-simulation, republishing with the recorded tim
 (``det_sim_replay`` and ``det_sim replay``).
 """
 
-import subprocess
-import sys
 import threading
 
 from det_sim_ros.cli import main as det_sim
@@ -166,27 +164,6 @@ def test_ros_args_end_the_line(log_path):
     assert args.ros_args == ['-r', '__ns:=/x', '-p', 'use_sim_time:=true']
     args = build_parser().parse_args(['replay', 'info', log_path, '--ros-args', '-r', 'a:=b'])
     assert args.ros_args == ['-r', 'a:=b']
-
-
-def test_old_replay_path_gives_both_halves():
-    """
-    Check that the flat alias ``det_sim_ros.replay`` gives the re-simulation and the player.
-
-    ``det_sim_ros.replay`` (the flat alias module path) has the ROS-free re-simulation and the
-    ROS player; ``python -m det_sim_ros.replay`` is the command.
-    """
-    code = ('import warnings\n'
-            'warnings.simplefilter("ignore")\n'
-            'import det_sim_ros.replay as old\n'
-            'from det_sim_ros.io import replay\n'
-            'from det_sim_ros.ros import play\n'
-            'assert old.resimulate is replay.resimulate and old.play is play.play\n'
-            'assert old.simulate_to_log is replay.simulate_to_log\n'
-            'assert old.qos_from_yaml is play.qos_from_yaml\n')
-    subprocess.run([sys.executable, '-c', code], check=True)
-    done = subprocess.run([sys.executable, '-W', 'ignore', '-m', 'det_sim_ros.replay', '--help'],
-                          capture_output=True, text=True, check=True)
-    assert done.stdout.startswith('usage: det_sim_replay') and 'resim' in done.stdout
 
 
 def _subscribe(context, topics):

@@ -1,8 +1,7 @@
 """
 ``det_sim_replay``: the ``replay`` verb of ``det_sim`` as a command of its own.
 
-It runs as the console script, as ``python -m det_sim_ros.cli.replay`` and as the old
-``python -m det_sim_ros.replay``.
+It runs as the console script and as ``python -m det_sim_ros.cli.replay``.
 """
 
 import sys

@@ -5,8 +5,7 @@ This is ``det_sim replay play`` and ``det_sim_replay play``: a controller can be
 against a recorded run.
 
 The offline half of replay (re-simulation, offline recording) is det_sim_ros.io.replay; its
-public names are re-exported here, so that one import gives both halves (the old path
-``det_sim_ros.replay`` names this module).
+public names are re-exported here, so that one import gives both halves.
 """
 
 from __future__ import annotations
