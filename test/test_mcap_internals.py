@@ -1,11 +1,11 @@
 """
-The mcap writer internals the record packer uses (det_sim_ros.io.mcap_internals).
+The mcap writer internals the record packer uses (det_sim_ros.io.log.mcap_internals).
 
 They are present in the installed mcap, and a change to them is reported loudly, naming the
 mcap version.
 """
 
-from det_sim_ros.io import mcap_internals
+from det_sim_ros.io.log import mcap_internals
 import pytest
 
 
@@ -45,7 +45,7 @@ def test_without_the_internals_the_recorder_writes_the_same_file(tmp_path, monke
     """
     import time as time_module
     from det_sim_ros.io.contract import encode_joint_state, TOPIC_TYPES
-    from det_sim_ros.io.mcap_log import Recorder
+    from det_sim_ros.io.log import Recorder
     monkeypatch.setattr(time_module, 'time_ns', lambda: 1234)   # the wall start in the metadata
 
     def write(path):

@@ -15,8 +15,8 @@ import textwrap
 
 from conftest import child_env
 from det_sim_ros import __version__
-from det_sim_ros.io.mcap_log import (LogReader, message_definition, qos_profiles_yaml, Recorder,
-                                     recover)
+from det_sim_ros.io.log import (LogReader, message_definition, qos_profiles_yaml, Recorder,
+                                recover)
 from det_sim_ros.io.replay import OUTPUT_FIELDS, simulate_to_log
 from det_sim_ros.scenes.scene import load_scene, scene_to_dict
 from det_sim_ros.sim.simulator import Simulator
@@ -219,7 +219,7 @@ def test_split_by_size_and_duration(tmp_path):
 CHILD = textwrap.dedent("""
     import sys, time
     from std_msgs.msg import Float64MultiArray
-    from det_sim_ros.io.mcap_log import Recorder
+    from det_sim_ros.io.log import Recorder
     recorder = Recorder(sys.argv[1], None, flush_period_s=0.02, background=sys.argv[2] == 'bg')
     flushes = 0
     k = 0
@@ -308,7 +308,7 @@ def test_an_interrupt_right_after_a_write_still_counts_it(tmp_path, monkeypatch)
     """SIGINT between writing a message and counting it: the end counters match the file."""
     from mcap.reader import make_reader
     from std_msgs.msg import Float64MultiArray
-    from det_sim_ros.io import log_file
+    from det_sim_ros.io.log import file as log_file
     path = tmp_path / 'cut.mcap'
     recorder = Recorder(str(path), None)
     for k in range(3):
@@ -337,7 +337,7 @@ def test_cdr_serializer_matches_rclpy_and_rosbags():
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Empty, Float64MultiArray
 
-    from det_sim_ros.io.mcap_log import serialize, type_name_of
+    from det_sim_ros.io.log import serialize, type_name_of
     store = get_typestore(Stores.ROS2_JAZZY)
     joint = JointState(name=['det0', 'det1'], position=[1.0, -2.5], velocity=[3.0])
     joint.header.stamp.sec, joint.header.frame_id = 7, 'beam'
@@ -372,7 +372,7 @@ def test_torn_file_is_recovered_in_place(tmp_path):
     """A file cut inside a write (power loss): recover_unfinished repairs it in place."""
     from mcap.reader import make_reader
     from std_msgs.msg import Float64MultiArray
-    from det_sim_ros.io.mcap_log import is_torn, recover_unfinished
+    from det_sim_ros.io.log import is_torn, recover_unfinished
     live = tmp_path / 'live' / 'run.mcap'
     recorder = Recorder(live, None, flush_sim_s=0.01)
     for k in range(100):
@@ -556,7 +556,7 @@ def test_background_recording_drops_nothing_while_the_writer_switches_files(
     import threading
     import time as _time
     from std_msgs.msg import Float64MultiArray
-    from det_sim_ros.io import log_file
+    from det_sim_ros.io.log import file as log_file
     switching = threading.Event()
 
     class SlowToOpen(log_file.TailStream):   # the gap between closing a file and the next

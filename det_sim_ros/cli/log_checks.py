@@ -21,7 +21,7 @@ class LogFileError(ValueError):
 
 def _check_bytes(path: str) -> None:
     """Refuse a file that is empty or does not start with the MCAP magic."""
-    from ..io.mcap_format import MAGIC
+    from ..io.log.format import MAGIC
     if os.path.isdir(path):
         raise LogFileError(f'{path}: a directory inside a directory (give the log files)')
     with open(path, 'rb') as stream:     # a missing file: FileNotFoundError, one line
@@ -34,7 +34,7 @@ def _check_bytes(path: str) -> None:
 
 def torn_files(files) -> list[str]:
     """Return those of ``files`` that are torn: they do not end in a valid MCAP footer."""
-    from ..io.mcap_format import is_torn
+    from ..io.log.format import is_torn
     return [path for path in files if is_torn(path)]
 
 
@@ -55,7 +55,7 @@ def open_log(paths):
         of the run (not a sim_node log, or torn before its scene).
     :raises OSError: a missing or unreadable file.
     """
-    from ..io.log_reader import log_files, LogReader
+    from ..io.log.reader import log_files, LogReader
     try:
         files = log_files(paths)
     except FileNotFoundError as exc:   # a directory without logs

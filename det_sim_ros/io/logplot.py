@@ -23,7 +23,7 @@ import numpy as np
 
 from .cdr import CdrError, deserialize, Reader
 from .contract import basename, COMMAND_TOPICS, JOINT_COMMAND_TOPIC
-from .mcap_format import MAGIC, MESSAGE_FIELDS, MESSAGE_HEAD_LENGTH
+from .log.format import MAGIC, MESSAGE_FIELDS, MESSAGE_HEAD_LENGTH
 from .sensing import is_truth_topic
 
 __all__ = ['LogData', 'Channel', 'read_log', 'summary', 'plot_log', 'LogPlotError',
@@ -228,7 +228,7 @@ def _scene(reader):
 
 def read_log(paths) -> LogData:
     """Read a sim_node log (file, split files or a directory) into arrays (see module doc)."""
-    from .log_reader import LogReader
+    from .log.reader import LogReader
     try:
         reader = LogReader(paths)
         _check_magic(reader.files)

@@ -5,14 +5,14 @@ The same Message records, chunk message index and statistics as ``add_message``,
 one struct pack per message (:meth:`RecordPacker.add`, 6.5 -> ~1.5 us per message) or, for the
 samples of the node's outputs, packed in C (``_ckernel.pack_records``, through
 :mod:`det_sim_ros.core.kernel`) a run of samples at a time (:meth:`RecordPacker.add_run`). The
-writer's private state is reached through :mod:`det_sim_ros.io.mcap_internals` only.
+writer's private state is reached through :mod:`det_sim_ros.io.log.mcap_internals` only.
 """
 
 from __future__ import annotations
 
 from . import mcap_internals
-from .mcap_format import MESSAGE_HEAD, MESSAGE_HEAD_LENGTH, OP_MESSAGE
-from ..core.kernel import pack_records
+from .format import MESSAGE_HEAD, MESSAGE_HEAD_LENGTH, OP_MESSAGE
+from ...core.kernel import pack_records
 
 __all__ = ['RecordPacker', 'sample_bytes', 'layout_segments']
 

@@ -22,16 +22,16 @@ import struct
 from typing import Iterable, Iterator
 import zlib
 
-from .cdr import deserialize
-from .mcap_format import (LIBRARY, MAGIC, MESSAGE_FIELDS, MESSAGE_HEAD, METADATA_NAME,
-                          OP_ATTACHMENT, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_HEADER,
-                          OP_MESSAGE, OP_METADATA, OP_SCHEMA, RECORD_HEAD, SCENE_ATTACHMENT)
-from .schemas import qos_profiles_yaml
+from .format import (LIBRARY, MAGIC, MESSAGE_FIELDS, MESSAGE_HEAD, METADATA_NAME,
+                     OP_ATTACHMENT, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_HEADER,
+                     OP_MESSAGE, OP_METADATA, OP_SCHEMA, RECORD_HEAD, SCENE_ATTACHMENT)
+from ..cdr import deserialize
+from ..schemas import qos_profiles_yaml
 
 __all__ = ['LogReader', 'LogMessage', 'RecordBlock', 'log_files', 'recover',
            'recover_unfinished']
 
-_logger = logging.getLogger('det_sim_ros.io.mcap_log')
+_logger = logging.getLogger('det_sim_ros.io.log')
 _PAYLOAD = MESSAGE_FIELDS['payload']
 
 
@@ -353,7 +353,7 @@ def recover_unfinished(folder: str, exclude: Iterable[str] = ()) -> list[tuple[s
 
     :returns: ``[(path, {'messages': n, 'complete': False}), ...]`` for the repaired files.
     """
-    from .mcap_format import is_torn
+    from .format import is_torn
     done = []
     skip = {os.path.abspath(p) for p in exclude}
     if not os.path.isdir(folder):

@@ -14,9 +14,9 @@ import time
 from typing import Mapping
 
 from . import mcap_internals
-from .mcap_format import END_METADATA_NAME, LIBRARY, METADATA_NAME, SCENE_ATTACHMENT, TailStream
-from .record_packing import RecordPacker
-from .schemas import message_definition, qos_profiles_yaml
+from .format import END_METADATA_NAME, LIBRARY, METADATA_NAME, SCENE_ATTACHMENT, TailStream
+from .packing import RecordPacker
+from ..schemas import message_definition, qos_profiles_yaml
 
 __all__ = ['LogFile', 'file_info', 'scene_text', 'package_version', 'COMPRESSION']
 
@@ -144,7 +144,7 @@ def scene_text(scene) -> str:
     if isinstance(scene, str):
         return scene
     import yaml
-    from ..scenes.scene import scene_to_dict
+    from ...scenes.scene import scene_to_dict
     data = scene if isinstance(scene, Mapping) else scene_to_dict(scene, wrap=True)
     return yaml.safe_dump(data, sort_keys=False)
 
@@ -152,7 +152,7 @@ def scene_text(scene) -> str:
 def package_version() -> str:
     """det_sim_ros's version ('unknown' for a partial install)."""
     try:
-        from .. import __version__
+        from ... import __version__
         return __version__
     except Exception:  # pragma: no cover - partial installs
         return 'unknown'

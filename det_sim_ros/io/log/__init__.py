@@ -39,22 +39,21 @@ and :attr:`Recorder.fault` says why.
 Reading (:class:`LogReader`) streams records in file order and stops quietly at the end of the
 readable data, so a file cut by a crash gives every message of every complete chunk.
 
-This module is the log's public face; the parts live in :mod:`~det_sim_ros.io.recorder` (with
-its collaborators :mod:`~det_sim_ros.io.log_rotation`, :mod:`~det_sim_ros.io.log_file`,
-:mod:`~det_sim_ros.io.record_packing`, :mod:`~det_sim_ros.io.flush_policy`,
-:mod:`~det_sim_ros.io.writer_thread`), :mod:`~det_sim_ros.io.log_reader`,
-:mod:`~det_sim_ros.io.schemas`, :mod:`~det_sim_ros.io.mcap_format` and
+This module is the log's public face; the parts live in :mod:`~det_sim_ros.io.log.recorder` (with
+its collaborators :mod:`~det_sim_ros.io.log.rotation`, :mod:`~det_sim_ros.io.log.file`,
+:mod:`~det_sim_ros.io.log.packing`, :mod:`~det_sim_ros.io.log.flush_policy`,
+:mod:`~det_sim_ros.io.log.writer_thread`), :mod:`~det_sim_ros.io.log.reader`,
+:mod:`~det_sim_ros.io.schemas`, :mod:`~det_sim_ros.io.log.format` and
 :mod:`~det_sim_ros.io.cdr`.
 """
 
 from __future__ import annotations
 
-from .cdr import deserialize, message_class, serialize
-from .log_reader import log_files, LogMessage, LogReader, recover, recover_unfinished
-from .mcap_format import (END_METADATA_NAME, is_torn, LIBRARY, METADATA_NAME,
-                          SCENE_ATTACHMENT)
+from .format import END_METADATA_NAME, is_torn, LIBRARY, METADATA_NAME, SCENE_ATTACHMENT
+from .reader import log_files, LogMessage, LogReader, recover, recover_unfinished
 from .recorder import Recorder
-from .schemas import DELIMITER, message_definition, qos_profiles_yaml, type_name_of
+from ..cdr import deserialize, message_class, serialize
+from ..schemas import DELIMITER, message_definition, qos_profiles_yaml, type_name_of
 
 __all__ = ['Recorder', 'LogReader', 'LogMessage', 'message_definition', 'qos_profiles_yaml',
            'type_name_of', 'serialize', 'deserialize', 'recover', 'recover_unfinished',

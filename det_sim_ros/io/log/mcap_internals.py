@@ -1,7 +1,7 @@
 """
 Every use of mcap's private writer state, in one place.
 
-The record packer (:mod:`det_sim_ros.io.record_packing`) appends Message records straight into
+The record packer (:mod:`det_sim_ros.io.log.packing`) appends Message records straight into
 ``mcap.Writer``'s chunk in progress and keeps the writer's statistics and chunk index as
 ``add_message`` would (1.5 instead of 6.5 us per message). That needs names mcap does not
 publish: the writer's name-mangled ``__statistics``, ``__chunk_builder``,
@@ -107,9 +107,9 @@ def check() -> None:
         missing.append('mcap.records.MessageIndex')
     if missing:
         raise McapInternalsChanged(
-            f'mcap {mcap_version()} changed the writer internals det_sim_ros.io.mcap_internals '
-            f'uses: {", ".join(missing)} missing (the recorder falls back to '
-            'Writer.add_message; adapt this module to the new names)')
+            f'mcap {mcap_version()} changed the writer internals '
+            f'det_sim_ros.io.log.mcap_internals uses: {", ".join(missing)} missing (the '
+            'recorder falls back to Writer.add_message; adapt this module to the new names)')
 
 
 try:
