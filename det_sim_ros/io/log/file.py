@@ -14,19 +14,12 @@ import time
 from typing import Mapping
 
 from . import mcap_internals
-from .format import END_METADATA_NAME, LIBRARY, METADATA_NAME, SCENE_ATTACHMENT, TailStream
+from .format import (compression as compression_kind, END_METADATA_NAME, LIBRARY, METADATA_NAME,
+                     SCENE_ATTACHMENT, TailStream, writer_compression)
 from .packing import RecordPacker
 from ..schemas import message_definition, qos_profiles_yaml
 
-__all__ = ['LogFile', 'file_info', 'scene_text', 'package_version', 'COMPRESSION']
-
-COMPRESSION = ('zstd', 'lz4', 'none', '')
-
-
-def _compression(name: str):
-    from mcap.writer import CompressionType
-    return {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
-            'none': CompressionType.NONE, '': CompressionType.NONE}[name]
+__all__ = ['LogFile', 'file_info', 'scene_text', 'package_version']
 
 
 class LogFile:
@@ -37,9 +30,9 @@ class LogFile:
     """
 
     def __init__(self, path: str, *, chunk_size: int, compression: str, packing: bool = True):
+        self._compression = compression_kind(compression)   # (a bad name: no file made)
         self.stream = TailStream(path)
         self._chunk_size = chunk_size
-        self._compression = compression
         self._packing = packing
         self.writer = self.packer = None
         self.channels: dict[str, int] = {}      # topic -> channel id
@@ -56,7 +49,7 @@ class LogFile:
         """
         from mcap.writer import Writer
         writer = Writer(self.stream, chunk_size=self._chunk_size,
-                        compression=_compression(self._compression))
+                        compression=writer_compression(self._compression))
         writer.start(profile='ros2', library=f'{LIBRARY} {version}')
         wall_ns = time.time_ns()
         info = dict(info)

@@ -22,9 +22,10 @@ import struct
 from typing import Iterable, Iterator
 import zlib
 
-from .format import (LIBRARY, MAGIC, MESSAGE_FIELDS, MESSAGE_HEAD, METADATA_NAME,
-                     OP_ATTACHMENT, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_HEADER,
-                     OP_MESSAGE, OP_METADATA, OP_SCHEMA, RECORD_HEAD, SCENE_ATTACHMENT)
+from .format import (chunk_compression, compression as compression_kind, LIBRARY, MAGIC,
+                     MESSAGE_FIELDS, MESSAGE_HEAD, METADATA_NAME, OP_ATTACHMENT, OP_CHANNEL,
+                     OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_HEADER, OP_MESSAGE, OP_METADATA,
+                     OP_SCHEMA, RECORD_HEAD, SCENE_ATTACHMENT, writer_compression)
 from ..cdr import deserialize
 from ..schemas import qos_profiles_yaml
 
@@ -122,17 +123,7 @@ def _top_records(stream) -> Iterator[tuple[int, bytes]]:
 
 def _chunk_data(chunk) -> bytes:
     """Return a chunk's records, decompressed and checked against its CRC."""
-    if chunk.compression == 'zstd':
-        import zstandard
-        data = zstandard.ZstdDecompressor().decompress(
-            chunk.data, max_output_size=chunk.uncompressed_size)
-    elif chunk.compression == 'lz4':
-        import lz4.frame
-        data = lz4.frame.decompress(chunk.data)
-    elif chunk.compression == '':
-        data = bytes(chunk.data)
-    else:
-        raise ValueError(f'unknown chunk compression {chunk.compression!r}')
+    data = chunk_compression(chunk.compression).decompress(chunk.data, chunk.uncompressed_size)
     if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
         raise ValueError('chunk CRC mismatch (a damaged chunk)')
     return data
@@ -309,10 +300,8 @@ def recover(source, target: str, compression: str = 'zstd') -> dict:
 
     :returns: ``{'messages': n, 'complete': bool}`` (complete: the source was finished).
     """
-    from mcap.writer import CompressionType
     reader = LogReader(source)
-    kind = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
-            'none': CompressionType.NONE}[compression]
+    kind = writer_compression(compression_kind(compression))
     count = 0
     with open(target, 'wb') as stream:
         writer = None
