@@ -438,7 +438,7 @@ def _write_samples(path, fast, background=False, stress=False, dropouts=False):
     options = {'flush_sim_s': 2e-5, 'split_s': 1.5e-4, 'max_queue': 5} if stress else {}
     recorder = Recorder(path, load_scene('default', PAPER), chunk_size=2048,
                         background=background,
-                        flush_period_s=1e9, packing=fast,   # False: mcap's add_message path
+                        flush_period_s=1e9, packing=fast,   # False: one by one, add_message
                         **options)   # no wall-clock flushes: comparable
     topics = ['deflection', 'displacement', 'charge', 'current']
     layouts = [tuple(topics[:j] + topics[j + 1:]) for j in range(len(topics))]
@@ -471,10 +471,11 @@ def _write_samples(path, fast, background=False, stress=False, dropouts=False):
 def test_fast_sample_path_writes_the_same_file_as_add_message(tmp_path, monkeypatch, background,
                                                               stress, dropouts):
     """
-    Check that the batched sample writer gives the bytes mcap's add_message gives.
+    Check that the batched sample writer gives the bytes of one-by-one add_message calls.
 
     record_sample's batched writer (compiled record packing, runs of samples), record's
-    single messages (and the writer thread) give the bytes mcap's own add_message gives:
+    single messages (and the writer thread) give the bytes add_message gives (mcap's Message
+    record class; test_mcap_writer: the file is mcap.writer.Writer's, call for call):
     records, chunk indexes and statistics; also when clamped times, other payload sizes,
     flushes and file splits end the runs, and with samples that lack a topic inside them.
     """

@@ -2,8 +2,8 @@
 One MCAP file being written in the rosbag2 conventions.
 
 Its start (header, the run's metadata record and scene attachment), its schemas and
-channels, its messages (through the record packer when mcap's internals allow, else
-``Writer.add_message``: the same bytes), its flushes and its end (the counters' metadata
+channels, its messages (through the record packer, or one by one through
+``McapWriter.add_message``: the same bytes), its flushes and its end (the counters' metadata
 record, the summary).
 """
 
@@ -13,10 +13,10 @@ import os
 import time
 from typing import Mapping
 
-from . import mcap_internals
 from .format import (compression as compression_kind, END_METADATA_NAME, LIBRARY, METADATA_NAME,
-                     SCENE_ATTACHMENT, TailStream, writer_compression)
+                     SCENE_ATTACHMENT, TailStream)
 from .packing import RecordPacker
+from .writer import McapWriter
 from ..schemas import message_definition, qos_profiles_yaml
 
 __all__ = ['LogFile', 'file_info', 'scene_text', 'package_version']
@@ -47,9 +47,8 @@ class LogFile:
         The metadata record is ``info`` (:func:`file_info`: its ``wall_start_ns`` is filled in
         here); there is no scene attachment for ''; all at log time ``log_time``.
         """
-        from mcap.writer import Writer
-        writer = Writer(self.stream, chunk_size=self._chunk_size,
-                        compression=writer_compression(self._compression))
+        writer = McapWriter(self.stream, chunk_size=self._chunk_size,
+                            compression=self._compression)
         writer.start(profile='ros2', library=f'{LIBRARY} {version}')
         wall_ns = time.time_ns()
         info = dict(info)
@@ -62,7 +61,7 @@ class LogFile:
                                   data=scene_yaml.encode())
         writer.flush()
         self.writer = writer
-        self.packer = RecordPacker.attach(writer) if self._packing else None
+        self.packer = RecordPacker(writer) if self._packing else None
 
     def size(self) -> int:
         """Return the file's size once everything written is flushed."""
@@ -89,9 +88,9 @@ class LogFile:
             self.writer.add_message(channel_id=channel_id, log_time=log_time, data=data,
                                     publish_time=log_time, sequence=sequence)
 
-    def message_count(self) -> int | None:
-        """Return the messages this file holds, as its summary will count them (None: unknown)."""
-        return mcap_internals.message_count(self.writer)
+    def message_count(self) -> int:
+        """Return the messages this file holds, as its summary will count them."""
+        return self.writer.statistics.message_count
 
     def flush(self) -> None:
         """End the chunk and write everything (and the provisional end) to disk."""

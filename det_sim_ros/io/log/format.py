@@ -19,7 +19,7 @@ __all__ = ['MAGIC', 'MESSAGE_HEAD', 'MESSAGE_FIELDS', 'OP_HEADER', 'OP_FOOTER', 
            'OP_METADATA', 'OP_DATA_END', 'RECORD_HEAD', 'PROVISIONAL_END',
            'TailStream', 'is_torn', 'LIBRARY', 'METADATA_NAME', 'END_METADATA_NAME',
            'SCENE_ATTACHMENT', 'Compression', 'COMPRESSIONS', 'compression',
-           'chunk_compression', 'writer_compression']
+           'chunk_compression']
 
 LIBRARY = 'det_sim_ros'
 METADATA_NAME = 'det_sim_ros'            # the run's metadata record, at the start of a file
@@ -45,8 +45,8 @@ class Compression:
     """
     A chunk compression: its name in the Chunk record and its two directions.
 
-    ``compress`` is the call mcap's writer makes (the same bytes); ``decompress`` takes the
-    compressed bytes and the uncompressed size the Chunk record states.
+    ``compress`` is the call ``mcap.writer.Writer`` makes (the same bytes); ``decompress``
+    takes the compressed bytes and the uncompressed size the Chunk record states.
     """
 
     field: str
@@ -93,12 +93,6 @@ def compression(name: str) -> Compression:
     if kind is None:
         raise ValueError(f'unknown compression {name!r} (one of {", ".join(COMPRESSIONS)})')
     return kind
-
-
-def writer_compression(kind: Compression):
-    """Return mcap.Writer's CompressionType for ``kind``."""
-    from mcap.writer import CompressionType
-    return getattr(CompressionType, kind.field.upper() or 'NONE')
 
 
 def chunk_compression(field: str) -> Compression:

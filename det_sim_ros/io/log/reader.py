@@ -25,7 +25,7 @@ import zlib
 from .format import (chunk_compression, compression as compression_kind, LIBRARY, MAGIC,
                      MESSAGE_FIELDS, MESSAGE_HEAD, METADATA_NAME, OP_ATTACHMENT, OP_CHANNEL,
                      OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_HEADER, OP_MESSAGE, OP_METADATA,
-                     OP_SCHEMA, RECORD_HEAD, SCENE_ATTACHMENT, writer_compression)
+                     OP_SCHEMA, RECORD_HEAD, SCENE_ATTACHMENT)
 from ..cdr import deserialize
 from ..schemas import qos_profiles_yaml
 
@@ -288,8 +288,8 @@ class LogReader:
 
 
 def _start_writer(stream, reader: LogReader, kind):
-    from mcap.writer import Writer
-    writer = Writer(stream, compression=kind)
+    from .writer import McapWriter
+    writer = McapWriter(stream, chunk_size=1024 * 1024, compression=kind)
     writer.start(profile=reader.profile or 'ros2', library=f'{LIBRARY} recover')
     return writer
 
@@ -301,7 +301,7 @@ def recover(source, target: str, compression: str = 'zstd') -> dict:
     :returns: ``{'messages': n, 'complete': bool}`` (complete: the source was finished).
     """
     reader = LogReader(source)
-    kind = writer_compression(compression_kind(compression))
+    kind = compression_kind(compression)
     count = 0
     with open(target, 'wb') as stream:
         writer = None

@@ -69,8 +69,8 @@ class Recorder:
         thread; :meth:`close` writes everything queued before it finishes the file.
     :param max_queue: background mode: when this many records wait, the recording thread
         writes the queue itself before it goes on (:mod:`det_sim_ros.io.log.writer_thread`).
-    :param packing: write messages through the compiled record packer where mcap's internals
-        allow it; False: through mcap's ``Writer.add_message`` (the same bytes).
+    :param packing: write messages through the compiled record packer; False: one by one,
+        each Message record written by mcap's record class (the same bytes, slower).
     """
 
     def __init__(self, path, scene=None, *, qos_by_topic: Mapping | None = None,
@@ -178,9 +178,7 @@ class Recorder:
             return
         # the file's own count: a SIGINT (a KeyboardInterrupt between any two bytecodes) after
         # a message is written but before it is counted must not leave the counters one short
-        held = file.message_count()
-        if held is not None:
-            self.messages = self._messages_before_file + held
+        self.messages = self._messages_before_file + file.message_count()
         file.finish(self.counters(strings=True))
         if self.paths:
             self._rotation.closed(self.paths[-1])
