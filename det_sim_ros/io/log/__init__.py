@@ -49,7 +49,8 @@ its collaborators :mod:`~det_sim_ros.io.log.rotation`, :mod:`~det_sim_ros.io.log
 
 from __future__ import annotations
 
-from .format import END_METADATA_NAME, is_torn, LIBRARY, METADATA_NAME, SCENE_ATTACHMENT
+from .format import (END_METADATA_NAME, file_kind, is_torn, LIBRARY, METADATA_NAME,
+                     SCENE_ATTACHMENT)
 from .reader import log_files, LogMessage, LogReader, recover, recover_unfinished
 from .recorder import Recorder
 from ..cdr import deserialize, message_class, serialize
@@ -58,4 +59,4 @@ from ..schemas import DELIMITER, message_definition, qos_profiles_yaml, type_nam
 __all__ = ['Recorder', 'LogReader', 'LogMessage', 'message_definition', 'qos_profiles_yaml',
            'type_name_of', 'serialize', 'deserialize', 'recover', 'recover_unfinished',
            'is_torn', 'log_files', 'LIBRARY', 'METADATA_NAME', 'END_METADATA_NAME',
-           'SCENE_ATTACHMENT', 'DELIMITER', 'message_class']
+           'SCENE_ATTACHMENT', 'DELIMITER', 'message_class', 'file_kind']

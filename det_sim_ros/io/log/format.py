@@ -19,7 +19,7 @@ __all__ = ['MAGIC', 'MESSAGE_HEAD', 'MESSAGE_FIELDS', 'OP_HEADER', 'OP_FOOTER', 
            'OP_METADATA', 'OP_DATA_END', 'RECORD_HEAD', 'PROVISIONAL_END',
            'TailStream', 'is_torn', 'LIBRARY', 'METADATA_NAME', 'END_METADATA_NAME',
            'SCENE_ATTACHMENT', 'Compression', 'COMPRESSIONS', 'compression',
-           'chunk_compression']
+           'chunk_compression', 'file_kind']
 
 LIBRARY = 'det_sim_ros'
 METADATA_NAME = 'det_sim_ros'            # the run's metadata record, at the start of a file
@@ -181,3 +181,14 @@ def is_torn(path: str) -> bool:
     except OSError:
         return False
     return end[-len(MAGIC):] != MAGIC or end[:len(_FOOTER_HEAD)] != _FOOTER_HEAD
+
+
+def file_kind(path) -> str:
+    """
+    Return 'mcap' for a file that starts with the MCAP magic, 'empty' or 'other'.
+
+    :raises OSError: a missing or unreadable file.
+    """
+    with open(path, 'rb') as stream:
+        head = stream.read(len(MAGIC))
+    return 'mcap' if head == MAGIC else 'empty' if not head else 'other'

@@ -19,21 +19,23 @@ import io
 import logging
 import os
 import struct
-from typing import Iterable, Iterator
+from typing import Iterable, Iterator, NamedTuple
 import zlib
 
 from .format import (chunk_compression, compression as compression_kind, LIBRARY, MAGIC,
-                     MESSAGE_FIELDS, MESSAGE_HEAD, METADATA_NAME, OP_ATTACHMENT, OP_CHANNEL,
-                     OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_HEADER, OP_MESSAGE, OP_METADATA,
-                     OP_SCHEMA, RECORD_HEAD, SCENE_ATTACHMENT)
+                     MESSAGE_FIELDS, MESSAGE_HEAD, MESSAGE_HEAD_LENGTH, METADATA_NAME,
+                     OP_ATTACHMENT, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_HEADER,
+                     OP_MESSAGE, OP_METADATA, OP_SCHEMA, RECORD_HEAD, SCENE_ATTACHMENT)
 from ..cdr import deserialize
 from ..schemas import qos_profiles_yaml
 
-__all__ = ['LogReader', 'LogMessage', 'RecordBlock', 'log_files', 'recover',
+__all__ = ['LogReader', 'LogMessage', 'RecordBlock', 'MessageColumns', 'log_files', 'recover',
            'recover_unfinished']
 
 _logger = logging.getLogger('det_sim_ros.io.log')
+_FIELD = MESSAGE_FIELDS
 _PAYLOAD = MESSAGE_FIELDS['payload']
+_BYTES = tuple(range(8))   # the bytes of a little-endian integer field, as offsets
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,6 +65,32 @@ class RecordBlock:
 
     raw: bytes
     positions: list
+
+    def columns(self) -> MessageColumns:
+        """
+        Return the fields of the block's messages as numpy columns, in file order.
+
+        Read at the message offsets in one pass each (a plot's millions of messages are not
+        parsed one by one); payload ``k`` is ``raw[payload_start[k]:][:payload_size[k]]``.
+        """
+        import numpy as np
+        arr = np.frombuffer(self.raw, dtype=np.uint8)
+        at = np.array(self.positions, dtype=np.int64)[:, None]
+        length = arr[at + _FIELD['length'] + _BYTES].view('<u8').reshape(-1)
+        return MessageColumns(
+            channel=arr[at + _FIELD['channel'] + _BYTES[:2]].view('<u2').reshape(-1),
+            log_time=arr[at + _FIELD['log_time'] + _BYTES].view('<u8').reshape(-1),
+            payload_start=at[:, 0] + _FIELD['payload'],
+            payload_size=(length - MESSAGE_HEAD_LENGTH).astype(np.int64))
+
+
+class MessageColumns(NamedTuple):
+    """The messages of a :class:`RecordBlock` as columns (numpy arrays, one entry each)."""
+
+    channel: object         # channel id (uint16)
+    log_time: object        # log time (ns, uint64)
+    payload_start: object   # offset of the payload in the block's ``raw`` (int64)
+    payload_size: object    # payload bytes (int64)
 
 
 def log_files(paths) -> list[str]:
