@@ -39,12 +39,21 @@ and :attr:`Recorder.fault` says why.
 Reading (:class:`LogReader`) streams records in file order and stops quietly at the end of the
 readable data, so a file cut by a crash gives every message of every complete chunk.
 
-This module is the log's public face; the parts live in :mod:`~det_sim_ros.io.log.recorder` (with
-its collaborators :mod:`~det_sim_ros.io.log.rotation`, :mod:`~det_sim_ros.io.log.file`,
-:mod:`~det_sim_ros.io.log.packing`, :mod:`~det_sim_ros.io.log.flush_policy`,
-:mod:`~det_sim_ros.io.log.writer_thread`), :mod:`~det_sim_ros.io.log.reader`,
-:mod:`~det_sim_ros.io.schemas`, :mod:`~det_sim_ros.io.log.format` and
-:mod:`~det_sim_ros.io.cdr`.
+This package is the one place that reads and writes MCAP; its ``__init__`` is the public face.
+Its modules, by job:
+
+- :mod:`.recorder`: the run's order, counters and faults (:class:`Recorder`), with
+  :mod:`.rotation` (file names, splits, the bounded directory), :mod:`.flush_policy` (when to
+  flush), :mod:`.write_modes` and :mod:`.writer_thread` (writing now or from the writer thread);
+- :mod:`.file`: one file in the rosbag2 conventions, written by :mod:`.writer` (the MCAP
+  writer on mcap's public record classes, the bytes of ``mcap.writer.Writer``) and
+  :mod:`.packing` (Message records packed into its open chunk, runs of samples in C);
+- :mod:`.reader`: reading, finished or not, and :func:`recover`;
+- :mod:`.format`: the bytes the package scans itself, the chunk compressions (one map), the
+  provisional end and the torn-file check.
+
+The messages' CDR is :mod:`det_sim_ros.io.cdr`'s, their ``.msg`` schemas and QoS metadata
+:mod:`det_sim_ros.io.schemas`'.
 """
 
 from __future__ import annotations
