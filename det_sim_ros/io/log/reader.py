@@ -22,6 +22,8 @@ import struct
 from typing import Iterable, Iterator, NamedTuple
 import zlib
 
+import numpy as np
+
 from .format import (chunk_compression, compression as compression_kind, LIBRARY, MAGIC,
                      MESSAGE_FIELDS, MESSAGE_HEAD, MESSAGE_HEAD_LENGTH, METADATA_NAME,
                      OP_ATTACHMENT, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_HEADER,
@@ -35,7 +37,7 @@ __all__ = ['LogReader', 'LogMessage', 'RecordBlock', 'MessageColumns', 'log_file
 _logger = logging.getLogger('det_sim_ros.io.log')
 _FIELD = MESSAGE_FIELDS
 _PAYLOAD = MESSAGE_FIELDS['payload']
-_BYTES = tuple(range(8))   # the bytes of a little-endian integer field, as offsets
+_BYTES = np.arange(8)   # the bytes of a little-endian integer field, as offsets
 
 
 @dataclasses.dataclass(frozen=True)
@@ -73,7 +75,6 @@ class RecordBlock:
         Read at the message offsets in one pass each (a plot's millions of messages are not
         parsed one by one); payload ``k`` is ``raw[payload_start[k]:][:payload_size[k]]``.
         """
-        import numpy as np
         arr = np.frombuffer(self.raw, dtype=np.uint8)
         at = np.array(self.positions, dtype=np.int64)[:, None]
         length = arr[at + _FIELD['length'] + _BYTES].view('<u8').reshape(-1)
