@@ -148,13 +148,13 @@ class RecordPacker:
         """
         writer = self._writer
         stats, chunk = writer.statistics, writer.chunk
-        records_in_chunk = chunk.records
-        base = len(records_in_chunk)
+        chunk_records = chunk.records
+        base = len(chunk_records)
         _cover(stats, stats.message_count == 0, times[0])
         _cover(stats, False, times[-1])
         _cover(chunk, chunk.num_messages == 0, times[0])
         _cover(chunk, False, times[-1])
-        records_in_chunk += records
+        chunk_records += records
         offsets, step, width = self._layout(channel_ids, sizes)
         k, counts = len(times), stats.channel_message_counts
         for channel_id, offset in offsets:
