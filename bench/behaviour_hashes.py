@@ -26,10 +26,13 @@ import numpy as np
 warnings.simplefilter('ignore', DeprecationWarning)   # the flat module aliases warn once
 
 try:
-    from det_sim_ros.io.mcap_log import LogReader, Recorder
     from det_sim_ros.io.replay import resimulate, simulate_to_log
     from det_sim_ros.scenes.scene import load_scene
     from det_sim_ros.sim.simulator import simulate, Simulator
+    try:
+        from det_sim_ros.io.log import LogReader, Recorder
+    except ImportError:   # the log before its subpackage (io/mcap_log.py)
+        from det_sim_ros.io.mcap_log import LogReader, Recorder
 except ImportError:   # a package with the flat module layout (no layer subpackages)
     from det_sim_ros.mcap_log import LogReader, Recorder
     from det_sim_ros.replay import resimulate, simulate_to_log

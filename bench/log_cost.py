@@ -14,7 +14,7 @@ import tempfile
 import time
 
 from det_sim_ros.io.contract import encode_float64_multi_array, OutputContract, TOPIC_TYPES
-from det_sim_ros.io.mcap_log import Recorder
+from det_sim_ros.io.log import Recorder
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import Simulator
 

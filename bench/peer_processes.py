@@ -13,7 +13,7 @@ import subprocess
 import sys
 
 from det_sim_ros.io.contract import decode_float64_multi_array
-from det_sim_ros.io.mcap_log import LogReader
+from det_sim_ros.io.log import LogReader
 import numpy as np
 
 SUBSCRIBER = """

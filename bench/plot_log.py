@@ -14,7 +14,7 @@ import struct
 import time
 
 from det_sim_ros.io import logplot
-from det_sim_ros.io.mcap_log import Recorder, serialize
+from det_sim_ros.io.log import Recorder, serialize
 from det_sim_ros.io.replay import OutputContract
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import simulate

@@ -8,7 +8,7 @@ power balance holds; a log re-simulates bit for bit.
 
 import math
 
-from det_sim_ros.io.mcap_log import Recorder
+from det_sim_ros.io.log import Recorder
 from det_sim_ros.io.replay import resimulate, simulate_to_log
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import simulate, Simulator

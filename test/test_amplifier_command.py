@@ -4,7 +4,7 @@ The amplifier's command side: DAC levels, delay in whole periods and offset.
 The same through Simulator.step, simulate() and a log's re-simulation.
 """
 
-from det_sim_ros.io.mcap_log import LogReader, Recorder
+from det_sim_ros.io.log import LogReader, Recorder
 from det_sim_ros.io.replay import resimulate, simulate_to_log
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.amplifier import CommandStage

@@ -13,7 +13,7 @@ import os
 
 from det_sim_ros.calibration.synthetic import step_and_sine, synthetic_measurement
 from det_sim_ros.cli.det_sim import main
-from det_sim_ros.io.mcap_log import Recorder
+from det_sim_ros.io.log import Recorder
 from det_sim_ros.io.replay import simulate_to_log
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import Simulator

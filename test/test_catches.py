@@ -9,7 +9,7 @@ as text.
 """
 
 from det_sim_ros.io import replay
-from det_sim_ros.io.mcap_log import Recorder
+from det_sim_ros.io.log import Recorder
 from det_sim_ros.scenes.scene import load_scene, SceneError
 from det_sim_ros.sim.simulator import Simulator
 import numpy as np

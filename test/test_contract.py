@@ -232,8 +232,8 @@ def test_contract_and_replay_need_no_rclpy(tmp_path):
     """The contract, the recorder and re-simulation run without importing rclpy."""
     code = (
         'import sys\n'
-        'from det_sim_ros import contract\n'
-        'from det_sim_ros.io.mcap_log import Recorder\n'
+        'from det_sim_ros.io import contract\n'
+        'from det_sim_ros.io.log import Recorder\n'
         'from det_sim_ros.io.replay import resimulate, simulate_to_log\n'
         'from det_sim_ros.scenes.scene import load_scene\n'
         'from det_sim_ros.sim.simulator import Simulator\n'

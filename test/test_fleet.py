@@ -84,7 +84,7 @@ def test_fleet_starts_its_nodes_and_forwards_the_stop(tmp_path, stop):
         assert len(finished_logs(str(tmp_path / 'logs' / name))) == 1
     params = yaml.safe_load((tmp_path / 'logs' / 'a.params.yaml').read_text())
     assert params['/**']['ros__parameters']['physics']['Rs'] == 1e3
-    from det_sim_ros.io.mcap_log import LogReader
+    from det_sim_ros.io.log import LogReader
     (log,) = os.listdir(tmp_path / 'logs' / 'a')
     scene = yaml.safe_load(LogReader(str(tmp_path / 'logs' / 'a' / log)).info['scene_yaml'])
     assert scene['sim_node']['ros__parameters']['physics']['Rs'] == 1e3   # applied
@@ -275,7 +275,7 @@ def _run_loops(net, tmp, node_hosts, controller_hosts, env):
 
 
 def _records(log_dir):
-    from det_sim_ros.io.mcap_log import LogReader
+    from det_sim_ros.io.log import LogReader
     (path,) = [os.path.join(log_dir, f) for f in os.listdir(log_dir) if f.endswith('.mcap')]
     return [(m.topic, m.log_time, m.sequence, m.data) for m in LogReader(path).messages()]
 
@@ -341,7 +341,7 @@ def test_qos_keep_all_for_lossy_links(harness, tmp_path, ros_context):
     """
     from rclpy.parameter import Parameter
     from rclpy.qos import HistoryPolicy, ReliabilityPolicy
-    from det_sim_ros.io.mcap_log import LogReader
+    from det_sim_ros.io.log import LogReader
     from det_sim_ros.scenes.scene import SceneError
     from det_sim_ros.ros.node import SimNode
     h = harness(qos_keep_all=True, mode='free_run', start_paused=True,

@@ -196,7 +196,7 @@ def test_node_starts_and_resets_to_the_initial_state_and_logs_it(tmp_path, harne
     stationary at rest; ~/reset returns to the same initial state (the same samples again); the
     log records it and re-simulates bit for bit.
     """
-    from det_sim_ros.io.mcap_log import LogReader
+    from det_sim_ros.io.log import LogReader
     from det_sim_ros.io.replay import resimulate
     h = harness(steps_per_tick=5, **{'log.path': str(tmp_path / 'logs'),
                                      'scene.initial_state': initial_state})
@@ -233,7 +233,7 @@ def test_log_without_the_key_replays_as_released(tmp_path):
     A log whose scene has neither scene.initial_state nor scene.rest_branch started released
     from q0.
     """
-    from det_sim_ros.io.mcap_log import Recorder
+    from det_sim_ros.io.log import Recorder
     from det_sim_ros.io.replay import resimulate, simulate_to_log
     from det_sim_ros.scenes.scene import scene_to_dict
     scene = load_scene('default', {'scene.initial_state': 'released'})

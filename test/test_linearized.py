@@ -11,7 +11,7 @@ modes; the amplified circuit under the linearized method.
 import os
 
 from det_sim_ros.core import kernel
-from det_sim_ros.io.mcap_log import Recorder
+from det_sim_ros.io.log import Recorder
 from det_sim_ros.io.replay import resimulate, simulate_to_log
 from det_sim_ros.physics import matrix_phi, reference_linearized
 from det_sim_ros.physics.model import build_model

@@ -12,7 +12,7 @@ import textwrap
 
 from conftest import child_env
 from det_sim_ros.io.contract import OutputContract
-from det_sim_ros.io.mcap_log import LogReader
+from det_sim_ros.io.log import LogReader
 from det_sim_ros.io.replay import resimulate
 # The fixture, as the plugin gives it. pyflakes reads each test's det_sim argument as a
 # redefinition of this import, hence the F811 noqa on those tests.

@@ -5,7 +5,7 @@ The geometry comes from the Ritz basis (no ROS); the node's marker topic: displa
 frames, q at the reference point, MCAP recording.
 """
 
-from det_sim_ros.io.mcap_log import deserialize
+from det_sim_ros.io.log import deserialize
 from det_sim_ros.physics.geometry import ActuatorGeometry
 from det_sim_ros.ros.markers import MARKER_TYPE, MarkerFrames
 from det_sim_ros.scenes.scene import load_scene
@@ -146,7 +146,7 @@ def test_node_publishes_markers_at_the_display_rate(harness, tmp_path):
             assert ref.pose.position.x == pytest.approx(h.samples['deflection'][t_ns][0],
                                                         rel=1e-12, abs=1e-18)
     h.close()
-    from det_sim_ros.io.mcap_log import LogReader
+    from det_sim_ros.io.log import LogReader
     logged = [m for m in LogReader(str(log)).messages() if m.topic == '/markers']
     assert logged and logged[0].type_name == MARKER_TYPE
     # the snap-through moves the beam: every frame of the display grid is in the log

@@ -15,8 +15,8 @@ import textwrap
 
 from conftest import child_env
 from det_sim_ros import __version__
-from det_sim_ros.io.mcap_log import (LogReader, message_definition, qos_profiles_yaml, Recorder,
-                                     recover)
+from det_sim_ros.io.log import (LogReader, message_definition, qos_profiles_yaml, Recorder,
+                                recover)
 from det_sim_ros.io.replay import OUTPUT_FIELDS, simulate_to_log
 from det_sim_ros.scenes.scene import load_scene, scene_to_dict
 from det_sim_ros.sim.simulator import Simulator
@@ -219,7 +219,7 @@ def test_split_by_size_and_duration(tmp_path):
 CHILD = textwrap.dedent("""
     import sys, time
     from std_msgs.msg import Float64MultiArray
-    from det_sim_ros.io.mcap_log import Recorder
+    from det_sim_ros.io.log import Recorder
     recorder = Recorder(sys.argv[1], None, flush_period_s=0.02, background=sys.argv[2] == 'bg')
     flushes = 0
     k = 0
@@ -308,7 +308,7 @@ def test_an_interrupt_right_after_a_write_still_counts_it(tmp_path, monkeypatch)
     """SIGINT between writing a message and counting it: the end counters match the file."""
     from mcap.reader import make_reader
     from std_msgs.msg import Float64MultiArray
-    from det_sim_ros.io import log_file
+    from det_sim_ros.io.log import file as log_file
     path = tmp_path / 'cut.mcap'
     recorder = Recorder(str(path), None)
     for k in range(3):
@@ -337,7 +337,7 @@ def test_cdr_serializer_matches_rclpy_and_rosbags():
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Empty, Float64MultiArray
 
-    from det_sim_ros.io.mcap_log import serialize, type_name_of
+    from det_sim_ros.io.log import serialize, type_name_of
     store = get_typestore(Stores.ROS2_JAZZY)
     joint = JointState(name=['det0', 'det1'], position=[1.0, -2.5], velocity=[3.0])
     joint.header.stamp.sec, joint.header.frame_id = 7, 'beam'
@@ -372,7 +372,7 @@ def test_torn_file_is_recovered_in_place(tmp_path):
     """A file cut inside a write (power loss): recover_unfinished repairs it in place."""
     from mcap.reader import make_reader
     from std_msgs.msg import Float64MultiArray
-    from det_sim_ros.io.mcap_log import is_torn, recover_unfinished
+    from det_sim_ros.io.log import is_torn, recover_unfinished
     live = tmp_path / 'live' / 'run.mcap'
     recorder = Recorder(live, None, flush_sim_s=0.01)
     for k in range(100):
@@ -438,7 +438,7 @@ def _write_samples(path, fast, background=False, stress=False, dropouts=False):
     options = {'flush_sim_s': 2e-5, 'split_s': 1.5e-4, 'max_queue': 5} if stress else {}
     recorder = Recorder(path, load_scene('default', PAPER), chunk_size=2048,
                         background=background,
-                        flush_period_s=1e9, packing=fast,   # False: mcap's add_message path
+                        flush_period_s=1e9, packing=fast,   # False: one by one, add_message
                         **options)   # no wall-clock flushes: comparable
     topics = ['deflection', 'displacement', 'charge', 'current']
     layouts = [tuple(topics[:j] + topics[j + 1:]) for j in range(len(topics))]
@@ -471,10 +471,11 @@ def _write_samples(path, fast, background=False, stress=False, dropouts=False):
 def test_fast_sample_path_writes_the_same_file_as_add_message(tmp_path, monkeypatch, background,
                                                               stress, dropouts):
     """
-    Check that the batched sample writer gives the bytes mcap's add_message gives.
+    Check that the batched sample writer gives the bytes of one-by-one add_message calls.
 
     record_sample's batched writer (compiled record packing, runs of samples), record's
-    single messages (and the writer thread) give the bytes mcap's own add_message gives:
+    single messages (and the writer thread) give the bytes add_message gives (mcap's Message
+    record class; test_mcap_writer: the file is mcap.writer.Writer's, call for call):
     records, chunk indexes and statistics; also when clamped times, other payload sizes,
     flushes and file splits end the runs, and with samples that lack a topic inside them.
     """
@@ -556,7 +557,7 @@ def test_background_recording_drops_nothing_while_the_writer_switches_files(
     import threading
     import time as _time
     from std_msgs.msg import Float64MultiArray
-    from det_sim_ros.io import log_file
+    from det_sim_ros.io.log import file as log_file
     switching = threading.Event()
 
     class SlowToOpen(log_file.TailStream):   # the gap between closing a file and the next

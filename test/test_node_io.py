@@ -10,7 +10,7 @@ Real-time pacing is driven by a fake wall clock (``node.wall_clock``): no wall-c
 
 from conftest import WALL_TIMEOUT
 from det_sim_ros.io.contract import decode_joint_state, OUTPUT_FIELDS
-from det_sim_ros.io.mcap_log import LogReader
+from det_sim_ros.io.log import LogReader
 from det_sim_ros.io.replay import resimulate
 from det_sim_ros.sim.simulator import Simulator
 import numpy as np

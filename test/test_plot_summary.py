@@ -8,7 +8,7 @@ channel.
 
 from det_sim_ros.cli.det_sim import main
 from det_sim_ros.io import logplot
-from det_sim_ros.io.mcap_log import Recorder
+from det_sim_ros.io.log import Recorder
 from det_sim_ros.io.replay import simulate_to_log
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import Simulator

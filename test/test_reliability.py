@@ -27,7 +27,7 @@ import time
 import warnings
 
 from conftest import child_env
-from det_sim_ros.io.mcap_log import is_torn, LogReader
+from det_sim_ros.io.log import is_torn, LogReader
 from det_sim_ros.ros.node import main
 from det_sim_ros.ros.params import NODE_PARAMS
 from det_sim_ros.scenes.scene import (INTEGRATOR_SPEC, load_scene, PHYSICS_SPEC, SCENE_SPEC,
@@ -464,7 +464,7 @@ def test_node_repairs_a_torn_log_in_its_directory_at_start(tmp_path, harness):
     """
     from std_msgs.msg import Float64MultiArray
 
-    from det_sim_ros.io.mcap_log import Recorder
+    from det_sim_ros.io.log import Recorder
     folder = tmp_path / 'logs'
     torn = folder / 'det_sim_20260101-000000_1.mcap'
     recorder = Recorder(tmp_path / 'live.mcap', None, flush_sim_s=0.01)

@@ -9,7 +9,7 @@ import threading
 
 from det_sim_ros.cli import main as det_sim
 from det_sim_ros.cli import main_replay as main
-from det_sim_ros.io.mcap_log import LogReader, Recorder
+from det_sim_ros.io.log import LogReader, Recorder
 from det_sim_ros.io.replay import OUTPUT_FIELDS, resimulate, simulate_to_log
 from det_sim_ros.ros.play import play
 from det_sim_ros.scenes.scene import load_scene

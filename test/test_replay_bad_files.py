@@ -12,8 +12,8 @@ import sys
 from conftest import child_env
 from det_sim_ros.cli import main as det_sim
 from det_sim_ros.cli import main_replay
-from det_sim_ros.io.mcap_format import MAGIC
-from det_sim_ros.io.mcap_log import Recorder
+from det_sim_ros.io.log import Recorder
+from det_sim_ros.io.log.format import MAGIC
 from det_sim_ros.io.replay import simulate_to_log
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import Simulator

@@ -138,7 +138,7 @@ NOISY = {'sensors.seed': 7, 'sensors.displacement.noise_std': 2e-6,
 
 
 def _noisy_log(path, overrides=NOISY, n=300):
-    from det_sim_ros.io.mcap_log import Recorder
+    from det_sim_ros.io.log import Recorder
     from det_sim_ros.io.replay import simulate_to_log
     from det_sim_ros.sim.simulator import Simulator
     scene = load_scene('default', overrides)
@@ -149,7 +149,7 @@ def _noisy_log(path, overrides=NOISY, n=300):
 
 
 def test_noisy_log_holds_measured_and_truth_and_resimulates_bit_exact(tmp_path, monkeypatch):
-    from det_sim_ros.io.log_reader import LogReader
+    from det_sim_ros.io.log.reader import LogReader
     from det_sim_ros.io.replay import resimulate
     from det_sim_ros.io.sensing import measured_run
     from det_sim_ros.sim.simulator import simulate, Simulator
@@ -176,7 +176,7 @@ def test_noisy_log_holds_measured_and_truth_and_resimulates_bit_exact(tmp_path, 
 
 
 def test_every_knob_off_logs_the_same_bytes(tmp_path):
-    from det_sim_ros.io.log_reader import LogReader
+    from det_sim_ros.io.log.reader import LogReader
     off = {'sensors.displacement.noise_std': 0.0, 'sensors.charge.dropout': 0.0}
     logs = []
     for name, overrides in (('plain', {}), ('off', off)):
@@ -196,8 +196,8 @@ def test_laser_preset_is_the_default_scene_read_by_a_laser_sensor():
 
 
 def test_noisy_array_logs_the_same_with_one_or_two_threads(tmp_path):
-    from det_sim_ros.io.log_reader import LogReader
-    from det_sim_ros.io.mcap_log import Recorder
+    from det_sim_ros.io.log.reader import LogReader
+    from det_sim_ros.io.log import Recorder
     from det_sim_ros.io.replay import simulate_to_log
     from det_sim_ros.sim.simulator import Simulator
     scene = load_scene('array', {'structure.copies': 4, **NOISY})

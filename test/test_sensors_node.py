@@ -4,7 +4,7 @@ import os
 import subprocess
 import sys
 
-from det_sim_ros.io.log_reader import LogReader
+from det_sim_ros.io.log.reader import LogReader
 from det_sim_ros.io.messages import decode_joint_state
 from det_sim_ros.io.replay import resimulate
 from det_sim_ros.ros.testing import det_sim  # noqa: F401

@@ -323,7 +323,7 @@ def test_scene_loads_by_default():
 
 def test_diagnostics_and_the_log_name_the_fidelity(harness, tmp_path):
     """Check /diagnostics and the MCAP log's metadata name the scene's model level."""
-    from det_sim_ros.io.mcap_log import LogReader
+    from det_sim_ros.io.log import LogReader
     h = harness(**{'scene.fidelity': 'exact', 'scene.n_ritz': 3, 'diagnostics_period': 0.05,
                    'log.path': str(tmp_path / 'logs')})
     h.spin_until(lambda: h.diagnostics, 'a diagnostics message')

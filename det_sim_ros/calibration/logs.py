@@ -115,7 +115,7 @@ def parse_mapping(mapping: Mapping[str, str] | list) -> dict:
 
 
 def _open(path: str):
-    from ..io.log_reader import LogReader
+    from ..io.log.reader import LogReader
     try:
         return LogReader(path)
     except FileNotFoundError as exc:

@@ -21,20 +21,19 @@ class LogFileError(ValueError):
 
 def _check_bytes(path: str) -> None:
     """Refuse a file that is empty or does not start with the MCAP magic."""
-    from ..io.mcap_format import MAGIC
+    from ..io.log import file_kind
     if os.path.isdir(path):
         raise LogFileError(f'{path}: a directory inside a directory (give the log files)')
-    with open(path, 'rb') as stream:     # a missing file: FileNotFoundError, one line
-        head = stream.read(len(MAGIC))
-    if not head:
+    kind = file_kind(path)      # a missing file: FileNotFoundError, one line
+    if kind == 'empty':
         raise LogFileError(f'{path}: an empty file, not an MCAP log')
-    if head != MAGIC:
+    if kind != 'mcap':
         raise LogFileError(f'{path}: not an MCAP file (it does not start with the MCAP magic)')
 
 
 def torn_files(files) -> list[str]:
     """Return those of ``files`` that are torn: they do not end in a valid MCAP footer."""
-    from ..io.mcap_format import is_torn
+    from ..io.log import is_torn
     return [path for path in files if is_torn(path)]
 
 
@@ -55,7 +54,7 @@ def open_log(paths):
         of the run (not a sim_node log, or torn before its scene).
     :raises OSError: a missing or unreadable file.
     """
-    from ..io.log_reader import log_files, LogReader
+    from ..io.log import log_files, LogReader
     try:
         files = log_files(paths)
     except FileNotFoundError as exc:   # a directory without logs

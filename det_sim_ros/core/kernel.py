@@ -13,7 +13,7 @@ Physics and stepping:
   part of 'etdrk4_linearized'; det_sim_ros.physics.matrix_phi is the same in numpy).
 - status codes ``OK``, ``BAD_STRETCH``, ``NON_FINITE``, ``BAD_SLOPE``.
 
-Wire and log (the bytes of det_sim_ros.io.contract and det_sim_ros.io.mcap_log):
+Wire and log (the bytes of det_sim_ros.io.contract and det_sim_ros.io.log):
 
 - ``SampleCodec``: one sample's output messages written from named fields in one call;
 - ``pack_records``: MCAP Message records of consecutive samples;

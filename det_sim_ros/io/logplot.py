@@ -23,7 +23,7 @@ import numpy as np
 
 from .cdr import CdrError, deserialize, Reader
 from .contract import basename, COMMAND_TOPICS, JOINT_COMMAND_TOPIC
-from .mcap_format import MAGIC, MESSAGE_FIELDS, MESSAGE_HEAD_LENGTH
+from .log import file_kind, LogReader
 from .sensing import is_truth_topic
 
 __all__ = ['LogData', 'Channel', 'read_log', 'summary', 'plot_log', 'LogPlotError',
@@ -144,11 +144,6 @@ def _doubles(matrix, at, n):
 
 # -- reading: the columns of LogReader's record blocks ------------------------------------------
 
-_BYTE = np.arange(8)
-_LENGTH, _CHANNEL, _LOG_TIME, _PAYLOAD = (MESSAGE_FIELDS[name] for name in
-                                          ('length', 'channel', 'log_time', 'payload'))
-
-
 class _Scan:
     """
     All messages of a log as per-topic uint8 matrices grouped by payload length.
@@ -169,13 +164,9 @@ class _Scan:
         if not block.positions:
             return
         arr = np.frombuffer(block.raw, dtype=np.uint8)
-        mpos = np.array(block.positions)
-        length = arr[mpos[:, None] + _LENGTH + _BYTE].view('<u8').reshape(-1)
-        channel = arr[mpos[:, None] + _CHANNEL + _BYTE[:2]].view('<u2').reshape(-1)
-        log_time = arr[mpos[:, None] + _LOG_TIME + _BYTE].view('<u8').reshape(-1)
-        size = (length - MESSAGE_HEAD_LENGTH).astype(np.int64)
-        order = self._order + np.arange(len(mpos))
-        self._order += len(mpos)
+        channel, log_time, payload_start, size = block.columns()
+        order = self._order + np.arange(len(channel))
+        self._order += len(channel)
         key = channel.astype(np.int64) * (1 << 32) + size
         for k in np.unique(key):
             sel = key == k
@@ -183,7 +174,7 @@ class _Scan:
             info = channels.get(ch)
             if info is None or is_truth_topic(info[0]):   # (the plot shows the published)
                 continue
-            start = mpos[sel] + _PAYLOAD
+            start = payload_start[sel]
             matrix = arr[start[:, None] + np.arange(dl)] if dl else np.zeros((len(start), 0),
                                                                              np.uint8)
             entry = self.topics.setdefault(info[0], {'type': info[1], 'parts': {}})
@@ -212,9 +203,8 @@ class _Scan:
 
 def _check_magic(files):
     for path in files:
-        with open(path, 'rb') as stream:
-            if stream.read(len(MAGIC)) != MAGIC:
-                raise LogPlotError(f'{path}: not an MCAP file')
+        if file_kind(path) != 'mcap':
+            raise LogPlotError(f'{path}: not an MCAP file')
 
 
 def _scene(reader):
@@ -228,7 +218,6 @@ def _scene(reader):
 
 def read_log(paths) -> LogData:
     """Read a sim_node log (file, split files or a directory) into arrays (see module doc)."""
-    from .log_reader import LogReader
     try:
         reader = LogReader(paths)
         _check_magic(reader.files)

@@ -27,7 +27,7 @@ from .contract import (CdrError, COMMAND_TOPIC, COMMAND_TOPICS, CommandDecoder,
                        decode_joint_state, encode_float64_multi_array, encode_joint_state,
                        JOINT_COMMAND_TOPIC, OUTPUT_FIELDS, OutputContract, rest_shortening,
                        rest_shortenings, stamp_ns, TOPIC_TYPES)
-from .mcap_log import LogReader, Recorder
+from .log import LogReader, Recorder
 from .sensing import is_truth_topic, make_outputs, SensedOutputs
 
 __all__ = ['OUTPUT_FIELDS', 'COMMAND_TOPICS', 'ResimResult', 'resimulate', 'simulate_to_log',

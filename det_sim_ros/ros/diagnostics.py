@@ -92,7 +92,7 @@ def diagnostics_message(*, node_name: str, stamp, mode: str, paused: bool, simul
         warning, its own keys).
     :param late_ticks, slipped_s: the pacing's totals.
     :param distrust: why the results are not to be trusted ('' if they are).
-    :param recorder: the MCAP :class:`~det_sim_ros.io.mcap_log.Recorder`, or None.
+    :param recorder: the MCAP :class:`~det_sim_ros.io.log.Recorder`, or None.
     :param wait: what the node waits for (:class:`~det_sim_ros.ros.waiting.Wait`), or None;
         once it is shown it is the message of an OK status.
     """

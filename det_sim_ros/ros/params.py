@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from typing import Any, Iterator, NamedTuple
 
+from ..io.log.format import COMPRESSIONS
 from ..scenes.scene import scene_to_dict, SceneError
 from ..scenes.sensors import sensors_to_dict
 
@@ -92,7 +93,7 @@ NODE_PARAMS = {
                            'directory, oldest deleted first (0 = no limit)', True, (0, 1000000)),
     'log.compression': Param('zstd', "MCAP chunk compression: 'zstd' (smallest files), 'lz4' "
                              "(a 100-DET array's log: about two thirds of the CPU in a loop, "
-                             "~20 % larger files) or 'none'", True, ('zstd', 'lz4', 'none')),
+                             "~20 % larger files) or 'none'", True, tuple(COMPRESSIONS)),
     'info_period': Param(5.0, 'seconds between INFO status lines (wall clock), 0 = off', True,
                          (0.0, 3600.0)),
     # shape markers (det_sim_ros.ros.markers)

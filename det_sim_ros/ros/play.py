@@ -16,7 +16,7 @@ import time
 from typing import Callable, Iterable
 
 from ..io.cdr import message_class
-from ..io.mcap_log import LogReader
+from ..io.log import LogReader
 from ..io.replay import (COMMAND_TOPICS, OUTPUT_FIELDS, OutputContract, ResimResult,
                          resimulate, rest_shortening, rest_shortenings, simulate_to_log)
 

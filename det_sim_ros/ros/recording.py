@@ -1,5 +1,5 @@
 """
-The node's MCAP recorder (det_sim_ros.io.mcap_log), opened from the ``log.*`` parameters.
+The node's MCAP recorder (det_sim_ros.io.log), opened from the ``log.*`` parameters.
 
 It is on unless ``log.enabled`` is false. Its writer thread owns the file and flushes it. A
 log that cannot be opened at start refuses the start; one that fails later stops logging only.
@@ -19,7 +19,7 @@ def open_recorder(get: Callable, scene, qos_by_topic: dict, metadata: dict, name
     """
     Open a background recorder fed the node's bytes; None when logging is off.
 
-    The recorder is a :class:`~det_sim_ros.io.mcap_log.Recorder`. Logs where it writes and its
+    The recorder is a :class:`~det_sim_ros.io.log.Recorder`. Logs where it writes and its
     limits; a log directory's unfinished logs (cut by a crash: power loss, SIGKILL inside a
     flush) are repaired first.
 
@@ -27,7 +27,7 @@ def open_recorder(get: Callable, scene, qos_by_topic: dict, metadata: dict, name
     """
     if not get('log.enabled'):
         return None
-    from ..io.mcap_log import Recorder, recover_unfinished
+    from ..io.log import Recorder, recover_unfinished
     from ..scenes.scene import SceneError
     path = get('log.path')
     try:

@@ -97,7 +97,7 @@ def _info(args) -> int:
 
 
 def _recover(args) -> int:
-    from ...io.mcap_log import recover
+    from ...io.log import recover
     reader = log_checks.open_log(args.log)
     outcome = recover(reader.files, args.output)
     print(f"{outcome['messages']} messages written to {args.output}"

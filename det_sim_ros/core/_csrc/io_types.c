@@ -3,7 +3,7 @@
  *
  * FrameMap(fields)    marker frames of one-coordinate cells (det_sim_ros.ros.markers)
  * SampleCodec(fields) one sample's output messages (det_sim_ros.io.contract)
- * pack_records(...)   consecutive samples' MCAP Message records (det_sim_ros.io.mcap_log)
+ * pack_records(...)   consecutive samples' MCAP Message records (det_sim_ros.io.log.packing)
  */
 #include "binding.h"
 

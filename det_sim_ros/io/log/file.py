@@ -2,8 +2,8 @@
 One MCAP file being written in the rosbag2 conventions.
 
 Its start (header, the run's metadata record and scene attachment), its schemas and
-channels, its messages (through the record packer when mcap's internals allow, else
-``Writer.add_message``: the same bytes), its flushes and its end (the counters' metadata
+channels, its messages (through the record packer, or one by one through
+``McapWriter.add_message``: the same bytes), its flushes and its end (the counters' metadata
 record, the summary).
 """
 
@@ -13,20 +13,13 @@ import os
 import time
 from typing import Mapping
 
-from . import mcap_internals
-from .mcap_format import END_METADATA_NAME, LIBRARY, METADATA_NAME, SCENE_ATTACHMENT, TailStream
-from .record_packing import RecordPacker
-from .schemas import message_definition, qos_profiles_yaml
+from .format import (compression as compression_kind, END_METADATA_NAME, LIBRARY, METADATA_NAME,
+                     SCENE_ATTACHMENT, TailStream)
+from .packing import RecordPacker
+from .writer import McapWriter
+from ..schemas import message_definition, qos_profiles_yaml
 
-__all__ = ['LogFile', 'file_info', 'scene_text', 'package_version', 'COMPRESSION']
-
-COMPRESSION = ('zstd', 'lz4', 'none', '')
-
-
-def _compression(name: str):
-    from mcap.writer import CompressionType
-    return {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
-            'none': CompressionType.NONE, '': CompressionType.NONE}[name]
+__all__ = ['LogFile', 'file_info', 'scene_text', 'package_version']
 
 
 class LogFile:
@@ -37,9 +30,9 @@ class LogFile:
     """
 
     def __init__(self, path: str, *, chunk_size: int, compression: str, packing: bool = True):
+        self._compression = compression_kind(compression)   # (a bad name: no file made)
         self.stream = TailStream(path)
         self._chunk_size = chunk_size
-        self._compression = compression
         self._packing = packing
         self.writer = self.packer = None
         self.channels: dict[str, int] = {}      # topic -> channel id
@@ -54,9 +47,8 @@ class LogFile:
         The metadata record is ``info`` (:func:`file_info`: its ``wall_start_ns`` is filled in
         here); there is no scene attachment for ''; all at log time ``log_time``.
         """
-        from mcap.writer import Writer
-        writer = Writer(self.stream, chunk_size=self._chunk_size,
-                        compression=_compression(self._compression))
+        writer = McapWriter(self.stream, chunk_size=self._chunk_size,
+                            compression=self._compression)
         writer.start(profile='ros2', library=f'{LIBRARY} {version}')
         wall_ns = time.time_ns()
         info = dict(info)
@@ -69,7 +61,7 @@ class LogFile:
                                   data=scene_yaml.encode())
         writer.flush()
         self.writer = writer
-        self.packer = RecordPacker.attach(writer) if self._packing else None
+        self.packer = RecordPacker(writer) if self._packing else None
 
     def size(self) -> int:
         """Return the file's size once everything written is flushed."""
@@ -96,9 +88,9 @@ class LogFile:
             self.writer.add_message(channel_id=channel_id, log_time=log_time, data=data,
                                     publish_time=log_time, sequence=sequence)
 
-    def message_count(self) -> int | None:
-        """Return the messages this file holds, as its summary will count them (None: unknown)."""
-        return mcap_internals.message_count(self.writer)
+    def message_count(self) -> int:
+        """Return the messages this file holds, as its summary will count them."""
+        return self.writer.statistics.message_count
 
     def flush(self) -> None:
         """End the chunk and write everything (and the provisional end) to disk."""
@@ -144,7 +136,7 @@ def scene_text(scene) -> str:
     if isinstance(scene, str):
         return scene
     import yaml
-    from ..scenes.scene import scene_to_dict
+    from ...scenes.scene import scene_to_dict
     data = scene if isinstance(scene, Mapping) else scene_to_dict(scene, wrap=True)
     return yaml.safe_dump(data, sort_keys=False)
 
@@ -152,7 +144,7 @@ def scene_text(scene) -> str:
 def package_version() -> str:
     """det_sim_ros's version ('unknown' for a partial install)."""
     try:
-        from .. import __version__
+        from ... import __version__
         return __version__
     except Exception:  # pragma: no cover - partial installs
         return 'unknown'

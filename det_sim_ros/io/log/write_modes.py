@@ -3,18 +3,18 @@ How the recorder's records reach the file.
 
 :class:`WriteNow` writes them in the recording thread; :class:`WriteBehind`
 (``background=True``) queues their bytes for the
-:class:`~det_sim_ros.io.writer_thread.WriterThread`.
+:class:`~det_sim_ros.io.log.writer_thread.WriterThread`.
 
-A mode is given the :class:`~det_sim_ros.io.recorder.Recorder` it serves and uses its writing
+A mode is given the :class:`~det_sim_ros.io.log.recorder.Recorder` it serves and uses its writing
 steps (``_write``, ``_write_sample``, ``_write_sample_run``, ``_new_file_now``, ``maybe_flush``,
 ``_set_fault``) and its counters.
 """
 
 from __future__ import annotations
 
-from .cdr import serialize
-from .schemas import type_name_of
 from .writer_thread import NEW_FILE, WriterThread
+from ..cdr import serialize
+from ..schemas import type_name_of
 
 __all__ = ['WriteNow', 'WriteBehind']
 

@@ -1,18 +1,18 @@
 """
-Record packing: mcap.Writer.add_message for many messages at once.
+Record packing: McapWriter.add_message for many messages at once.
 
 The same Message records, chunk message index and statistics as ``add_message``, written with
 one struct pack per message (:meth:`RecordPacker.add`, 6.5 -> ~1.5 us per message) or, for the
 samples of the node's outputs, packed in C (``_ckernel.pack_records``, through
-:mod:`det_sim_ros.core.kernel`) a run of samples at a time (:meth:`RecordPacker.add_run`). The
-writer's private state is reached through :mod:`det_sim_ros.io.mcap_internals` only.
+:mod:`det_sim_ros.core.kernel`) a run of samples at a time (:meth:`RecordPacker.add_run`), into
+the :class:`~det_sim_ros.io.log.writer.McapWriter`'s open chunk.
 """
 
 from __future__ import annotations
 
-from . import mcap_internals
-from .mcap_format import MESSAGE_HEAD, MESSAGE_HEAD_LENGTH, OP_MESSAGE
-from ..core.kernel import pack_records
+from .format import MESSAGE_HEAD, MESSAGE_HEAD_LENGTH, OP_MESSAGE
+from .writer import McapWriter
+from ...core.kernel import pack_records
 
 __all__ = ['RecordPacker', 'sample_bytes', 'layout_segments']
 
@@ -67,38 +67,20 @@ def _cover(record, empty: bool, log_time: int) -> None:
 
 
 class RecordPacker:
-    """
-    Message records into one started mcap.Writer's chunks (see the module docstring).
+    """Message records into one started McapWriter's chunks (see the module docstring)."""
 
-    Build with :meth:`attach`, which returns None when mcap's internals are not there.
-    """
-
-    def __init__(self, internals: mcap_internals.WriterInternals):
-        self._mcap = internals
-        self.chunk_size = internals.chunk_size
+    def __init__(self, writer: McapWriter):
+        self._writer = writer
+        self.chunk_size = writer.chunk_size
         self._sample_offsets = {}   # (channel ids, payload sizes) -> _layout
-
-    @classmethod
-    def attach(cls, writer) -> 'RecordPacker | None':
-        """Return a packer for ``writer``, or None (then write through ``add_message``)."""
-        internals = mcap_internals.attach(writer)
-        return cls(internals) if internals is not None else None
 
     def chunk_used(self) -> int:
         """Bytes in the chunk in progress."""
-        return self._mcap.buffer().tell()
+        return len(self._writer.chunk.records)
 
     def room(self, sizes) -> int:
         """Return how many samples of payload ``sizes`` fit in the chunk in progress."""
         return (self.chunk_size - self.chunk_used()) // sample_bytes(sizes)
-
-    def _index(self, channel_id: int):
-        indices = self._mcap.chunk.message_indices
-        index = indices.get(channel_id)
-        if index is None:
-            index = indices[channel_id] = mcap_internals.MessageIndex(channel_id=channel_id,
-                                                                      records=[])
-        return index
 
     def add(self, items, log_time: int) -> None:
         """
@@ -106,20 +88,22 @@ class RecordPacker:
 
         A chunk ends after the message that makes it exceed the chunk size.
         """
-        stats, chunk = self._mcap.statistics, self._mcap.chunk
+        writer = self._writer
+        stats = writer.statistics
         _cover(stats, stats.message_count == 0, log_time)
         counts, pack = stats.channel_message_counts, MESSAGE_HEAD.pack
         for channel_id, sequence, data in items:
+            chunk = writer.chunk    # a new one when a chunk ends
             _cover(chunk, chunk.num_messages == 0, log_time)
-            buffer = self._mcap.buffer()    # replaced when a chunk ends
-            self._index(channel_id).records.append((log_time, buffer.tell()))
-            buffer.write(pack(OP_MESSAGE, MESSAGE_HEAD_LENGTH + len(data), channel_id,
-                              sequence, log_time, log_time))
-            buffer.write(data)
+            records = chunk.records
+            chunk.index(channel_id).records.append((log_time, len(records)))
+            records += pack(OP_MESSAGE, MESSAGE_HEAD_LENGTH + len(data), channel_id,
+                            sequence, log_time, log_time)
+            records += data
             counts[channel_id] += 1
             stats.message_count += 1
             chunk.num_messages += 1
-            self._mcap.finalize()
+            writer.end_chunk_if_full()
 
     def _layout(self, channel_ids: tuple, sizes: tuple) -> tuple:
         """
@@ -162,19 +146,20 @@ class RecordPacker:
         order, ``sizes`` its payload sizes), ``times`` their log times. The caller guarantees the
         run fits in the chunk, so no message ends it.
         """
-        stats, chunk = self._mcap.statistics, self._mcap.chunk
-        buffer = self._mcap.buffer()
-        base = buffer.tell()
+        writer = self._writer
+        stats, chunk = writer.statistics, writer.chunk
+        chunk_records = chunk.records
+        base = len(chunk_records)
         _cover(stats, stats.message_count == 0, times[0])
         _cover(stats, False, times[-1])
         _cover(chunk, chunk.num_messages == 0, times[0])
         _cover(chunk, False, times[-1])
-        buffer.write(records)
+        chunk_records += records
         offsets, step, width = self._layout(channel_ids, sizes)
         k, counts = len(times), stats.channel_message_counts
         for channel_id, offset in offsets:
             start = base + offset
-            entries = self._index(channel_id).records
+            entries = chunk.index(channel_id).records
             if k == 1:   # (add_sample, or a sensor's dropped sample inside a run)
                 entries.append((times[0], start))
             else:
@@ -182,7 +167,7 @@ class RecordPacker:
             counts[channel_id] += k
         stats.message_count += k * width
         chunk.num_messages += k * width
-        self._mcap.finalize()
+        writer.end_chunk_if_full()
 
     def pack_run(self, channel_ids, firsts, times, rows, sizes) -> int:
         """

@@ -39,24 +39,33 @@ and :attr:`Recorder.fault` says why.
 Reading (:class:`LogReader`) streams records in file order and stops quietly at the end of the
 readable data, so a file cut by a crash gives every message of every complete chunk.
 
-This module is the log's public face; the parts live in :mod:`~det_sim_ros.io.recorder` (with
-its collaborators :mod:`~det_sim_ros.io.log_rotation`, :mod:`~det_sim_ros.io.log_file`,
-:mod:`~det_sim_ros.io.record_packing`, :mod:`~det_sim_ros.io.flush_policy`,
-:mod:`~det_sim_ros.io.writer_thread`), :mod:`~det_sim_ros.io.log_reader`,
-:mod:`~det_sim_ros.io.schemas`, :mod:`~det_sim_ros.io.mcap_format` and
-:mod:`~det_sim_ros.io.cdr`.
+This package is the one place that reads and writes MCAP; its ``__init__`` is the public face.
+Its modules, by job:
+
+- :mod:`.recorder`: the run's order, counters and faults (:class:`Recorder`), with
+  :mod:`.rotation` (file names, splits, the bounded directory), :mod:`.flush_policy` (when to
+  flush), :mod:`.write_modes` and :mod:`.writer_thread` (writing now or from the writer thread);
+- :mod:`.file`: one file in the rosbag2 conventions, written by :mod:`.writer` (the MCAP
+  writer on mcap's public record classes, the bytes of ``mcap.writer.Writer``) and
+  :mod:`.packing` (Message records packed into its open chunk, runs of samples in C);
+- :mod:`.reader`: reading, finished or not, and :func:`recover`;
+- :mod:`.format`: the bytes the package scans itself, the chunk compressions (one map), the
+  provisional end and the torn-file check.
+
+The messages' CDR is :mod:`det_sim_ros.io.cdr`'s, their ``.msg`` schemas and QoS metadata
+:mod:`det_sim_ros.io.schemas`'.
 """
 
 from __future__ import annotations
 
-from .cdr import deserialize, message_class, serialize
-from .log_reader import log_files, LogMessage, LogReader, recover, recover_unfinished
-from .mcap_format import (END_METADATA_NAME, is_torn, LIBRARY, METADATA_NAME,
-                          SCENE_ATTACHMENT)
+from .format import (END_METADATA_NAME, file_kind, is_torn, LIBRARY, METADATA_NAME,
+                     SCENE_ATTACHMENT)
+from .reader import log_files, LogMessage, LogReader, recover, recover_unfinished
 from .recorder import Recorder
-from .schemas import DELIMITER, message_definition, qos_profiles_yaml, type_name_of
+from ..cdr import deserialize, message_class, serialize
+from ..schemas import DELIMITER, message_definition, qos_profiles_yaml, type_name_of
 
 __all__ = ['Recorder', 'LogReader', 'LogMessage', 'message_definition', 'qos_profiles_yaml',
            'type_name_of', 'serialize', 'deserialize', 'recover', 'recover_unfinished',
            'is_torn', 'log_files', 'LIBRARY', 'METADATA_NAME', 'END_METADATA_NAME',
-           'SCENE_ATTACHMENT', 'DELIMITER', 'message_class']
+           'SCENE_ATTACHMENT', 'DELIMITER', 'message_class', 'file_kind']

@@ -1,10 +1,10 @@
 """
-The run recorder (the format and its crash safety: :mod:`det_sim_ros.io.mcap_log`).
+The run recorder (the format and its crash safety: :mod:`det_sim_ros.io.log`).
 
 The :class:`Recorder` keeps the run's order (sequence numbers, non-decreasing log times), its
-counters and its fault, and hands the rest to collaborators: :class:`~.log_rotation.LogRotation`
-(file names, splits, the bounded directory), :class:`~.log_file.LogFile` (one MCAP file and its
-channels), :class:`~.record_packing.RecordPacker` (the records, packed in C for runs of
+counters and its fault, and hands the rest to collaborators: :class:`~.rotation.LogRotation`
+(file names, splits, the bounded directory), :class:`~.file.LogFile` (one MCAP file and its
+channels), :class:`~.packing.RecordPacker` (the records, packed in C for runs of
 samples), :class:`~.flush_policy.FlushPolicy` (when to flush) and, with ``background=True``,
 :class:`~.writer_thread.WriterThread` (the writer thread and its bounded queue), reached
 through the recording mode (:mod:`~.write_modes`).
@@ -19,22 +19,22 @@ import time
 from typing import Callable, Mapping, Sequence
 import weakref
 
-from .cdr import serialize
+from .file import file_info, LogFile, package_version, scene_text
 from .flush_policy import FlushPolicy
-from .log_file import file_info, LogFile, package_version, scene_text
-from .log_rotation import LogRotation
-from .record_packing import layout_segments
-from .schemas import type_name_of
+from .packing import layout_segments
+from .rotation import LogRotation
 from .write_modes import WriteBehind, WriteNow
+from ..cdr import serialize
+from ..schemas import type_name_of
 
 __all__ = ['Recorder']
 
-_logger = logging.getLogger('det_sim_ros.io.mcap_log')
+_logger = logging.getLogger('det_sim_ros.io.log')
 
 
 class Recorder:
     """
-    Record ROS messages of one run to MCAP (see :mod:`det_sim_ros.io.mcap_log`).
+    Record ROS messages of one run to MCAP (see :mod:`det_sim_ros.io.log`).
 
     No ROS graph or rclpy needed (messages are given as CDR bytes or serialized by
     :mod:`det_sim_ros.io.cdr`).
@@ -68,9 +68,9 @@ class Recorder:
         them in order every ``drain_period_s``. Counters and :attr:`fault` are updated by the
         thread; :meth:`close` writes everything queued before it finishes the file.
     :param max_queue: background mode: when this many records wait, the recording thread
-        writes the queue itself before it goes on (:mod:`det_sim_ros.io.writer_thread`).
-    :param packing: write messages through the compiled record packer where mcap's internals
-        allow it; False: through mcap's ``Writer.add_message`` (the same bytes).
+        writes the queue itself before it goes on (:mod:`det_sim_ros.io.log.writer_thread`).
+    :param packing: write messages through the compiled record packer; False: one by one,
+        each Message record written by mcap's record class (the same bytes, slower).
     """
 
     def __init__(self, path, scene=None, *, qos_by_topic: Mapping | None = None,
@@ -178,9 +178,7 @@ class Recorder:
             return
         # the file's own count: a SIGINT (a KeyboardInterrupt between any two bytecodes) after
         # a message is written but before it is counted must not leave the counters one short
-        held = file.message_count()
-        if held is not None:
-            self.messages = self._messages_before_file + held
+        self.messages = self._messages_before_file + file.message_count()
         file.finish(self.counters(strings=True))
         if self.paths:
             self._rotation.closed(self.paths[-1])
@@ -385,7 +383,7 @@ class Recorder:
         """
         Return the samples from items[i] that may go in one run, in segments of one layout.
 
-        See :func:`~.record_packing.layout_segments`; empty: the sample at i needs _write_sample.
+        See :func:`~.packing.layout_segments`; empty: the sample at i needs _write_sample.
         """
         file = self._file
         if (file is None or file.packer is None or self._rotation.file_start_t is None
