@@ -18,13 +18,14 @@ would still move it.
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import time
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from .intervals import uncertainty
+from .intervals import MAX_DIRECTION_SE, RCOND, uncertainty
 from .levels import fit_levels
 from .measurement import CalibrationError, Measurement, read_csv
 from .parameters import fit_parameters, from_z, to_z
@@ -48,6 +49,9 @@ FTOL = 1e-6
 # than this times the residual variance: the step moves the estimates by less than
 # sqrt(2 x 0.05) = 0.32 standard errors (in the direction they are best determined, less)
 POLISH_DECREASE = 0.05
+# Gauss-Newton steps at the scene's level after the space-mapping step before a local search
+# takes over (each is one batch of a run and one per parameter)
+POLISH_STEPS = 2
 
 
 @dataclasses.dataclass
@@ -330,7 +334,7 @@ def fit(logs, params: Sequence[str] | str, scene=None, *, mapping: Mapping | Non
             polish = _Pass(levels[1], problems[1], parallel, say)
             passes.append(polish)
             try:
-                best = _polish(polish, search, best.x, max_evaluations)
+                best = _polish(polish, search, best, max_evaluations)
                 return _result(polish, z0, best, outcomes, passes, samples, began)
             finally:
                 polish.close()
@@ -375,7 +379,7 @@ class _Pass:
             self.evaluator.close()
 
 
-def _polish(polish: _Pass, search: _Pass, z_coarse, max_evaluations: int):
+def _polish(polish: _Pass, search: _Pass, coarse, max_evaluations: int):
     """
     Return the scene level's optimum from the coarse level's one (a scipy OptimizeResult).
 
@@ -386,53 +390,87 @@ def _polish(polish: _Pass, search: _Pass, z_coarse, max_evaluations: int):
     is then about z_c - d (a space-mapping step: one expensive run instead of a search). A
     Gauss-Newton step with the scene level's own sensitivities at that point checks it: when
     the step would lower the cost by less than :data:`POLISH_DECREASE` x the residual variance
-    it is the answer; else a local search at the scene's level goes on from it.
+    it is the answer; else up to :data:`POLISH_STEPS` such steps go on while they lower the
+    cost, and then a local search at the scene's level.
     """
     from scipy.optimize import OptimizeResult
     problem, parameters = polish.problem, polish.problem.parameters
     lower = np.array([p.to_z(p.lower) for p in parameters])
     upper = np.array([p.to_z(p.upper) for p in parameters])
     polish.say(f'polishing at {polish.level.describe()}')
-    runs = polish.time_a_run(z_coarse, simulate=True)
-    z = np.array(z_coarse, dtype=float)
+    z = np.array(coarse.x, dtype=float)
+    runs = polish.time_a_run(z, simulate=True)
     coarse_runs = 0
     if runs is not None:
-        target = search.problem.matching(runs, search.problem.scene)
+        free = _determined(coarse, parameters)
+        coarse_scene = search.problem.scene_at(from_z(parameters, z))
+        target = search.problem.matching(runs, coarse_scene, [parameters[j] for j in free])
         evaluator = Evaluator(target, search.evaluator.kind, search.evaluator.workers)
         try:
             mapped = _local_search(_Objective(target, evaluator, lambda *args: None),
-                                   z, parameters, max_evaluations)
+                                   z[free], target.parameters, max_evaluations)
         finally:
             evaluator.close()
         coarse_runs = evaluator.calls
         polish.extra_runs += coarse_runs
-        z = np.clip(z + (z - mapped.x), lower, upper)
+        z[free] = np.clip(z[free] + (z[free] - mapped.x), lower[free], upper[free])
     f, jacobian = problem.linearize(z, polish.evaluator)
-    decrease, variance = _gauss_newton_decrease(f, jacobian)
-    polish.say(f"mapped to the scene's level: cost {0.5 * float(f @ f):.6g}, a Gauss-Newton step "
-               f'would lower it by {decrease:.3g} (residual variance {variance:.4g})')
-    if decrease <= POLISH_DECREASE * variance:
-        polish.done(f'a space-mapping step from the coarse optimum ({coarse_runs} of the runs at '
-                    'the coarse level), checked by a Gauss-Newton step')
-        message = (f"a Gauss-Newton step at the scene's level would lower the cost by "
-                   f'{decrease:.3g}, below {POLISH_DECREASE:g} x the residual variance')
-        return OptimizeResult(x=z, fun=f, jac=jacobian, cost=0.5 * float(f @ f), status=1,
-                              message=message, nfev=1)
+    for steps in range(POLISH_STEPS + 1):
+        step, decrease, variance = _gauss_newton(f, jacobian)
+        polish.say(f"at the scene's level: cost {0.5 * float(f @ f):.6g}, a Gauss-Newton step "
+                   f'would lower it by {decrease:.3g} (residual variance {variance:.4g})')
+        if decrease <= POLISH_DECREASE * variance:
+            polish.done(f'a space-mapping step from the coarse optimum ({coarse_runs} of the runs '
+                        f'at the coarse level) and {steps} Gauss-Newton step(s), checked by one')
+            message = (f"a Gauss-Newton step at the scene's level would lower the cost by "
+                       f'{decrease:.3g}, below {POLISH_DECREASE:g} x the residual variance')
+            return OptimizeResult(x=z, fun=f, jac=jacobian, cost=0.5 * float(f @ f), status=1,
+                                  message=message, nfev=steps + 1)
+        if steps == POLISH_STEPS:
+            break
+        trial = np.clip(z + step, lower, upper)
+        f_trial, jacobian_trial = problem.linearize(trial, polish.evaluator)
+        if f_trial @ f_trial >= f @ f:   # the linearisation does not hold: search from z
+            break
+        z, f, jacobian = trial, f_trial, jacobian_trial
     objective = _Objective(problem, polish.evaluator,
                            _reporter(parameters, polish.say, "scene's level"))
     objective.know(z, f, jacobian)
     result = _local_search(objective, z, parameters, max_evaluations)
     polish.done(f'a space-mapping step from the coarse optimum ({coarse_runs} of the runs at '
-                f'the coarse level), then a local search ({result.nfev} evaluations)')
+                f'the coarse level), Gauss-Newton steps, then a local search ({result.nfev} '
+                'evaluations)')
     return result
 
 
-def _gauss_newton_decrease(f, jacobian) -> tuple:
-    """Return (the cost decrease a Gauss-Newton step predicts, the residual variance)."""
-    step, *_ = np.linalg.lstsq(jacobian, -f, rcond=None)
-    predicted = jacobian @ step
+def _determined(coarse, parameters) -> list:
+    """
+    Return the indices of the parameters the coarse optimum determines (a finite interval).
+
+    One the log cannot identify moves the matching fit's optimum anywhere along its flat
+    direction; the polish keeps it at its coarse value.
+    """
+    stats = uncertainty(coarse.jac, coarse.fun, parameters, coarse.x)
+    return [j for j, e in enumerate(stats.estimates) if math.isfinite(e.se)]
+
+
+def _gauss_newton(f, jacobian) -> tuple:
+    """
+    Return (the Gauss-Newton step, the cost decrease it predicts, the residual variance).
+
+    Over the directions the log determines: a direction whose standard error exceeds
+    :data:`~.intervals.MAX_DIRECTION_SE` (the data cannot fix it within a factor e; the
+    intervals hold its parameters) may ask for a step far outside the bounds and the
+    linearisation, and is left out, as the intervals leave it out.
+    """
     dof = max(len(f) - jacobian.shape[1], 1)
-    return 0.5 * float(predicted @ predicted), float(f @ f) / dof
+    variance = float(f @ f) / dof
+    u, singular, vt = np.linalg.svd(jacobian, full_matrices=False)
+    top = singular[0] if singular.size and singular[0] > 0 else 1.0
+    kept = (singular > RCOND * top) & (singular * MAX_DIRECTION_SE > math.sqrt(variance))
+    projected = u[:, kept].T @ f
+    step = -vt[kept].T @ (projected / singular[kept])
+    return step, 0.5 * float(projected @ projected), variance
 
 
 def _runs_or_none(problem, z):

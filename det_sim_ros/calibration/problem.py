@@ -124,15 +124,17 @@ class Problem:
                 float(np.sqrt(np.mean((measured - runs[m][name][index]) ** 2)))
                 for m, name, index, measured, _ in self.blocks}
 
-    def matching(self, runs, scene) -> 'Problem':
+    def matching(self, runs, scene, parameters=None) -> 'Problem':
         """
         Return the problem of matching simulated runs (:meth:`simulate`) at another scene.
 
-        The same samples, weights and parameters, with ``runs`` in place of the measured values:
-        its optimum is the parameters at which ``scene`` behaves most like the runs.
+        The same samples and weights, with ``runs`` in place of the measured values, varying
+        ``parameters`` (default: all of this problem's; the others keep the scene's values): its
+        optimum is the parameters at which ``scene`` behaves most like the runs.
         """
         other = copy.copy(self)
         other.scene = scene
+        other.parameters = list(self.parameters if parameters is None else parameters)
         other.blocks = [(m, name, index, runs[m][name][index], weights)
                         for m, name, index, _, weights in self.blocks]
         return other
