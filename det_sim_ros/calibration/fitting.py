@@ -72,7 +72,8 @@ class PassOutcome:
 
     ``role``: 'coarse' (the search from several starts) or 'scene' (the scene's own level: the
     polish after a coarse pass, else the whole search); ``level``: fidelity, Ritz terms and
-    integrator tolerance (:meth:`~.levels.Level.describe`).
+    integrator tolerance (:meth:`~.levels.Level.describe`); ``values``: name -> value at the
+    pass's optimum.
     """
 
     role: str
@@ -81,6 +82,7 @@ class PassOutcome:
     simulate_calls: int
     wall_time: float
     parallel: str
+    values: dict
 
 
 @dataclasses.dataclass
@@ -328,7 +330,7 @@ def fit(logs, params: Sequence[str] | str, scene=None, *, mapping: Mapping | Non
         best, outcomes = _searches(problems[0], search.evaluator, z0, starts, candidates, seed,
                                    max_evaluations, say)
         search.done(f'{len(outcomes)} local search(es) from {max(candidates, starts)} '
-                    'candidate starts')
+                    'candidate starts', best.x)
         passes = [search]
         if len(levels) > 1:
             polish = _Pass(levels[1], problems[1], parallel, say)
@@ -351,6 +353,7 @@ class _Pass:
         self.evaluator = None
         self.extra_runs = 0   # runs outside the evaluator: the timed one
         self.work = ''
+        self.z = None
         self._began = time.monotonic()
         self._wall = None
 
@@ -362,16 +365,20 @@ class _Pass:
         self.extra_runs += 1
         return value
 
-    def done(self, work: str) -> None:
-        """Note what the pass did (its wall time runs on until :meth:`outcome`)."""
+    def done(self, work: str, z=None) -> None:
+        """Note what the pass did and where it ended (z); stop its clock."""
         self.work = work
+        self.z = self.z if z is None else np.array(z, dtype=float)
         self._wall = time.monotonic() - self._began
 
     def outcome(self) -> PassOutcome:
         """Return the pass's :class:`PassOutcome`."""
         wall = self._wall if self._wall is not None else time.monotonic() - self._began
+        parameters = self.problem.parameters
+        values = {p.name: v for p, v in zip(parameters, from_z(parameters, self.z))}
         return PassOutcome(self.level.role, self.level.describe(), self.work,
-                           self.evaluator.calls + self.extra_runs, wall, self.evaluator.kind)
+                           self.evaluator.calls + self.extra_runs, wall, self.evaluator.kind,
+                           values)
 
     def close(self) -> None:
         """Stop the evaluator's workers."""
@@ -421,7 +428,8 @@ def _polish(polish: _Pass, search: _Pass, coarse, max_evaluations: int):
                    f'would lower it by {decrease:.3g} (residual variance {variance:.4g})')
         if decrease <= POLISH_DECREASE * variance:
             polish.done(f'a space-mapping step from the coarse optimum ({coarse_runs} of the runs '
-                        f'at the coarse level) and {steps} Gauss-Newton step(s), checked by one')
+                        f'at the coarse level) and {steps} Gauss-Newton step(s), checked by one',
+                        z)
             message = (f"a Gauss-Newton step at the scene's level would lower the cost by "
                        f'{decrease:.3g}, below {POLISH_DECREASE:g} x the residual variance')
             return OptimizeResult(x=z, fun=f, jac=jacobian, cost=0.5 * float(f @ f), status=1,
@@ -439,7 +447,7 @@ def _polish(polish: _Pass, search: _Pass, coarse, max_evaluations: int):
     result = _local_search(objective, z, parameters, max_evaluations)
     polish.done(f'a space-mapping step from the coarse optimum ({coarse_runs} of the runs at '
                 f'the coarse level), Gauss-Newton steps, then a local search ({result.nfev} '
-                'evaluations)')
+                'evaluations)', result.x)
     return result
 
 
