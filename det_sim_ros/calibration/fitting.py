@@ -284,7 +284,7 @@ def fit(logs, params: Sequence[str] | str, scene=None, *, mapping: Mapping | Non
         start: Mapping[str, float] | None = None, bounds: Mapping[str, tuple] | None = None,
         sigma: Mapping[str, float] | None = None, starts: int = 3, candidates: int = 6,
         max_evaluations: int = 60, parallel: str = 'auto', seed: int = 0,
-        progress: Callable[[str], None] | None = None) -> FitResult:
+        coarse: bool = True, progress: Callable[[str], None] | None = None) -> FitResult:
     """
     Fit scene parameters to measured logs and return a :class:`FitResult`.
 
@@ -302,6 +302,8 @@ def fit(logs, params: Sequence[str] | str, scene=None, *, mapping: Mapping | Non
     :param max_evaluations: residual evaluations per local search before it gives up.
     :param parallel: 'auto', 'threads', 'processes' or 'serial' (the sensitivities' runs;
         'auto': threads when a run takes 0.5 s or more, see :func:`~.problem.make_evaluator`).
+    :param coarse: search at the coarse level and polish at the scene's (:mod:`.levels`); False:
+        search at the scene's level alone.
     :param progress: called with a line of text per iteration.
     :raises CalibrationError: bad input (one line).
     """
@@ -320,7 +322,7 @@ def fit(logs, params: Sequence[str] | str, scene=None, *, mapping: Mapping | Non
     if samples <= len(parameters):
         raise CalibrationError(f'{samples} measured sample(s) for {len(parameters)} '
                                'parameter(s): a fit needs more samples than parameters')
-    levels = fit_levels(base)
+    levels = fit_levels(base) if coarse else fit_levels(base)[-1:]
     problems = [Problem(level.scene, measurements, parameters, sigma) for level in levels]
     z0 = to_z(parameters, [p.start for p in parameters])
     search = _Pass(levels[0], problems[0], parallel, say)
