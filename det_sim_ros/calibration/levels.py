@@ -2,11 +2,11 @@
 The model levels a fit runs at: a cheap coarse level that searches, the scene's own that polishes.
 
 A run of a 10 s log at the default level (exact kinematics, five Ritz terms, integrator
-tolerance 1e-6) takes about 1 s, and a search from several starts takes 150-250 runs. The same
-scene with one Ritz term and a tolerance of 1e-3 runs about 60x faster, and on the step-and-sine
-log its optimum lies within about 1 % of the default level's (its model error: the parameters
+tolerance 1e-6) takes about 1 s, and a search from several starts takes 150-400 runs. The same
+scene with one Ritz term and a tolerance of 1e-3 runs 35-45x faster, and on the step-and-sine
+log its optimum lies within a few percent of the default level's (its model error: the parameters
 absorb the beam's missing terms). So :func:`~.fitting.fit` searches at that coarse level and
-only corrects its optimum at the scene's level, in a few runs (docs/calibration.md, Speed).
+only corrects its optimum at the scene's level, in a few runs (docs/calibration.md, Two levels).
 
 The coarse level keeps the scene's fidelity, structure, physics and stepper; it drops to
 :data:`COARSE_N_RITZ` terms and loosens the tolerance to :data:`COARSE_TOLERANCE` (an explicit
@@ -21,8 +21,8 @@ import dataclasses
 
 __all__ = ['Level', 'fit_levels', 'COARSE_N_RITZ', 'COARSE_TOLERANCE']
 
-# Ritz terms per beam of the coarse level: the cheapest; on the 10 s step-and-sine log of the
-# default scene its optimum of m, eta_b, eps_r is within 1.1 % of the truth (bench/fit_speed.py)
+# Ritz terms per beam of the coarse level: the cheapest; on step-and-sine logs of the default
+# scene its optimum is off the truth by its model error: m 0.9 %, eps_r 1.0-1.5 %, eta_b 0.4-2.5 %
 COARSE_N_RITZ = 1
 # integrator tolerance of the coarse level (relative to the stroke): one step per 1 ms period
 # there; its finite-difference sensitivities agree with those at 1e-6 within 0.5 %
