@@ -410,8 +410,8 @@ def _polish(polish: _Pass, search: _Pass, coarse, max_evaluations: int):
     z = np.array(coarse.x, dtype=float)
     runs = polish.time_a_run(z, simulate=True)
     coarse_runs = 0
-    if runs is not None:
-        free = _determined(coarse, parameters)
+    free = _determined(coarse, parameters)
+    if runs is not None and free:
         coarse_scene = search.problem.scene_at(from_z(parameters, z))
         target = search.problem.matching(runs, coarse_scene, [parameters[j] for j in free])
         evaluator = Evaluator(target, search.evaluator.kind, search.evaluator.workers)
