@@ -82,3 +82,26 @@ def test_the_report_says_the_level_and_tolerance_of_each_pass(truth, fitted):
     for p, level in zip(fitted.passes, fit_levels(truth)):
         assert p.level == level.describe() and f'{p.role}: {p.level}' in text
     assert fitted.simulate_calls == sum(p.simulate_calls for p in fitted.passes)
+
+
+def test_a_polish_the_check_does_not_accept_ends_in_a_local_search_at_the_same_optimum(
+        truth, fitted, monkeypatch):
+    """
+    Check the polish's last resort: a local search at the scene's level.
+
+    With no Gauss-Newton step small enough to accept (POLISH_DECREASE 0), the polish takes its
+    steps and then searches; it must reach the optimum the check accepted: within half a
+    standard error (the check accepts a point whose step would move it by at most 0.32).
+    """
+    from det_sim_ros.calibration import fitting
+    monkeypatch.setattr(fitting, 'POLISH_DECREASE', 0.0)
+    log = fitted.traces[0]
+    measurement = synthetic_measurement(truth, step_and_sine(1.5, truth.dt), noise=0.01, seed=2)
+    assert (measurement.channels['dy'].values == log['channels']['dy'][1]).all()
+    start = {name: getattr(truth.physics, name) * (2.0 if i % 2 == 0 else 0.5)
+             for i, name in enumerate(NAMES)}
+    searched = det_sim_ros.fit([measurement], NAMES, scene=truth, start=start, starts=1,
+                               candidates=1, parallel='threads')
+    assert 'then a local search' in searched.passes[1].work and searched.converged
+    for estimate in fitted.estimates:
+        assert abs(searched.values[estimate.name] - estimate.value) <= 0.5 * estimate.se
