@@ -10,8 +10,10 @@ parameter counts as well identified in a seed when it is not flagged and its rel
 error is below 1 % (Rp, the leakage resistance, has a time constant of ~100 s: a 10 s log cannot
 identify it, and it must be flagged).
 
-Run: ``flock /work/bench.lock python bench/fit_accuracy.py --seeds 0:5`` (each fit takes
-~10-30 s on a shared 2-core host; split the seeds over runs of <= 3 min).
+The fit runs as ``det_sim fit`` does: the search at the coarse level, the polish at the default
+scene's (docs/calibration.md, Two levels). Run: ``flock /work/bench.lock python
+bench/fit_accuracy.py --seeds 0:5`` (each fit of four parameters takes ~20-60 s on a shared
+2-core host; split the seeds over runs of <= 3 min).
 """
 
 import argparse

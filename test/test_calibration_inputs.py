@@ -72,16 +72,31 @@ def test_sim_node_log_fits_and_the_scene_file_loads_as_it_is(tmp_path, truth):
     assert load_scene(str(out), {'scene.initial_state': 'rest'}).physics.Y == fitted_y(out)
 
 
-def test_csv_fits(tmp_path, synthetic):
-    path = tmp_path / 'rig.csv'
+def _write_csv(path, synthetic):
     dy = synthetic.channels['dy'].values[:, 0]
     volts = np.append(synthetic.volts[:, 0], synthetic.volts[-1, 0])
     rows = ['t (s),v (V),dy (m)'] + [f'{k * synthetic.dt:.6f},{float(v)!r},{float(d)!r}'
                                      for k, (v, d) in enumerate(zip(volts, dy))]
     path.write_text('\n'.join(rows) + '\n')
+
+
+def test_csv_fits(tmp_path, synthetic):
+    path = tmp_path / 'rig.csv'
+    _write_csv(path, synthetic)
     out, stdout = _fit(tmp_path, path, path, '--scene', 'default')   # two logs fit together
     assert fitted_y(out) == pytest.approx(Y_TRUE, rel=0.01)
     assert '2 log(s), ' in stdout
+    default = load_scene('default')
+    assert '\n  coarse: exact, n_ritz 1, ' in stdout
+    assert f'\n  scene: exact, n_ritz {default.n_ritz}, ' in stdout
+
+
+def test_no_coarse_searches_at_the_scene_level_alone(tmp_path, synthetic):
+    path = tmp_path / 'rig.csv'
+    _write_csv(path, synthetic)
+    out, stdout = _fit(tmp_path, path, '--scene', 'default', '--no-coarse')
+    assert fitted_y(out) == pytest.approx(Y_TRUE, rel=0.01)
+    assert '\n  scene: exact, ' in stdout and '\n  coarse: ' not in stdout
 
 
 def _write_rig_log(path, synthetic):

@@ -7,23 +7,31 @@ sensitivities evaluated in parallel. The beam is bistable: parameters far off ca
 the other branch, where the residual is large and the local search may stall. So the fit first
 scores a few candidate starts around the given one (one run each), runs the local search from
 the given start and the best-scoring others, and keeps the lowest cost.
+
+That search runs at a cheap coarse level of the scene (:mod:`.levels`); the scene's own level
+then corrects the coarse optimum (:func:`_polish`): one run there, a coarse fit to that run
+(which tells how far the coarse level's optimum sits from the scene's), and a Gauss-Newton step
+with the scene's sensitivities that checks the result, or a local search from it when the step
+would still move it.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import time
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from .intervals import uncertainty
+from .intervals import MAX_DIRECTION_SE, RCOND, uncertainty
+from .levels import fit_levels
 from .measurement import CalibrationError, Measurement, read_csv
 from .parameters import fit_parameters, from_z, to_z
-from .problem import make_evaluator, Problem
+from .problem import Evaluator, make_evaluator, Problem
 
-__all__ = ['fit', 'FitResult', 'StartOutcome', 'load_measurements']
+__all__ = ['fit', 'FitResult', 'StartOutcome', 'PassOutcome', 'load_measurements']
 
 # candidate starts: the given one and others spread by up to this factor (log scale) or
 # fraction (linear scale) around it
@@ -37,6 +45,13 @@ SMOOTHING = 0.05
 # relative decrease of the cost below which a search stops (cost ~ N/2 at the noise level: a
 # change far below one unit of chi^2)
 FTOL = 1e-6
+# the polish stops when a Gauss-Newton step at the scene's level would lower the cost by less
+# than this times the residual variance: the step moves the estimates by less than
+# sqrt(2 x 0.05) = 0.32 standard errors (in the direction they are best determined, less)
+POLISH_DECREASE = 0.05
+# Gauss-Newton steps at the scene's level after the space-mapping step before a local search
+# takes over (each is one batch of a run and one per parameter)
+POLISH_STEPS = 2
 
 
 @dataclasses.dataclass
@@ -48,6 +63,26 @@ class StartOutcome:
     evaluations: int
     status: int
     message: str
+
+
+@dataclasses.dataclass
+class PassOutcome:
+    """
+    One pass of a fit at one model level: its role, level, what it did and what it cost.
+
+    ``role``: 'coarse' (the search from several starts) or 'scene' (the scene's own level: the
+    polish after a coarse pass, else the whole search); ``level``: fidelity, Ritz terms and
+    integrator tolerance (:meth:`~.levels.Level.describe`); ``values``: name -> value at the
+    pass's optimum.
+    """
+
+    role: str
+    level: str
+    work: str
+    simulate_calls: int
+    wall_time: float
+    parallel: str
+    values: dict
 
 
 @dataclasses.dataclass
@@ -79,6 +114,7 @@ class FitResult:
     samples: int
     traces: list
     parallel: str = 'serial'
+    passes: list = dataclasses.field(default_factory=list)
 
     @property
     def values(self) -> dict:
@@ -141,10 +177,17 @@ class _Objective:
         self.problem, self.evaluator, self.report = problem, evaluator, report
         self.window = window
         self._last = (None, None)
+        self._known = (None, None, None)
         self.iterations = 0
 
+    def know(self, z, f, jacobian) -> None:
+        """Keep a residual and Jacobian already evaluated at z (the search starts there)."""
+        self._known = (np.array(z), f, jacobian)
+
     def residual(self, z) -> np.ndarray:
-        f = self.evaluator.evaluate([np.array(z)], self.window)[0]
+        point, f, _ = self._known
+        if point is None or not np.array_equal(point, z):
+            f = self.evaluator.evaluate([np.array(z)], self.window)[0]
         self._last = (np.array(z), f)
         return f
 
@@ -154,6 +197,9 @@ class _Objective:
             f0 = self.residual(z)
         self.iterations += 1
         self.report(self.iterations, z, 0.5 * float(f0 @ f0))
+        known, _, jacobian = self._known
+        if known is not None and np.array_equal(known, z):
+            return jacobian
         return self.problem.jacobian(np.array(z), f0, self.evaluator, window=self.window)
 
 
@@ -222,14 +268,6 @@ def _reporter(parameters, say, label: str):
     return report
 
 
-def _runs(problem, z):
-    from ..physics.model import ModelDomainError
-    try:
-        return problem.simulate(z)
-    except ModelDomainError:
-        return None
-
-
 def _traces(problem, before, after) -> list:
     traces = []
     for m, measurement in enumerate(problem.measurements):
@@ -246,7 +284,7 @@ def fit(logs, params: Sequence[str] | str, scene=None, *, mapping: Mapping | Non
         start: Mapping[str, float] | None = None, bounds: Mapping[str, tuple] | None = None,
         sigma: Mapping[str, float] | None = None, starts: int = 3, candidates: int = 6,
         max_evaluations: int = 60, parallel: str = 'auto', seed: int = 0,
-        progress: Callable[[str], None] | None = None) -> FitResult:
+        coarse: bool = True, progress: Callable[[str], None] | None = None) -> FitResult:
     """
     Fit scene parameters to measured logs and return a :class:`FitResult`.
 
@@ -264,6 +302,8 @@ def fit(logs, params: Sequence[str] | str, scene=None, *, mapping: Mapping | Non
     :param max_evaluations: residual evaluations per local search before it gives up.
     :param parallel: 'auto', 'threads', 'processes' or 'serial' (the sensitivities' runs;
         'auto': threads when a run takes 0.5 s or more, see :func:`~.problem.make_evaluator`).
+    :param coarse: search at the coarse level and polish at the scene's (:mod:`.levels`); False:
+        search at the scene's level alone.
     :param progress: called with a line of text per iteration.
     :raises CalibrationError: bad input (one line).
     """
@@ -282,30 +322,190 @@ def fit(logs, params: Sequence[str] | str, scene=None, *, mapping: Mapping | Non
     if samples <= len(parameters):
         raise CalibrationError(f'{samples} measured sample(s) for {len(parameters)} '
                                'parameter(s): a fit needs more samples than parameters')
-    problem = Problem(base, measurements, parameters, sigma)
+    levels = fit_levels(base) if coarse else fit_levels(base)[-1:]
+    problems = [Problem(level.scene, measurements, parameters, sigma) for level in levels]
     z0 = to_z(parameters, [p.start for p in parameters])
-    timed = time.monotonic()
-    problem.residual(z0)   # the cost of a run decides whether threads pay
-    evaluator = make_evaluator(problem, parallel, time.monotonic() - timed)
+    search = _Pass(levels[0], problems[0], parallel, say)
+    search.time_a_run(z0)
     try:
-        best, outcomes = _searches(problem, evaluator, z0, starts, candidates, seed,
+        say(f'searching at {search.level.describe()}')
+        best, outcomes = _searches(problems[0], search.evaluator, z0, starts, candidates, seed,
                                    max_evaluations, say)
+        search.done(f'{len(outcomes)} local search(es) from {max(candidates, starts)} '
+                    'candidate starts', best.x)
+        passes = [search]
+        if len(levels) > 1:
+            polish = _Pass(levels[1], problems[1], parallel, say)
+            passes.append(polish)
+            try:
+                best = _polish(polish, search, best, max_evaluations)
+                return _result(polish, z0, best, outcomes, passes, samples, began)
+            finally:
+                polish.close()
+        return _result(search, z0, best, outcomes, passes, samples, began)
     finally:
-        evaluator.close()
-    return _result(problem, z0, best, outcomes, evaluator, samples, time.monotonic() - began)
+        search.close()
 
 
-def _result(problem, z0, best, outcomes, evaluator, samples: int, wall: float) -> FitResult:
+class _Pass:
+    """A fit's work at one level: its problem, its evaluator (picked by a run's cost), a tally."""
+
+    def __init__(self, level, problem, parallel: str, say):
+        self.level, self.problem, self.parallel, self.say = level, problem, parallel, say
+        self.evaluator = None
+        self.extra_runs = 0   # runs outside the evaluator: the timed one
+        self.work = ''
+        self.z = None
+        self._began = time.monotonic()
+        self._wall = None
+
+    def time_a_run(self, z, simulate: bool = False):
+        """Run at z once and pick the evaluator by its cost; return the runs or the residual."""
+        timed = time.monotonic()
+        value = _runs_or_none(self.problem, z) if simulate else self.problem.residual(z)
+        self.evaluator = make_evaluator(self.problem, self.parallel, time.monotonic() - timed)
+        self.extra_runs += 1
+        return value
+
+    def done(self, work: str, z=None) -> None:
+        """Note what the pass did and where it ended (z); stop its clock."""
+        self.work = work
+        self.z = self.z if z is None else np.array(z, dtype=float)
+        self._wall = time.monotonic() - self._began
+
+    def outcome(self) -> PassOutcome:
+        """Return the pass's :class:`PassOutcome`."""
+        wall = self._wall if self._wall is not None else time.monotonic() - self._began
+        parameters = self.problem.parameters
+        values = {p.name: v for p, v in zip(parameters, from_z(parameters, self.z))}
+        return PassOutcome(self.level.role, self.level.describe(), self.work,
+                           self.evaluator.calls + self.extra_runs, wall, self.evaluator.kind,
+                           values)
+
+    def close(self) -> None:
+        """Stop the evaluator's workers."""
+        if self.evaluator is not None:
+            self.evaluator.close()
+
+
+def _polish(polish: _Pass, search: _Pass, coarse, max_evaluations: int):
+    """
+    Return the scene level's optimum from the coarse level's one (a scipy OptimizeResult).
+
+    The parameters that make the coarse level behave like the scene's level at z are about
+    z + d, with an offset d that hardly changes over the small distance between the two
+    levels' optima (the coarse level's model error, absorbed by the parameters). One run at the
+    scene's level at the coarse optimum z_c and a coarse fit to it give d; the scene's optimum
+    is then about z_c - d (a space-mapping step: one expensive run instead of a search). A
+    Gauss-Newton step with the scene level's own sensitivities at that point checks it: when
+    the step would lower the cost by less than :data:`POLISH_DECREASE` x the residual variance
+    it is the answer; else up to :data:`POLISH_STEPS` such steps go on while they lower the
+    cost, and then a local search at the scene's level.
+    """
+    from scipy.optimize import OptimizeResult
+    problem, parameters = polish.problem, polish.problem.parameters
+    lower = np.array([p.to_z(p.lower) for p in parameters])
+    upper = np.array([p.to_z(p.upper) for p in parameters])
+    polish.say(f'polishing at {polish.level.describe()}')
+    z = np.array(coarse.x, dtype=float)
+    runs = polish.time_a_run(z, simulate=True)
+    coarse_runs = 0
+    free = _determined(coarse, parameters)
+    if runs is not None and free:
+        coarse_scene = search.problem.scene_at(from_z(parameters, z))
+        target = search.problem.matching(runs, coarse_scene, [parameters[j] for j in free])
+        evaluator = Evaluator(target, search.evaluator.kind, search.evaluator.workers)
+        try:
+            mapped = _local_search(_Objective(target, evaluator, lambda *args: None),
+                                   z[free], target.parameters, max_evaluations)
+        finally:
+            evaluator.close()
+        coarse_runs = evaluator.calls
+        polish.extra_runs += coarse_runs
+        z[free] = np.clip(z[free] + (z[free] - mapped.x), lower[free], upper[free])
+    f, jacobian = problem.linearize(z, polish.evaluator)
+    for steps in range(POLISH_STEPS + 1):
+        step, decrease, variance = _gauss_newton(f, jacobian)
+        polish.say(f"at the scene's level: cost {0.5 * float(f @ f):.6g}, a Gauss-Newton step "
+                   f'would lower it by {decrease:.3g} (residual variance {variance:.4g})')
+        if decrease <= POLISH_DECREASE * variance:
+            polish.done(f'a space-mapping step from the coarse optimum ({coarse_runs} of the runs '
+                        f'at the coarse level) and {steps} Gauss-Newton step(s), checked by one',
+                        z)
+            message = (f"a Gauss-Newton step at the scene's level would lower the cost by "
+                       f'{decrease:.3g}, below {POLISH_DECREASE:g} x the residual variance')
+            return OptimizeResult(x=z, fun=f, jac=jacobian, cost=0.5 * float(f @ f), status=1,
+                                  message=message, nfev=steps + 1)
+        if steps == POLISH_STEPS:
+            break
+        trial = np.clip(z + step, lower, upper)
+        f_trial, jacobian_trial = problem.linearize(trial, polish.evaluator)
+        if f_trial @ f_trial >= f @ f:   # the linearisation does not hold: search from z
+            break
+        z, f, jacobian = trial, f_trial, jacobian_trial
+    objective = _Objective(problem, polish.evaluator,
+                           _reporter(parameters, polish.say, "scene's level"))
+    objective.know(z, f, jacobian)
+    result = _local_search(objective, z, parameters, max_evaluations)
+    polish.done(f'a space-mapping step from the coarse optimum ({coarse_runs} of the runs at '
+                f'the coarse level), Gauss-Newton steps, then a local search ({result.nfev} '
+                'evaluations)', result.x)
+    return result
+
+
+def _determined(coarse, parameters) -> list:
+    """
+    Return the indices of the parameters the coarse optimum determines (a finite interval).
+
+    One the log cannot identify moves the matching fit's optimum anywhere along its flat
+    direction; the polish keeps it at its coarse value.
+    """
+    stats = uncertainty(coarse.jac, coarse.fun, parameters, coarse.x)
+    return [j for j, e in enumerate(stats.estimates) if math.isfinite(e.se)]
+
+
+def _gauss_newton(f, jacobian) -> tuple:
+    """
+    Return (the Gauss-Newton step, the cost decrease it predicts, the residual variance).
+
+    Over the directions the log determines: a direction whose standard error exceeds
+    :data:`~.intervals.MAX_DIRECTION_SE` (the data cannot fix it within a factor e; the
+    intervals hold its parameters) may ask for a step far outside the bounds and the
+    linearisation, and is left out, as the intervals leave it out.
+    """
+    dof = max(len(f) - jacobian.shape[1], 1)
+    variance = float(f @ f) / dof
+    u, singular, vt = np.linalg.svd(jacobian, full_matrices=False)
+    top = singular[0] if singular.size and singular[0] > 0 else 1.0
+    kept = (singular > RCOND * top) & (singular * MAX_DIRECTION_SE > math.sqrt(variance))
+    projected = u[:, kept].T @ f
+    step = -vt[kept].T @ (projected / singular[kept])
+    return step, 0.5 * float(projected @ projected), variance
+
+
+def _runs_or_none(problem, z):
+    from ..physics.model import ModelDomainError
+    try:
+        return problem.simulate(z)
+    except ModelDomainError:
+        return None
+
+
+def _result(last: _Pass, z0, best, outcomes, passes, samples: int, began: float) -> FitResult:
+    """Return the FitResult: intervals at the optimum, runs at the start and at the optimum."""
+    problem = last.problem
     parameters = problem.parameters
     stats = uncertainty(best.jac, best.fun, parameters, best.x)
     z_fit = [p.to_z(e.value) for p, e in zip(parameters, stats.estimates)]
-    before, after = _runs(problem, z0), _runs(problem, z_fit)
+    before, after = last.evaluator.runs([z0, z_fit])
     nan = {key: float('nan') for key in ((problem.measurements[m].source, name)
                                          for m, name, *_ in problem.blocks)}
     noise = {(problem.measurements[m].source, name):
              problem.measurements[m].channels[name].sigma for m, name, *_ in problem.blocks}
     converged = best.status > 0
     message = ('converged: ' if converged else 'did not converge: ') + str(best.message)
+    last.done(last.work)   # its wall time includes the runs at the start and the optimum
+    outcomes_of_passes = [p.outcome() for p in passes]
     return FitResult(
         scene=problem.scene_at([e.value for e in stats.estimates]), start_scene=problem.scene,
         parameters=parameters, estimates=stats.estimates, correlation=stats.correlation,
@@ -313,5 +513,7 @@ def _result(problem, z0, best, outcomes, evaluator, samples: int, wall: float) -
         dof=stats.dof, rms_before=nan if before is None else problem.rms(before),
         rms_after=nan if after is None else problem.rms(after), noise=noise,
         converged=converged, message=message, starts=outcomes,
-        simulate_calls=evaluator.calls + 3, wall_time=wall, samples=samples,
-        traces=_traces(problem, before, after), parallel=evaluator.kind)
+        simulate_calls=sum(p.simulate_calls for p in outcomes_of_passes),
+        wall_time=time.monotonic() - began,
+        samples=samples, traces=_traces(problem, before, after), parallel=last.evaluator.kind,
+        passes=outcomes_of_passes)

@@ -12,6 +12,7 @@ serially, on threads (the compiled run releases the GIL) or in processes.
 from __future__ import annotations
 
 import concurrent.futures
+import copy
 import os
 
 import numpy as np
@@ -123,8 +124,35 @@ class Problem:
                 float(np.sqrt(np.mean((measured - runs[m][name][index]) ** 2)))
                 for m, name, index, measured, _ in self.blocks}
 
+    def matching(self, runs, scene, parameters=None) -> 'Problem':
+        """
+        Return the problem of matching simulated runs (:meth:`simulate`) at another scene.
+
+        The same samples and weights, with ``runs`` in place of the measured values, varying
+        ``parameters`` (default: all of this problem's; the others keep the scene's values): its
+        optimum is the parameters at which ``scene`` behaves most like the runs.
+        """
+        other = copy.copy(self)
+        other.scene = scene
+        other.parameters = list(self.parameters if parameters is None else parameters)
+        other.blocks = [(m, name, index, runs[m][name][index], weights)
+                        for m, name, index, _, weights in self.blocks]
+        return other
+
     def jacobian(self, z, f0, evaluator, step: float = FD_STEP, window: int = 1) -> np.ndarray:
         """Return the forward-difference Jacobian of :meth:`residual` (backward at a bound)."""
+        points, steps = self._shifted(z, step)
+        columns = evaluator.evaluate(points, window)
+        return np.column_stack([(f - f0) / h for f, h in zip(columns, steps)])
+
+    def linearize(self, z, evaluator, step: float = FD_STEP, window: int = 1) -> tuple:
+        """Return (:meth:`residual`, :meth:`jacobian`) at z, their runs evaluated as one batch."""
+        points, steps = self._shifted(z, step)
+        f0, *columns = evaluator.evaluate([np.array(z, dtype=float), *points], window)
+        return f0, np.column_stack([(f - f0) / h for f, h in zip(columns, steps)])
+
+    def _shifted(self, z, step: float) -> tuple:
+        """Return the points z + h e_j and the steps h (backward where forward is outside)."""
         upper = [p.to_z(p.upper) for p in self.parameters]
         points, steps = [], []
         for j in range(len(z)):
@@ -133,8 +161,7 @@ class Problem:
             point[j] += h
             points.append(point)
             steps.append(h)
-        columns = evaluator.evaluate(points, window)
-        return np.column_stack([(f - f0) / h for f, h in zip(columns, steps)])
+        return points, steps
 
 
 class Evaluator:
@@ -160,6 +187,16 @@ class Evaluator:
             return [self.problem.residual(z, window) for z in points]
         run = _residual_in_worker if self.kind == 'processes' else self.problem.residual
         return list(self._pool.map(run, points, [window] * len(points)))
+
+    def runs(self, points) -> list:
+        """Return :meth:`Problem.simulate` at each point (None where the run left the domain)."""
+        points = list(points)
+        self.calls += len(points)
+        if self._pool is None or len(points) == 1:
+            return [_runs_or_none(self.problem, z) for z in points]
+        if self.kind == 'processes':
+            return list(self._pool.map(_runs_in_worker, points))
+        return list(self._pool.map(_runs_or_none, [self.problem] * len(points), points))
 
     def close(self) -> None:
         """Stop the workers."""
@@ -194,6 +231,18 @@ def _install(problem) -> None:
 
 def _residual_in_worker(z, window) -> np.ndarray:
     return _WORKER_PROBLEM[0].residual(z, window)
+
+
+def _runs_in_worker(z):
+    return _runs_or_none(_WORKER_PROBLEM[0], z)
+
+
+def _runs_or_none(problem, z):
+    from ..physics.model import ModelDomainError
+    try:
+        return problem.simulate(z)
+    except ModelDomainError:
+        return None
 
 
 def _smoothed(values: np.ndarray, window: int) -> np.ndarray:

@@ -75,6 +75,14 @@ def _warnings(result) -> list:
     return lines
 
 
+def _pass_rows(result) -> list:
+    lines = ['model level of each pass (fidelity, Ritz terms, integrator tolerance):']
+    for p in result.passes:
+        lines.append(f'  {p.role}: {p.level}: {p.work}; {p.simulate_calls} simulate() calls in '
+                     f'{p.wall_time:.1f} s ({p.parallel})')
+    return lines if result.passes else []
+
+
 def report_text(result) -> str:
     """Return the report: residuals before and after, estimates, correlations, warnings."""
     status = 'converged' if result.converged else 'DID NOT CONVERGE'
@@ -88,8 +96,8 @@ def report_text(result) -> str:
     for n, s in enumerate(result.starts, start=1):
         values = ', '.join(f'{v:.4g}' for v in s.start)
         starts.append(f'  {n}: ({values}) -> {s.cost:.6g} after {s.evaluations} evaluations')
-    blocks = [head, _channel_rows(result), _parameter_rows(result), _correlation_rows(result),
-              starts, _warnings(result)]
+    blocks = [head, _pass_rows(result), _channel_rows(result), _parameter_rows(result),
+              _correlation_rows(result), starts, _warnings(result)]
     return '\n\n'.join('\n'.join(block) for block in blocks if block) + '\n'
 
 

@@ -64,6 +64,9 @@ def add_arguments(parser) -> None:
                         choices=('auto', 'threads', 'processes', 'serial'),
                         help='how the sensitivity runs share the cores (default: auto = threads '
                              'when one run takes 0.5 s or more, else serial)')
+    parser.add_argument('--no-coarse', action='store_true',
+                        help="search at the scene's own level alone, not at the coarse level "
+                             'first (slower: docs/calibration.md, Two levels)')
     parser.add_argument('--no-plots', action='store_true', help='write no PNG')
     parser.add_argument('--quiet', action='store_true', help='no progress on stderr')
 
@@ -107,7 +110,7 @@ def main(args) -> int:
     result = fit(args.logs, args.params, args.scene, mapping=args.mapping or None, start=start,
                  bounds=_bounds(args.bounds), sigma=sigma, starts=args.starts,
                  max_evaluations=args.max_evaluations, parallel=args.parallel,
-                 progress=None if args.quiet else progress)
+                 coarse=not args.no_coarse, progress=None if args.quiet else progress)
     written = result.write(args.output, plot=not args.no_plots)
     print(result.report(), end='')
     common.print_written(written)
