@@ -1,0 +1,289 @@
+"""
+The live view (Foxglove WebSocket) of sim_node and of its logs, seen by an independent client.
+
+The client here is the `websockets` package speaking the Foxglove WebSocket protocol
+(subprotocol foxglove.sdk.v1) by hand, decoding with mcap_ros2's dynamic decoder built from the
+schemas the server sends: nothing of det_sim_ros reads the bytes. One node process serves both
+a working client and a stalled one (connected, subscribed, never reading).
+"""
+
+import asyncio
+import json
+import os
+import queue
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import threading
+import time
+
+from conftest import child_env
+import pytest
+
+websockets = pytest.importorskip('websockets')
+pytest.importorskip('foxglove')
+
+from mcap.records import Schema  # noqa: E402
+from mcap_ros2.decoder import DecoderFactory  # noqa: E402
+
+SUBPROTOCOL = 'foxglove.sdk.v1'
+TIMEOUT = 60.0   # s; a safety net only: a wait that hits it fails the test
+NODE = [sys.executable, '-m', 'det_sim_ros.cli.sim_node']
+VIEW = [sys.executable, '-m', 'det_sim_ros.cli', 'view']
+
+
+class Process:
+    """A child process whose output lines are read by a thread (a line that never comes fails)."""
+
+    def __init__(self, args, cwd):
+        self.proc = subprocess.Popen(args, cwd=cwd, text=True, bufsize=1,
+                                     env=child_env(PYTHONUNBUFFERED='1'),
+                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+        self.lines = []
+        self._queue = queue.Queue()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self):
+        for line in self.proc.stdout:
+            self._queue.put(line)
+        self._queue.put(None)
+
+    def wait_for(self, text) -> str:
+        deadline = time.monotonic() + TIMEOUT
+        while (left := deadline - time.monotonic()) > 0.0:
+            line = self._queue.get(timeout=left)
+            if line is None:
+                pytest.fail(f'ended before {text!r}:\n' + ''.join(self.lines))
+            self.lines.append(line)
+            if text in line:
+                return line
+        pytest.fail(f'no {text!r} within {TIMEOUT} s:\n' + ''.join(self.lines))
+
+    def stop(self) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+        code = self.proc.wait(timeout=TIMEOUT)
+        while (line := self._queue.get(timeout=TIMEOUT)) is not None:
+            self.lines.append(line)
+        return code
+
+
+def port_of(line: str) -> int:
+    return int(line.split('ws://127.0.0.1:')[1].split()[0].rstrip(':;'))
+
+
+class Client:
+    """A Foxglove WebSocket client: channels, decoded messages, time, status, service calls."""
+
+    def __init__(self, ws):
+        self.ws = ws
+        self.channels = {}      # channel id -> advertised channel
+        self.services = {}      # name -> service id
+        self.decoders = {}
+        self.messages = {}      # topic -> [(log time, decoded message)]
+        self.times = []
+        self.statuses = []
+        self.sessions = []
+        self.responses = {}
+        self.subscribed = {}    # subscription id -> channel id
+        self.parameters = {}
+
+    @classmethod
+    async def connect(cls, port, **kwargs):
+        ws = await websockets.connect(f'ws://127.0.0.1:{port}', subprotocols=[SUBPROTOCOL],
+                                      max_size=None, **kwargs)
+        return cls(ws)
+
+    def topic_channels(self):
+        return {channel['topic']: channel for channel in self.channels.values()}
+
+    def take(self, frame) -> None:
+        if isinstance(frame, str):
+            message = json.loads(frame)
+            op = message['op']
+            if op == 'serverInfo':
+                self.sessions.append(message['sessionId'])
+            elif op == 'advertise':
+                for channel in message['channels']:
+                    self.channels[channel['id']] = channel
+            elif op == 'advertiseServices':
+                self.services.update({s['name']: s['id'] for s in message['services']})
+            elif op == 'status':
+                self.statuses.append(message['message'])
+            elif op == 'parameterValues':
+                self.parameters.update({p['name']: p.get('value')
+                                        for p in message['parameters']})
+            return
+        op = frame[0]
+        if op == 1:      # message data: subscription id, log time, payload
+            sub, log_time = struct.unpack_from('<IQ', frame, 1)
+            channel = self.channels[self.subscribed[sub]]
+            decoder = self.decoders.get(channel['id'])
+            if decoder is None:
+                decoder = self.decoders[channel['id']] = DecoderFactory().decoder_for(
+                    channel['encoding'], Schema(
+                        id=channel['id'], name=channel['schemaName'],
+                        encoding=channel['schemaEncoding'], data=channel['schema'].encode()))
+            self.messages.setdefault(channel['topic'], []).append(
+                (log_time, decoder(frame[13:])))
+        elif op == 2:    # time
+            self.times.append(struct.unpack_from('<Q', frame, 1)[0])
+        elif op == 3:    # service call response: service id, call id, encoding, payload
+            _, call, length = struct.unpack_from('<III', frame, 1)
+            self.responses[call] = json.loads(frame[13 + length:])
+
+    async def pump(self, until, what):
+        deadline = time.monotonic() + TIMEOUT
+        while not until():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                pytest.fail(f'no {what} within {TIMEOUT} s')
+            try:
+                self.take(await asyncio.wait_for(self.ws.recv(), left))
+            except asyncio.TimeoutError:
+                pass
+
+    async def subscribe_all(self):
+        subscriptions = [{'id': 100 + cid, 'channelId': cid} for cid in self.channels]
+        self.subscribed.update({s['id']: s['channelId'] for s in subscriptions})
+        await self.ws.send(json.dumps({'op': 'subscribe', 'subscriptions': subscriptions}))
+
+    async def advertise(self, channel_id, topic, schema_name, encoding='json'):
+        await self.ws.send(json.dumps({'op': 'advertise', 'channels': [{
+            'id': channel_id, 'topic': topic, 'encoding': encoding, 'schemaName': schema_name}]}))
+
+    async def publish(self, channel_id, payload: bytes):
+        await self.ws.send(b'\x01' + struct.pack('<I', channel_id) + payload)
+
+    async def call(self, name, request: dict, call_id):
+        await self.ws.send(b'\x02' + struct.pack('<III', self.services[name], call_id, 4)
+                           + b'json' + json.dumps(request).encode())
+        await self.pump(lambda: call_id in self.responses, f'answer of {name}')
+        return self.responses[call_id]
+
+    def latest(self, topic):
+        return self.messages[topic][-1][1]
+
+
+def stamp(msg) -> int:
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+def diagnostic_values(client):
+    """Return the key/value pairs of the latest /diagnostics status of sim_node."""
+    status = client.latest('/diagnostics').status[0]
+    return {kv.key: kv.value for kv in status.values}
+
+
+async def stalled_client(port, ready: threading.Event, hold_s: float):
+    """Connect with a tiny receive buffer, subscribe to everything, then never read."""
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.connect(('127.0.0.1', port))
+    client = await Client.connect(port, sock=sock, max_queue=1, ping_interval=None)
+    await client.pump(lambda: len(client.channels) >= 5, 'channels (stalled client)')
+    await client.subscribe_all()
+    client.ws.transport.pause_reading()   # from here on nothing is read
+    ready.set()
+    await asyncio.sleep(hold_s)
+    await client.ws.close()
+
+
+async def watch_node(port):
+    """The working client's session with the node; returns what it saw."""
+    client = await Client.connect(port)
+    outputs = ('/displacement', '/deflection', '/charge', '/current')
+    wanted = outputs + ('/markers', '/diagnostics', '/sim_node/truth/displacement')
+    await client.pump(lambda: set(wanted) <= set(client.topic_channels())
+                      and '/sim_node/reset' in client.services, 'channels and services')
+    channels = client.topic_channels()
+    for topic in wanted:
+        assert channels[topic]['encoding'] == 'cdr'
+        assert channels[topic]['schemaEncoding'] == 'ros2msg'
+    assert channels['/displacement']['schemaName'] == 'sensor_msgs/msg/JointState'
+    assert 'MSG: std_msgs/Header' in channels['/displacement']['schema']
+    assert channels['/markers']['schemaName'] == 'visualization_msgs/msg/MarkerArray'
+    await client.subscribe_all()
+    await client.pump(lambda: len(client.messages.get('/displacement', ())) >= 300
+                      and client.times and client.messages.get('/diagnostics')
+                      and client.messages.get('/markers')
+                      and client.messages.get('/sim_node/truth/displacement'),
+                      'samples, time, diagnostics, markers and truth')
+    # the stamps follow sim time: one sample per 1 ms period, log time = header stamp, and the
+    # time the server sends is the sample's
+    samples = client.messages['/displacement']
+    stamps = [stamp(msg) for _, msg in client.messages['/deflection']]
+    assert all(b - a == 1_000_000 for a, b in zip(stamps, stamps[1:])), 'a period missing'
+    assert all(log_time == stamp(msg) for log_time, msg in samples)
+    assert stamps[0] <= client.times[-1] <= stamps[-1] + 1_000_000_000
+    assert list(samples[-1][1].name) == ['det0']
+    # a JSON voltage command, as Foxglove's Publish panel sends it, moves the actuator
+    await client.advertise(1, '/voltage_command', 'std_msgs/msg/Float64MultiArray')
+    await client.publish(1, b'{"data": [2500]}')
+    truth = '/sim_node/truth/displacement'   # (the measured one is noisy, may drop a sample)
+    await client.pump(lambda: client.latest(truth).position[0] > 1e-4, 'the rise of dy')
+    # malformed commands are refused with the reason, on /diagnostics and to the client
+    await client.publish(1, b'{"data": "high"}')
+    await client.pump(lambda: 'must be a list of numbers' in diagnostic_values(client).get(
+        'last_refused', ''), 'the refusal of a malformed command on /diagnostics')
+    assert any('must be a list of numbers' in s for s in client.statuses)
+    await client.publish(1, b'{"data": [1000, 2000]}')
+    await client.pump(lambda: 'expected 1 voltage' in diagnostic_values(client).get(
+        'last_refused', ''), 'the refusal of a command of the wrong length')
+    # reset: a new session (the client clears its buffers), then samples from t = 0 again
+    sessions = len(client.sessions)
+    answer = await client.call('/sim_node/reset', {}, call_id=7)
+    assert answer['success'] and answer['message'].startswith('reset to t = 0')
+    count = len(samples)
+    await client.pump(lambda: len(client.sessions) > sessions and len(samples) > count + 5,
+                      'a new session and samples after the reset')
+    after = [stamp(msg) for _, msg in samples[count:]]
+    assert after[0] < 1_000_000_000 and after[0] < stamps[-1]
+    # a runtime parameter through the protocol's parameters capability
+    await client.ws.send(json.dumps({'op': 'getParameters', 'parameterNames': ['max_lag'],
+                                     'id': 'p1'}))
+    await client.pump(lambda: 'max_lag' in client.parameters, 'the value of max_lag')
+    assert client.parameters['max_lag'] == 0.05
+    await client.ws.send(json.dumps({'op': 'setParameters', 'id': 'p2', 'parameters': [
+        {'name': 'max_lag', 'value': 0.2}, {'name': 'real_time_factor', 'value': -1}]}))
+    await client.pump(lambda: client.parameters['max_lag'] == 0.2
+                      and 'real_time_factor' in client.parameters, 'the parameters set')
+    assert client.parameters['real_time_factor'] == 1.0   # refused: unchanged, and why
+    await client.pump(lambda: any('real_time_factor' in s for s in client.statuses),
+                      'the reason real_time_factor was refused')
+    await client.ws.close()
+    return client
+
+
+def test_node_live_view(tmp_path):
+    node = Process(NODE + ['--ros-args', '-p', 'scene_file:=sensor_laser', '-p',
+                           'scene.fidelity:=paper', '-p', 'live.enabled:=true', '-p',
+                           'live.port:=0', '-p', f'log.path:={tmp_path}', '-p',
+                           'info_period:=0.0'], tmp_path)
+    try:
+        port = port_of(node.wait_for('live view on ws://'))
+        node.wait_for('voltage command order')
+        ready = threading.Event()
+        stalled = threading.Thread(target=asyncio.run, args=(
+            stalled_client(port, ready, 10.0),), daemon=True)
+        stalled.start()
+        assert ready.wait(TIMEOUT)
+        asyncio.run(watch_node(port))
+        stalled.join(TIMEOUT)
+        assert not stalled.is_alive()
+    finally:
+        code = node.stop()
+    assert code == 0, ''.join(node.lines)
+    # the node lost no period while a client stalled: every 1 ms sample of each run is in
+    # the log (two files: before and after the reset)
+    from mcap.reader import make_reader
+    files = sorted(os.listdir(tmp_path))
+    assert len([f for f in files if f.endswith('.mcap')]) == 2, files
+    for name in files:
+        with open(tmp_path / name, 'rb') as stream:
+            times = [message.log_time for _, channel, message in
+                     make_reader(stream).iter_messages(topics=['/deflection'])]
+        assert times == [k * 1_000_000 for k in range(len(times))], name
+        assert len(times) > 100
