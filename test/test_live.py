@@ -93,7 +93,7 @@ class Client:
     @classmethod
     async def connect(cls, port, **kwargs):
         ws = await websockets.connect(f'ws://127.0.0.1:{port}', subprotocols=[SUBPROTOCOL],
-                                      max_size=None, **kwargs)
+                                      max_size=None, close_timeout=1.0, **kwargs)
         return cls(ws)
 
     def topic_channels(self):
@@ -177,8 +177,13 @@ def diagnostic_values(client):
     return {kv.key: kv.value for kv in status.values}
 
 
-async def stalled_client(port, ready: threading.Event, hold_s: float):
-    """Connect with a tiny receive buffer, subscribe to everything, then never read."""
+async def stalled_client(port, ready: threading.Event, hold_s: float, seen: list):
+    """
+    Connect with a tiny receive buffer, subscribe to everything, then read nothing for hold_s.
+
+    Afterwards read what is left (until the server closes or 2 s pass) into ``seen``: the
+    /deflection log times this client got.
+    """
     sock = socket.socket()
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
     sock.connect(('127.0.0.1', port))
@@ -188,6 +193,12 @@ async def stalled_client(port, ready: threading.Event, hold_s: float):
     client.ws.transport.pause_reading()   # from here on nothing is read
     ready.set()
     await asyncio.sleep(hold_s)
+    client.ws.transport.resume_reading()
+    try:
+        await asyncio.wait_for(client.pump(lambda: False, 'the end'), 2.0)
+    except (asyncio.TimeoutError, websockets.ConnectionClosed):
+        pass   # (the server drops a client that stalled long enough)
+    seen += [t for t, _ in client.messages.get('/deflection', [])]
     await client.ws.close()
 
 
@@ -261,13 +272,13 @@ def test_node_live_view(tmp_path):
     node = Process(NODE + ['--ros-args', '-p', 'scene_file:=sensor_laser', '-p',
                            'scene.fidelity:=paper', '-p', 'live.enabled:=true', '-p',
                            'live.port:=0', '-p', f'log.path:={tmp_path}', '-p',
-                           'info_period:=0.0'], tmp_path)
+                           'info_period:=0.0', '-p', 'diagnostics_period:=0.25'], tmp_path)
     try:
         port = port_of(node.wait_for('live view on ws://'))
         node.wait_for('voltage command order')
-        ready = threading.Event()
+        ready, seen = threading.Event(), []
         stalled = threading.Thread(target=asyncio.run, args=(
-            stalled_client(port, ready, 10.0),), daemon=True)
+            stalled_client(port, ready, 10.0, seen),), daemon=True)
         stalled.start()
         assert ready.wait(TIMEOUT)
         asyncio.run(watch_node(port))
@@ -279,11 +290,59 @@ def test_node_live_view(tmp_path):
     # the node lost no period while a client stalled: every 1 ms sample of each run is in
     # the log (two files: before and after the reset)
     from mcap.reader import make_reader
-    files = sorted(os.listdir(tmp_path))
-    assert len([f for f in files if f.endswith('.mcap')]) == 2, files
+    files = sorted(f for f in os.listdir(tmp_path) if f.endswith('.mcap'))
+    assert len(files) == 2, files
+    logged = 0
     for name in files:
         with open(tmp_path / name, 'rb') as stream:
             times = [message.log_time for _, channel, message in
                      make_reader(stream).iter_messages(topics=['/deflection'])]
         assert times == [k * 1_000_000 for k in range(len(times))], name
         assert len(times) > 100
+        logged += len(times)
+    # and the stall was real: the stalled client missed at least the second's worth of samples
+    # its buffers could have held (the server dropped its oldest, or the client)
+    assert len(seen) < logged - 1000, (len(seen), logged)
+
+
+def test_view_serves_a_log_from_start_to_end(tmp_path):
+    from det_sim_ros.io.mcap_log import Recorder
+    from det_sim_ros.io.replay import simulate_to_log
+    from det_sim_ros.scenes.scene import load_scene
+    from det_sim_ros.sim.simulator import Simulator
+    from mcap.reader import make_reader
+    scene = load_scene('default', overrides={'scene.fidelity': 'paper'})
+    sim = Simulator(scene)
+    run = tmp_path / 'run'
+    recorder = Recorder(str(run), scene, split_mb=0.0)
+    simulate_to_log(recorder, sim, lambda k: [2500.0] if k == 20 else None, 400)
+    recorder.close()
+    [log] = os.listdir(run)
+    with open(run / log, 'rb') as stream:
+        logged = {}
+        for _, channel, message in make_reader(stream).iter_messages():
+            logged.setdefault(channel.topic, []).append(message.log_time)
+    view = Process(VIEW + [str(run), '--port', '0', '--speed', '4'], tmp_path)
+    try:
+        port = port_of(view.wait_for('on ws://'))
+
+        async def watch():
+            client = await Client.connect(port)
+            await client.pump(lambda: set(logged) <= set(client.topic_channels()), 'channels')
+            await client.subscribe_all()
+            await client.pump(lambda: all(len(client.messages.get(topic, ())) == len(times)
+                                          for topic, times in logged.items()),
+                              'every message of the log')
+            await client.ws.close()
+            return client
+        client = asyncio.run(watch())
+        view.wait_for('end of the log')
+    finally:
+        assert view.stop() == 0, ''.join(view.lines)
+    for topic, times in logged.items():
+        assert [t for t, _ in client.messages[topic]] == times, topic
+    displacement = [msg.position[0] for _, msg in client.messages['/displacement']]
+    # at rest Δy = y0 - y is zero up to rounding (y ~ 1e-3 m: ~1e-16 m); 2500 V from k = 20
+    # lift it by tenths of a millimetre
+    assert abs(displacement[0]) < 1e-9 and max(displacement) > 1e-4
+    assert [stamp(msg) for _, msg in client.messages['/displacement']] == logged['/displacement']
