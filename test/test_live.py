@@ -346,3 +346,65 @@ def test_view_serves_a_log_from_start_to_end(tmp_path):
     # lift it by tenths of a millimetre
     assert abs(displacement[0]) < 1e-9 and max(displacement) > 1e-4
     assert [stamp(msg) for _, msg in client.messages['/displacement']] == logged['/displacement']
+
+
+def test_without_the_extra_or_with_the_port_taken_the_node_refuses_in_one_line(tmp_path):
+    blocked = tmp_path / 'blocked'
+    (blocked / 'foxglove').mkdir(parents=True)
+    (blocked / 'foxglove' / '__init__.py').write_text("raise ImportError('not installed')\n")
+    args = ['--ros-args', '-p', 'scene.fidelity:=paper', '-p', 'live.enabled:=true', '-p',
+            'log.enabled:=false', '-p', 'allow_duplicate_name:=true']
+    env = child_env()
+    env['PYTHONPATH'] = os.pathsep.join([str(blocked), env['PYTHONPATH']])
+    run = subprocess.run(NODE + args, cwd=tmp_path, env=env, text=True, capture_output=True,
+                         timeout=TIMEOUT)
+    fatal = [line for line in (run.stdout + run.stderr).splitlines() if 'FATAL' in line]
+    assert run.returncode == 1 and len(fatal) == 1, run.stdout + run.stderr
+    assert "parameter live.enabled: the live view needs foxglove-sdk: install the extra 'live'" \
+        in fatal[0]
+    run = subprocess.run(VIEW + ['any.mcap'], cwd=tmp_path, env=env, text=True,
+                         capture_output=True, timeout=TIMEOUT)
+    assert run.returncode == 2 and run.stderr.startswith('det_sim: error: the live view needs '
+                                                         "foxglove-sdk: install the extra 'live'")
+    assert len(run.stderr.splitlines()) == 1
+    with socket.socket() as taken:
+        taken.bind(('127.0.0.1', 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        run = subprocess.run(NODE + args + ['-p', f'live.port:={port}'], cwd=tmp_path,
+                             env=child_env(), text=True, capture_output=True, timeout=TIMEOUT)
+    fatal = [line for line in (run.stdout + run.stderr).splitlines() if 'FATAL' in line]
+    assert run.returncode == 1 and len(fatal) == 1, run.stdout + run.stderr
+    assert f'parameter live.port: cannot listen on 127.0.0.1:{port} (' in fatal[0]
+
+
+@pytest.mark.parametrize('topic, payload, reason', [
+    ('voltage_command', b'{"data": "high"}', "JSON field 'data' must be a list of numbers"),
+    ('voltage_command', b'{"data": [true]}', "JSON field 'data' must be a list of numbers"),
+    ('voltage_command', b'{"volts": [1]}', 'JSON needs "data"'),
+    ('voltage_command', b'[2500]', 'JSON must be an object'),
+    ('voltage_command', b'{"data": [2500', 'not JSON'),
+    ('voltage_command', b'\xff', 'not JSON'),
+    ('voltage_command_joint', b'{"name": [1], "position": [2]}', 'must be a list of strings'),
+])
+def test_a_client_command_that_is_not_a_message_is_refused_with_its_reason(topic, payload,
+                                                                             reason):
+    from det_sim_ros.io.live_server import command_bytes
+    with pytest.raises(ValueError, match=reason.replace('[', r'\[')):
+        command_bytes(topic, payload, 'json')
+
+
+def test_a_client_json_command_is_the_cdr_a_dds_publisher_sends():
+    from det_sim_ros.io.contract import CommandDecoder
+    from det_sim_ros.io.live_server import command_bytes
+    decoder = CommandDecoder(['det0', 'det1'], 5000.0)
+    command = decoder.decode('voltage_command', command_bytes(
+        'voltage_command', b'{"data": [2500, 1000.5]}', 'json'), [0.0, 0.0])
+    assert command.volts == [2500.0, 1000.5] and not command.reason
+    joint = decoder.decode('voltage_command_joint', command_bytes(
+        'voltage_command_joint', b'{"name": ["det1"], "position": [300]}', 'json'), [1.0, 2.0])
+    assert joint.volts == [1.0, 300.0]
+    # NaN reaches the node's own checks, which refuse it as they refuse it from DDS
+    nan = decoder.decode('voltage_command', command_bytes(
+        'voltage_command', b'{"data": [NaN, 1]}', 'json'), [0.0, 0.0])
+    assert nan.volts is None and 'non-finite voltage on det0' in nan.reason, nan.reason

@@ -25,7 +25,7 @@ from .contract import COMMAND_TOPIC, JOINT_COMMAND_TOPIC
 from .messages import encode_float64_multi_array, encode_joint_state
 from .schemas import message_definition
 
-__all__ = ['EXTRA_HINT', 'LiveUnavailable', 'LiveServer', 'ClientCommands', 'command_bytes',
+__all__ = ['EXTRA_HINT', 'LiveUnavailable', 'require_sdk', 'LiveServer', 'ClientCommands', 'command_bytes',
            'foxglove_url']
 
 EXTRA_HINT = "install the extra 'live': pip install 'det_sim_ros[live]'"
@@ -38,7 +38,8 @@ class LiveUnavailable(RuntimeError):
     """The live view cannot start (no foxglove-sdk, a port in use, ...): a one-line reason."""
 
 
-def _sdk():
+def require_sdk():
+    """Return the foxglove module; :class:`LiveUnavailable` naming the extra without it."""
     try:
         import foxglove
         import foxglove.websocket
@@ -151,7 +152,7 @@ class LiveServer:
     def __init__(self, host: str, port: int, *, name: str = 'det_sim_ros', listener=None,
                  services=(), parameters: bool = False, client_publish: bool = False,
                  playback_range: tuple[int, int] | None = None):
-        foxglove = _sdk()
+        foxglove = require_sdk()
         from foxglove.websocket import Capability
         self._foxglove = foxglove
         self._context = foxglove.Context()   # this server's channels only

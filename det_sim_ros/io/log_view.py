@@ -15,7 +15,7 @@ import os
 import threading
 import time
 
-from .live_server import LiveServer
+from .live_server import LiveServer, require_sdk
 from .log_reader import LogReader
 
 __all__ = ['LogPlayer', 'LogSummary']
@@ -55,6 +55,7 @@ class LogPlayer:
 
     def __init__(self, paths, host: str = '127.0.0.1', port: int = 8765, speed: float = 1.0,
                  paused: bool = False, settle_s: float = SETTLE_S):
+        require_sdk()
         from foxglove.websocket import PlaybackStatus
         self._status_kind = PlaybackStatus
         self.log = LogSummary(paths)

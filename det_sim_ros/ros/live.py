@@ -22,7 +22,7 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 
 from ..io.contract import COMMAND_TOPICS, DIAGNOSTICS_TOPIC, JOINT_STATE, stamp_ns, TOPIC_TYPES
-from ..io.live_server import ClientCommands, LiveServer, LiveUnavailable
+from ..io.live_server import ClientCommands, LiveServer, LiveUnavailable, require_sdk
 from ..io.schemas import type_name_of
 from ..scenes.scene import SceneError
 
@@ -43,6 +43,7 @@ def open_live_view(node) -> 'LiveView | None':
     if not get('live.enabled').value:
         return None
     try:
+        require_sdk()
         view = LiveView(node, get('live.host').value, get('live.port').value)
     except LiveUnavailable as exc:
         name = 'live.enabled' if 'foxglove-sdk' in str(exc) else 'live.port'
