@@ -20,13 +20,12 @@ import threading
 import time
 
 from conftest import child_env
+from mcap.records import Schema
+from mcap_ros2.decoder import DecoderFactory
 import pytest
 
-websockets = pytest.importorskip('websockets')
+websockets = pytest.importorskip('websockets')   # (the 'test' extra has both)
 pytest.importorskip('foxglove')
-
-from mcap.records import Schema  # noqa: E402
-from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 
 SUBPROTOCOL = 'foxglove.sdk.v1'
 TIMEOUT = 60.0   # s; a safety net only: a wait that hits it fails the test
@@ -203,7 +202,7 @@ async def stalled_client(port, ready: threading.Event, hold_s: float, seen: list
 
 
 async def watch_node(port):
-    """The working client's session with the node; returns what it saw."""
+    """Watch, command, reset and set parameters of the node as a client; return the client."""
     client = await Client.connect(port)
     outputs = ('/displacement', '/deflection', '/charge', '/current')
     wanted = outputs + ('/markers', '/diagnostics', '/sim_node/truth/displacement')
@@ -387,8 +386,7 @@ def test_without_the_extra_or_with_the_port_taken_the_node_refuses_in_one_line(t
     ('voltage_command', b'\xff', 'not JSON'),
     ('voltage_command_joint', b'{"name": [1], "position": [2]}', 'must be a list of strings'),
 ])
-def test_a_client_command_that_is_not_a_message_is_refused_with_its_reason(topic, payload,
-                                                                             reason):
+def test_a_client_command_that_is_not_a_message_is_refused(topic, payload, reason):
     from det_sim_ros.io.live_server import command_bytes
     with pytest.raises(ValueError, match=reason.replace('[', r'\[')):
         command_bytes(topic, payload, 'json')

@@ -25,8 +25,8 @@ from .contract import COMMAND_TOPIC, JOINT_COMMAND_TOPIC
 from .messages import encode_float64_multi_array, encode_joint_state
 from .schemas import message_definition
 
-__all__ = ['EXTRA_HINT', 'LiveUnavailable', 'require_sdk', 'LiveServer', 'ClientCommands', 'command_bytes',
-           'foxglove_url']
+__all__ = ['EXTRA_HINT', 'LiveUnavailable', 'require_sdk', 'LiveServer', 'ClientCommands',
+           'command_bytes', 'foxglove_url']
 
 EXTRA_HINT = "install the extra 'live': pip install 'det_sim_ros[live]'"
 # per client: messages queued before its oldest is dropped (the SDK's default); a stalled
@@ -262,4 +262,3 @@ class _Listener:
         self._server.subscribed(client.id, channel.id, False)
         if hasattr(self._owner, 'on_unsubscribe'):
             self._owner.on_unsubscribe(client, channel)
-

@@ -281,6 +281,6 @@ class LiveView:
 
 
 def _native(value):
-    """A parameter value as the SDK takes it (arrays as lists)."""
+    """Return a parameter value as the SDK takes it (arrays as lists)."""
     return value.tolist() if isinstance(value, array) else (
         list(value) if isinstance(value, (tuple, list)) else value)
