@@ -44,7 +44,8 @@ def open_live_view(node) -> 'LiveView | None':
         return None
     try:
         require_sdk()
-        view = LiveView(node, get('live.host').value, get('live.port').value)
+        view = LiveView(node, get('live.host').value, get('live.port').value,
+                        get('live.rate_hz').value)
     except LiveUnavailable as exc:
         name = 'live.enabled' if 'foxglove-sdk' in str(exc) else 'live.port'
         raise SceneError(f'parameter {name}: {exc}') from None
@@ -106,10 +107,15 @@ class LiveView:
 
     :param node: the :class:`~det_sim_ros.ros.node.SimNode` (its publishers, services and
         parameters exist).
+    :param rate_hz: output samples served per simulated second (0: every one).
     """
 
-    def __init__(self, node, host: str, port: int):
+    def __init__(self, node, host: str, port: int, rate_hz: float = 0.0):
         self._node = node
+        # sim ns between two served samples (1: every one), and the next one's earliest time
+        self._every_ns = int(round(1e9 / rate_hz)) if rate_hz > 0 else 1
+        self._next_ns = 0
+        self._last_ns = -1     # the last sample's time seen (a reset goes back)
         self._calls = _Calls()
         outputs = node.outputs
         outs, truth = node.output_publishers, node.truth_publishers
@@ -159,16 +165,21 @@ class LiveView:
         server = self._server
         if not server.watched:
             return
-        server.time(batch[0][0])   # first: a reset's sample 0 starts a new session
-        channels, markers = self._sample_channels, self._marker_channel
+        if batch[0][0] < self._last_ns:   # back in time: a reset; clients clear their buffers
+            server.restart_time()
+            self._next_ns = 0
+        channels, markers, served = self._sample_channels, self._marker_channel, None
         for t_ns, samples, frame in batch:
-            for channel, data in zip(channels, samples):
-                if data is not None:
-                    channel.log(data, log_time=t_ns)
+            if t_ns >= self._next_ns:
+                self._next_ns, served = t_ns + self._every_ns, t_ns
+                for channel, data in zip(channels, samples):
+                    if data is not None:
+                        channel.log(data, log_time=t_ns)
             if frame is not None:
                 markers.log(frame, log_time=t_ns)
-        if len(batch) > 1:
-            server.time(batch[-1][0])
+        self._last_ns = batch[-1][0]
+        if served is not None:   # the time of the last sample served
+            server.time(served)
 
     def diagnostics(self, msg) -> None:
         """Serve a /diagnostics message (stamped with the sim time now)."""

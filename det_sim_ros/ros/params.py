@@ -107,6 +107,9 @@ NODE_PARAMS = {
                           "the 'live' extra)", True, None),
     'live.port': Param(8765, 'live view: TCP port (0 = a free port, named in the start-up '
                        'line)', True, (0, 65535)),
+    'live.rate_hz': Param(0.0, 'live view: output samples served per simulated second (0 = '
+                          'every sample; the log keeps every sample either way)', True,
+                          (0.0, 1.0e6)),
     'live.host': Param('127.0.0.1', "live view: address to listen on ('0.0.0.0': every "
                        'network interface; anyone who reaches it can command the node)', True,
                        None),
