@@ -10,8 +10,10 @@ another process subscribed to every channel, reading and counting what it gets) 
 is spun at a time, in blocks of ``--block-s`` wall seconds, the four in a random order per
 round, so the host's drift hits all alike. Node CPU = this process's CPU time (all threads:
 DDS, log writer, the live server's) per control period in each block; reported: per state the
-median over rounds of its ratio to ``off`` in the same round, with the quartiles, and the CPU
-per period of ``off``.
+median over rounds of its ratio to ``off`` in the same round, with the quartiles, the CPU
+per period of ``off`` and the executor thread's share (the rest: DDS, log writer and the live
+server's threads; a server's threads may still send a backlog during the next block, of any
+state, which pulls the ratios towards 1).
 
     python bench/live_cost.py [--rounds 20] [--block-s 0.5]
 """
@@ -79,12 +81,12 @@ def start(name, live, log_dir, rate_hz=0.0):
 
 
 def spin_block(node, executor, seconds):
-    """Spin one node for ``seconds`` of wall time; return (CPU s, periods run)."""
-    k0, c0 = node.simulator.k, time.process_time()
+    """Spin one node for ``seconds`` of wall time; return (CPU s, executor CPU s, periods)."""
+    k0, c0, t0 = node.simulator.k, time.process_time(), time.thread_time()
     end = time.perf_counter() + seconds
     while time.perf_counter() < end:
         executor.spin_once(timeout_sec=0.05)
-    return time.process_time() - c0, node.simulator.k - k0
+    return time.process_time() - c0, time.thread_time() - t0, node.simulator.k - k0
 
 
 def main():
@@ -114,13 +116,15 @@ def main():
         rng = random.Random(1)
         per_period = {state: [] for state in states}
         periods = {state: 0 for state in states}
+        executor_cpu = {state: 0.0 for state in states}
         for _ in range(args.rounds):
             order = list(states)
             rng.shuffle(order)
             for state in order:
-                cpu, n = spin_block(*nodes[state], args.block_s)
+                cpu, main_cpu, n = spin_block(*nodes[state], args.block_s)
                 per_period[state].append(cpu / n)
                 periods[state] += n
+                executor_cpu[state] += main_cpu
         received = {}
         for state, client in clients.items():
             client.terminate()
@@ -137,7 +141,9 @@ def main():
         q = statistics.quantiles(ratios, n=4)
         print(f'  {state:8s} / off: median {statistics.median(ratios):.3f} (quartiles '
               f'{q[0]:.3f} .. {q[2]:.3f}), {statistics.median(per_period[state]) * 1e6:.1f} us '
-              f'per period, {periods[state]} periods')
+              f'per period, of which the executor thread '
+              f'{executor_cpu[state] / periods[state] * 1e6:.1f} us (off: '
+              f'{executor_cpu["off"] / periods["off"] * 1e6:.1f} us), {periods[state]} periods')
     print('  the clients got ' + ', '.join(f'{state}: {count} messages'
                                            for state, count in received.items()))
 
