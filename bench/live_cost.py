@@ -1,13 +1,13 @@
 """
 CPU cost of the live view (Foxglove WebSocket): off, on without a client, on with one client.
 
-Four sim_nodes run in this process, free run (the node's cheapest mode per period, so the
-live view's largest share), default scene, the MCAP log and 30 Hz markers on as a user runs
+Five sim_nodes run in this process, free run (the node's cheapest mode per period, so the
+live view's largest share; --real-time: at 1 kHz, as a user watching runs them), default scene, the MCAP log and 30 Hz markers on as a user runs
 them: ``off`` (live.enabled false), ``off2`` (the same again: an A/A control, the method's own
 noise on this host), ``idle`` (live on, no client) and ``watched`` (live on, one client in
 another process subscribed to every channel, reading and counting what it gets) and
 ``watched_100Hz`` (the same with live.rate_hz 100: a tenth of the 1 kHz samples). Only one node
-is spun at a time, in blocks of ``--block-s`` wall seconds, the four in a random order per
+runs at a time (the others paused), in blocks of ``--block-s`` wall seconds, the four in a random order per
 round, so the host's drift hits all alike. Node CPU = this process's CPU time (all threads:
 DDS, log writer, the live server's) per control period in each block; reported: per state the
 median over rounds of its ratio to ``off`` in the same round, with the quartiles, the CPU
@@ -15,7 +15,7 @@ per period of ``off`` and the executor thread's share (the rest: DDS, log writer
 server's threads; a server's threads may still send a backlog during the next block, of any
 state, which pulls the ratios towards 1).
 
-    python bench/live_cost.py [--rounds 20] [--block-s 0.5]
+    python bench/live_cost.py [--rounds 20] [--block-s 0.5] [--real-time]
 """
 
 import argparse
@@ -28,11 +28,11 @@ import tempfile
 import time
 
 CLIENT = """
-import asyncio, json, signal, sys, time
+import asyncio, json, os, signal, sys, time
 import websockets
 
 got = 0
-signal.signal(signal.SIGTERM, lambda *_: (print(got, flush=True), sys.exit(0)))
+signal.signal(signal.SIGTERM, lambda *_: (print(got, flush=True), os._exit(0)))
 
 async def main(port, seconds):
     global got
@@ -62,7 +62,7 @@ asyncio.run(main(int(sys.argv[1]), float(sys.argv[2])))
 """
 
 
-def start(name, live, log_dir, rate_hz=0.0):
+def start(name, live, log_dir, rate_hz=0.0, real_time=False):
     """Start a free-running sim_node (its own context and executor); return (node, executor)."""
     import rclpy
     from rclpy.parameter import Parameter
@@ -70,7 +70,8 @@ def start(name, live, log_dir, rate_hz=0.0):
     context = rclpy.context.Context()
     rclpy.init(context=context)
     node = SimNode(context=context, namespace=name, parameter_overrides=[
-        Parameter('real_time', value=False), Parameter('info_period', value=0.0),
+        Parameter('real_time', value=real_time), Parameter('info_period', value=0.0),
+        Parameter('start_paused', value=True),
         Parameter('log.path', value=os.path.join(log_dir, name)),
         Parameter('live.enabled', value=live), Parameter('live.port', value=0),
         Parameter('live.rate_hz', value=rate_hz),
@@ -81,11 +82,17 @@ def start(name, live, log_dir, rate_hz=0.0):
 
 
 def spin_block(node, executor, seconds):
-    """Spin one node for ``seconds`` of wall time; return (CPU s, executor CPU s, periods)."""
+    """
+    Run one node (resumed, then paused again) for ``seconds`` of wall time.
+
+    Return (CPU s, executor thread CPU s, periods run).
+    """
     k0, c0, t0 = node.simulator.k, time.process_time(), time.thread_time()
+    node.set_paused(False)
     end = time.perf_counter() + seconds
     while time.perf_counter() < end:
         executor.spin_once(timeout_sec=0.05)
+    node.set_paused(True)
     return time.process_time() - c0, time.thread_time() - t0, node.simulator.k - k0
 
 
@@ -93,6 +100,9 @@ def main():
     parser = argparse.ArgumentParser()
     parser.add_argument('--rounds', type=int, default=20)
     parser.add_argument('--block-s', type=float, default=0.5)
+    parser.add_argument('--real-time', action='store_true',
+                        help='the nodes in real time at 1 kHz (as a user watching runs them) '
+                        'instead of free run')
     args = parser.parse_args()
     os.environ.setdefault('ROS_DOMAIN_ID', str(150 + os.getpid() % 50))
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
@@ -100,7 +110,7 @@ def main():
     watched = ('watched', 'watched_100Hz')
     with tempfile.TemporaryDirectory() as log_dir:
         nodes = {state: start(state, state not in ('off', 'off2'), log_dir,
-                              100.0 if state == 'watched_100Hz' else 0.0)
+                              100.0 if state == 'watched_100Hz' else 0.0, args.real_time)
                  for state in states}
         seconds = args.rounds * len(states) * args.block_s + 30.0
         clients = {state: subprocess.Popen([sys.executable, '-c', CLIENT,
@@ -133,7 +143,8 @@ def main():
             executor.shutdown()
             node.destroy_node()
     off = per_period['off']
-    print(f'live view cost, default scene, free run, MCAP log and 30 Hz markers on, '
+    mode = 'real time' if args.real_time else 'free run'
+    print(f'live view cost, default scene, {mode}, MCAP log and 30 Hz markers on, '
           f'{args.rounds} rounds of {args.block_s:g} s blocks per state; CPU per period '
           f'(median) off: {statistics.median(off) * 1e6:.1f} us')
     for state in states[1:]:

@@ -26,9 +26,11 @@ from ..io.live_server import ClientCommands, LiveServer, LiveUnavailable, requir
 from ..io.schemas import type_name_of
 from ..scenes.scene import SceneError
 
-__all__ = ['LiveView', 'open_live_view', 'POLL_S', 'ANSWER_TIMEOUT_S']
+__all__ = ['LiveView', 'open_live_view', 'POLL_S', 'FLUSH_S', 'ANSWER_TIMEOUT_S']
 
 POLL_S = 0.02             # wall s between two looks at what clients asked (commands, calls)
+FLUSH_S = 0.02            # wall s between two bursts of messages to the clients (50 Hz)
+QUEUE_SAMPLES = 5000      # samples waiting for the sender at most (then the oldest go)
 ANSWER_TIMEOUT_S = 5.0    # a service call or parameter request the node has not run by then fails
 _HIDDEN_SERVICE_PACKAGES = ('rcl_interfaces',)   # parameters: the Parameters capability
 
@@ -138,6 +140,13 @@ class LiveView:
         self._diagnostics_channel = server.channel(DIAGNOSTICS_TOPIC,
                                                    TOPIC_TYPES[DIAGNOSTICS_TOPIC])
         node.create_timer(POLL_S, self._calls.run_pending, clock=node.steady_clock)
+        # the clients' messages go out from a thread of their own, in bursts: a websocket
+        # send costs ~1 us in a burst and tens of us alone (the server's thread wakes for it)
+        self._queue = deque(maxlen=QUEUE_SAMPLES)
+        self._stopping = threading.Event()
+        self._sender = threading.Thread(target=self._flush_every, args=(FLUSH_S,),
+                                        name='live view', daemon=True)
+        self._sender.start()
         node.add_post_set_parameters_callback(self._parameters_changed)
 
     @property
@@ -159,17 +168,27 @@ class LiveView:
         """Return ``publisher`` (/diagnostics) with its messages also served live."""
         return _DiagnosticsTap(publisher, self)
 
-    # -- the node's messages (executor thread) ----------------------------------------------
+    # -- the node's messages ------------------------------------------------------------------
     def send(self, batch) -> None:
-        """Serve a batch of (t_ns, sample messages, marker frame or None) and the time."""
-        server = self._server
-        if not server.watched:
-            return
-        if batch[0][0] < self._last_ns:   # back in time: a reset; clients clear their buffers
-            server.restart_time()
-            self._next_ns = 0
+        """Queue a batch of (t_ns, sample messages, marker frame or None) for the clients."""
+        if self._server.watched:   # (nobody subscribes: nothing to do)
+            self._queue.extend(batch)
+
+    def _flush_every(self, period_s: float) -> None:
+        """Serve what the node queued, every ``period_s`` (the sender thread)."""
+        while not self._stopping.wait(period_s):
+            self._flush()
+
+    def _flush(self) -> None:
+        """Serve the queued samples, marker frames and the time, in order."""
+        server, queue = self._server, self._queue
         channels, markers, served = self._sample_channels, self._marker_channel, None
-        for t_ns, samples, frame in batch:
+        while queue:
+            t_ns, samples, frame = queue.popleft()
+            if t_ns < self._last_ns:   # back in time: a reset; clients clear their buffers
+                server.restart_time()
+                self._next_ns = 0
+            self._last_ns = t_ns
             if t_ns >= self._next_ns:
                 self._next_ns, served = t_ns + self._every_ns, t_ns
                 for channel, data in zip(channels, samples):
@@ -177,7 +196,6 @@ class LiveView:
                         channel.log(data, log_time=t_ns)
             if frame is not None:
                 markers.log(frame, log_time=t_ns)
-        self._last_ns = batch[-1][0]
         if served is not None:   # the time of the last sample served
             server.time(served)
 
@@ -189,7 +207,9 @@ class LiveView:
                                           log_time=stamp_ns(sim.k, sim.dt))
 
     def close(self) -> None:
-        """Stop the server."""
+        """Stop the sender thread and the server."""
+        self._stopping.set()
+        self._sender.join(timeout=2.0)
         self._server.stop()
 
     # -- client publish (server threads) ----------------------------------------------------
