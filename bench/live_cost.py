@@ -1,19 +1,19 @@
 """
 CPU cost of the live view (Foxglove WebSocket): off, on without a client, on with one client.
 
-Five sim_nodes run in this process, free run (the node's cheapest mode per period, so the
-live view's largest share; --real-time: at 1 kHz, as a user watching runs them), default scene, the MCAP log and 30 Hz markers on as a user runs
-them: ``off`` (live.enabled false), ``off2`` (the same again: an A/A control, the method's own
-noise on this host), ``idle`` (live on, no client) and ``watched`` (live on, one client in
-another process subscribed to every channel, reading and counting what it gets) and
-``watched_100Hz`` (the same with live.rate_hz 100: a tenth of the 1 kHz samples). Only one node
-runs at a time (the others paused), in blocks of ``--block-s`` wall seconds, the four in a random order per
-round, so the host's drift hits all alike. Node CPU = this process's CPU time (all threads:
-DDS, log writer, the live server's) per control period in each block; reported: per state the
-median over rounds of its ratio to ``off`` in the same round, with the quartiles, the CPU
-per period of ``off`` and the executor thread's share (the rest: DDS, log writer and the live
-server's threads; a server's threads may still send a backlog during the next block, of any
-state, which pulls the ratios towards 1).
+Five sim_nodes run in this process, default scene, the MCAP log and 30 Hz markers on as a user
+runs them; free run (the node's cheapest mode per period, so the live view's largest share) or,
+with --real-time, at 1 kHz as a user watching runs them: ``off`` (live.enabled false), ``off2``
+(the same again: an A/A control, the method's own noise on this host), ``idle`` (live on, no
+client), ``watched`` (live on, one client in another process subscribed to every channel,
+reading and counting what it gets) and ``watched_100Hz`` (the same with live.rate_hz 100: a
+tenth of the 1 kHz samples). Only one node runs at a time (the others paused), in blocks of
+``--block-s`` wall seconds, the five in a random order per round, so the host's drift hits all
+alike. Node CPU = this process's CPU time (all threads: DDS, log writer, the live view's
+sender and server threads) per control period in each block; reported: per state the median
+over rounds of its ratio to ``off`` in the same round, with the quartiles, the CPU per period
+of ``off`` and the executor thread's share (a server's threads may still send a backlog during
+the next block, of any state, which pulls the ratios towards 1).
 
     python bench/live_cost.py [--rounds 20] [--block-s 0.5] [--real-time]
 """
@@ -125,8 +125,8 @@ def main():
             spin_block(node, executor, 0.5)
         rng = random.Random(1)
         per_period = {state: [] for state in states}
-        periods = {state: 0 for state in states}
-        executor_cpu = {state: 0.0 for state in states}
+        periods = dict.fromkeys(states, 0)
+        executor_cpu = dict.fromkeys(states, 0.0)
         for _ in range(args.rounds):
             order = list(states)
             rng.shuffle(order)
