@@ -88,6 +88,7 @@ class Client:
         self.responses = {}
         self.subscribed = {}    # subscription id -> channel id
         self.parameters = {}
+        self.playback_states = {}   # request id -> (status, time, speed, did seek)
 
     @classmethod
     async def connect(cls, port, **kwargs):
@@ -129,6 +130,10 @@ class Client:
                 (log_time, decoder(frame[13:])))
         elif op == 2:    # time
             self.times.append(struct.unpack_from('<Q', frame, 1)[0])
+        elif op == 5:    # playback state: status, time, speed, did seek, request id
+            status, position, speed, did_seek, length = struct.unpack_from('<BQfBI', frame, 1)
+            request = frame[19:19 + length].decode()
+            self.playback_states[request] = (status, position, speed, bool(did_seek))
         elif op == 3:    # service call response: service id, call id, encoding, payload
             _, call, length = struct.unpack_from('<III', frame, 1)
             self.responses[call] = json.loads(frame[13 + length:])
@@ -161,6 +166,12 @@ class Client:
                            + b'json' + json.dumps(request).encode())
         await self.pump(lambda: call_id in self.responses, f'answer of {name}')
         return self.responses[call_id]
+
+    async def playback(self, command, speed, seek_ns, request_id):
+        """Send a playback control request (command 0 play, 1 pause; seek_ns None: no seek)."""
+        head = struct.pack('<BfBQI', command, speed, seek_ns is not None, seek_ns or 0,
+                           len(request_id))
+        await self.ws.send(b'\x03' + head + request_id.encode())
 
     def latest(self, topic):
         return self.messages[topic][-1][1]
@@ -344,19 +355,33 @@ def test_view_serves_a_log_from_start_to_end(tmp_path):
             await client.pump(lambda: all(len(client.messages.get(topic, ())) == len(times)
                                           for topic, times in logged.items()),
                               'every message of the log')
+            first_pass = {topic: list(got) for topic, got in client.messages.items()}
+            view.wait_for('end of the log')
+            # playback control, as Foxglove's seek bar sends it: play from the middle at x8
+            middle = logged['/displacement'][len(logged['/displacement']) // 2]
+            await client.playback(0, 8.0, middle, 'seek1')
+            await client.pump(lambda: 'seek1' in client.playback_states, 'the playback state')
+            status, position, speed, did_seek = client.playback_states['seek1']
+            assert (status, position, speed, did_seek) == (0, middle, 8.0, True)   # playing
+            again = client.messages['/displacement']
+            await client.pump(lambda: len(again) > len(first_pass['/displacement']),
+                              'a sample after the seek')
+            assert again[len(first_pass['/displacement'])][0] == middle
+            await client.playback(1, 8.0, None, 'pause1')
+            await client.pump(lambda: 'pause1' in client.playback_states, 'the pause')
+            assert client.playback_states['pause1'][0] == 1   # paused
             await client.ws.close()
-            return client
-        client = asyncio.run(watch())
-        view.wait_for('end of the log')
+            return client, first_pass
+        client, first_pass = asyncio.run(watch())
     finally:
         assert view.stop() == 0, ''.join(view.lines)
     for topic, times in logged.items():
-        assert [t for t, _ in client.messages[topic]] == times, topic
-    displacement = [msg.position[0] for _, msg in client.messages['/displacement']]
+        assert [t for t, _ in first_pass[topic]] == times, topic
+    displacement = [msg.position[0] for _, msg in first_pass['/displacement']]
     # at rest Δy = y0 - y is zero up to rounding (y ~ 1e-3 m: ~1e-16 m); 2500 V from k = 20
     # lift it by tenths of a millimetre
     assert abs(displacement[0]) < 1e-9 and max(displacement) > 1e-4
-    assert [stamp(msg) for _, msg in client.messages['/displacement']] == logged['/displacement']
+    assert [stamp(msg) for _, msg in first_pass['/displacement']] == logged['/displacement']
 
 
 def test_without_the_extra_or_with_the_port_taken_the_node_refuses_in_one_line(tmp_path):
