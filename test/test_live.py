@@ -290,13 +290,19 @@ async def watch_node(port):
     return client
 
 
+def live_node(tmp_path, **params):
+    """Start sim_node with the live view on a free port, logging to tmp_path; (node, port)."""
+    params = {'scene.fidelity': 'paper', 'live.enabled': 'true', 'live.port': 0,
+              'log.path': tmp_path, 'info_period': '0.0', **params}
+    args = [f'{name}:={value}' for name, value in params.items()]
+    node = Process(NODE + ['--ros-args'] + [word for arg in args for word in ('-p', arg)],
+                   tmp_path)
+    return node, port_of(node.wait_for('live view on ws://'))
+
+
 def test_node_live_view(tmp_path):
-    node = Process(NODE + ['--ros-args', '-p', 'scene_file:=sensor_laser', '-p',
-                           'scene.fidelity:=paper', '-p', 'live.enabled:=true', '-p',
-                           'live.port:=0', '-p', f'log.path:={tmp_path}', '-p',
-                           'info_period:=0.0', '-p', 'diagnostics_period:=0.25'], tmp_path)
+    node, port = live_node(tmp_path, scene_file='sensor_laser', diagnostics_period=0.25)
     try:
-        port = port_of(node.wait_for('live view on ws://'))
         node.wait_for('voltage command order')
         ready, seen = threading.Event(), []
         stalled = threading.Thread(target=asyncio.run, args=(
@@ -443,3 +449,27 @@ def test_a_client_json_command_is_the_cdr_a_dds_publisher_sends():
     nan = decoder.decode('voltage_command', command_bytes(
         'voltage_command', b'{"data": [NaN, 1]}', 'json'), [0.0, 0.0])
     assert nan.volts is None and 'non-finite voltage on det0' in nan.reason, nan.reason
+
+
+def test_live_rate_serves_every_nth_sample_and_the_log_keeps_all(tmp_path):
+    node, port = live_node(tmp_path, **{'live.rate_hz': 100, 'allow_duplicate_name': 'true'})
+    try:
+        async def watch():
+            client = await Client.connect(port)
+            await client.pump(lambda: '/displacement' in client.topic_channels(), 'channels')
+            await client.subscribe_all()
+            await client.pump(lambda: len(client.messages.get('/displacement', ())) >= 20,
+                              'samples')
+            await client.ws.close()
+            return client
+        client = asyncio.run(watch())
+    finally:
+        assert node.stop() == 0, ''.join(node.lines)
+    stamps = [stamp(msg) for _, msg in client.messages['/displacement']]
+    assert all(b - a == 10_000_000 for a, b in zip(stamps, stamps[1:])), stamps[:5]
+    from mcap.reader import make_reader
+    [log] = [f for f in os.listdir(tmp_path) if f.endswith('.mcap')]
+    with open(tmp_path / log, 'rb') as stream:
+        times = [message.log_time for _, _, message in
+                 make_reader(stream).iter_messages(topics=['/displacement'])]
+    assert times == [k * 1_000_000 for k in range(len(times))] and times[-1] >= stamps[-1]

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import json
 import threading
-from typing import Callable
 
 from .contract import COMMAND_TOPIC, JOINT_COMMAND_TOPIC
 from .messages import encode_float64_multi_array, encode_joint_state
@@ -159,7 +158,6 @@ class LiveServer:
         self._subscribed: set[tuple[int, int]] = set()
         self._lock = threading.Lock()
         self.watched = False         # some client subscribes to some channel
-        self.on_watch: Callable[[bool], None] | None = None
         self._last_time = None
         self.sessions = 1
         capabilities = [Capability.Time]
@@ -227,10 +225,7 @@ class LiveServer:
         """Count a client's subscription (the listener calls it on the SDK's thread)."""
         with self._lock:
             (self._subscribed.add if on else self._subscribed.discard)((client, channel))
-            watched = bool(self._subscribed)
-            changed, self.watched = watched != self.watched, watched
-        if changed and self.on_watch is not None:
-            self.on_watch(watched)
+            self.watched = bool(self._subscribed)
 
     def stop(self) -> None:
         """Stop the server (clients see the connection close)."""
