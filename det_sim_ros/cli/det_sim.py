@@ -15,6 +15,7 @@ The offline verbs write data (CSV, JSON) and plots (PNG); the ROS tools are ``fl
     det_sim fleet FLEET.yaml [--host NAME] [--log-dir DIR]   (sim_node processes, one per
                     namespace; Ctrl-C stops them all; det_sim_ros.ros.fleet describes the file)
     det_sim replay {resim,play,info,recover} LOG ...   (also the command det_sim_replay)
+    det_sim view LOG [--port 8765] [--speed 1]   (a log in Foxglove or Lichtblick; 'live' extra)
     det_sim send det0=2000 | 2000 0   det_sim watch [--csv]   det_sim pause | resume | reset
     det_sim advance N   det_sim param get|set NAME [VALUE]   (a running sim_node, found by
                     --ns and --node; docs/shell.md: the ros2 commands they stand in for)
@@ -37,13 +38,14 @@ import argparse
 import sys
 
 from . import common
-from .verbs import bench, fit, fleet, linearize, node, plot, replay, statics, step
+from .verbs import bench, fit, fleet, linearize, node, plot, replay, statics, step, view
 
 __all__ = ['main', 'main_replay', 'build_parser', 'VERBS']
 
 PROG = 'det_sim'
 VERBS = {'statics': statics, 'step': step, 'bench': bench, 'plot': plot,
-         'linearize': linearize, 'fit': fit, 'fleet': fleet, 'replay': replay, **node.VERBS}
+         'linearize': linearize, 'fit': fit, 'fleet': fleet, 'replay': replay, 'view': view,
+         **node.VERBS}
 
 
 def build_parser() -> argparse.ArgumentParser:

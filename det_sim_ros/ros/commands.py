@@ -67,6 +67,11 @@ class CommandInput:
                                      throttle_duration_sec=1.0)
         self._on_command(command)
 
+    def refuse(self, reason: str) -> None:
+        """Count a command that could not be read as a message (a live client's bad JSON)."""
+        self.received += 1
+        self._refuse(f'{reason}; holding the previous voltages')
+
     def _refuse(self, reason: str) -> None:
         self.refused += 1
         self.last_refused = reason

@@ -488,6 +488,11 @@ class NodeMarkers:
             self._shown_at = now
         return data
 
+    def add_viewers(self, count) -> None:
+        """Count ``count()`` more viewers beside DDS subscriptions (the live view's clients)."""
+        subscriptions = self.publisher.get_subscription_count
+        self._viewers = lambda: subscriptions() + count()
+
     def publish(self, data: bytes) -> None:
         self._publish_raw(data)   # (Publisher.publish's type check and guard skipped)
         self.published += 1

@@ -29,6 +29,7 @@ from std_srvs.srv import SetBool, Trigger
 from .commands import CommandInput
 from .declaration import load_node_scene, validate_parameters
 from .discovery import announce_early
+from .live import open_live_view
 from .markers import attach_markers
 from .name_check import check_unique_name, note_node_created
 from .pacing import make_pacing
@@ -180,11 +181,15 @@ class SimNode(Node):
         self.create_service(Trigger, '~/reset', self._srv_reset)
         self.add_on_set_parameters_callback(validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
+        self._live = open_live_view(self)   # Foxglove WebSocket server, or None (ros.live)
+        if self._live is not None:
+            self._diag_pub = self._live.tap(self._diag_pub)
 
     # -- read-only accessors ----------------------------------------------------------------
     simulator = property(lambda self: self._sim, doc='The Simulator this node runs.')
     recorder = property(lambda self: self._recorder, doc='The MCAP Recorder, or None.')
     markers = property(lambda self: self._markers, doc='The NodeMarkers, or None (off).')
+    live = property(lambda self: self._live, doc='The LiveView (ros.live), or None (off).')
     dt = property(lambda self: self._sim.dt, doc='The control period, s.')
     mode = property(lambda self: self._pacing.mode, doc='real_time, free_run or lockstep.')
     pacing = property(lambda self: self._pacing, doc='The Pacing of this mode (ros.pacing).')
@@ -225,6 +230,8 @@ class SimNode(Node):
         """Finish the MCAP log (indexed and complete), then destroy the node."""
         if self._recorder is not None:
             self._recorder.close()
+        if self._live is not None:
+            self._live.close()
         return super().destroy_node()
 
     # -- stepping ---------------------------------------------------------------------------
@@ -264,6 +271,8 @@ class SimNode(Node):
                         publish(data)
                 if frame is not None:
                     self._markers.publish(frame)
+            if self._live is not None:
+                self._live.send(batch)
         except RuntimeError:   # rclpy's RCLError: Ctrl-C shut the context down mid-tick
             if self.context.ok():
                 raise

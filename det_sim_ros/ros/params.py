@@ -102,6 +102,18 @@ NODE_PARAMS = {
                              'many per wall second; 0 = off', True, (0.0, 1.0e4)),
     'markers.frame_id': Param('', "'': one frame per DET (<namespace>/<DET name>); else all "
                               'DETs in this one frame, side by side', True, None),
+    # the live view (det_sim_ros.ros.live; the 'live' extra): docs/visualization.md
+    'live.enabled': Param(False, 'serve the outputs, markers, /diagnostics and sim time to '
+                          'Foxglove or Lichtblick over the Foxglove WebSocket protocol (needs '
+                          "the 'live' extra)", True, None),
+    'live.port': Param(8765, 'live view: TCP port (0 = a free port, named in the start-up '
+                       'line)', True, (0, 65535)),
+    'live.rate_hz': Param(0.0, 'live view: output samples served per simulated second (0 = '
+                          'every sample; the log keeps every sample either way)', True,
+                          (0.0, 1.0e6)),
+    'live.host': Param('127.0.0.1', "live view: address to listen on ('0.0.0.0': every "
+                       'network interface; anyone who reaches it can command the node)', True,
+                       None),
     'allow_duplicate_name': Param(False, 'start even if another node of this fully qualified '
                                   'name is running (one warning); false: refuse to start (the '
                                   'check looks for 0.75 s after start)', True, None),
