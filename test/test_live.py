@@ -334,7 +334,7 @@ def test_node_live_view(tmp_path):
 
 
 def test_view_serves_a_log_from_start_to_end(tmp_path):
-    from det_sim_ros.io.mcap_log import Recorder
+    from det_sim_ros.io.log import Recorder
     from det_sim_ros.io.replay import simulate_to_log
     from det_sim_ros.scenes.scene import load_scene
     from det_sim_ros.sim.simulator import Simulator

@@ -16,7 +16,7 @@ import threading
 import time
 
 from .live_server import LiveServer, require_sdk
-from .log_reader import LogReader
+from .log import LogReader
 
 __all__ = ['LogPlayer', 'LogSummary']
 
