@@ -3,6 +3,9 @@ Work-precision map against the continuum: level x Ritz terms x tolerance, error 
 
 Workloads, each at every point of GRID (level, n_r, tolerances):
 
+Each point's integration error is its error against the same level's own converged run (at
+tolerance OWN), on the same scale.
+
 - the three 'step' cases of bench/continuum_reference.py (fixed eps_b 0.15 / 0.20, simply
   supported 0.20; released, 3 kV from 1.5 to 3 s, 4.5 s) through ``simulate()``
   (bench/fidelity_choice.run_level): error = max |dy - dy_ref| over the 3 kV phase / stroke
@@ -11,7 +14,8 @@ Workloads, each at every point of GRID (level, n_r, tolerances):
   steps per period;
 - a controller's input (CONTROLLER_END s of the default scene from rest: a new command every
   period, a 0 / 2.5 kV square wave at 2 Hz, so the beam switches twice a second, plus a uniform
-  +-DITHER V dither per sample): error = max |y - y_ref| over the run / the travel of y_ref,
+  +-DITHER V dither per sample): error = max |dy - dy_ref| over the run / the travel of y_ref,
+  dy = y - y(0) the displacement from the rest state,
   y_ref the simulator at exact n_r 11, tolerance 1e-8 (which agrees with the continuum
   reference to 1.5e-7 of the stroke on the step cases), switching right = the sign of q at the
   end of every half period as the reference's;
@@ -72,8 +76,9 @@ REFERENCE = ('exact', 11, 1e-8)
 HERE = os.path.dirname(os.path.abspath(__file__))
 CSV = os.path.join(HERE, 'data', 'work_precision_map.csv')
 FIGURE = os.path.join(HERE, os.pardir, 'docs', 'figures', 'work_precision_map.png')
-FIELDS = ('workload', 'fidelity', 'n_r', 'tolerance', 'error', 'switch_ok', 'cpu_per_s',
-          'x_real_time', 'steps_per_period')
+FIELDS = ('workload', 'fidelity', 'n_r', 'tolerance', 'error', 'integration_error',
+          'switch_ok', 'cpu_per_s', 'x_real_time', 'steps_per_period')
+OWN = 1e-8   # each level's own converged run: its tolerance
 
 
 def level_overrides(fidelity, n_r, tolerance) -> dict:
@@ -106,28 +111,49 @@ def run_controller(fidelity, n_r, tolerance):
     return result, time.process_time() - start, sim.steps_taken / periods
 
 
-def controller_row(point, reference):
-    """Return the map row of the controller run at one point against ``reference``."""
+def _displacement(result) -> np.ndarray:
+    """Return y - y(0): the travel from the rest state (whose y differs a little by level)."""
+    return result['y'] - result['y'][0]
+
+
+def controller_rows(point, reference, own=None):
+    """
+    Return ([the controller run's row], its result) at one point.
+
+    Error against ``reference`` (the continuum) and, with ``own``, against the level's own
+    converged run: max |y - y_ref| over the run / the travel of the continuum's y.
+    """
     result, cpu, steps = run_controller(*point)
-    y_ref = reference['y']
-    error = float(np.max(np.abs(result['y'] - y_ref)) / (y_ref.max() - y_ref.min()))
+    travel = reference['y'].max() - reference['y'].min()
+    error = float(np.max(np.abs(_displacement(result) - _displacement(reference))) / travel)
+    own = own if own is not None else result
+    own_error = float(np.max(np.abs(_displacement(result) - _displacement(own))) / travel)
     ok = np.array_equal(half_period_signs(result.t, result['q']),
                         half_period_signs(reference.t, reference['q']))
-    return _row('controller', point, error, ok, cpu / CONTROLLER_END, steps)
+    return [_row('controller', point, error, own_error, ok, cpu / CONTROLLER_END, steps)], result
 
 
-def step_rows(point, reference):
-    """Return the map rows of the three step cases at one point."""
-    rows = []
+def step_rows(point, reference, own=None):
+    """
+    Return (the map rows of the three step cases at one point, their dy by case).
+
+    Error against the continuum ``reference`` and, with ``own`` (dy by case of the level's own
+    converged run), against its own model: the integration error.
+    """
+    rows, dys = [], {}
     for beam, eps_b in CASES:
-        ref = reference[case_name(beam, eps_b)]
+        name = case_name(beam, eps_b)
+        ref = reference[name]
         run, cpu, steps = run_level(beam, eps_b, point[0], point[1], repeats=1,
                                     **{'integrator.tolerance': point[2]})
         dy, _ = delta_y(run.t, run['y'], run.scene.beam_length)
-        error = stroke_error(run.t, dy, ref['dy'], stroke(ref['y']))
+        dys[name] = dy
+        scale = stroke(ref['y'])
+        error = stroke_error(run.t, dy, ref['dy'], scale)
+        own_error = stroke_error(run.t, dy, (own or dys)[name], scale)
         ok = switched(run.t, run['q']) == switched(ref['t'], ref['q'])
-        rows.append(_row(case_name(beam, eps_b), point, error, ok, cpu / STEP_END, steps))
-    return rows
+        rows.append(_row(name, point, error, own_error, ok, cpu / STEP_END, steps))
+    return rows, dys
 
 
 def lsoda_rows(point, reference):
@@ -140,7 +166,7 @@ def lsoda_rows(point, reference):
         cpu = time.process_time() - start
         error = stroke_error(run['t'], run['dy'], ref['dy'], stroke(ref['y']))
         ok = switched(run['t'], run['q']) == switched(ref['t'], ref['q'])
-        rows.append(_row(f'lsoda {case_name(beam, eps_b)}', point, error, ok,
+        rows.append(_row(f'lsoda {case_name(beam, eps_b)}', point, error, float('nan'), ok,
                          cpu / run['t'][-1], float('nan')))
     return rows
 
@@ -151,19 +177,24 @@ def array_row(point):
     periods = round(ARRAY_END / scene.dt)
     volts = controller_volts(periods, scene.dt, scene.n_dets)
     sim = Simulator(scene, threads=ARRAY_THREADS)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     simulate(sim, volts, ARRAY_END)
     wall = (time.perf_counter() - start) / ARRAY_END
+    cpu = (time.process_time() - cpu) / ARRAY_END
     steps = sim.steps_taken / periods / sim.model.arrays.n_groups
-    return _row('array', point, float('nan'), True, wall, steps)
+    print(f'    array CPU (both threads) {cpu:.3f} s/s: {ARRAY_THREADS / cpu:.2f}x real time '
+          f'on {ARRAY_THREADS} idle cores')
+    return [_row('array', point, float('nan'), float('nan'), True, wall, steps),
+            _row('array cpu', point, float('nan'), float('nan'), True, cpu / ARRAY_THREADS,
+                 steps)]
 
 
-def _row(workload, point, error, ok, cpu_per_s, steps) -> dict:
-    row = dict(zip(FIELDS, (workload, point[0], point[1], point[2], error, ok, cpu_per_s,
-                            1.0 / cpu_per_s, steps)))
+def _row(workload, point, error, own_error, ok, cpu_per_s, steps) -> dict:
+    row = dict(zip(FIELDS, (workload, point[0], point[1], point[2], error, own_error, ok,
+                            cpu_per_s, 1.0 / cpu_per_s, steps)))
     print(f'  {workload:>22} {point[0]:>10} {point[1]} {point[2]:.0e}: error {error:.2e} '
-          f'{"" if ok else "SWITCHING WRONG "}{cpu_per_s:.4f} CPU s/s ({1 / cpu_per_s:.1f}x) '
-          f'{steps:.1f} steps/period', flush=True)
+          f'(own {own_error:.1e}) {"" if ok else "SWITCHING WRONG "}{cpu_per_s:.4f} CPU s/s '
+          f'({1 / cpu_per_s:.1f}x) {steps:.1f} steps/period', flush=True)
     return row
 
 
@@ -261,17 +292,23 @@ def main(argv=None) -> int:
     if not args.no_controller:
         controller_ref, _, _ = run_controller(*REFERENCE)
     for (fidelity, n_r), tolerances in (QUICK_GRID if args.quick else GRID).items():
+        own_rows, own = step_rows((fidelity, n_r, OWN), reference)
+        if controller_ref is not None:
+            own_ctl_rows, own_ctl = controller_rows((fidelity, n_r, OWN), controller_ref)
+            own_rows += own_ctl_rows
         for tol in tolerances:
-            point = (fidelity, n_r, tol)
-            rows += step_rows(point, reference)
+            if tol == OWN:
+                rows += own_rows
+                continue
+            rows += step_rows((fidelity, n_r, tol), reference, own)[0]
             if controller_ref is not None:
-                rows.append(controller_row(point, controller_ref))
+                rows += controller_rows((fidelity, n_r, tol), controller_ref, own_ctl)[0]
     if args.lsoda:
         for point in LSODA_POINTS:
             rows += lsoda_rows(point, reference)
     if args.array:
         for point in ARRAY_POINTS:
-            rows.append(array_row(point))
+            rows += array_row(point)
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     with open(args.out, 'w', encoding='utf-8', newline='') as fh:
         writer = csv.DictWriter(fh, FIELDS)

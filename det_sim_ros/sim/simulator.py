@@ -23,7 +23,8 @@ from typing import Callable
 import numpy as np
 
 from .amplifier import CommandStage
-from .integrators import get_method, make_stepper, Method, step_control, transient_settings
+from .integrators import (get_method, integration_tolerance, make_stepper, Method, step_control,
+                          transient_settings)
 from ..core import kernel
 from ..physics.model import build_model, Model, ModelDomainError
 from ..physics.statics import initial_state
@@ -94,6 +95,8 @@ class Simulator:
         if substeps < 0:
             raise ValueError(f'substeps must be >= 0 (got {substeps})')
         self.dt = self.scene.dt
+        # the tolerance the step control works to (the scene's, or its level's when 'auto')
+        self.tolerance = integration_tolerance(self.scene)
         self.control = step_control(self.method, self.model, substeps)
         self.adaptive = self.control.adaptive
         self.transient = transient_settings(self.method, self.scene)

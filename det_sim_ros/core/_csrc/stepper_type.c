@@ -45,24 +45,27 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
     static char *kwlist[] = {"model", "c", "terms", "embedded", "error_weights", "dt",
                              "z_tol", "fine", "substeps", "tolerance", "min_substeps",
                              "max_substeps", "exponent", "jump_ref", "linearized",
-                             "lin_refresh", NULL};
+                             "lin_refresh", "lin_refresh_input", NULL};
     PyObject *model, *c, *terms, *embedded, *weights;
     double dt, z_tol, fine, tol, exponent, jump_ref = 0.0, lin_refresh = 0.0;
+    double lin_refresh_input = 0.0;
     long long n0, n_min, n_max;
     int linearized = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O!OOOOdddLdLLd|dpd", kwlist, &ModelType,
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O!OOOOdddLdLLd|dpdd", kwlist, &ModelType,
                                      &model, &c, &terms, &embedded, &weights, &dt, &z_tol, &fine,
                                      &n0, &tol, &n_min, &n_max, &exponent, &jump_ref,
-                                     &linearized, &lin_refresh))
+                                     &linearized, &lin_refresh, &lin_refresh_input))
         return -1;
     if (self->ready) {
         PyErr_SetString(PyExc_RuntimeError, "Stepper already initialised");
         return -1;
     }
     if (!(dt > 0.0) || n0 < 1 || n_min < 1 || n_max < n_min || !(exponent > 0.0)
-        || !(jump_ref >= 0.0 && jump_ref < INFINITY) || !(lin_refresh >= 0.0)) {
+        || !(jump_ref >= 0.0 && jump_ref < INFINITY) || !(lin_refresh >= 0.0)
+        || !(lin_refresh_input >= 0.0)) {
         PyErr_SetString(PyExc_ValueError, "Stepper: need dt > 0, 1 <= min <= max substeps, "
-                                          "a finite jump_ref >= 0, lin_refresh >= 0");
+                                          "a finite jump_ref >= 0, lin_refresh >= 0, "
+                                          "lin_refresh_input >= 0");
         return -1;
     }
     ModelObject *mo = (ModelObject *)model;
@@ -87,6 +90,7 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
         self->st.jump_ref = jump_ref;
         self->st.linearized = linearized;
         self->st.lin_refresh = lin_refresh;
+        self->st.lin_refresh_input = lin_refresh_input;
         const int init = ds_stepper_init(&self->st, &mo->m, dt, z_tol, fine, &ctl, bw.buf);
         if (init < 0 || ds_work_init(&self->out_work, &mo->m) < 0) {
             ds_stepper_free(&self->st);

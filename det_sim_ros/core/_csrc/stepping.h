@@ -89,6 +89,7 @@ typedef struct {
     int threads;
     int linearized;                     /* a dense linear part over q, qdot per group */
     double lin_refresh;                 /* weighted state change that renews it */
+    double lin_refresh_input;           /* input change (V) that renews it (0: any) */
 } ds_stepper;
 
 /* st->method must be initialised (ds_method_init) before. */
