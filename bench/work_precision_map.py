@@ -46,7 +46,7 @@ from continuum_reference import (case_name, CASES, load_reference, solve_case, s
 from det_sim_ros.analysis.scenarios import delta_y, STEP_END
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import simulate, Simulator
-from fidelity_choice import run_level
+from fidelity_choice import DOC, MACHINE, run_level, write_doc
 import numpy as np
 
 TOLERANCES = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-8)
@@ -56,10 +56,11 @@ GRID = {   # (fidelity, n_r): tolerances (the paper's and the consistent level's
     ('consistent', 5): (1e-2, 1e-3, 1e-4, 1e-6),
     ('exact', 3): TOLERANCES,
     ('exact', 4): (1e-2, 1e-3, 1e-4, 1e-6),
-    ('exact', 5): TOLERANCES,
+    ('exact', 5): (1e-2, 3e-3, 1e-3, 1e-4, 1e-5, 1e-6, 1e-8),
     ('exact', 6): (1e-2, 1e-3, 1e-4, 1e-5, 1e-6),
-    ('exact', 7): TOLERANCES,
-    ('exact', 9): (1e-3, 1e-4, 1e-6, 1e-8),
+    ('exact', 7): (1e-2, 1e-3, 3e-4, 1e-4, 1e-5, 1e-6, 1e-8),
+    ('exact', 8): (1e-3, 1e-4, 1e-5),
+    ('exact', 9): (1e-3, 1e-4, 1e-5, 1e-6, 1e-8),
 }
 QUICK_GRID = {('paper', 1): (1e-6,), ('exact', 3): (1e-3,), ('exact', 5): (1e-3, 1e-6),
               ('exact', 7): (1e-4,)}
@@ -73,6 +74,7 @@ DITHER = 25.0           # V, uniform +- per sample
 ARRAY_END = 1.0         # s
 ARRAY_THREADS = 2
 REFERENCE = ('exact', 11, 1e-8)
+BEGIN, END = '<!-- work_precision_map: begin -->', '<!-- work_precision_map: end -->'
 HERE = os.path.dirname(os.path.abspath(__file__))
 CSV = os.path.join(HERE, 'data', 'work_precision_map.csv')
 FIGURE = os.path.join(HERE, os.pardir, 'docs', 'figures', 'work_precision_map.png')
@@ -265,6 +267,95 @@ def plot(rows, path=FIGURE):
     print(f'wrote {os.path.normpath(path)}')
 
 
+def _level(fidelity, n_r) -> str:
+    return 'paper' if fidelity == 'paper' else f'{fidelity} n_r {n_r}'
+
+
+def _by_point(rows):
+    """Return {(fidelity, n_r, tolerance): {workload: row}} with numbers as numbers."""
+    out = {}
+    for r in rows:
+        key = (r['fidelity'], int(r['n_r']), float(r['tolerance']))
+        out.setdefault(key, {})[r['workload']] = {
+            k: (v if k in ('workload', 'fidelity') else
+                (v in (True, 'True')) if k == 'switch_ok' else float(v)) for k, v in r.items()}
+    return out
+
+
+def doc_section(rows) -> str:
+    """Return the markdown of the map: the front, the auto tolerances' evidence, array, LSODA."""
+    import datetime
+    import subprocess
+    cases = [case_name(b, e) for b, e in CASES]
+    points = _by_point(rows)
+    steps = {k: v for k, v in points.items() if all(c in v for c in cases)}
+    best = summary(rows)
+    keys = list(best)
+    on_front = {keys[i] for i in front([(best[k][1], best[k][0]) for k in keys])}
+    try:
+        commit = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True,
+                                text=True, check=True, cwd=HERE).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        commit = 'unknown'
+    out = [f'Measured {datetime.date.today().isoformat()}, commit {commit}, {MACHINE} (one run '
+           'per point, CPU time of one core: ±30 % with the load; ratios side by side in one '
+           'run). Error: the step cases\' max |Δy − Δy_ref| over the 3 kV phase / stroke, the '
+           'worst of the three; CPU: the slowest of the three; "integration": the error against '
+           f'the same level at tolerance {OWN:g}, as a fraction of the level\'s own error '
+           'against the continuum (worst case); controller: '
+           f'{CONTROLLER_END:g} s of the default scene under a new command every period (a '
+           f'{CONTROLLER_HZ:g} Hz 0 / {CONTROLLER_HIGH / 1e3:g} kV square wave, ±{DITHER:g} V '
+           f'dither), max |Δy − Δy_ref| / travel against exact n_r {REFERENCE[1]} at '
+           f'{REFERENCE[2]:g}. Front: no other point both cheaper and more accurate on the step '
+           'cases. `bench/work_precision_map.py --docs` rewrites this section.', '',
+           '![work-precision map](figures/work_precision_map.png)', '',
+           '| level | tolerance | worst error | integration / model | slowest × real time | '
+           'steps per period (slowest) | controller error | controller × real time | front |',
+           '|---|---|---|---|---|---|---|---|---|']
+    own_error = {(f, n): max(steps[(f, n, OWN)][c]['error'] for c in cases)
+                 for f, n, _ in steps if (f, n, OWN) in steps}
+    for key in sorted(steps, key=lambda k: (k[0] != 'paper', k[0], k[1], -k[2])):
+        fidelity, n_r, tol = key
+        if tol == OWN and tol not in GRID.get((fidelity, n_r), ()):
+            continue
+        v = steps[key]
+        slow = max(cases, key=lambda c: v[c]['cpu_per_s'])
+        ratio = max(v[c]['integration_error'] / steps[(fidelity, n_r, OWN)][c]['error']
+                    for c in cases) if (fidelity, n_r) in own_error else float('nan')
+        ctl = v.get('controller')
+        wrong = '' if all(v[c]['switch_ok'] for c in cases) else ' (switches wrongly)'
+        out.append(f'| {_level(fidelity, n_r)} | {tol:g} | {best[key][0]:.2%}{wrong} | '
+                   f'{ratio:.1%} | {1 / best[key][1]:.0f} | {v[slow]["steps_per_period"]:.1f} | '
+                   + (f'{ctl["error"]:.2%} | {ctl["x_real_time"]:.0f} | ' if ctl else '– | – | ')
+                   + ('**yes**' if key in on_front else '') + ' |')
+    arrays = {k: v for k, v in points.items() if 'array' in v}
+    if arrays:
+        out += ['', f'The shipped array (100 copies, {ARRAY_THREADS} threads, {ARRAY_END:g} s of '
+                'the controller\'s input, each copy its own dither): × real time from the CPU '
+                f'time of both threads ({ARRAY_THREADS} idle cores) and from the wall clock on '
+                'this shared host (other sessions running beside it):', '',
+                '| level | tolerance | × real time (CPU, 2 cores) | × real time (wall, shared) '
+                '| steps per period per copy | error, fixed ε_b 0.20 (the array\'s cell) |',
+                '|---|---|---|---|---|---|']
+        for (fidelity, n_r, tol), v in arrays.items():
+            cell = steps.get((fidelity, n_r, tol), {}).get('fixed_0.20')
+            out.append(f'| {_level(fidelity, n_r)} | {tol:g} | '
+                       f'{v["array cpu"]["x_real_time"]:.2f} | {v["array"]["x_real_time"]:.2f} | '
+                       f'{v["array"]["steps_per_period"]:.1f} | '
+                       + (f'{cell["error"]:.2%}' if cell else '–') + ' |')
+    lsoda = {k: v for k, v in points.items() if any(w.startswith('lsoda') for w in v)}
+    if lsoda:
+        out += ['', 'scipy\'s LSODA on the same compiled right-hand side (`Model.f`, one solve '
+                'per constant voltage), the step cases, against this stepper at the same level:',
+                '', '| level | LSODA rtol | worst error | slowest × real time |',
+                '|---|---|---|---|']
+        for (fidelity, n_r, tol), v in lsoda.items():
+            err = max(v[f'lsoda {c}']['error'] for c in cases)
+            x = min(v[f'lsoda {c}']['x_real_time'] for c in cases)
+            out.append(f'| {_level(fidelity, n_r)} | {tol:g} | {err:.2%} | {x:.0f} |')
+    return '\n'.join(out)
+
+
 def read_csv(path=CSV):
     """Return the rows of a written map."""
     with open(path, encoding='utf-8') as fh:
@@ -280,10 +371,14 @@ def main(argv=None) -> int:
     ap.add_argument('--no-controller', action='store_true', help='skip the controller run')
     ap.add_argument('--plot', action='store_true', help='draw the figure')
     ap.add_argument('--plot-only', action='store_true', help='redraw from the CSV only')
+    ap.add_argument('--docs', action='store_true',
+                    help='write the map section of docs/fidelity.md')
     ap.add_argument('--out', default=CSV)
     args = ap.parse_args(argv)
     if args.plot_only:
         plot(read_csv(args.out))
+        if args.docs:
+            write_doc(doc_section(read_csv(args.out)), begin=BEGIN, end=END)
         return 0
     reference = load_reference()
     simulate(Simulator(load_scene('default')), np.zeros(10), 0.01)   # warm up
@@ -296,9 +391,9 @@ def main(argv=None) -> int:
         if controller_ref is not None:
             own_ctl_rows, own_ctl = controller_rows((fidelity, n_r, OWN), controller_ref)
             own_rows += own_ctl_rows
+        rows += own_rows
         for tol in tolerances:
             if tol == OWN:
-                rows += own_rows
                 continue
             rows += step_rows((fidelity, n_r, tol), reference, own)[0]
             if controller_ref is not None:
@@ -317,6 +412,9 @@ def main(argv=None) -> int:
     print(f'wrote {os.path.normpath(args.out)}')
     if args.plot:
         plot(rows)
+    if args.docs:
+        write_doc(doc_section(rows), begin=BEGIN, end=END)
+        print(f'wrote the map into {os.path.normpath(DOC)}')
     return 0
 
 
