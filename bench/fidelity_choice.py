@@ -82,8 +82,8 @@ def study(reference):
     for fidelity, n_r in LEVELS:
         row = {'fidelity': fidelity, 'n_r': n_r, 'error': [], 'error_peak': [],
                'switch_ok': [], 'cpu': [], 'steps': [],
-               'tolerance': integration_tolerance(step_scene(**{'scene.fidelity': fidelity,
-                                                                 'scene.n_ritz': n_r}))}
+               'tolerance': integration_tolerance(step_scene(
+                   **{'scene.fidelity': fidelity, 'scene.n_ritz': n_r}))}
         for beam, eps_b in CASES:
             ref = reference[case_name(beam, eps_b)]
             run, cpu, steps = run_level(beam, eps_b, fidelity, n_r)
@@ -170,7 +170,7 @@ def table(rows, reference) -> str:
              f'start to the buckled rest state: {strokes}) and, in parentheses, of the peak '
              f'displacement in the 3 kV phase (max |Δy_ref|: {peaks}); '
              f'Δy_ref the exact kinematics at n_r {meta["n_ritz"]}, tolerance {meta["rtol"]:g} '
-             '(bench/continuum_reference.py); integrator: auto at the level\'s own tolerance '
+             '(bench/continuum_reference.py); integrator: auto at the own tolerance of each level '
              '(`integrator.tolerance: 0`, the table in det_sim_ros/sim/integrators.py).', '',
              '| level | tolerance | '
              + ' | '.join(f'error {b.replace("_", " ")} {e:.2f}' for b, e in CASES)
@@ -179,8 +179,9 @@ def table(rows, reference) -> str:
     for r in rows:
         level = r['fidelity'] if r['fidelity'] == 'paper' else f'{r["fidelity"]} n_r {r["n_r"]}'
         cpu_lo, cpu_hi = min(r['cpu']), max(r['cpu'])
-        lines.append(f'| {level} | {r["tolerance"]:g} | ' + ' | '.join(f'{e:.2%} ({p:.2%})' for e, p in
-                                                  zip(r['error'], r['error_peak']))
+        lines.append(f'| {level} | {r["tolerance"]:g} | '
+                     + ' | '.join(f'{e:.2%} ({p:.2%})'
+                                  for e, p in zip(r['error'], r['error_peak']))
                      + f' | {sum(r["switch_ok"])} of {len(CASES)}'
                      + f' | {cpu_lo:.3g}–{cpu_hi:.3g} | {1 / cpu_hi:.3g}–{1 / cpu_lo:.3g}'
                      + ' | ' + '–'.join(f'{s:.0f}' for s in (min(r['steps']), max(r['steps'])))

@@ -299,9 +299,9 @@ def doc_section(rows) -> str:
         commit = 'unknown'
     out = [f'Measured {datetime.date.today().isoformat()}, commit {commit}, {MACHINE} (one run '
            'per point, CPU time of one core: ±30 % with the load; ratios side by side in one '
-           'run). Error: the step cases\' max |Δy − Δy_ref| over the 3 kV phase / stroke, the '
+           'run). Error: max |Δy − Δy_ref| of a step case over its 3 kV phase / stroke, the '
            'worst of the three; CPU: the slowest of the three; "integration": the error against '
-           f'the same level at tolerance {OWN:g}, as a fraction of the level\'s own error '
+           f'the same level at tolerance {OWN:g}, as a fraction of the own error of the level '
            'against the continuum (worst case); controller: '
            f'{CONTROLLER_END:g} s of the default scene under a new command every period (a '
            f'{CONTROLLER_HZ:g} Hz 0 / {CONTROLLER_HIGH / 1e3:g} kV square wave, ±{DITHER:g} V '
@@ -331,11 +331,11 @@ def doc_section(rows) -> str:
     arrays = {k: v for k, v in points.items() if 'array' in v}
     if arrays:
         out += ['', f'The shipped array (100 copies, {ARRAY_THREADS} threads, {ARRAY_END:g} s of '
-                'the controller\'s input, each copy its own dither): × real time from the CPU '
+                'the input of the controller, each copy its own dither): × real time from the CPU '
                 f'time of both threads ({ARRAY_THREADS} idle cores) and from the wall clock on '
                 'this shared host (other sessions running beside it):', '',
                 '| level | tolerance | × real time (CPU, 2 cores) | × real time (wall, shared) '
-                '| steps per period per copy | error, fixed ε_b 0.20 (the array\'s cell) |',
+                '| steps per period per copy | error, fixed ε_b 0.20 (the cell of the array) |',
                 '|---|---|---|---|---|---|']
         for (fidelity, n_r, tol), v in arrays.items():
             cell = steps.get((fidelity, n_r, tol), {}).get('fixed_0.20')
@@ -345,7 +345,7 @@ def doc_section(rows) -> str:
                        + (f'{cell["error"]:.2%}' if cell else '–') + ' |')
     lsoda = {k: v for k, v in points.items() if any(w.startswith('lsoda') for w in v)}
     if lsoda:
-        out += ['', 'scipy\'s LSODA on the same compiled right-hand side (`Model.f`, one solve '
+        out += ['', 'LSODA (scipy) on the same compiled right-hand side (`Model.f`, one solve '
                 'per constant voltage), the step cases, against this stepper at the same level:',
                 '', '| level | LSODA rtol | worst error | slowest × real time |',
                 '|---|---|---|---|']

@@ -6,7 +6,8 @@ profile on five scenes at tolerance 1e-6 (the paper's level set explicitly where
 fidelity is not the subject) and on the shipped default at its own tolerance ('auto':
 AUTO_TOLERANCE). They follow from the step-size control's constants
 (det_sim_ros.sim.integrators: LOCAL_TOLERANCE, MAX_SUBSTEPS_FACTOR, ERROR_CONSTANT,
-TRANSIENT_FINE, TRANSIENT_CHARGE, MAX_STEP, STABLE_STEP, LINEAR_REFRESH, LINEAR_REFRESH_INPUT, LINEARIZED_MAX_FACTOR, AUTO_TOLERANCE;
+TRANSIENT_FINE, TRANSIENT_CHARGE, MAX_STEP, STABLE_STEP, LINEAR_REFRESH, LINEAR_REFRESH_INPUT,
+LINEARIZED_MAX_FACTOR, AUTO_TOLERANCE;
 CTL_SAFETY, the growth rules and the count ladder of linearized methods in
 core/_csrc/stepping.c; 'default' and 'exact_n3' step with 'etdrk4_linearized', the others
 with 'etdrk4' or 'dp5'), so a change to any of them shows here by name rather than only as a
