@@ -138,14 +138,23 @@ def file_info(version: str, scene_yaml: str, file_index: int,
 
 
 def scene_text(scene) -> str:
-    """Return the YAML text stored in a log for a Scene, its YAML text or mapping ('' for None)."""
+    """
+    Return the YAML text stored in a log for a Scene, its YAML text or mapping ('' for None).
+
+    A Scene's tolerance is stored as the number it resolves to (an 'auto' 0 is not).
+    """
     if scene is None:
         return ''
     if isinstance(scene, str):
         return scene
     import yaml
     from ..scenes.scene import scene_to_dict
-    data = scene if isinstance(scene, Mapping) else scene_to_dict(scene, wrap=True)
+    from ..sim.integrators import integration_tolerance
+    if isinstance(scene, Mapping):
+        data = scene
+    else:   # the tolerance used, not 'auto' (0): a log re-simulates whatever the table says later
+        scene = scene.replace(**{'integrator.tolerance': integration_tolerance(scene)})
+        data = scene_to_dict(scene, wrap=True)
     return yaml.safe_dump(data, sort_keys=False)
 
 
