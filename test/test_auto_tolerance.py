@@ -10,8 +10,8 @@ bench/data/continuum_reference.npz, the exact kinematics at n_r 11 solved by LSO
 import json
 import os
 
-from det_sim_ros.analysis.scenarios import delta_y, STEP_END, STEP_SWITCH_TIMES, step_scene
-from det_sim_ros.analysis.scenarios import step_voltage
+from det_sim_ros.analysis.scenarios import (delta_y, STEP_END, step_scene, STEP_SWITCH_TIMES,
+                                            step_voltage)
 from det_sim_ros.io.log_file import scene_text
 from det_sim_ros.scenes.scene import load_scene, SceneError
 from det_sim_ros.sim.integrators import AUTO_TOLERANCE, integration_tolerance
