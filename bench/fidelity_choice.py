@@ -72,6 +72,7 @@ def run_level(beam, eps_b, fidelity, n_r, repeats=3, **overrides):
         run = simulate(sim, voltage, STEP_END)
         times.append(time.process_time() - start)
         run.scene = scene
+        run.periods_repeated = sim.stepper.periods_repeated
     periods = round(STEP_END / scene.dt)
     return run, statistics.median(times), sim.steps_taken / periods
 

@@ -3,7 +3,8 @@ Work-precision map against the continuum: level x Ritz terms x tolerance, error 
 
 Workloads, each at every point of GRID (level, n_r, tolerances):
 
-Each point's integration error is its error against the same level's own converged run (at
+'Periods repeated': the fraction of control periods the step-count controller ran again with
+more steps (the embedded estimate over the tolerance). Each point's integration error is its error against the same level's own converged run (at
 tolerance OWN), on the same scale.
 
 - the three 'step' cases of bench/continuum_reference.py (fixed eps_b 0.15 / 0.20, simply
@@ -79,7 +80,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 CSV = os.path.join(HERE, 'data', 'work_precision_map.csv')
 FIGURE = os.path.join(HERE, os.pardir, 'docs', 'figures', 'work_precision_map.png')
 FIELDS = ('workload', 'fidelity', 'n_r', 'tolerance', 'error', 'integration_error',
-          'switch_ok', 'cpu_per_s', 'x_real_time', 'steps_per_period')
+          'switch_ok', 'cpu_per_s', 'x_real_time', 'steps_per_period', 'repeated')
 OWN = 1e-8   # each level's own converged run: its tolerance
 
 
@@ -110,6 +111,7 @@ def run_controller(fidelity, n_r, tolerance):
     sim = Simulator(scene)
     start = time.process_time()
     result = simulate(sim, volts, CONTROLLER_END)
+    result.periods_repeated = sim.stepper.periods_repeated / periods
     return result, time.process_time() - start, sim.steps_taken / periods
 
 
@@ -132,7 +134,9 @@ def controller_rows(point, reference, own=None):
     own_error = float(np.max(np.abs(_displacement(result) - _displacement(own))) / travel)
     ok = np.array_equal(half_period_signs(result.t, result['q']),
                         half_period_signs(reference.t, reference['q']))
-    return [_row('controller', point, error, own_error, ok, cpu / CONTROLLER_END, steps)], result
+    row = _row('controller', point, error, own_error, ok, cpu / CONTROLLER_END, steps)
+    row['repeated'] = result.periods_repeated
+    return [row], result
 
 
 def step_rows(point, reference, own=None):
@@ -155,6 +159,7 @@ def step_rows(point, reference, own=None):
         own_error = stroke_error(run.t, dy, (own or dys)[name], scale)
         ok = switched(run.t, run['q']) == switched(ref['t'], ref['q'])
         rows.append(_row(name, point, error, own_error, ok, cpu / STEP_END, steps))
+        rows[-1]['repeated'] = run.periods_repeated / round(STEP_END / run.scene.dt)
     return rows, dys
 
 
@@ -193,7 +198,7 @@ def array_row(point):
 
 def _row(workload, point, error, own_error, ok, cpu_per_s, steps) -> dict:
     row = dict(zip(FIELDS, (workload, point[0], point[1], point[2], error, own_error, ok,
-                            cpu_per_s, 1.0 / cpu_per_s, steps)))
+                            cpu_per_s, 1.0 / cpu_per_s, steps, float('nan'))))
     print(f'  {workload:>22} {point[0]:>10} {point[1]} {point[2]:.0e}: error {error:.2e} '
           f'(own {own_error:.1e}) {"" if ok else "SWITCHING WRONG "}{cpu_per_s:.4f} CPU s/s '
           f'({1 / cpu_per_s:.1f}x) {steps:.1f} steps/period', flush=True)
@@ -310,8 +315,9 @@ def doc_section(rows) -> str:
            'cases. `bench/work_precision_map.py --docs` rewrites this section.', '',
            '![work-precision map](figures/work_precision_map.png)', '',
            '| level | tolerance | worst error | integration / model | slowest × real time | '
-           'steps per period (slowest) | controller error | controller × real time | front |',
-           '|---|---|---|---|---|---|---|---|---|']
+           'steps per period (slowest) | periods repeated (slowest) | controller error | '
+           'controller × real time | front |',
+           '|---|---|---|---|---|---|---|---|---|---|']
     own_error = {(f, n): max(steps[(f, n, OWN)][c]['error'] for c in cases)
                  for f, n, _ in steps if (f, n, OWN) in steps}
     for key in sorted(steps, key=lambda k: (k[0] != 'paper', k[0], k[1], -k[2])):
@@ -326,6 +332,7 @@ def doc_section(rows) -> str:
         wrong = '' if all(v[c]['switch_ok'] for c in cases) else ' (switches wrongly)'
         out.append(f'| {_level(fidelity, n_r)} | {tol:g} | {best[key][0]:.2%}{wrong} | '
                    f'{ratio:.1%} | {1 / best[key][1]:.0f} | {v[slow]["steps_per_period"]:.1f} | '
+                   f'{v[slow]["repeated"]:.1%} | '
                    + (f'{ctl["error"]:.2%} | {ctl["x_real_time"]:.0f} | ' if ctl else '– | – | ')
                    + ('**yes**' if key in on_front else '') + ' |')
     arrays = {k: v for k, v in points.items() if 'array' in v}

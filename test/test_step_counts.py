@@ -45,6 +45,8 @@ STEPS = {
     'exact_n3': [85, 2150, 1480],
     'ideal_dp5_paper': [66, 693, 720],
 }
+# periods the default (at auto) runs again with more steps over PROFILE
+REPEATED_DEFAULT_AUTO = 20.0
 
 
 def step_counts(name):
@@ -66,3 +68,16 @@ def step_counts(name):
 @pytest.mark.parametrize('name', sorted(SCENES))
 def test_adaptive_step_counts_are_pinned(name):
     assert step_counts(name) == STEPS[name]
+
+
+def test_repeated_periods_are_counted_and_pinned():
+    """The default at auto repeats a few periods through the snap; a fixed count none."""
+    counts = {}
+    for substeps in (0, 4):
+        sim = Simulator(load_scene('default', {'integrator.substeps': substeps}))
+        for volts, periods in PROFILE:
+            sim.set_input([volts])
+            for _ in range(periods):
+                sim.step()
+        counts[substeps] = sim.stepper.periods_repeated
+    assert counts == {0: REPEATED_DEFAULT_AUTO, 4: 0.0}

@@ -318,11 +318,12 @@ static PyObject *Stepper_get(StepperObject *self, void *which)
 {
     NEED_READY(self);
     const ds_stepper *st = &self->st;
-    double total = 0.0, best = 0.0, watched = 0.0;
+    double total = 0.0, best = 0.0, watched = 0.0, repeated = 0.0;
     int64_t n = 0;
     for (int64_t g = 0; g < st->n_groups; g++) {
         total += st->group[g].steps;
         watched += st->group[g].watched;
+        repeated += st->group[g].repeated;
         if (st->group[g].est > best)
             best = st->group[g].est;
         if (st->group[g].ctl.n > n)
@@ -338,6 +339,7 @@ static PyObject *Stepper_get(StepperObject *self, void *which)
     case 6: return PyLong_FromLongLong(st->group[0].ctl_initial.n_max);
     case 7: return PyFloat_FromDouble(st->group[0].ctl_initial.tol);
     case 9: return PyFloat_FromDouble(watched);
+    case 10: return PyFloat_FromDouble(repeated);
     default:
 #ifdef _OPENMP
         Py_RETURN_TRUE;
@@ -421,6 +423,9 @@ static PyGetSetDef Stepper_getset[] = {
     {"limit_watched_periods", (getter)Stepper_get, NULL,
      "amplified periods stepped one step at a time for a current limit within reach",
      (void *)9},
+    {"periods_repeated", (getter)Stepper_get, NULL,
+     "periods repeated with more steps (their estimate over the tolerance), all groups",
+     (void *)10},
     {NULL}
 };
 
