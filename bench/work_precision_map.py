@@ -4,8 +4,8 @@ Work-precision map against the continuum: level x Ritz terms x tolerance, error 
 Workloads, each at every point of GRID (level, n_r, tolerances):
 
 'Periods repeated': the fraction of control periods the step-count controller ran again with
-more steps (the embedded estimate over the tolerance). Each point's integration error is its error against the same level's own converged run (at
-tolerance OWN), on the same scale.
+more steps (the embedded estimate over the tolerance). Each point's integration error is its
+error against the same level's own converged run (at tolerance OWN), on the same scale.
 
 - the three 'step' cases of bench/continuum_reference.py (fixed eps_b 0.15 / 0.20, simply
   supported 0.20; released, 3 kV from 1.5 to 3 s, 4.5 s) through ``simulate()``
@@ -333,13 +333,14 @@ def doc_section(rows) -> str:
         out.append(f'| {_level(fidelity, n_r)} | {tol:g} | {best[key][0]:.2%}{wrong} | '
                    f'{ratio:.1%} | {1 / best[key][1]:.0f} | {v[slow]["steps_per_period"]:.1f} | '
                    f'{v[slow]["repeated"]:.1%} | '
-                   + (f'{ctl["error"]:.2%} | {ctl["x_real_time"]:.0f} | ' if ctl else '– | – | ')
+                   + (f'{ctl["error"]:.2%} | {ctl["x_real_time"]:.0f} | ' if ctl
+                      else '– | – | ')
                    + ('**yes**' if key in on_front else '') + ' |')
     arrays = {k: v for k, v in points.items() if 'array' in v}
     if arrays:
         out += ['', f'The shipped array (100 copies, {ARRAY_THREADS} threads, {ARRAY_END:g} s of '
-                'the input of the controller, each copy its own dither): × real time from the CPU '
-                f'time of both threads ({ARRAY_THREADS} idle cores) and from the wall clock on '
+                'the input of the controller, each copy its own dither): × real time from the '
+                f'CPU time of both threads ({ARRAY_THREADS} idle cores) and from the wall clock on '
                 'this shared host (other sessions running beside it):', '',
                 '| level | tolerance | × real time (CPU, 2 cores) | × real time (wall, shared) '
                 '| steps per period per copy | error, fixed ε_b 0.20 (the cell of the array) |',
