@@ -340,8 +340,8 @@ def doc_section(rows) -> str:
     if arrays:
         out += ['', f'The shipped array (100 copies, {ARRAY_THREADS} threads, {ARRAY_END:g} s of '
                 'the input of the controller, each copy its own dither): × real time from the '
-                f'CPU time of both threads ({ARRAY_THREADS} idle cores) and from the wall clock on '
-                'this shared host (other sessions running beside it):', '',
+                f'CPU time of both threads ({ARRAY_THREADS} idle cores) and from the wall clock '
+                'on this shared host (other sessions running beside it):', '',
                 '| level | tolerance | × real time (CPU, 2 cores) | × real time (wall, shared) '
                 '| steps per period per copy | error, fixed ε_b 0.20 (the cell of the array) |',
                 '|---|---|---|---|---|---|']
