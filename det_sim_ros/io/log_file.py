@@ -18,7 +18,7 @@ from .mcap_format import END_METADATA_NAME, LIBRARY, METADATA_NAME, SCENE_ATTACH
 from .record_packing import RecordPacker
 from .schemas import message_definition, qos_profiles_yaml
 
-__all__ = ['LogFile', 'file_info', 'scene_text', 'package_version', 'COMPRESSION']
+__all__ = ['LogFile', 'file_info', 'scene_text', 'logged_scene', 'package_version', 'COMPRESSION']
 
 COMPRESSION = ('zstd', 'lz4', 'none', '')
 
@@ -149,13 +149,18 @@ def scene_text(scene) -> str:
         return scene
     import yaml
     from ..scenes.scene import scene_to_dict
-    from ..sim.integrators import integration_tolerance
-    if isinstance(scene, Mapping):
-        data = scene
-    else:   # the tolerance used, not 'auto' (0): a log re-simulates whatever the table says later
-        scene = scene.replace(**{'integrator.tolerance': integration_tolerance(scene)})
-        data = scene_to_dict(scene, wrap=True)
+    data = scene if isinstance(scene, Mapping) else scene_to_dict(logged_scene(scene), wrap=True)
     return yaml.safe_dump(data, sort_keys=False)
+
+
+def logged_scene(scene):
+    """
+    Return a Scene as a log stores it: its tolerance the number it resolves to.
+
+    Not 'auto' (0): a log re-simulates as recorded whatever the auto table says later.
+    """
+    from ..sim.integrators import integration_tolerance
+    return scene.replace(**{'integrator.tolerance': integration_tolerance(scene)})
 
 
 def package_version() -> str:
