@@ -77,5 +77,7 @@ def test_kernel_matches_the_reference_at_the_steepest_state():
         assert status == kernel.OK
         expected, ref_in, ref_diss = reference.rhs(model.arrays, x, u)
         scale = np.maximum(np.abs(expected), 1e-6 * np.max(np.abs(expected)))
-        assert np.max(np.abs(dx - expected) / scale) <= 1e-10
+        # rounding amplified by the mass solve, ill-conditioned as |w'| -> 1: 6e-10 measured
+        # at 0.989, 1e-11 at 0.975; a wrong term in either would be off by far more
+        assert np.max(np.abs(dx - expected) / scale) <= 3e-9
         assert (p_in, p_diss) == pytest.approx((ref_in, ref_diss), rel=1e-10, abs=1e-18)

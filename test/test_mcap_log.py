@@ -15,8 +15,8 @@ import textwrap
 
 from conftest import child_env
 from det_sim_ros import __version__
-from det_sim_ros.io.log import (LogReader, message_definition, qos_profiles_yaml, Recorder,
-                                recover)
+from det_sim_ros.io.log import (LogReader, logged_scene, message_definition, qos_profiles_yaml,
+                                Recorder, recover)
 from det_sim_ros.io.replay import OUTPUT_FIELDS, simulate_to_log
 from det_sim_ros.scenes.scene import load_scene, scene_to_dict
 from det_sim_ros.sim.simulator import Simulator
@@ -155,8 +155,9 @@ def test_reader_plain_mcap_and_rclpy(logged_run):
     assert current[1:] == [row[names.index('i_DE')] for row in expected]
     info = metadata['det_sim_ros']
     assert info['version'] == __version__ and info['time_base'] == 'sim_time'
-    assert yaml.safe_load(attachments['scene.yaml']) == scene_to_dict(scene, wrap=True)
-    assert load_scene(yaml.safe_load(info['scene_yaml'])) == scene
+    assert yaml.safe_load(attachments['scene.yaml']) == scene_to_dict(logged_scene(scene),
+                                                                      wrap=True)
+    assert load_scene(yaml.safe_load(info['scene_yaml'])) == logged_scene(scene)
     assert metadata['det_sim_ros.end']['messages'] == str(4 * (N_STEPS + 1) + N_STEPS // 25)
 
 

@@ -9,7 +9,7 @@ re-simulates bit for bit.
 
 import textwrap
 
-from det_sim_ros.io.log import LogReader, Recorder
+from det_sim_ros.io.log import LogReader, logged_scene, Recorder
 from det_sim_ros.io.replay import resimulate, simulate_to_log
 from det_sim_ros.scenes.scene import find_config, load_scene, scene_to_dict, SceneError
 from det_sim_ros.sim.simulator import Simulator
@@ -142,7 +142,7 @@ def test_a_log_of_an_inheriting_scene_holds_the_resolved_scene(tmp_path):
     recorder.close()
     stored = yaml.safe_load(LogReader(log).scene_yaml)['sim_node']['ros__parameters']
     assert 'base' not in stored and {'scene', 'physics', 'integrator', 'rate_hz'} <= set(stored)
-    assert load_scene(stored) == scene
+    assert load_scene(stored) == logged_scene(scene)   # its tolerance as resolved
     result = resimulate(log)
     assert result.steps == 200 and result.ok(tolerance=0.0), result.table()
 
@@ -158,6 +158,6 @@ def test_the_node_logs_the_resolved_scene_of_an_inheriting_file(tmp_path, harnes
     h.spin_until_sim_time(h.node.simulator.t + 0.05)
     h.close()
     stored = yaml.safe_load(LogReader(recorder.paths[0]).scene_yaml)
-    assert load_scene(stored) == load_scene(str(path))
+    assert load_scene(stored) == logged_scene(load_scene(str(path)))
     result = resimulate(recorder.paths[0])
     assert result.commands == 1 and result.ok(tolerance=0.0), result.table()

@@ -501,7 +501,6 @@ def test_implausible_physics_is_flagged_on_diagnostics(harness):
     /diagnostics says WARN with the cause (not OK); nothing non-finite is published.
     """
     from diagnostic_msgs.msg import DiagnosticStatus
-    from det_sim_ros.sim.simulator import POWER_RESIDUAL_LIMIT
     h = harness(diagnostics_period=0.05, **{'physics.v_max': 1.0e5,
                                             'scene.initial_state': 'released'})
     logged, logger = [], h.node.get_logger()
@@ -523,7 +522,7 @@ def test_implausible_physics_is_flagged_on_diagnostics(harness):
     h.spin_until(lambda: len(ours()) >= 5, 'five more diagnostics')
     assert all(status.level == DiagnosticStatus.WARN for status in ours())
     assert len([m for m in logged if 'residual' in m]) == 1   # logged once, not every period
-    assert abs(h.node.simulator.power_residual()) > POWER_RESIDUAL_LIMIT
+    assert abs(h.node.simulator.power_residual()) > h.node.simulator.power_residual_limit
     assert not h.non_finite
     h.call('reset')
     h.diagnostics.clear()

@@ -1,11 +1,13 @@
 """
-Pin the adaptive step counts of a fixed voltage profile on five scenes.
+Pin the adaptive step counts of a fixed voltage profile on six scenes.
 
 The adaptive step counts, pinned: the internal steps taken per stretch of a fixed voltage
 profile on five scenes at tolerance 1e-6 (the paper's level set explicitly where the
-fidelity is not the subject). They follow from the step-size control's constants
+fidelity is not the subject) and on the shipped default at its own tolerance ('auto':
+AUTO_TOLERANCE). They follow from the step-size control's constants
 (det_sim_ros.sim.integrators: LOCAL_TOLERANCE, MAX_SUBSTEPS_FACTOR, ERROR_CONSTANT,
-TRANSIENT_FINE, TRANSIENT_CHARGE, MAX_STEP, STABLE_STEP, LINEAR_REFRESH, LINEARIZED_MAX_FACTOR;
+TRANSIENT_FINE, TRANSIENT_CHARGE, MAX_STEP, STABLE_STEP, LINEAR_REFRESH, LINEAR_REFRESH_INPUT,
+LINEARIZED_MAX_FACTOR, AUTO_TOLERANCE;
 CTL_SAFETY, the growth rules and the count ladder of linearized methods in
 core/_csrc/stepping.c; 'default' and 'exact_n3' step with 'etdrk4_linearized', the others
 with 'etdrk4' or 'dp5'), so a change to any of them shows here by name rather than only as a
@@ -27,6 +29,7 @@ PROFILE = ((0.0, 50), (3000.0, 130), (1500.0, 120))
 PAPER = {'scene.fidelity': 'paper'}
 SCENES = {
     'default': ('default', {}),           # the shipped default: exact kinematics, 5 Ritz terms
+    'default_auto': ('default', {'integrator.tolerance': 0.0}),   # ... at its own tolerance
     'paper': ('default', PAPER),
     'plate_paper': ('plate', PAPER),
     'exact_n3': ('default', {'scene.fidelity': 'exact', 'scene.n_ritz': 3}),
@@ -35,17 +38,20 @@ SCENES = {
 }
 # internal steps taken in each stretch of PROFILE
 STEPS = {
-    'default': [85, 4241, 5086],
+    'default': [85, 4599, 5200],
+    'default_auto': [51, 299, 336],
     'paper': [85, 2655, 2561],
     'plate_paper': [85, 2787, 2952],
-    'exact_n3': [85, 2116, 1476],
+    'exact_n3': [85, 2150, 1480],
     'ideal_dp5_paper': [66, 693, 720],
 }
+# periods the default (at auto) runs again with more steps over PROFILE
+REPEATED_DEFAULT_AUTO = 20.0
 
 
 def step_counts(name):
     source, overrides = SCENES[name]
-    sim = Simulator(load_scene(source, {**overrides, 'integrator.tolerance': TOLERANCE}))
+    sim = Simulator(load_scene(source, {'integrator.tolerance': TOLERANCE, **overrides}))
     assert sim.adaptive
     counts = []
     for volts, periods in PROFILE:
@@ -62,3 +68,16 @@ def step_counts(name):
 @pytest.mark.parametrize('name', sorted(SCENES))
 def test_adaptive_step_counts_are_pinned(name):
     assert step_counts(name) == STEPS[name]
+
+
+def test_repeated_periods_are_counted_and_pinned():
+    """The default at auto repeats a few periods through the snap; a fixed count none."""
+    counts = {}
+    for substeps in (0, 4):
+        sim = Simulator(load_scene('default', {'integrator.substeps': substeps}))
+        for volts, periods in PROFILE:
+            sim.set_input([volts])
+            for _ in range(periods):
+                sim.step()
+        counts[substeps] = sim.stepper.periods_repeated
+    assert counts == {0: REPEATED_DEFAULT_AUTO, 4: 0.0}

@@ -266,17 +266,23 @@ def run(action, args, prog: str) -> int:
         print(f'{prog}: interrupted', file=sys.stderr)
         return 130
     except _input_errors() as exc:
-        print(f'{prog}: error: {exc}', file=sys.stderr)
+        print(f'{prog}: error: {_one_line(exc)}', file=sys.stderr)
         return 2
     except _domain_error() as exc:
-        print(f'{prog}: error: the simulation left the model domain: {exc}', file=sys.stderr)
+        print(f'{prog}: error: the simulation left the model domain: {_one_line(exc)}',
+              file=sys.stderr)
         return 1
     except (OSError, ValueError) as exc:
-        print(f'{prog}: error: {exc}', file=sys.stderr)
+        print(f'{prog}: error: {_one_line(exc)}', file=sys.stderr)
         return 1
     except Exception as exc:  # noqa: BLE001 - a command line tool answers in one line
         if os.environ.get(TRACEBACK_ENV) == '1':
             raise
-        print(f'{prog}: error: {type(exc).__name__}: {exc} (set {TRACEBACK_ENV}=1 for the '
-              'traceback)', file=sys.stderr)
+        print(f'{prog}: error: {type(exc).__name__}: {_one_line(exc)} (set {TRACEBACK_ENV}=1 '
+              'for the traceback)', file=sys.stderr)
         return 1
+
+
+def _one_line(exc) -> str:
+    """Return an error's message on one line (a YAML parser's spans several, with a caret)."""
+    return ' '.join(str(exc).split())

@@ -71,7 +71,8 @@ SCENE_SPEC = {
 SECTION_DEFAULTS = {('scene', 'initial_state'): 'rest', ('scene', 'rest_branch'): 'buckled+'}
 INTEGRATOR_SPEC = {
     'method': ('str', 'stepper name or auto'),
-    'tolerance': ('float', 0.0, False, 0.1, '-', 'target error of auto'),
+    'tolerance': ('float', 0.0, True, 0.1, '-', 'target error of auto (0 = auto: follows the '
+                  'model error of the level, docs/fidelity.md)'),
     'substeps': ('int', 0, True, 100000, '-',
                  'internal steps per control period (0 = adaptive from the tolerance)'),
 }

@@ -31,7 +31,7 @@ from ..core import kernel
 
 __all__ = ['Method', 'METHODS', 'get_method', 'choose_substeps', 'step_control', 'error_weights',
            'transient_settings', 'TransientSettings', 'StepControl', 'make_stepper',
-           'advance']
+           'advance', 'AUTO_TOLERANCE', 'integration_tolerance']
 
 
 @dataclasses.dataclass(frozen=True)
@@ -157,7 +157,41 @@ METHODS = {m.name: m for m in (
 # The dense linear part of 'etdrk4_linearized' is taken anew at a period's start when the input
 # changed or a q or qdot moved by more than this in the error norm's scale (beam length, length
 # per period) since it was taken: between, the weights phi_k(c h A) of each step size are kept.
-LINEAR_REFRESH = 1e-3
+# A stale A only moves part of the linear dynamics into the explicit remainder, whose error the
+# step control sees: on the three exact 'step' cases at n_r 5-7, tolerance 1e-3, 1e-2 took A in
+# half the periods 1e-3 did, cost 0.65-0.9x as much and moved the error against the continuum
+# by at most 1e-4 of the stroke (bench/work_precision_map.py).
+LINEAR_REFRESH = 1e-2
+# ... or when an input moved by more than this times v_max since it was taken (not at every
+# change: a controller's small corrections every period took A, and the weights of each step
+# size, anew every period; with this, 1.3x faster on a switching input with a +-25 V dither per
+# period at the same error, bench/work_precision_map.py's controller run at tolerance 1e-2).
+LINEAR_REFRESH_INPUT = 1e-2
+
+
+# integrator.tolerance 0 ('auto'): the tolerance follows the model. Per level, the loosest
+# tolerance of the work-precision map (bench/work_precision_map.py, docs/fidelity.md) whose
+# integration error (against the same level at 1e-8) stays within 10 % of the level's own model
+# error (against the continuum) on each of the three 'step' cases: total error = model error
+# + integration error, and accuracy the model does not have is not worth its cost. Rows:
+# (fidelity, up to n_r, tolerance), first match. 'paper' keeps 1e-6: its runs are compared with
+# the paper's own results, where the model itself is the reference (and its numbers stay).
+AUTO_TOLERANCE = (
+    ('paper', 12, 1e-6),
+    ('consistent', 12, 1e-2),   # model error >= 0.26 % of the stroke; 1e-2 adds <= 6 % of it
+    ('exact', 6, 1e-2),         # n_r 5: 0.16-0.73 %, 1e-2 adds 1.4e-4-4.6e-4 (at most 9 %)
+    ('exact', 8, 1e-4),         # n_r 7: 0.03-0.08 %, 1e-4 adds 4e-6-1.2e-5 (1e-3: 17 %)
+    ('exact', 9, 1e-5),         # n_r 9: 2e-5-6e-5, 1e-5 adds 8e-7-1.4e-6 (1e-4: 18 %)
+    ('exact', 12, 1e-6),        # beyond the map: a converged reference's own tolerance
+)
+
+
+def integration_tolerance(scene) -> float:
+    """Return the scene's integrator tolerance: its own, or AUTO_TOLERANCE's when it is 0."""
+    if scene.tolerance > 0.0:
+        return scene.tolerance
+    return next(tol for fidelity, n_max, tol in AUTO_TOLERANCE
+                if fidelity == scene.fidelity and scene.n_ritz <= n_max)
 
 
 def get_method(name: str) -> Method:
@@ -265,14 +299,15 @@ def step_control(method: Method, model, substeps: int = 0) -> StepControl:
     ``substeps`` (0: :func:`choose_substeps`).
     """
     scene = model.scene
+    tolerance = integration_tolerance(scene)
     beam_rate = 0.0 if method.linearized else model.fastest_beam_rate()
-    n0 = substeps or choose_substeps(method, scene.dt, scene.tolerance, beam_rate)
+    n0 = substeps or choose_substeps(method, scene.dt, tolerance, beam_rate)
     if substeps or not method.adaptive:
         return StepControl(n0, 0.0, n0, n0, 1.0)
     n_min = min_substeps(scene.dt, beam_rate)
     local = LINEARIZED_LOCAL_TOLERANCE if method.linearized else LOCAL_TOLERANCE[
         method.embedded_order]
-    tol = local * scene.tolerance
+    tol = local * tolerance
     n_max = MAX_SUBSTEPS_FACTOR * max(n0, n_min)
     if method.linearized:   # see LINEARIZED_MAX_FACTOR
         n_max = LINEARIZED_MAX_FACTOR * max(n0, n_min, min_substeps(scene.dt,
@@ -298,7 +333,13 @@ def make_stepper(model, method: Method, control: StepControl, dt: float,
                           max_substeps=int(control.max_substeps),
                           exponent=float(control.exponent),
                           jump_ref=float(transient.jump_ref),
-                          linearized=method.linearized, lin_refresh=LINEAR_REFRESH)
+                          linearized=method.linearized, lin_refresh=LINEAR_REFRESH,
+                          lin_refresh_input=LINEAR_REFRESH_INPUT * _largest_v_max(model))
+
+
+def _largest_v_max(model) -> float:
+    """Return the largest v_max of the model's cells, V."""
+    return max(cell.v_max for cell in model.scene.cell_physics())
 
 
 def error_weights(model) -> np.ndarray:
@@ -352,11 +393,12 @@ def transient_settings(method: Method, scene) -> TransientSettings:
     ``fine`` follows the tolerance and was calibrated on the 'step' scenes, whose jumps are
     v_max: so ``jump_ref`` = v_max.
     """
-    fine = min(1.0, max(0.05, TRANSIENT_FINE * (scene.tolerance / 3e-6) ** 0.25))
+    tolerance = integration_tolerance(scene)
+    fine = min(1.0, max(0.05, TRANSIENT_FINE * (tolerance / 3e-6) ** 0.25))
     if not method.exponential or scene.source != 'rc':
         return TransientSettings(0.0, fine, 0.0)
     p = scene.physics
-    return TransientSettings(TRANSIENT_CHARGE * scene.tolerance * p.C0 * p.v_max, fine,
+    return TransientSettings(TRANSIENT_CHARGE * tolerance * p.C0 * p.v_max, fine,
                              p.v_max)
 
 

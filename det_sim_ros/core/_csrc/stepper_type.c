@@ -45,24 +45,27 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
     static char *kwlist[] = {"model", "c", "terms", "embedded", "error_weights", "dt",
                              "z_tol", "fine", "substeps", "tolerance", "min_substeps",
                              "max_substeps", "exponent", "jump_ref", "linearized",
-                             "lin_refresh", NULL};
+                             "lin_refresh", "lin_refresh_input", NULL};
     PyObject *model, *c, *terms, *embedded, *weights;
     double dt, z_tol, fine, tol, exponent, jump_ref = 0.0, lin_refresh = 0.0;
+    double lin_refresh_input = 0.0;
     long long n0, n_min, n_max;
     int linearized = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O!OOOOdddLdLLd|dpd", kwlist, &ModelType,
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O!OOOOdddLdLLd|dpdd", kwlist, &ModelType,
                                      &model, &c, &terms, &embedded, &weights, &dt, &z_tol, &fine,
                                      &n0, &tol, &n_min, &n_max, &exponent, &jump_ref,
-                                     &linearized, &lin_refresh))
+                                     &linearized, &lin_refresh, &lin_refresh_input))
         return -1;
     if (self->ready) {
         PyErr_SetString(PyExc_RuntimeError, "Stepper already initialised");
         return -1;
     }
     if (!(dt > 0.0) || n0 < 1 || n_min < 1 || n_max < n_min || !(exponent > 0.0)
-        || !(jump_ref >= 0.0 && jump_ref < INFINITY) || !(lin_refresh >= 0.0)) {
+        || !(jump_ref >= 0.0 && jump_ref < INFINITY) || !(lin_refresh >= 0.0)
+        || !(lin_refresh_input >= 0.0)) {
         PyErr_SetString(PyExc_ValueError, "Stepper: need dt > 0, 1 <= min <= max substeps, "
-                                          "a finite jump_ref >= 0, lin_refresh >= 0");
+                                          "a finite jump_ref >= 0, lin_refresh >= 0, "
+                                          "lin_refresh_input >= 0");
         return -1;
     }
     ModelObject *mo = (ModelObject *)model;
@@ -87,6 +90,7 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
         self->st.jump_ref = jump_ref;
         self->st.linearized = linearized;
         self->st.lin_refresh = lin_refresh;
+        self->st.lin_refresh_input = lin_refresh_input;
         const int init = ds_stepper_init(&self->st, &mo->m, dt, z_tol, fine, &ctl, bw.buf);
         if (init < 0 || ds_work_init(&self->out_work, &mo->m) < 0) {
             ds_stepper_free(&self->st);
@@ -314,11 +318,12 @@ static PyObject *Stepper_get(StepperObject *self, void *which)
 {
     NEED_READY(self);
     const ds_stepper *st = &self->st;
-    double total = 0.0, best = 0.0, watched = 0.0;
+    double total = 0.0, best = 0.0, watched = 0.0, repeated = 0.0;
     int64_t n = 0;
     for (int64_t g = 0; g < st->n_groups; g++) {
         total += st->group[g].steps;
         watched += st->group[g].watched;
+        repeated += st->group[g].repeated;
         if (st->group[g].est > best)
             best = st->group[g].est;
         if (st->group[g].ctl.n > n)
@@ -334,6 +339,7 @@ static PyObject *Stepper_get(StepperObject *self, void *which)
     case 6: return PyLong_FromLongLong(st->group[0].ctl_initial.n_max);
     case 7: return PyFloat_FromDouble(st->group[0].ctl_initial.tol);
     case 9: return PyFloat_FromDouble(watched);
+    case 10: return PyFloat_FromDouble(repeated);
     default:
 #ifdef _OPENMP
         Py_RETURN_TRUE;
@@ -417,6 +423,9 @@ static PyGetSetDef Stepper_getset[] = {
     {"limit_watched_periods", (getter)Stepper_get, NULL,
      "amplified periods stepped one step at a time for a current limit within reach",
      (void *)9},
+    {"periods_repeated", (getter)Stepper_get, NULL,
+     "periods repeated with more steps (their estimate over the tolerance), all groups",
+     (void *)10},
     {NULL}
 };
 

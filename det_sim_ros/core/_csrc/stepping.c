@@ -167,6 +167,7 @@ int ds_period_core(const ds_stepper *st, ds_group *g, double *x, const double *u
                 next = count_ladder(next);
             ctl->n = next < ctl->n_max ? next : ctl->n_max;
             memcpy(x, g->x_keep, (size_t)nx * sizeof(double));
+            g->repeated += 1.0;
             continue;
         }
         if (status != DS_OK)

@@ -59,6 +59,8 @@ typedef struct {
     double est, steps;                  /* largest error estimate since reset, steps taken */
     double watched;                     /* amplified periods stepped one step at a time for a
                                            current limit within reach (amplifier.c) */
+    double repeated;                    /* periods repeated with more steps (estimate over
+                                           the tolerance, or the domain left) */
     int64_t s0, s1;                     /* states with a stiff rate: [s0, s1) */
     int64_t q_first, c_first;           /* first coordinate and cell in the whole model */
     int quasi_static;
@@ -89,6 +91,7 @@ typedef struct {
     int threads;
     int linearized;                     /* a dense linear part over q, qdot per group */
     double lin_refresh;                 /* weighted state change that renews it */
+    double lin_refresh_input;           /* input change (V) that renews it (0: any) */
 } ds_stepper;
 
 /* st->method must be initialised (ds_method_init) before. */

@@ -58,6 +58,7 @@ The messages' CDR is :mod:`det_sim_ros.io.cdr`'s, their ``.msg`` schemas and QoS
 
 from __future__ import annotations
 
+from .file import logged_scene
 from .format import (END_METADATA_NAME, file_kind, is_torn, LIBRARY, METADATA_NAME,
                      SCENE_ATTACHMENT)
 from .reader import log_files, LogMessage, LogReader, recover, recover_unfinished
@@ -68,4 +69,4 @@ from ..schemas import DELIMITER, message_definition, qos_profiles_yaml, type_nam
 __all__ = ['Recorder', 'LogReader', 'LogMessage', 'message_definition', 'qos_profiles_yaml',
            'type_name_of', 'serialize', 'deserialize', 'recover', 'recover_unfinished',
            'is_torn', 'log_files', 'LIBRARY', 'METADATA_NAME', 'END_METADATA_NAME',
-           'SCENE_ATTACHMENT', 'DELIMITER', 'message_class', 'file_kind']
+           'SCENE_ATTACHMENT', 'DELIMITER', 'message_class', 'file_kind', 'logged_scene']

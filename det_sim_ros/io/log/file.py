@@ -19,7 +19,7 @@ from .packing import RecordPacker
 from .writer import McapWriter
 from ..schemas import message_definition, qos_profiles_yaml
 
-__all__ = ['LogFile', 'file_info', 'scene_text', 'package_version']
+__all__ = ['LogFile', 'file_info', 'scene_text', 'logged_scene', 'package_version']
 
 
 class LogFile:
@@ -130,15 +130,29 @@ def file_info(version: str, scene_yaml: str, file_index: int,
 
 
 def scene_text(scene) -> str:
-    """Return the YAML text stored in a log for a Scene, its YAML text or mapping ('' for None)."""
+    """
+    Return the YAML text stored in a log for a Scene, its YAML text or mapping ('' for None).
+
+    A Scene's tolerance is stored as the number it resolves to (an 'auto' 0 is not).
+    """
     if scene is None:
         return ''
     if isinstance(scene, str):
         return scene
     import yaml
     from ...scenes.scene import scene_to_dict
-    data = scene if isinstance(scene, Mapping) else scene_to_dict(scene, wrap=True)
+    data = scene if isinstance(scene, Mapping) else scene_to_dict(logged_scene(scene), wrap=True)
     return yaml.safe_dump(data, sort_keys=False)
+
+
+def logged_scene(scene):
+    """
+    Return a Scene as a log stores it: its tolerance the number it resolves to.
+
+    Not 'auto' (0): a log re-simulates as recorded whatever the auto table says later.
+    """
+    from ...sim.integrators import integration_tolerance
+    return scene.replace(**{'integrator.tolerance': integration_tolerance(scene)})
 
 
 def package_version() -> str:
