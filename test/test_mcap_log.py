@@ -15,7 +15,7 @@ import textwrap
 
 from conftest import child_env
 from det_sim_ros import __version__
-from det_sim_ros.io.log import (LogReader, logged_scene, message_definition, qos_profiles_yaml,
+from det_sim_ros.io.log import (logged_scene, LogReader, message_definition, qos_profiles_yaml,
                                 Recorder, recover)
 from det_sim_ros.io.replay import OUTPUT_FIELDS, simulate_to_log
 from det_sim_ros.scenes.scene import load_scene, scene_to_dict

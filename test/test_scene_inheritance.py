@@ -9,7 +9,7 @@ re-simulates bit for bit.
 
 import textwrap
 
-from det_sim_ros.io.log import LogReader, logged_scene, Recorder
+from det_sim_ros.io.log import logged_scene, LogReader, Recorder
 from det_sim_ros.io.replay import resimulate, simulate_to_log
 from det_sim_ros.scenes.scene import find_config, load_scene, scene_to_dict, SceneError
 from det_sim_ros.sim.simulator import Simulator
