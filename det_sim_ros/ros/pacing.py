@@ -16,6 +16,7 @@ mode. Wall times are in s.
 from __future__ import annotations
 
 import os
+import threading
 import time
 from typing import Callable, NamedTuple
 
@@ -23,8 +24,10 @@ from .waiting import Wait
 from ..io.contract import MODES
 from ..scenes.scene import SceneError
 
-__all__ = ['FreeRunPacing', 'LockstepPacing', 'make_pacing', 'Pacing', 'PacingReport',
-           'RealTimePacing', 'set_fifo_priority']
+__all__ = ['BehindLog', 'FreeRunPacing', 'LockstepPacing', 'make_pacing', 'Pacing',
+           'PacingReport', 'RealTimePacing', 'set_thread_scheduling']
+
+BEHIND_WARN_INTERVAL_S = 30.0   # wall s: at most one 'behind real time' WARN this often
 
 
 class PacingReport(NamedTuple):
@@ -150,7 +153,15 @@ class RealTimePacing(Pacing):
         self.max_lag_seen = 0     # most periods behind since the last report
         self._wall0 = 0.0         # the wall-clock reference and the period k at it
         self._k0 = 0
+        self._cost = PeriodCost()
+        self._fifo = FifoRequest(get('realtime_priority'))
+        self._behind_log = None
         super().__init__(get)
+
+    def start(self, node) -> None:
+        super().start(node)
+        logger = node.get_logger()
+        self._behind_log = BehindLog(logger.warning, logger.info, lambda: node.wall_clock())
 
     def label(self) -> str:
         return 'real-time x%g' % self.real_time_factor
@@ -184,6 +195,8 @@ class RealTimePacing(Pacing):
         due = self.steps_due(node.wall_clock())
         if due <= 0:
             return
+        if self._fifo.priority:   # SCHED_FIFO follows the thread that steps
+            self._fifo.follow(node.get_logger())
         if due > 1:
             self.late_ticks += 1
         dt = node.dt
@@ -194,9 +207,14 @@ class RealTimePacing(Pacing):
             self.slipped_s += excess * dt / self.real_time_factor
             due = allowed
         self.max_lag_seen = max(self.max_lag_seen, due - 1)
-        for _ in range(min(due, self.max_catchup)):
-            if not node.run_period():
-                return
+        sim = node.simulator
+        cpu0, steps0, k0 = time.thread_time(), sim.steps_taken, sim.k
+        try:
+            for _ in range(min(due, self.max_catchup)):
+                if not node.run_period():
+                    return
+        finally:
+            self._cost.add(time.thread_time() - cpu0, sim.steps_taken - steps0, sim.k - k0)
 
     def report(self, rate_hz: float, slipped_s: float, wall_s: float) -> PacingReport:
         node = self.node
@@ -212,16 +230,138 @@ class RealTimePacing(Pacing):
         elif running and max_lag * dt > 0.5 * self.max_lag > 0.0:
             warning = (f'lagging: up to {max_lag * dt * 1e3:.0f} ms behind the wall clock '
                        f'(slips beyond {self.max_lag * 1e3:g} ms)')
-        return PacingReport(lag, max_lag, warning, {})
+        cpu_s, steps = self._cost.take()
+        budget_s = dt / self.real_time_factor
+        if self._behind_log is not None:
+            self._behind_log.check(warning, behind_reason(cpu_s, steps, budget_s))
+        values = {'cpu_per_period_ms': f'{cpu_s * 1e3:.3f}' if cpu_s is not None else '',
+                  'steps_per_period': f'{steps:.1f}' if steps is not None else '',
+                  'realtime_priority': self._fifo.state}
+        return PacingReport(lag, max_lag, warning, values)
 
     def apply_priority(self, priority: int, logger) -> bool:
-        changed, refused = set_fifo_priority(priority)
+        """SCHED_FIFO at ``priority`` for the calling thread (the one that steps); True if so."""
+        return self._fifo.follow(logger)
+
+
+class PeriodCost:
+    """
+    What the real-time periods cost since the last report: CPU and internal steps per period.
+
+    The CPU is the stepping thread's (``time.thread_time``) over its periods: taking the
+    commands, the physics, encoding, publishing and queueing the log (not the log writer's
+    thread, nor DDS's).
+    """
+
+    def __init__(self):
+        self._cpu_s, self._steps, self._periods = 0.0, 0, 0
+
+    def add(self, cpu_s: float, steps: int, periods: int) -> None:
+        """Add a tick: its CPU (s), internal steps and periods run (a reset may make <= 0)."""
+        if periods > 0 and steps >= 0:
+            self._cpu_s += cpu_s
+            self._steps += steps
+            self._periods += periods
+
+    def take(self) -> tuple:
+        """Return (CPU s, internal steps) per period since the last take, or (None, None)."""
+        periods = self._periods
+        result = ((self._cpu_s / periods, self._steps / periods) if periods > 0
+                  else (None, None))
+        self._cpu_s, self._steps, self._periods = 0.0, 0, 0
+        return result
+
+
+def behind_reason(cpu_s: float | None, steps: float | None, budget_s: float) -> str:
+    """
+    Say why a real-time node may be behind: a period's CPU against the wall time it is given.
+
+    ``cpu_s`` is the CPU per period (s) of the stepping thread, ``steps`` the integrator's
+    internal steps per period, ``budget_s`` the wall time per period.
+    """
+    if cpu_s is None:
+        return 'no period ran in the window'
+    text = (f'a period cost {cpu_s * 1e3:.2f} ms of CPU ({steps:.1f} internal steps) for '
+            f'{budget_s * 1e3:.2f} ms of wall time')
+    if cpu_s > budget_s:
+        return (text + ': the periods cost more CPU than real time gives them (a looser '
+                'integrator.tolerance, a lower fidelity or real_time_factor < 1 would fit)')
+    return text + ': the node did not get the CPU in time (a busy host; see realtime_priority)'
+
+
+class BehindLog:
+    """
+    Log when a real-time node falls behind (WARN, with why) and when it has caught up (INFO).
+
+    :meth:`check` is called once per diagnostics window with that window's pacing warning
+    ('' when on time). A WARN is logged at most once per ``interval_s`` of ``clock``; an
+    episode that starts sooner is counted and named in the next WARN, and its end is not
+    logged (its start was not).
+    """
+
+    def __init__(self, warn: Callable[[str], None], info: Callable[[str], None],
+                 clock: Callable[[], float], interval_s: float = BEHIND_WARN_INTERVAL_S):
+        self._warn, self._info, self._clock = warn, info, clock
+        self.interval_s = interval_s
+        self._since = None          # wall time the current episode started (None: on time)
+        self._warned = False        # the current episode's start was logged
+        self._last_warn = None
+        self._unlogged = 0          # episodes not logged since the last WARN
+
+    def check(self, warning: str, reason: str) -> None:
+        """Follow one window: ``warning`` ('' = on time) and ``reason`` (its cost)."""
+        now = self._clock()
+        if warning and self._since is None:
+            self._since = now
+            self._warned = self._last_warn is None or now - self._last_warn >= self.interval_s
+            if self._warned:
+                more = (f' ({self._unlogged} more time(s) since the last warning)'
+                        if self._unlogged else '')
+                self._warn(f'behind real time{more}: {warning}; {reason}')
+                self._last_warn, self._unlogged = now, 0
+            else:
+                self._unlogged += 1
+        elif not warning and self._since is not None:
+            if self._warned:
+                self._info(f'caught up with real time after {now - self._since:.1f} s behind')
+            self._since = None
+
+
+class FifoRequest:
+    """
+    ``realtime_priority``: SCHED_FIFO for the thread that steps the node, not for the others.
+
+    The log writer, DDS's and rclpy's threads keep their scheduling: a FIFO log writer would
+    take a core from the controller whenever it compresses a chunk. The priority is set on the
+    calling thread (:meth:`follow`) and moves with the stepping if another thread takes it
+    over. ``state`` says what is in force: 'off', 'SCHED_FIFO N' or why it was refused.
+    """
+
+    def __init__(self, priority: int):
+        self.priority = priority
+        self.state = 'off'
+        self._thread = None     # the native id of the thread at FIFO, or the refused one
+        self._refused = False
+
+    def follow(self, logger) -> bool:
+        """Put the calling thread at SCHED_FIFO (once; again if the thread changed)."""
+        tid = threading.get_native_id()
+        if tid == self._thread or not self.priority:
+            return not self._refused and bool(self.priority)
+        if self._thread is not None and not self._refused:
+            set_thread_scheduling(self._thread, 0)   # the previous stepping thread
+        self._thread = tid
+        refused = set_thread_scheduling(tid, self.priority)
+        self._refused = bool(refused)
         if refused:
-            logger.warning(f'realtime_priority {priority}: SCHED_FIFO refused ({refused}); '
+            self.state = f'refused ({refused})'
+            logger.warning(f'realtime_priority {self.priority}: SCHED_FIFO refused ({refused}); '
                            'running with normal scheduling (grant CAP_SYS_NICE, or an rtprio '
                            'limit in /etc/security/limits.conf)')
         else:
-            logger.info(f'SCHED_FIFO priority {priority} for {changed} thread(s)')
+            self.state = f'SCHED_FIFO {self.priority}'
+            logger.info(f'SCHED_FIFO priority {self.priority} for the stepping thread '
+                        f'(native id {tid}); the log writer and DDS threads keep theirs')
         return not refused
 
 
@@ -430,27 +570,17 @@ def make_pacing(get: Callable) -> Pacing:
     return PACINGS[mode](get)
 
 
-def set_fifo_priority(priority: int) -> tuple[int, str]:
+def set_thread_scheduling(tid: int, priority: int) -> str:
     """
-    Set SCHED_FIFO at ``priority`` for every thread of this process, all or nothing.
+    Put thread ``tid`` (a native id) at SCHED_FIFO ``priority``, or back to SCHED_OTHER if 0.
 
-    The threads are the executor's, DDS's and the log writer's; threads started later inherit
-    the priority. Return (threads changed, the reason it was refused or '').
+    Return '' or why the system refused (e.g. 'Operation not permitted' without CAP_SYS_NICE).
     """
-    changed, refused = 0, ''
-    for tid in sorted(int(t) for t in os.listdir('/proc/self/task')):
-        try:
-            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
-            changed += 1
-        except ProcessLookupError:   # a thread that has just ended
-            continue
-        except (PermissionError, OSError) as exc:
-            refused = exc.strerror or str(exc)
-            break
-    if refused:
-        for tid in (int(t) for t in os.listdir('/proc/self/task')):
-            try:
-                os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
-            except OSError:
-                pass
-    return changed, refused
+    policy = os.SCHED_FIFO if priority else os.SCHED_OTHER
+    try:
+        os.sched_setscheduler(tid, policy, os.sched_param(priority))
+    except ProcessLookupError:   # a thread that has ended
+        return ''
+    except (PermissionError, OSError, AttributeError) as exc:   # (no sched_* outside Linux)
+        return getattr(exc, 'strerror', None) or str(exc)
+    return ''
