@@ -18,9 +18,10 @@ wave 0 / 2.5 kV that switches the beam between its two states twice a second (ea
   /diagnostics level and message at the end.
 
 ``--pairs N`` runs N pairs of configurations in random order (``--a`` and ``--b``: extra
-``-p NAME:=VALUE`` parameters of the node, comma separated), so a before/after is measured in
-one run on the same host; each run holds the busy process for its whole duration. The host is
-shared, so compare within a run.
+``-p NAME:=VALUE`` parameters of the node, comma separated; ``--a-repo`` / ``--b-repo``: the
+node from another checkout of this repository, its kernel built in place, e.g. the code
+before a change), so a before/after is measured in one run on the same host; each run holds
+the busy process for its whole duration. The host is shared, so compare within a run.
 
 Usage: python bench/realtime_switching.py [--seconds 30] [--pairs 1]
        [--a 'realtime_priority:=0'] [--b 'realtime_priority:=50'] [--json out.json]
@@ -120,8 +121,8 @@ def analyse(data, dt):
     return result
 
 
-def run_once(extra, seconds, depth, folder, label):
-    """Run node, controller and busy process once; return the figures."""
+def run_once(extra, seconds, depth, folder, label, repo=REPO):
+    """Run node (from checkout ``repo``), controller and busy process once; the figures."""
     out = os.path.join(folder, f'controller_{label}.json')
     log_dir = os.path.join(folder, f'log_{label}')
     params = ['-p', f'log.path:={log_dir}', '-p', 'info_period:=0.0']
@@ -131,7 +132,7 @@ def run_once(extra, seconds, depth, folder, label):
     node = subprocess.Popen([sys.executable, '-m', 'det_sim_ros.cli.sim_node', '--ros-args',
                              *params], cwd=folder, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True,
-                            env=dict(os.environ, PYTHONPATH=REPO))
+                            env=dict(os.environ, PYTHONPATH=repo))
     controller = spawn(SWITCHING_CONTROLLER, '1', out, str(seconds), str(depth))
     try:
         controller.wait(timeout=seconds + 60)
@@ -156,24 +157,30 @@ def main(argv=None):
     parser.add_argument('--pairs', type=int, default=1)
     parser.add_argument('--a', default='', help="the node's extra parameters, NAME:=VALUE,...")
     parser.add_argument('--b', default=None, help='a second configuration, paired with --a')
+    parser.add_argument('--a-repo', default=REPO, help='the checkout configuration a runs')
+    parser.add_argument('--b-repo', default=REPO, help='the checkout configuration b runs')
     parser.add_argument('--controller-depth', type=int, default=10)
     parser.add_argument('--seed', type=int, default=1)
     parser.add_argument('--json')
     args = parser.parse_args(argv)
-    configs = {'a': args.a} if args.b is None else {'a': args.a, 'b': args.b}
+    configs = {'a': args.a}
+    if args.b is not None or os.path.abspath(args.a_repo) != os.path.abspath(args.b_repo):
+        configs['b'] = args.b or ''
+    repos = {'a': os.path.abspath(args.a_repo), 'b': os.path.abspath(args.b_repo)}
     rng = random.Random(args.seed)
     results = {name: [] for name in configs}
     report = {'cpus': os.cpu_count(), 'load_avg_at_start': os.getloadavg(),
-              'configs': configs, 'seconds': args.seconds}
+              'configs': configs, 'repos': repos, 'seconds': args.seconds}
     with tempfile.TemporaryDirectory() as folder:
         for pair in range(args.pairs):
             order = list(configs)
             rng.shuffle(order)
             for name in order:
                 result = run_once(configs[name], args.seconds, args.controller_depth, folder,
-                                  f'{name}{pair}')
+                                  f'{name}{pair}', repos[name])
                 results[name].append(result)
-                print(json.dumps({name: configs[name], **result}), flush=True)
+                print(json.dumps({name: configs[name], 'repo': repos[name], **result}),
+                      flush=True)
                 time.sleep(1.0)
     report['results'] = results
     report['load_avg_at_end'] = os.getloadavg()

@@ -156,12 +156,17 @@ class RealTimePacing(Pacing):
         self._cost = PeriodCost()
         self._fifo = FifoRequest(get('realtime_priority'))
         self._behind_log = None
+        self._first_tick = True
         super().__init__(get)
 
     def start(self, node) -> None:
         super().start(node)
         logger = node.get_logger()
         self._behind_log = BehindLog(logger.warning, logger.info, lambda: node.wall_clock())
+        # the schedule starts at the first tick: the node's start-up after its timer was made
+        # (the log opened, sample 0, the first spin) took 0.1-0.2 s beside a busy core, which
+        # the first tick would otherwise find due and slip
+        self._first_tick = True
 
     def label(self) -> str:
         return 'real-time x%g' % self.real_time_factor
@@ -192,6 +197,9 @@ class RealTimePacing(Pacing):
         node = self.node
         if not node.running:
             return
+        if self._first_tick:
+            self._first_tick = False
+            self.resync()
         due = self.steps_due(node.wall_clock())
         if due <= 0:
             return
