@@ -24,7 +24,8 @@ before a change), so a before/after is measured in one run on the same host; eac
 the busy process for its whole duration. The host is shared, so compare within a run.
 
 Usage: python bench/realtime_switching.py [--seconds 30] [--pairs 1]
-       [--a 'realtime_priority:=0'] [--b 'realtime_priority:=50'] [--json out.json]
+       [--a 'realtime_priority:=0'] [--b 'realtime_priority:=50'] [--a-repo CHECKOUT]
+       [--controller-depth 10] [--controller-priority 0] [--json out.json]
 """
 
 import argparse
@@ -121,7 +122,7 @@ def analyse(data, dt):
     return result
 
 
-def run_once(extra, seconds, depth, folder, label, repo=REPO):
+def run_once(extra, seconds, depth, folder, label, repo=REPO, controller_priority=0):
     """Run node (from checkout ``repo``), controller and busy process once; the figures."""
     out = os.path.join(folder, f'controller_{label}.json')
     log_dir = os.path.join(folder, f'log_{label}')
@@ -134,6 +135,9 @@ def run_once(extra, seconds, depth, folder, label, repo=REPO):
                             stderr=subprocess.STDOUT, text=True,
                             env=dict(os.environ, PYTHONPATH=repo))
     controller = spawn(SWITCHING_CONTROLLER, '1', out, str(seconds), str(depth))
+    if controller_priority:   # as `chrt -f N` would (its threads, started later, inherit it)
+        os.sched_setscheduler(controller.pid, os.SCHED_FIFO,
+                              os.sched_param(controller_priority))
     try:
         controller.wait(timeout=seconds + 60)
     except subprocess.TimeoutExpired:
@@ -160,6 +164,8 @@ def main(argv=None):
     parser.add_argument('--a-repo', default=REPO, help='the checkout configuration a runs')
     parser.add_argument('--b-repo', default=REPO, help='the checkout configuration b runs')
     parser.add_argument('--controller-depth', type=int, default=10)
+    parser.add_argument('--controller-priority', type=int, default=0,
+                        help="the controller process's SCHED_FIFO priority (0 = ordinary)")
     parser.add_argument('--seed', type=int, default=1)
     parser.add_argument('--json')
     args = parser.parse_args(argv)
@@ -177,7 +183,7 @@ def main(argv=None):
             rng.shuffle(order)
             for name in order:
                 result = run_once(configs[name], args.seconds, args.controller_depth, folder,
-                                  f'{name}{pair}', repos[name])
+                                  f'{name}{pair}', repos[name], args.controller_priority)
                 results[name].append(result)
                 print(json.dumps({name: configs[name], 'repo': repos[name], **result}),
                       flush=True)

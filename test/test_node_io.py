@@ -240,7 +240,8 @@ def test_falling_behind_real_time_warns_once_and_says_when_caught_up(harness, tm
     """
     from det_sim_ros.ros.pacing import BEHIND_WARN_INTERVAL_S
     from test_lockstep_waiting import listen_to_rosout
-    h, wall = _real_time_node(harness, tmp_path, max_lag=0.02)
+    # (no diagnostics timer in the test's time: each window is one publish_diagnostics call)
+    h, wall = _real_time_node(harness, tmp_path, max_lag=0.02, diagnostics_period=3600.0)
     lines = listen_to_rosout(h)
     node = h.node
 

@@ -185,6 +185,15 @@ class Recorder:
         if self.paths:
             self._rotation.closed(self.paths[-1])
 
+    def write_here(self) -> bool:
+        """
+        Write what is queued (background mode) and flush if due, in the calling thread.
+
+        Return False if the writer thread was writing at that moment (then it writes). A
+        real-time node's stepping thread calls it after each tick.
+        """
+        return self._mode.write_here()
+
     def new_file(self) -> None:
         """Finish the current file and continue in a new one (e.g. when sim time restarts)."""
         self._mode.new_file()

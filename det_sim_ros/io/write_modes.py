@@ -48,6 +48,11 @@ class WriteNow:
         """Continue in a new file now."""
         self._recorder._new_file_now()
 
+    def write_here(self) -> bool:
+        """Flush if due (everything else is written already)."""
+        self._recorder.maybe_flush()
+        return True
+
     def stop(self) -> None:
         """Nothing is pending."""
 
@@ -102,6 +107,10 @@ class WriteBehind:
             return False
         self._thread.put((log_time_ns, topics, data, types))
         return True
+
+    def write_here(self) -> bool:
+        """Write the queue in the calling thread unless the writer thread is writing."""
+        return self._thread.write_here()
 
     def new_file(self) -> None:
         """Continue in a new file after what is queued; it is open on return."""

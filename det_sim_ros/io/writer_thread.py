@@ -68,6 +68,26 @@ class WriterThread:
         """Write everything queued now, in the calling thread."""
         self._guarded(yield_gil=False)
 
+    def write_here(self) -> bool:
+        """
+        Write what is queued and flush if due, in the calling thread, unless the thread is.
+
+        For a caller whose thread must not wait on this one (a real-time node's stepping
+        thread): when the writer thread holds the lock nothing is written and False is
+        returned. The writer thread then finds nothing to do, and never holds the GIL while a
+        busy host keeps it off the CPU, which would hold up the caller.
+        """
+        if not self._lock.acquire(blocking=False):
+            return False
+        try:
+            self._drain(yield_gil=False)
+            self._maybe_flush()
+        except Exception as exc:  # noqa: BLE001 - a logging fault stops logging, nothing else
+            self._on_error(exc)
+        finally:
+            self._lock.release()
+        return True
+
     def _guarded(self, yield_gil: bool) -> None:
         try:
             with self._lock:
