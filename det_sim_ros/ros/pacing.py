@@ -165,7 +165,9 @@ class RealTimePacing(Pacing):
         self._behind_log = BehindLog(logger.warning, logger.info, lambda: node.wall_clock())
         # the schedule starts at the first tick: the node's start-up after its timer was made
         # (the log opened, sample 0, the first spin) took 0.1-0.2 s beside a busy core, which
-        # the first tick would otherwise find due and slip
+        # the first tick would otherwise find due and slip. It moves by whole periods: the
+        # periods stay due just before the timer's ticks (a schedule set at the first tick's
+        # own, late, time put every period a tick late: ~1 ms of lag)
         self._first_tick = True
 
     def label(self) -> str:
@@ -186,6 +188,10 @@ class RealTimePacing(Pacing):
         self._wall0 = self.node.wall_clock()
         self._k0 = self.node.simulator.k
 
+    def run(self, running: bool) -> None:
+        self._first_tick = False   # a resume (or the gate opening) restarts the schedule now
+        super().run(running)
+
     def steps_due(self, now: float) -> int:
         """Return the control periods the wall clock (at ``now``) is ahead of sim time."""
         # + 1e-6: a period is due at its boundary despite round-off (0.003 / 0.001 < 3)
@@ -197,10 +203,12 @@ class RealTimePacing(Pacing):
         node = self.node
         if not node.running:
             return
+        due = self.steps_due(node.wall_clock())
         if self._first_tick:
             self._first_tick = False
-            self.resync()
-        due = self.steps_due(node.wall_clock())
+            if due > 1:   # the rest of the start-up, whole periods: neither slipped nor run
+                self._k0 -= due - 1
+                due = 1
         if due <= 0:
             return
         if self._fifo.priority:   # SCHED_FIFO follows the thread that steps
