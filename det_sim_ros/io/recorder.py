@@ -185,6 +185,11 @@ class Recorder:
         if self.paths:
             self._rotation.closed(self.paths[-1])
 
+    @property
+    def writer_native_id(self) -> int | None:
+        """Return the native thread id of the writer thread (background mode), else None."""
+        return self._mode.writer_native_id
+
     def write_here(self) -> bool:
         """
         Write what is queued (background mode) and flush if due, in the calling thread.

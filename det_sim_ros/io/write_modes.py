@@ -24,6 +24,7 @@ class WriteNow:
 
     caught_up = 0
     queued = 0
+    writer_native_id = None     # no writer thread
 
     def __init__(self, recorder):
         self._recorder = recorder
@@ -81,6 +82,11 @@ class WriteBehind:
     def queued(self) -> int:
         """Items waiting for the writer thread."""
         return len(self._thread)
+
+    @property
+    def writer_native_id(self) -> int | None:
+        """Return the writer thread's native thread id (None once stopped)."""
+        return self._thread.native_id
 
     def _stopped(self, count: int) -> bool:
         recorder = self._recorder

@@ -54,6 +54,11 @@ class WriterThread:
         """Return whether the thread takes items (until :meth:`stop`)."""
         return self._thread is not None
 
+    @property
+    def native_id(self) -> int | None:
+        """Return the writer thread's native (kernel) thread id, None once stopped."""
+        return self._thread.native_id if self._thread is not None else None
+
     def __len__(self) -> int:
         return len(self._queue)
 

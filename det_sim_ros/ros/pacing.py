@@ -16,7 +16,6 @@ mode. Wall times are in s.
 from __future__ import annotations
 
 import os
-import threading
 import time
 from typing import Callable, NamedTuple
 
@@ -211,8 +210,6 @@ class RealTimePacing(Pacing):
                 due = 1
         if due <= 0:
             return
-        if self._fifo.priority:   # SCHED_FIFO follows the thread that steps
-            self._fifo.follow(node.get_logger())
         if due > 1:
             self.late_ticks += 1
         dt = node.dt
@@ -261,8 +258,10 @@ class RealTimePacing(Pacing):
         return PacingReport(lag, max_lag, warning, values)
 
     def apply_priority(self, priority: int, logger) -> bool:
-        """SCHED_FIFO at ``priority`` for the calling thread (the one that steps); True if so."""
-        return self._fifo.follow(logger)
+        """SCHED_FIFO at ``priority`` for the node's threads but the log writer; True if so."""
+        recorder = self.node.recorder
+        writer = recorder.writer_native_id if recorder is not None else None
+        return self._fifo.apply(logger, keep=() if writer is None else (writer,))
 
 
 class PeriodCost:
@@ -350,40 +349,44 @@ class BehindLog:
 
 class FifoRequest:
     """
-    ``realtime_priority``: SCHED_FIFO for the thread that steps the node, not for the others.
+    ``realtime_priority``: SCHED_FIFO for the node's threads, all but the log writer's.
 
-    The log writer, DDS's and rclpy's threads keep their scheduling: a FIFO log writer would
-    take a core from the controller whenever it compresses a chunk. The priority is set on the
-    calling thread (:meth:`follow`) and moves with the stepping if another thread takes it
-    over. ``state`` says what is in force: 'off', 'SCHED_FIFO N' or why it was refused.
+    The stepping thread alone is not enough: it shares DDS's locks (a publisher's history, a
+    subscription's queue) with DDS's own threads, and one of those holding a lock while a busy
+    process has its core held the stepping thread up (arrival lag p99 2.6-42 ms against
+    0.7-0.9 ms with every thread at SCHED_FIFO, the same runs). The log writer stays at normal
+    scheduling: the stepping thread writes the log itself after each tick
+    (:meth:`~det_sim_ros.io.recorder.Recorder.write_here`), so a FIFO writer would only take a
+    core from the controller whenever it found work. ``state`` says what is in force: 'off',
+    'SCHED_FIFO N' or why it was refused.
     """
 
     def __init__(self, priority: int):
         self.priority = priority
         self.state = 'off'
-        self._thread = None     # the native id of the thread at FIFO, or the refused one
-        self._refused = False
 
-    def follow(self, logger) -> bool:
-        """Put the calling thread at SCHED_FIFO (once; again if the thread changed)."""
-        tid = threading.get_native_id()
-        if tid == self._thread or not self.priority:
-            return not self._refused and bool(self.priority)
-        if self._thread is not None and not self._refused:
-            set_thread_scheduling(self._thread, 0)   # the previous stepping thread
-        self._thread = tid
-        refused = set_thread_scheduling(tid, self.priority)
-        self._refused = bool(refused)
+    def apply(self, logger, keep=()) -> bool:
+        """Put every thread but those in ``keep`` (native ids) at SCHED_FIFO; all or nothing."""
+        tids = [tid for tid in sorted(int(t) for t in os.listdir('/proc/self/task'))
+                if tid not in keep]
+        changed, refused = 0, ''
+        for tid in tids:
+            refused = set_thread_scheduling(tid, self.priority)
+            if refused:
+                break
+            changed += 1
         if refused:
+            for tid in tids:
+                set_thread_scheduling(tid, 0)
             self.state = f'refused ({refused})'
             logger.warning(f'realtime_priority {self.priority}: SCHED_FIFO refused ({refused}); '
                            'running with normal scheduling (grant CAP_SYS_NICE, or an rtprio '
                            'limit in /etc/security/limits.conf)')
-        else:
-            self.state = f'SCHED_FIFO {self.priority}'
-            logger.info(f'SCHED_FIFO priority {self.priority} for the stepping thread '
-                        f'(native id {tid}); the log writer and DDS threads keep theirs')
-        return not refused
+            return False
+        self.state = f'SCHED_FIFO {self.priority}'
+        logger.info(f'SCHED_FIFO priority {self.priority} for {changed} thread(s): the stepping '
+                    'thread, DDS\'s and rclpy\'s (the log writer keeps normal scheduling)')
+        return True
 
 
 class FreeRunPacing(Pacing):
