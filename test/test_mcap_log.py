@@ -545,29 +545,6 @@ def test_background_queue_stays_bounded_when_the_writer_falls_behind(tmp_path):
     assert times == [k * 1000 for k in range(3000)]
 
 
-def test_write_here_writes_the_queue_in_the_calling_thread(tmp_path):
-    """
-    Check that write_here writes what is queued in the calling thread, in order.
-
-    A real-time node's stepping thread writes its log itself after each tick (the writer
-    thread then has nothing to hold the GIL for). The writer thread's period is made an hour:
-    whatever is written is written by write_here; the file holds every sample in order.
-    """
-    from det_sim_ros.io.contract import encode_joint_state, TOPIC_TYPES
-    recorder = Recorder(tmp_path / 'here.mcap', None, background=True, drain_period_s=3600.0)
-    topics = ['deflection', 'displacement']
-    for k in range(50):
-        data = [encode_joint_state(['det0'], [float(k)], stamp_ns=k * 1000)] * len(topics)
-        recorder.record_sample(k * 1000, topics, data, TOPIC_TYPES)
-        if k % 5 == 4:
-            assert recorder.queued > 0
-            assert recorder.write_here()   # the writer thread sleeps: never busy here
-            assert recorder.queued == 0 and recorder.messages == 2 * (k + 1)
-    recorder.close()
-    times = [m.log_time for m in LogReader(tmp_path / 'here.mcap').messages(['/deflection'])]
-    assert times == [k * 1000 for k in range(50)]
-
-
 def test_background_recording_drops_nothing_while_the_writer_switches_files(
         tmp_path, monkeypatch):
     """

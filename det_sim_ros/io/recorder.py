@@ -185,20 +185,6 @@ class Recorder:
         if self.paths:
             self._rotation.closed(self.paths[-1])
 
-    @property
-    def writer_native_id(self) -> int | None:
-        """Return the native thread id of the writer thread (background mode), else None."""
-        return self._mode.writer_native_id
-
-    def write_here(self) -> bool:
-        """
-        Write what is queued (background mode) and flush if due, in the calling thread.
-
-        Return False if the writer thread was writing at that moment (then it writes). A
-        real-time node's stepping thread calls it after each tick.
-        """
-        return self._mode.write_here()
-
     def new_file(self) -> None:
         """Finish the current file and continue in a new one (e.g. when sim time restarts)."""
         self._mode.new_file()

@@ -24,7 +24,6 @@ class WriteNow:
 
     caught_up = 0
     queued = 0
-    writer_native_id = None     # no writer thread
 
     def __init__(self, recorder):
         self._recorder = recorder
@@ -48,11 +47,6 @@ class WriteNow:
     def new_file(self) -> None:
         """Continue in a new file now."""
         self._recorder._new_file_now()
-
-    def write_here(self) -> bool:
-        """Flush if due (everything else is written already)."""
-        self._recorder.maybe_flush()
-        return True
 
     def stop(self) -> None:
         """Nothing is pending."""
@@ -83,11 +77,6 @@ class WriteBehind:
         """Items waiting for the writer thread."""
         return len(self._thread)
 
-    @property
-    def writer_native_id(self) -> int | None:
-        """Return the writer thread's native thread id (None once stopped)."""
-        return self._thread.native_id
-
     def _stopped(self, count: int) -> bool:
         recorder = self._recorder
         if recorder.fault or not self._thread.running:
@@ -113,10 +102,6 @@ class WriteBehind:
             return False
         self._thread.put((log_time_ns, topics, data, types))
         return True
-
-    def write_here(self) -> bool:
-        """Write the queue in the calling thread unless the writer thread is writing."""
-        return self._thread.write_here()
 
     def new_file(self) -> None:
         """Continue in a new file after what is queued; it is open on return."""

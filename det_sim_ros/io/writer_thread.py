@@ -54,11 +54,6 @@ class WriterThread:
         """Return whether the thread takes items (until :meth:`stop`)."""
         return self._thread is not None
 
-    @property
-    def native_id(self) -> int | None:
-        """Return the writer thread's native (kernel) thread id, None once stopped."""
-        return self._thread.native_id if self._thread is not None else None
-
     def __len__(self) -> int:
         return len(self._queue)
 
@@ -72,26 +67,6 @@ class WriterThread:
     def write_queued(self) -> None:
         """Write everything queued now, in the calling thread."""
         self._guarded(yield_gil=False)
-
-    def write_here(self) -> bool:
-        """
-        Write what is queued and flush if due, in the calling thread, unless the thread is.
-
-        For a caller whose thread must not wait on this one (a real-time node's stepping
-        thread): when the writer thread holds the lock nothing is written and False is
-        returned. The writer thread then finds nothing to do, and never holds the GIL while a
-        busy host keeps it off the CPU, which would hold up the caller.
-        """
-        if not self._lock.acquire(blocking=False):
-            return False
-        try:
-            self._drain(yield_gil=False)
-            self._maybe_flush()
-        except Exception as exc:  # noqa: BLE001 - a logging fault stops logging, nothing else
-            self._on_error(exc)
-        finally:
-            self._lock.release()
-        return True
 
     def _guarded(self, yield_gil: bool) -> None:
         try:

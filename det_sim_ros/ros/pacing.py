@@ -226,11 +226,6 @@ class RealTimePacing(Pacing):
             for _ in range(min(due, self.max_catchup)):
                 if not node.run_period():
                     return
-            if node.recorder is not None:
-                # the log is written here, after the tick's samples are out: a writer thread
-                # holding the GIL while a busy host keeps it off the CPU held this thread up
-                # for up to ~14 ms at a time (this thread at SCHED_FIFO, the log on)
-                node.recorder.write_here()
         finally:
             self._cost.add(time.thread_time() - cpu0, sim.steps_taken - steps0, sim.k - k0)
 
@@ -258,10 +253,8 @@ class RealTimePacing(Pacing):
         return PacingReport(lag, max_lag, warning, values)
 
     def apply_priority(self, priority: int, logger) -> bool:
-        """SCHED_FIFO at ``priority`` for the node's threads but the log writer; True if so."""
-        recorder = self.node.recorder
-        writer = recorder.writer_native_id if recorder is not None else None
-        return self._fifo.apply(logger, keep=() if writer is None else (writer,))
+        """SCHED_FIFO at ``priority`` for every thread of the process; True if in force."""
+        return self._fifo.apply(logger)
 
 
 class PeriodCost:
@@ -349,26 +342,25 @@ class BehindLog:
 
 class FifoRequest:
     """
-    ``realtime_priority``: SCHED_FIFO for the node's threads, all but the log writer's.
+    ``realtime_priority``: SCHED_FIFO for every thread of the node's process, all or nothing.
 
-    The stepping thread alone is not enough: it shares DDS's locks (a publisher's history, a
-    subscription's queue) with DDS's own threads, and one of those holding a lock while a busy
-    process has its core held the stepping thread up (arrival lag p99 2.6-42 ms against
-    0.7-0.9 ms with every thread at SCHED_FIFO, the same runs). The log writer stays at normal
-    scheduling: the stepping thread writes the log itself after each tick
-    (:meth:`~det_sim_ros.io.recorder.Recorder.write_here`), so a FIFO writer would only take a
-    core from the controller whenever it found work. ``state`` says what is in force: 'off',
-    'SCHED_FIFO N' or why it was refused.
+    Not the stepping thread alone: it shares locks with DDS's threads (a publisher's history,
+    a subscription's queue) and the GIL with the log writer, and one of those holding a lock
+    while a busy process had its core held the stepping thread up. Beside a busy core, a
+    controller at SCHED_FIFO 40, 20-30 s runs: arrival lag p99 2.6-42 ms with the stepping
+    thread alone, 1.1-7.7 ms with every thread but the log writer (the stepping thread writing
+    the log), 0.6-1.0 ms with every thread (bench/realtime_switching.py). Threads started
+    later inherit the policy from the thread that starts them. ``state`` says what is in
+    force: 'off', 'SCHED_FIFO N' or why it was refused.
     """
 
     def __init__(self, priority: int):
         self.priority = priority
         self.state = 'off'
 
-    def apply(self, logger, keep=()) -> bool:
-        """Put every thread but those in ``keep`` (native ids) at SCHED_FIFO; all or nothing."""
-        tids = [tid for tid in sorted(int(t) for t in os.listdir('/proc/self/task'))
-                if tid not in keep]
+    def apply(self, logger) -> bool:
+        """Put every thread of the process at SCHED_FIFO; True if in force."""
+        tids = sorted(int(t) for t in os.listdir('/proc/self/task'))
         changed, refused = 0, ''
         for tid in tids:
             refused = set_thread_scheduling(tid, self.priority)
@@ -384,8 +376,8 @@ class FifoRequest:
                            'limit in /etc/security/limits.conf)')
             return False
         self.state = f'SCHED_FIFO {self.priority}'
-        logger.info(f'SCHED_FIFO priority {self.priority} for {changed} thread(s): the stepping '
-                    'thread, DDS\'s and rclpy\'s (the log writer keeps normal scheduling)')
+        logger.info(f'SCHED_FIFO priority {self.priority} for {changed} thread(s) (stepping, '
+                    'DDS, rclpy, log writer)')
         return True
 
 
