@@ -52,7 +52,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from diagnostic_msgs.msg import DiagnosticArray
 from det_sim_ros.io.contract import decode_joint_state, encode_float64_multi_array
-n_det, out_path, seconds, depth = int(sys.argv[1]), sys.argv[2], float(sys.argv[3]), int(sys.argv[4])
+n_det, out_path = int(sys.argv[1]), sys.argv[2]
+seconds, depth = float(sys.argv[3]), int(sys.argv[4])
 rclpy.init()
 node = rclpy.create_node('switching_controller')
 cmd = node.create_publisher(Float64MultiArray, 'voltage_command', 10)
