@@ -270,7 +270,7 @@ def test_falling_behind_real_time_warns_once_and_says_when_caught_up(harness, tm
     (warned,) = logged('behind real time')
     assert 'below real time' in warned and 'slipped' in warned
     assert 'ms of CPU' in warned and 'internal steps' in warned
-    assert '1.00 ms of wall time' in warned   # dt 1 ms at real_time_factor 1
+    assert '1.000 ms of wall time' in warned   # dt 1 ms at real_time_factor 1
     assert not logged('caught up')
     quiet_window()
     h.spin_until(lambda: logged('caught up with real time'), 'the caught-up line')
