@@ -13,7 +13,10 @@ wave 0 / 2.5 kV that switches the beam between its two states twice a second (ea
 - arrival lag: the wall time a sample arrived minus the wall time it was due, p50 / p99 / max
   (ms). Sample k is due k dt after the start; the start is estimated as the earliest arrival
   less its sim time, so the lag is measured from the best arrival of the run (~0.1-0.3 ms
-  after the true due time on an idle host);
+  after the true due time on an idle host). A slip moves the node's schedule for good, so
+  every later sample counts as late by it; ``own_lag`` is the lag against the node's own
+  schedule instead: a sample's arrival offset less the smallest offset of it and the 999
+  samples after it (a slip is then not a lag, a stall still is);
 - the node's real-time factor over the run (sim time received per wall second) and its
   /diagnostics level and message at the end.
 
@@ -29,6 +32,7 @@ Usage: python bench/realtime_switching.py [--seconds 30] [--pairs 1]
 """
 
 import argparse
+import collections
 import json
 import os
 import random
@@ -108,8 +112,19 @@ def analyse(data, dt):
     lost = sum(max(0, (b - a) // step - 1) for a, b in zip(stamps, stamps[1:]))
     start = min(a - s * 1e-9 for s, a in zip(stamps, arrivals))
     lag = [(a - s * 1e-9 - start) * 1e3 for s, a in zip(stamps, arrivals)]
+    offsets = [a - s * 1e-9 for s, a in zip(stamps, arrivals)]
+    ahead, window = [], collections.deque()   # a sliding minimum over the next 1000
+    for i in range(len(offsets) - 1, -1, -1):
+        while window and offsets[window[-1]] >= offsets[i]:
+            window.pop()
+        window.append(i)
+        if window[0] > i + 999:
+            window.popleft()
+        ahead.append(offsets[i] - offsets[window[0]])
+    own = [x * 1e3 for x in ahead]
     wall = arrivals[-1] - arrivals[0]
-    result = {'samples_received': len(stamps), 'samples_lost': int(lost),
+    result = {'own_lag_ms_p50': _percentile(own, 50), 'own_lag_ms_p99': _percentile(own, 99),
+              'own_lag_ms_max': max(own),'samples_received': len(stamps), 'samples_lost': int(lost),
               'lag_ms_p50': _percentile(lag, 50), 'lag_ms_p99': _percentile(lag, 99),
               'lag_ms_max': max(lag), 'rtf': (stamps[-1] - stamps[0]) * 1e-9 / wall}
     if data['diagnostics']:
