@@ -124,7 +124,8 @@ def analyse(data, dt):
     own = [x * 1e3 for x in ahead]
     wall = arrivals[-1] - arrivals[0]
     result = {'own_lag_ms_p50': _percentile(own, 50), 'own_lag_ms_p99': _percentile(own, 99),
-              'own_lag_ms_max': max(own),'samples_received': len(stamps), 'samples_lost': int(lost),
+              'own_lag_ms_max': max(own), 'samples_received': len(stamps),
+              'samples_lost': int(lost),
               'lag_ms_p50': _percentile(lag, 50), 'lag_ms_p99': _percentile(lag, 99),
               'lag_ms_max': max(lag), 'rtf': (stamps[-1] - stamps[0]) * 1e-9 / wall}
     if data['diagnostics']:
