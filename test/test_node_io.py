@@ -191,33 +191,39 @@ def test_services_and_parameters_with_either_executor(harness, executor):
 
 
 @pytest.mark.parametrize('outcome', ['granted', 'refused'])
-def test_realtime_priority_is_applied_to_every_thread_or_degrades(harness, monkeypatch, outcome):
+def test_realtime_priority_is_applied_to_every_thread_or_degrades(harness, monkeypatch, tmp_path,
+                                                                  outcome):
     """
     Check that realtime_priority applies SCHED_FIFO to every thread, or degrades to a warning.
 
-    realtime_priority puts every thread of the process under SCHED_FIFO (real-time mode),
-    or, without permission, logs a warning and leaves scheduling as it was; the node runs
-    either way. (os.sched_setscheduler is recorded, not called: the test process stays as it
-    is.)
+    Every thread of the process goes to SCHED_FIFO (real-time mode): the stepping thread (this
+    one: the harness spins in it), rclpy's, DDS's and the log writer's. Without permission
+    every thread is put back to normal scheduling, the node says why on /diagnostics and runs.
+    (os.sched_setscheduler is recorded, not called: the test process stays as it is.)
     """
     import os
+    import threading
     calls = []
 
     def fake(tid, policy, param):
+        calls.append((tid, policy, param.sched_priority))
         if outcome == 'refused' and policy == os.SCHED_FIFO:
             raise PermissionError(1, 'Operation not permitted')
-        calls.append((tid, policy, param.sched_priority))
     monkeypatch.setattr(os, 'sched_setscheduler', fake)
-    h = harness(real_time=True, realtime_priority=20)
-    if outcome == 'granted':
-        assert h.node.realtime_scheduling
-        fifo = {tid for tid, policy, prio in calls if policy == os.SCHED_FIFO and prio == 20}
-        # the main thread and the threads rclpy and DDS started (one call per thread)
-        assert os.getpid() in fifo and len(fifo) > 1 and len(fifo) == len(calls)
-    else:
-        assert not h.node.realtime_scheduling
-        assert all(policy == os.SCHED_OTHER for _, policy, _ in calls)   # all or nothing
+    h = harness(real_time=True, realtime_priority=20, **{'log.path': str(tmp_path)})
     h.spin_until(lambda: h.node.simulator.k > 3, 'periods')   # running either way
+    fifo = {tid for tid, policy, prio in calls if policy == os.SCHED_FIFO and prio == 20}
+    assert h.node.realtime_scheduling == (outcome == 'granted')
+    values = {kv.key: kv.value for kv in h.node.publish_diagnostics().status[0].values}
+    threads = {int(t) for t in os.listdir('/proc/self/task')}
+    if outcome == 'granted':
+        # the main thread and the threads rclpy, DDS and the log started (one call per thread)
+        assert threading.get_native_id() in fifo and len(fifo) == len(calls) > 2
+        assert values['realtime_priority'] == 'SCHED_FIFO 20'
+    else:
+        back = {tid for tid, policy, _ in calls if policy == os.SCHED_OTHER}
+        assert back >= fifo and back & threads   # all or nothing
+        assert values['realtime_priority'] == 'refused (Operation not permitted)'
 
 
 def test_realtime_priority_is_ignored_outside_real_time(harness, monkeypatch):
@@ -226,3 +232,51 @@ def test_realtime_priority_is_ignored_outside_real_time(harness, monkeypatch):
     monkeypatch.setattr(os, 'sched_setscheduler', lambda *a: calls.append(a))
     h = harness(real_time=False, realtime_priority=20)
     assert not h.node.realtime_scheduling and not calls
+
+
+def test_falling_behind_real_time_warns_once_and_says_when_caught_up(harness, tmp_path):
+    """
+    Check that falling behind real time is logged: one WARN with how far and why, then caught up.
+
+    Driven by the fake wall clock and node.publish_diagnostics() (one diagnostics window per
+    call): 10 s of wall time at once slips the node; the window's report logs one WARN naming
+    the slip and the cost of a period (CPU, internal steps, wall time per period); a quiet
+    window logs the catch-up (INFO). A second slip within the rate limit is not warned again;
+    one after it is, and names the episode it did not warn of.
+    """
+    from det_sim_ros.ros.pacing import BEHIND_WARN_INTERVAL_S
+    from test_lockstep_waiting import listen_to_rosout
+    # (no diagnostics timer in the test's time: each window is one publish_diagnostics call)
+    h, wall = _real_time_node(harness, tmp_path, max_lag=0.02, diagnostics_period=3600.0)
+    lines = listen_to_rosout(h)
+    node = h.node
+
+    def slip(seconds):
+        k = node.simulator.k
+        wall.now += seconds
+        h.spin_until(lambda: node.simulator.k > k, 'the late tick')
+        node.publish_diagnostics()
+
+    def quiet_window():
+        node.publish_diagnostics()
+
+    def logged(start):
+        for _ in range(20):   # /rosout is asynchronous: give it a few spins
+            h.executor.spin_once(timeout_sec=0.01)
+        return [line for line in lines if line.startswith(start)]
+
+    slip(10.0)
+    h.spin_until(lambda: logged('behind real time'), 'the WARN')
+    (warned,) = logged('behind real time')
+    assert 'below real time' in warned and 'slipped' in warned
+    assert 'ms of CPU' in warned and 'internal steps' in warned
+    assert '1.000 ms of wall time' in warned   # dt 1 ms at real_time_factor 1
+    assert not logged('caught up')
+    quiet_window()
+    h.spin_until(lambda: logged('caught up with real time'), 'the caught-up line')
+    slip(1.0)                                  # within the rate limit: not warned again
+    quiet_window()
+    assert len(logged('behind real time')) == 1 and len(logged('caught up')) == 1
+    slip(BEHIND_WARN_INTERVAL_S)               # after it: warned, naming the silent episode
+    h.spin_until(lambda: len(logged('behind real time')) == 2, 'the second WARN')
+    assert '(1 more time(s) since the last warning)' in logged('behind real time')[1]

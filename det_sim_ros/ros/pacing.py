@@ -23,8 +23,10 @@ from .waiting import Wait
 from ..io.contract import MODES
 from ..scenes.scene import SceneError
 
-__all__ = ['FreeRunPacing', 'LockstepPacing', 'make_pacing', 'Pacing', 'PacingReport',
-           'RealTimePacing', 'set_fifo_priority']
+__all__ = ['BehindLog', 'FreeRunPacing', 'LockstepPacing', 'make_pacing', 'Pacing',
+           'PacingReport', 'RealTimePacing', 'set_thread_scheduling']
+
+BEHIND_WARN_INTERVAL_S = 30.0   # wall s: at most one 'behind real time' WARN this often
 
 
 class PacingReport(NamedTuple):
@@ -150,7 +152,23 @@ class RealTimePacing(Pacing):
         self.max_lag_seen = 0     # most periods behind since the last report
         self._wall0 = 0.0         # the wall-clock reference and the period k at it
         self._k0 = 0
+        self._cost = PeriodCost()
+        self._fifo = FifoRequest(get('realtime_priority'))
+        self._behind_log = None
+        self._first_tick = True
         super().__init__(get)
+
+    def start(self, node) -> None:
+        super().start(node)
+        logger = node.get_logger()
+        self._behind_log = BehindLog(logger.warning, logger.info, lambda: node.wall_clock())
+        self._cost.take(node.simulator)   # the first window starts here
+        # the schedule starts at the first tick: the node's start-up after its timer was made
+        # (the log opened, sample 0, the first spin) took 0.1-0.2 s beside a busy core, which
+        # the first tick would otherwise find due and slip. It moves by whole periods: the
+        # periods stay due just before the timer's ticks (a schedule set at the first tick's
+        # own, late, time put every period a tick late: ~1 ms of lag)
+        self._first_tick = True
 
     def label(self) -> str:
         return 'real-time x%g' % self.real_time_factor
@@ -170,6 +188,10 @@ class RealTimePacing(Pacing):
         self._wall0 = self.node.wall_clock()
         self._k0 = self.node.simulator.k
 
+    def run(self, running: bool) -> None:
+        self._first_tick = False   # a resume (or the gate opening) restarts the schedule now
+        super().run(running)
+
     def steps_due(self, now: float) -> int:
         """Return the control periods the wall clock (at ``now``) is ahead of sim time."""
         # + 1e-6: a period is due at its boundary despite round-off (0.003 / 0.001 < 3)
@@ -182,6 +204,11 @@ class RealTimePacing(Pacing):
         if not node.running:
             return
         due = self.steps_due(node.wall_clock())
+        if self._first_tick:
+            self._first_tick = False
+            if due > 1:   # the rest of the start-up, whole periods: neither slipped nor run
+                self._k0 -= due - 1
+                due = 1
         if due <= 0:
             return
         if due > 1:
@@ -212,17 +239,138 @@ class RealTimePacing(Pacing):
         elif running and max_lag * dt > 0.5 * self.max_lag > 0.0:
             warning = (f'lagging: up to {max_lag * dt * 1e3:.0f} ms behind the wall clock '
                        f'(slips beyond {self.max_lag * 1e3:g} ms)')
-        return PacingReport(lag, max_lag, warning, {})
+        cpu_s, steps = self._cost.take(node.simulator)
+        budget_s = dt / self.real_time_factor
+        if self._behind_log is not None:
+            self._behind_log.check(warning, behind_reason(cpu_s, steps, budget_s))
+        values = {'cpu_per_period_ms': f'{cpu_s * 1e3:.3f}' if cpu_s is not None else '',
+                  'steps_per_period': f'{steps:.1f}' if steps is not None else '',
+                  'realtime_priority': self._fifo.state}
+        return PacingReport(lag, max_lag, warning, values)
 
     def apply_priority(self, priority: int, logger) -> bool:
-        changed, refused = set_fifo_priority(priority)
+        """SCHED_FIFO at ``priority`` for every thread of the process; True if in force."""
+        return self._fifo.apply(logger)
+
+
+class PeriodCost:
+    """
+    What a window's periods cost: the node thread's CPU and the internal steps per period.
+
+    The CPU is the calling thread's (``time.thread_time``) between two :meth:`take` calls,
+    which the node's reports make from its executor's thread: the thread that takes the
+    commands, steps, encodes, publishes, queues the log and runs the timers (not the log
+    writer's thread, nor DDS's).
+    """
+
+    def __init__(self):
+        self._mark = None     # (thread CPU s, internal steps, period k) at the last take
+
+    def take(self, simulator) -> tuple:
+        """Return (CPU s, internal steps) per period since the last take, or (None, None)."""
+        now = (time.thread_time(), simulator.steps_taken, simulator.k)
+        last, self._mark = self._mark, now
+        if last is None or now[2] <= last[2] or now[1] < last[1]:   # none ran, or a reset
+            return None, None
+        periods = now[2] - last[2]
+        return (now[0] - last[0]) / periods, (now[1] - last[1]) / periods
+
+
+def behind_reason(cpu_s: float | None, steps: float | None, budget_s: float) -> str:
+    """
+    Say why a real-time node may be behind: a period's CPU against the wall time it is given.
+
+    ``cpu_s`` is the CPU per period (s) of the node's thread, ``steps`` the integrator's
+    internal steps per period, ``budget_s`` the wall time per period.
+    """
+    if cpu_s is None:
+        return 'no period ran in the window (or it was reset)'
+    text = (f'a period cost {cpu_s * 1e3:.3f} ms of CPU ({steps:.1f} internal steps) for '
+            f'{budget_s * 1e3:.3f} ms of wall time')
+    if cpu_s > 0.8 * budget_s:   # DDS's threads and the log writer need some of it too
+        return (text + ': the periods take about all the CPU real time gives them (a looser '
+                'integrator.tolerance, a lower fidelity or real_time_factor < 1 would fit)')
+    return text + ': the node did not get the CPU in time (a busy host; see realtime_priority)'
+
+
+class BehindLog:
+    """
+    Log when a real-time node falls behind (WARN, with why) and when it has caught up (INFO).
+
+    :meth:`check` is called once per diagnostics window with that window's pacing warning
+    ('' when on time). A WARN is logged at most once per ``interval_s`` of ``clock``; an
+    episode that starts sooner is counted and named in the next WARN, and its end is not
+    logged (its start was not).
+    """
+
+    def __init__(self, warn: Callable[[str], None], info: Callable[[str], None],
+                 clock: Callable[[], float], interval_s: float = BEHIND_WARN_INTERVAL_S):
+        self._warn, self._info, self._clock = warn, info, clock
+        self.interval_s = interval_s
+        self._since = None          # wall time the current episode started (None: on time)
+        self._warned = False        # the current episode's start was logged
+        self._last_warn = None
+        self._unlogged = 0          # episodes not logged since the last WARN
+
+    def check(self, warning: str, reason: str) -> None:
+        """Follow one window: ``warning`` ('' = on time) and ``reason`` (its cost)."""
+        now = self._clock()
+        if warning and self._since is None:
+            self._since = now
+            self._warned = self._last_warn is None or now - self._last_warn >= self.interval_s
+            if self._warned:
+                more = (f' ({self._unlogged} more time(s) since the last warning)'
+                        if self._unlogged else '')
+                self._warn(f'behind real time{more}: {warning}; {reason}')
+                self._last_warn, self._unlogged = now, 0
+            else:
+                self._unlogged += 1
+        elif not warning and self._since is not None:
+            if self._warned:
+                self._info(f'caught up with real time after {now - self._since:.1f} s behind')
+            self._since = None
+
+
+class FifoRequest:
+    """
+    ``realtime_priority``: SCHED_FIFO for every thread of the node's process, all or nothing.
+
+    Not the stepping thread alone, measured: it shares locks with DDS's threads (a publisher's
+    history, a subscription's queue) and the GIL with the log writer, and one of those holding
+    one while a busy process has its core holds the stepping thread up (the likely cause; not
+    traced to the lock). Beside a busy core, a
+    controller at SCHED_FIFO 40, 20-30 s runs: arrival lag p99 5.7-42 ms with the stepping
+    thread alone, 1.1-7.7 ms with every thread but the log writer (the stepping thread writing
+    the log), 0.6-1.0 ms with every thread (bench/realtime_switching.py). Threads started
+    later inherit the policy from the thread that starts them. ``state`` says what is in
+    force: 'off', 'SCHED_FIFO N' or why it was refused.
+    """
+
+    def __init__(self, priority: int):
+        self.priority = priority
+        self.state = 'off'
+
+    def apply(self, logger) -> bool:
+        """Put every thread of the process at SCHED_FIFO; True if in force."""
+        tids = sorted(int(t) for t in os.listdir('/proc/self/task'))
+        changed, refused = 0, ''
+        for tid in tids:
+            refused = set_thread_scheduling(tid, self.priority)
+            if refused:
+                break
+            changed += 1
         if refused:
-            logger.warning(f'realtime_priority {priority}: SCHED_FIFO refused ({refused}); '
+            for tid in tids:
+                set_thread_scheduling(tid, 0)
+            self.state = f'refused ({refused})'
+            logger.warning(f'realtime_priority {self.priority}: SCHED_FIFO refused ({refused}); '
                            'running with normal scheduling (grant CAP_SYS_NICE, or an rtprio '
                            'limit in /etc/security/limits.conf)')
-        else:
-            logger.info(f'SCHED_FIFO priority {priority} for {changed} thread(s)')
-        return not refused
+            return False
+        self.state = f'SCHED_FIFO {self.priority}'
+        logger.info(f'SCHED_FIFO priority {self.priority} for {changed} thread(s) (stepping, '
+                    'DDS, rclpy, log writer)')
+        return True
 
 
 class FreeRunPacing(Pacing):
@@ -430,27 +578,17 @@ def make_pacing(get: Callable) -> Pacing:
     return PACINGS[mode](get)
 
 
-def set_fifo_priority(priority: int) -> tuple[int, str]:
+def set_thread_scheduling(tid: int, priority: int) -> str:
     """
-    Set SCHED_FIFO at ``priority`` for every thread of this process, all or nothing.
+    Put thread ``tid`` (a native id) at SCHED_FIFO ``priority``, or back to SCHED_OTHER if 0.
 
-    The threads are the executor's, DDS's and the log writer's; threads started later inherit
-    the priority. Return (threads changed, the reason it was refused or '').
+    Return '' or why the system refused (e.g. 'Operation not permitted' without CAP_SYS_NICE).
     """
-    changed, refused = 0, ''
-    for tid in sorted(int(t) for t in os.listdir('/proc/self/task')):
-        try:
-            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
-            changed += 1
-        except ProcessLookupError:   # a thread that has just ended
-            continue
-        except (PermissionError, OSError) as exc:
-            refused = exc.strerror or str(exc)
-            break
-    if refused:
-        for tid in (int(t) for t in os.listdir('/proc/self/task')):
-            try:
-                os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
-            except OSError:
-                pass
-    return changed, refused
+    policy = os.SCHED_FIFO if priority else os.SCHED_OTHER
+    try:
+        os.sched_setscheduler(tid, policy, os.sched_param(priority))
+    except ProcessLookupError:   # a thread that has ended
+        return ''
+    except (PermissionError, OSError, AttributeError) as exc:   # (no sched_* outside Linux)
+        return getattr(exc, 'strerror', None) or str(exc)
+    return ''
