@@ -124,6 +124,40 @@ def test_a_rig_log_with_other_topics_fits_through_the_mapping(tmp_path, syntheti
     assert 'charge' in stdout
 
 
+def test_a_scale_applies_to_scalar_fields_too(tmp_path, synthetic):
+    """
+    Check each mapped value is the logged number times its scale, for a Float64's scalar field.
+
+    The rig logs its voltage in kV and Δy in mm, each as a Float64 (a scalar ``data``, not an
+    array element); the reference is the raw values the test wrote times the mapping's scale.
+    """
+    from det_sim_ros.calibration.logs import read_log
+    from det_sim_ros.io.cdr import serialize
+    from mcap.writer import Writer
+    from std_msgs.msg import Float64
+    volts_kv = synthetic.volts[:, 0] * 1e-3
+    dy_mm = synthetic.channels['dy'].values[:, 0] * 1e3
+    path = tmp_path / 'scalars.mcap'
+    with open(path, 'wb') as stream:
+        writer = Writer(stream)
+        writer.start(profile='ros2', library='test')
+        schema = writer.register_schema('std_msgs/msg/Float64', 'ros2msg', b'')
+        channels = {topic: writer.register_channel(topic, 'cdr', schema)
+                    for topic in ('/amp/kv', '/rig/dy_mm')}
+        for k, value in enumerate(dy_mm):
+            t_ns = STAMP0 + k * 1_000_000
+            if k < len(volts_kv):
+                writer.add_message(channels['/amp/kv'], t_ns,
+                                   serialize(Float64(data=float(volts_kv[k]))), t_ns)
+            writer.add_message(channels['/rig/dy_mm'], t_ns,
+                               serialize(Float64(data=float(value))), t_ns)
+        writer.finish()
+    measured = read_log(str(path), ['voltage=/amp/kv*1e3', 'dy=/rig/dy_mm.data*1e-3'])
+    # the same IEEE product on both sides: equal to within one rounding
+    assert measured.volts[:, 0] == pytest.approx(volts_kv * 1e3, rel=1e-15)
+    assert measured.channels['dy'].values[:, 0] == pytest.approx(dy_mm * 1e-3, rel=1e-15)
+
+
 def _csv(tmp_path, text, name='bad.csv'):
     path = tmp_path / name
     path.write_text(text)
