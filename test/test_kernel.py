@@ -75,7 +75,7 @@ def _close(actual, expected, rel=1e-10):
     """
     Assert each component agrees to ``rel`` of itself or of 1e-6 of the vector's largest.
 
-    The random states are moderate (|w'| well below 1, mass matrices of condition ~1e2-1e4),
+    The random states are moderate (|w'| well below 1, mass matrices of condition 1 to 3e2),
     where both codes carry a few hundred eps of each term: the largest deviation seen is 1.4e-12
     (70x inside 1e-10), the same with OpenBLAS's Haswell, SkylakeX and Nehalem kernels
     (OPENBLAS_CORETYPE), numpy's baseline SIMD, the kernel at -O0 and without AVX2. A steep
