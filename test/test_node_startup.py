@@ -136,6 +136,45 @@ def test_unwritable_log_path_refuses_to_start(tmp_path):
         assert repr(path) in problems[0]
 
 
+def _params_file(tmp_path):
+    """Write a ROS params file with a misspelled key under a known section (lockstep)."""
+    path = tmp_path / 'params.yaml'
+    path.write_text('/**:\n  ros__parameters:\n    lockstep:\n      timout: 2.0\n'
+                    '    log:\n      enabled: false\n')
+    return str(path)
+
+
+def test_a_misspelled_parameter_is_named_with_the_closest_known_one(tmp_path):
+    """
+    Check a misspelled -p name and params-file key: a WARN naming the closest known parameter.
+
+    The node still starts (the misspelled values are ignored, as the warning says).
+    """
+    node = Node(tmp_path, '--ros-args', '-r', '__ns:=/startup_typo', '-p', 'modee:=free_run',
+                '--params-file', _params_file(tmp_path), '-p', 'info_period:=0.0')
+    try:
+        warning = node.wait_for("unknown parameter 'lockstep.timout'")
+        assert '[WARN]' in warning and "did you mean 'lockstep.timeout'?" in warning
+        warning = node.wait_for("unknown parameter 'modee'")
+        assert '[WARN]' in warning and "did you mean 'mode'?" in warning
+        node.wait_for(READY)
+    finally:
+        assert node.stop() == 0, ''.join(node.lines)
+
+
+def test_strict_parameters_makes_a_misspelled_name_fatal(tmp_path):
+    """Check that with strict_parameters an unknown name stops the start: one FATAL line."""
+    result = run_entry(['--ros-args', '-r', '__ns:=/startup_strict', '-p', 'modee:=free_run',
+                        '--params-file', _params_file(tmp_path),
+                        '-p', 'strict_parameters:=true'], cwd=tmp_path)
+    assert result.returncode == 1, result.stderr
+    problems = [line for line in result.stderr.splitlines() if '[INFO]' not in line]
+    assert len(problems) == 1 and '[FATAL]' in problems[0], result.stderr
+    assert "did you mean 'mode'?" in problems[0]
+    assert "did you mean 'lockstep.timeout'?" in problems[0]
+    assert READY not in result.stderr
+
+
 def test_duplicate_name_refused_unless_allowed(tmp_path):
     """
     Check a second node of one name: one FATAL line and exit 1, or a WARN when allowed.
