@@ -125,7 +125,10 @@ def _watch(args) -> int:
         except KeyboardInterrupt:   # the usual way to stop watching
             pass
         return 0
-    return _run(args, action)
+    try:
+        return _run(args, action)
+    except KeyboardInterrupt:       # also before the first sample, or while it winds up
+        return 0
 
 
 # -- pause, resume, advance, reset ------------------------------------------------------------
