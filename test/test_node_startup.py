@@ -15,7 +15,7 @@ import threading
 import time
 
 from conftest import child_env
-from det_sim_ros.ros.discovery import ANNOUNCE_S
+from det_sim_ros.ros.name_check import Claim, younger
 from det_sim_ros.ros.params import NODE_PARAMS
 import pytest
 
@@ -175,13 +175,22 @@ def test_strict_parameters_makes_a_misspelled_name_fatal(tmp_path):
     assert READY not in result.stderr
 
 
+def test_claims_are_ordered_the_same_way_by_every_node():
+    """Check the claims' order: the earlier start wins, a tie goes to the smaller id."""
+    old, new, tie = Claim(100, 7), Claim(200, 1), Claim(100, 9)
+    assert younger(new, old) and not younger(old, new)
+    assert younger(tie, old) and not younger(old, tie)
+    assert not younger(old, old)                    # its own claim, heard back
+    assert Claim.parse(new.text()) == new and Claim.parse('not a claim') is None
+
+
 def test_duplicate_name_refused_unless_allowed(tmp_path):
     """
     Check a second node of one name: one FATAL line and exit 1, or a WARN when allowed.
 
-    The duplicates start once the first node is past its first announcements (ANNOUNCE_S), when
-    they depend on its periodic ones: at Fast DDS's 3 s period a fifth of them would not see it
-    within the check's window and start anyway.
+    The duplicates publish from their start (the name is settled by the claims the nodes
+    announce, det_sim_ros.ros.name_check) and stop themselves once they hear the running node's
+    older claim; the running node goes on.
     """
     args = ['--ros-args', '-r', '__ns:=/startup_dup', '-p', 'log.enabled:=false',
             '-p', 'info_period:=0.0']
@@ -189,14 +198,14 @@ def test_duplicate_name_refused_unless_allowed(tmp_path):
     try:
         # the start line names the level: the shipped default is the exact kinematics, 5 terms
         assert 'fidelity exact n_r=5' in first.wait_for(READY)
-        time.sleep(ANNOUNCE_S)
         with concurrent.futures.ThreadPoolExecutor(3) as pool:
             seconds = list(pool.map(lambda _: run_entry(args, cwd=tmp_path), range(3)))
         for second in seconds:
             assert second.returncode == 1, second.stderr
             fatal = [line for line in second.stderr.splitlines() if '[FATAL]' in line]
             assert len(fatal) == 1 and 'another node named /startup_dup/sim_node' in fatal[0]
-            assert READY not in second.stderr
+            assert 'Traceback' not in second.stderr
+        assert first.proc.poll() is None           # the running node was not the one refused
         allowed = Node(tmp_path, *args, '-p', 'allow_duplicate_name:=true')
         try:
             allowed.wait_for(READY)
@@ -206,6 +215,36 @@ def test_duplicate_name_refused_unless_allowed(tmp_path):
             assert allowed.stop() == 0
     finally:
         assert first.stop() == 0, ''.join(first.lines)
+
+
+def test_of_nodes_started_together_exactly_one_keeps_its_name(tmp_path):
+    """
+    Check three nodes of one name started at the same moment: one runs, two are refused.
+
+    Each orders the claims the same way (start time, then instance id), so exactly the oldest
+    goes on, whichever claim each hears first; none waits for the others before publishing.
+    """
+    args = ['--ros-args', '-r', '__ns:=/startup_together', '-p', 'log.enabled:=false',
+            '-p', 'info_period:=0.0']
+    nodes = [Node(tmp_path, *args) for _ in range(3)]
+    try:
+        for node in nodes:
+            node.wait_for(READY)
+        refused = []
+        for node in nodes:       # a refused node exits after its FATAL line
+            if node.proc.poll() is None:
+                try:
+                    node.proc.wait(timeout=10.0)
+                except subprocess.TimeoutExpired:
+                    continue
+            refused.append(node)
+        assert len(refused) == 2, [''.join(node.lines) for node in nodes]
+    finally:
+        codes = [node.stop() for node in nodes]
+    assert sorted(codes) == [0, 1, 1], codes
+    for node in refused:
+        fatal = [line for line in node.lines if '[FATAL]' in line]
+        assert len(fatal) == 1 and 'another node named /startup_together/sim_node' in fatal[0]
 
 
 def test_reset_answer_names_the_new_log_file(harness, tmp_path):

@@ -30,7 +30,7 @@ from .commands import CommandInput
 from .declaration import load_node_scene, validate_parameters
 from .discovery import announce_early
 from .markers import attach_markers
-from .name_check import check_unique_name, note_node_created
+from .name_check import NameClaim
 from .pacing import make_pacing
 from .recording import open_recorder
 from .reports import NodeReports
@@ -71,8 +71,8 @@ class SimNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        note_node_created(self.context)   # discovery runs from here, beside the preparation
         self.scene, scene_file = load_node_scene(self)
+        self.name_claim = NameClaim(self, self._p('allow_duplicate_name'))   # settled later
         self._pacing = make_pacing(self._p)
         started = time.perf_counter()
         self._sim = Simulator(self.scene, threads=self._p('threads'))
@@ -95,7 +95,6 @@ class SimNode(Node):
         self.on_sample = None
         self._fault_reported = ''
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        check_unique_name(self, self._p('allow_duplicate_name'))
         self._start(scene_file)
 
     def _start(self, scene_file):

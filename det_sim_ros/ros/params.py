@@ -102,9 +102,10 @@ NODE_PARAMS = {
                              'many per wall second; 0 = off', True, (0.0, 1.0e4)),
     'markers.frame_id': Param('', "'': one frame per DET (<namespace>/<DET name>); else all "
                               'DETs in this one frame, side by side', True, None),
-    'allow_duplicate_name': Param(False, 'start even if another node of this fully qualified '
-                                  'name is running (one warning); false: refuse to start (the '
-                                  'check looks for 0.75 s after start)', True, None),
+    'allow_duplicate_name': Param(False, 'run even if another node of this fully qualified '
+                                  'name is running (one warning); false: the younger of two '
+                                  'stops itself with one FATAL line once it hears the older '
+                                  '(publishing is not held back for it)', True, None),
     'strict_parameters': Param(False, 'a parameter name the node does not know (-p, a params '
                                'file) stops the start with one FATAL line; false: one warning '
                                'naming the closest known name, and the start goes on', True,

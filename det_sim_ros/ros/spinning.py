@@ -113,12 +113,14 @@ def spin_until_stopped(node, stop) -> None:
     """
     Run the node's callbacks until a stop signal (checked at least every 0.1 s).
 
-    Then finish the node's log before anything of the middleware is taken down.
+    Then finish the node's log before anything of the middleware is taken down. A node that
+    finds an older one of its name (``node.name_claim.refusal``) stops the same way, then
+    raises :class:`SceneError` with that line.
     """
     executor = make_executor(node.context)
     executor.add_node(node)
     try:
-        while not stop.requested and node.context.ok():
+        while not stop.requested and node.context.ok() and not node.name_claim.refusal:
             executor.spin_once(timeout_sec=0.1)
     finally:
         if node.recorder is not None:
@@ -126,3 +128,6 @@ def spin_until_stopped(node, stop) -> None:
         stop.end()
         executor.remove_node(node)
         executor.shutdown(timeout_sec=0.0)
+    if node.name_claim.refusal and not stop.requested:
+        from ..scenes.scene import SceneError
+        raise SceneError(node.name_claim.refusal)
