@@ -50,7 +50,7 @@ def _env():
     return env
 
 
-def time_to_first_sample(command, env, timeout=120.0):
+def time_to_first_sample(command, env, timeout=120.0, cwd=None):
     """Start ``command``; seconds until this process receives its first displacement sample."""
     import rclpy
     from rclpy.context import Context
@@ -68,7 +68,7 @@ def time_to_first_sample(command, env, timeout=120.0):
     executor.add_node(node)
     log = tempfile.TemporaryFile()
     t0 = time.perf_counter()
-    proc = subprocess.Popen(command, env=env, stdout=log, stderr=subprocess.STDOUT)
+    proc = subprocess.Popen(command, env=env, stdout=log, stderr=subprocess.STDOUT, cwd=cwd)
     try:
         while not got and time.perf_counter() - t0 < timeout and proc.poll() is None:
             executor.spin_once(timeout_sec=0.01)
@@ -166,7 +166,7 @@ def _compare_trees(trees, starts, env) -> int:
             tree_env = dict(env, PYTHONPATH=os.path.abspath(tree))
             took, _ = time_to_first_sample(
                 [sys.executable, '-m', 'det_sim_ros.cli.sim_node', '--ros-args',
-                 '-p', 'log.enabled:=false'], tree_env)
+                 '-p', 'log.enabled:=false'], tree_env, cwd=tree)   # -m: the tree first
             seconds[tree].append(took)
             print(f'{tree} start {k + 1}: first displacement sample after {took:.2f} s',
                   flush=True)
