@@ -77,6 +77,15 @@ def test_send_by_name_and_in_det_order_then_advance(node, capsys):
     assert _charge(node) == {'left': 0.0, 'right': 0.0}
 
 
+def test_send_out_of_range_says_the_node_clamps_it(node, capsys):
+    assert main(['send', 'left=-500', 'right=1000'] + NS) == 0
+    captured = capsys.readouterr()
+    assert 'sent left=-500, right=1000 V' in captured.out
+    assert captured.err == ('det_sim: note: the node applies left: -500 V clamped to [0, 3000] V '
+                            '(/arm1/voltage_command_joint)\n')
+    assert main(['send', '0', '0'] + NS) == 0 and capsys.readouterr().err == ''
+
+
 @pytest.mark.parametrize('argv, code, message', [
     (['send', '1000'] + NS, 2, '1 voltage(s) for 2 DET(s)'),
     (['send', 'middle=5'] + NS, 2, "unknown or repeated DET 'middle'; the DETs: left, right"),

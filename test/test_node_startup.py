@@ -8,6 +8,7 @@ entry point (``python -m det_sim_ros.cli.sim_node``) on the test domain.
 import concurrent.futures
 import os
 import queue
+import re
 import signal
 import subprocess
 import sys
@@ -93,6 +94,9 @@ def test_help_prints_usage_modes_and_parameters(tmp_path, flag):
         assert f'  {name}  (default ' in result.stdout
         assert param.description.split()[0] in result.stdout
     assert '(default 256.0; 0 to 1e+06; fixed at start)' in result.stdout   # log.split_mb
+    intro = ' '.join(result.stdout.split('modes (')[0].split())
+    for topic in ('voltage_command', 'voltage_command_joint', 'displacement', 'structure'):
+        assert topic in re.findall(r'\w+', intro), topic   # the topics' own names
     assert result.stderr == ''                 # no ROS log line: rclpy was not initialised
     assert os.listdir(tmp_path) == []          # no log directory, no file
 
