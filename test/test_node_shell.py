@@ -139,14 +139,14 @@ INTERRUPTED = [['send', 'left=100'], ['watch'], ['watch', '--csv'], ['pause'], [
 
 
 def _handles_sigterm(pid) -> bool:
-    """Return whether the process catches SIGTERM (the shell's handler: /proc SigCgt)."""
+    """Return whether the process catches SIGTERM (det_sim's handler: /proc SigCgt)."""
     with open(f'/proc/{pid}/status') as stream:
         caught = [line for line in stream if line.startswith('SigCgt:')]
     return bool(caught) and bool(int(caught[0].split()[1], 16) >> (signal.SIGTERM - 1) & 1)
 
 
 def _interrupt(argv, delay):
-    """Run ``det_sim ARGV``; SIGINT it ``delay`` s after its shell took the signals."""
+    """Run ``det_sim ARGV``; SIGINT it ``delay`` s after it took the signals."""
     from conftest import DOMAIN_ID
     proc = subprocess.Popen([sys.executable, '-m', 'det_sim_ros.cli', *argv, *NS], text=True,
                             env=child_env(ROS_DOMAIN_ID=str(DOMAIN_ID), PYTHONUNBUFFERED='1'),
@@ -172,14 +172,15 @@ def test_every_verb_stops_cleanly_on_ctrl_c_at_any_moment(node):
     """
     Check SIGINT at random moments of each verb: exit 0 or 130 with one line, no traceback.
 
-    From the moment the verb's shell takes the signals (before it imports rclpy) to its end:
-    its start, discovery, a wait for the node's answer, the watch loop and the teardown. A
-    verb that was done exits 0; one that was cut short says 'det_sim: interrupted' and exits
-    130; watch, whose usual end is Ctrl-C, exits 0. rclpy turned a KeyboardInterrupt inside
-    its executor into 'RuntimeError: Unable to convert call argument'.
+    From the moment det_sim takes the signals (its first line) to its end: its imports, the
+    shell's start, discovery, a wait for the node's answer, the watch loop and the teardown. A
+    verb that was done exits 0 (watch too: its usual end is Ctrl-C); one cut short says
+    'det_sim: interrupted' and exits 130. rclpy turned a KeyboardInterrupt inside its
+    executor into 'RuntimeError: Unable to convert call argument'; one inside a C extension's
+    import came out as an ImportError.
     """
     rng = random.Random(5)
-    cases = [(argv, rng.uniform(0.0, 1.0)) for argv in INTERRUPTED for _ in range(4)]
+    cases = [(argv, rng.uniform(0.0, 1.5)) for argv in INTERRUPTED for _ in range(4)]
     problems, interrupted = [], 0
     try:
         for argv, delay in cases:
@@ -190,8 +191,6 @@ def test_every_verb_stops_cleanly_on_ctrl_c_at_any_moment(node):
             # signals back (a shell reports it as 130 too); nothing more was to be written
             clean = (code in (0, -2) and not err.strip()) or (
                 code == 130 and err == 'det_sim: interrupted\n')
-            if argv[0] == 'watch':
-                clean = code in (0, -2) and 'Traceback' not in err and 'Error' not in err
             if not clean:
                 problems.append(f'{argv} after {delay:.2f} s: exit {code}\n{err}')
             interrupted += code == 130 or argv[0] == 'watch'
