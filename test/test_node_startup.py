@@ -179,6 +179,25 @@ def test_strict_parameters_makes_a_misspelled_name_fatal(tmp_path):
     assert READY not in result.stderr
 
 
+def test_a_stop_says_how_far_the_run_went_and_where_its_log_is(tmp_path):
+    """Check the INFO line a stopped node leaves: its sim time, periods and log file."""
+    node = Node(tmp_path, '--ros-args', '-r', '__ns:=/startup_stop', '-p', 'mode:=free_run',
+                '-p', f'log.path:={tmp_path / "logs"}', '-p', 'info_period:=0.0',
+                '-p', 'scene.fidelity:=paper')
+    try:
+        node.wait_for(READY)
+        time.sleep(1.0)   # past the start-up, which a stop unwinds without this line
+    finally:
+        assert node.stop() == 0, ''.join(node.lines)
+    stopped = [line for line in node.lines if 'stopped at t = ' in line]
+    assert len(stopped) == 1 and '[INFO]' in stopped[0], ''.join(node.lines)
+    logs = sorted((tmp_path / 'logs').glob('*.mcap'))
+    assert len(logs) == 1 and f'log: {logs[0]}' in stopped[0]
+    periods = int(re.search(r'after (\d+) period', stopped[0]).group(1))
+    t = float(re.search(r'stopped at t = ([\d.e+-]+) s', stopped[0]).group(1))
+    assert periods > 0 and t == pytest.approx(periods * 1e-3, rel=1e-6)   # free run, 1 kHz
+
+
 def test_claims_are_ordered_the_same_way_by_every_node():
     """Check the claims' order: the earlier start wins, a tie goes to the smaller id."""
     old, new, tie = Claim(100, 7), Claim(200, 1), Claim(100, 9)

@@ -125,9 +125,25 @@ def spin_until_stopped(node, stop) -> None:
     finally:
         if node.recorder is not None:
             node.recorder.close()
+        _say_stopped(node)
         stop.end()
         executor.remove_node(node)
         executor.shutdown(timeout_sec=0.0)
-    if node.name_claim.refusal and not stop.requested:
+    if not stop.requested and node.name_claim.refusal:
         from ..scenes.scene import SceneError
         raise SceneError(node.name_claim.refusal)
+
+
+def _say_stopped(node) -> None:
+    """Log one INFO line: how far the run went and where its (finished) log is."""
+    recorder = node.recorder
+    if recorder is None or not recorder.paths:
+        where = 'no log (log.enabled is false)'
+    else:
+        earlier = len(recorder.paths) - 1
+        where = f'log: {recorder.paths[-1]}'
+        if earlier:
+            where += f' (and {earlier} earlier file(s))'
+
+    node.get_logger().info(f'stopped at t = {node.simulator.t:.6g} s after '
+                           f'{node.steps_total} period(s); {where}')
