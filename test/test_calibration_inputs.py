@@ -9,7 +9,9 @@ made them; the fitted scene loads as it is; bad input is one line and a non-zero
 
 import contextlib
 import io
+import math
 import os
+import re
 
 from det_sim_ros.calibration.synthetic import step_and_sine, synthetic_measurement
 from det_sim_ros.cli.det_sim import main
@@ -82,6 +84,31 @@ def test_csv_fits(tmp_path, synthetic):
     out, stdout = _fit(tmp_path, path, path, '--scene', 'default')   # two logs fit together
     assert fitted_y(out) == pytest.approx(Y_TRUE, rel=0.01)
     assert '2 log(s), ' in stdout
+
+
+def test_the_scene_file_keeps_the_digits_the_interval_gives_and_the_report_reads_plainly(
+        tmp_path, synthetic):
+    """
+    Check the fitted scene's value: rounded to two significant digits of its standard error.
+
+    And the report's words: the misfit in noise units, the starting points in plain words (no
+    'residual variance (weighted)' or 'local searches' head lines, no bare costs).
+    """
+    import yaml
+    import det_sim_ros
+    from det_sim_ros.calibration.report import rounded
+    result = det_sim_ros.fit([synthetic], ['Y'], scene='default', starts=1, parallel='serial')
+    (estimate,) = result.estimates
+    out = tmp_path / 'fitted.yaml'
+    result.write(str(out), plot=False)
+    written = yaml.safe_load(out.read_text())['sim_node']['ros__parameters']['physics']['Y']
+    digits = 1 - math.floor(math.log10(estimate.se))
+    assert written == round(estimate.value, digits) == rounded(estimate.value, estimate.se)
+    assert abs(written - estimate.value) <= 0.05 * estimate.se     # far inside the interval
+    report = result.report()
+    assert 'misfit: the residuals are ' in report and 'times the noise' in report
+    assert 'residual variance (weighted)' not in report and 'local searches' not in report
+    assert re.search(r'\n  1: \([^)]*\) -> [\d.e+]+ x noise after \d+ runs', report), report
 
 
 def _write_rig_log(path, synthetic):
