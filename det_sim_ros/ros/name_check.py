@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import os
 import time
+import weakref
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
@@ -74,7 +75,9 @@ class NameClaim:
     def __init__(self, node, allow: bool):
         self.claim = Claim(time.time_ns(), int.from_bytes(os.urandom(8), 'little'))
         self.refusal = ''
-        self._node, self._allow, self._warned = node, allow, False
+        # weak: the node's subscription holds this object's callback, and a node whose start
+        # failed must be freed at once (it holds its logger's /rosout publisher)
+        self._node, self._allow, self._warned = weakref.ref(node), allow, False
         # a writer keeps its one claim for the nodes that come later; the reader's history is
         # shared by all writers of the (keyless) topic, so it keeps many: claims that arrive
         # together must not overwrite the older one before it is read
@@ -88,11 +91,13 @@ class NameClaim:
 
     def _heard(self, msg) -> None:
         other = Claim.parse(msg.data)
-        if other is None or not younger(self.claim, other) or self.refusal or self._warned:
+        node = self._node()
+        if (node is None or other is None or not younger(self.claim, other) or self.refusal
+                or self._warned):
             return
         if self._allow:
             self._warned = True
-            self._node.get_logger().warning(_refusal(self._node).split(';')[0]
-                                            + ' (allow_duplicate_name is true: started anyway)')
+            node.get_logger().warning(_refusal(node).split(';')[0]
+                                      + ' (allow_duplicate_name is true: started anyway)')
         else:
-            self.refusal = _refusal(self._node)
+            self.refusal = _refusal(node)

@@ -72,7 +72,6 @@ class SimNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         self.scene, scene_file = load_node_scene(self)
-        self.name_claim = NameClaim(self, self._p('allow_duplicate_name'))   # settled later
         self._pacing = make_pacing(self._p)
         started = time.perf_counter()
         self._sim = Simulator(self.scene, threads=self._p('threads'))
@@ -101,6 +100,7 @@ class SimNode(Node):
         """Create the endpoints, timers and the recorder; then sample 0 and the start-up line."""
         if self._p('qos_sensor_data') and self._p('qos_keep_all'):
             raise SceneError('parameters qos_sensor_data and qos_keep_all: choose one')
+        self.name_claim = NameClaim(self, self._p('allow_duplicate_name'))   # settled later
         keep_all = QoSProfile(history=HistoryPolicy.KEEP_ALL)
         in_qos = keep_all if self._p('qos_keep_all') else QoSProfile(depth=10)
         out_qos = qos_profile_sensor_data if self._p('qos_sensor_data') else in_qos
