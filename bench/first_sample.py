@@ -15,6 +15,10 @@ gives this process's subscriber a 100 ms announcement period (a Fast DDS XML pro
 process only), which leaves mostly the node's own start-up in the figure.
 
 Run from the repository with a venv that has rclpy: python bench/first_sample.py [--starts 3]
+
+``--tree DIR`` (repeatable) skips the install and starts ``python -m det_sim_ros.cli.sim_node``
+from each source tree DIR (its kernel built in place), the trees taking turns start by start,
+and prints each tree's median and maximum: two versions side by side in one run.
 """
 
 import argparse
@@ -46,7 +50,7 @@ def _env():
     return env
 
 
-def time_to_first_sample(command, env, timeout=120.0):
+def time_to_first_sample(command, env, timeout=120.0, cwd=None):
     """Start ``command``; seconds until this process receives its first displacement sample."""
     import rclpy
     from rclpy.context import Context
@@ -64,7 +68,7 @@ def time_to_first_sample(command, env, timeout=120.0):
     executor.add_node(node)
     log = tempfile.TemporaryFile()
     t0 = time.perf_counter()
-    proc = subprocess.Popen(command, env=env, stdout=log, stderr=subprocess.STDOUT)
+    proc = subprocess.Popen(command, env=env, stdout=log, stderr=subprocess.STDOUT, cwd=cwd)
     try:
         while not got and time.perf_counter() - t0 < timeout and proc.poll() is None:
             executor.spin_once(timeout_sec=0.01)
@@ -98,6 +102,9 @@ def main(argv=None) -> int:
     parser.add_argument('--probe-announce-ms', type=int, default=0,
                         help="this process's participant re-announces itself this often "
                              '(0: the Fast DDS default, 3 s)')
+    parser.add_argument('--tree', action='append', default=[],
+                        help='a source tree to start sim_node from, without an install '
+                             '(repeatable: the trees take turns)')
     args = parser.parse_args(argv)
     env = _env()
     env.pop('FASTRTPS_DEFAULT_PROFILES_FILE', None)   # the node keeps the defaults
@@ -106,6 +113,8 @@ def main(argv=None) -> int:
         with open(profile, 'w') as stream:
             stream.write(PROBE_PROFILE.format(ns=args.probe_announce_ms * 1_000_000))
         os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = profile   # before rclpy is imported
+    if args.tree:
+        return _compare_trees(args.tree, args.starts, env)
     tmp = tempfile.mkdtemp(prefix='det_sim_first_')
     try:
         venv = os.path.join(tmp, 'venv')
@@ -145,6 +154,25 @@ def main(argv=None) -> int:
                       f'{seconds:.2f} s   [{line}]')
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+    return 0
+
+
+def _compare_trees(trees, starts, env) -> int:
+    """Start sim_node from each tree in turn ``starts`` times; print each one's median, max."""
+    import statistics
+    seconds = {tree: [] for tree in trees}
+    for k in range(starts):
+        for tree in trees:
+            tree_env = dict(env, PYTHONPATH=os.path.abspath(tree))
+            took, _ = time_to_first_sample(
+                [sys.executable, '-m', 'det_sim_ros.cli.sim_node', '--ros-args',
+                 '-p', 'log.enabled:=false'], tree_env, cwd=tree)   # -m: the tree first
+            seconds[tree].append(took)
+            print(f'{tree} start {k + 1}: first displacement sample after {took:.2f} s',
+                  flush=True)
+    for tree, values in seconds.items():
+        print(f'{tree}: {len(values)} starts, median {statistics.median(values):.2f} s, '
+              f'max {max(values):.2f} s (process start to the first sample at a subscriber)')
     return 0
 
 

@@ -9,7 +9,9 @@ made them; the fitted scene loads as it is; bad input is one line and a non-zero
 
 import contextlib
 import io
+import math
 import os
+import re
 
 from det_sim_ros.calibration.synthetic import step_and_sine, synthetic_measurement
 from det_sim_ros.cli.det_sim import main
@@ -99,6 +101,31 @@ def test_no_coarse_searches_at_the_scene_level_alone(tmp_path, synthetic):
     assert '\n  scene: exact, ' in stdout and '\n  coarse: ' not in stdout
 
 
+def test_the_scene_file_keeps_the_digits_the_interval_gives_and_the_report_reads_plainly(
+        tmp_path, synthetic):
+    """
+    Check the fitted scene's value: rounded to two significant digits of its standard error.
+
+    And the report's words: the misfit in noise units, the starting points in plain words (no
+    'residual variance (weighted)' or 'local searches' head lines, no bare costs).
+    """
+    import yaml
+    import det_sim_ros
+    from det_sim_ros.calibration.report import rounded
+    result = det_sim_ros.fit([synthetic], ['Y'], scene='default', starts=1, parallel='serial')
+    (estimate,) = result.estimates
+    out = tmp_path / 'fitted.yaml'
+    result.write(str(out), plot=False)
+    written = yaml.safe_load(out.read_text())['sim_node']['ros__parameters']['physics']['Y']
+    digits = 1 - math.floor(math.log10(estimate.se))
+    assert written == round(estimate.value, digits) == rounded(estimate.value, estimate.se)
+    assert abs(written - estimate.value) <= 0.05 * estimate.se     # far inside the interval
+    report = result.report()
+    assert 'misfit: the residuals are ' in report and 'times the noise' in report
+    assert 'residual variance (weighted)' not in report and 'local searches' not in report
+    assert re.search(r'\n  1: \([^)]*\) -> [\d.e+]+ x noise after \d+ runs', report), report
+
+
 def _write_rig_log(path, synthetic):
     """Write a rig's rosbag2 MCAP: Float64 volts, JointState Δy in mm, Float64MultiArray charge."""
     from det_sim_ros.io.cdr import serialize
@@ -137,6 +164,40 @@ def test_a_rig_log_with_other_topics_fits_through_the_mapping(tmp_path, syntheti
                        '--map', 'charge=rig/adc.data[1]*1e-6')
     assert fitted_y(out) == pytest.approx(Y_TRUE, rel=0.01)
     assert 'charge' in stdout
+
+
+def test_a_scale_applies_to_scalar_fields_too(tmp_path, synthetic):
+    """
+    Check each mapped value is the logged number times its scale, for a Float64's scalar field.
+
+    The rig logs its voltage in kV and Δy in mm, each as a Float64 (a scalar ``data``, not an
+    array element); the reference is the raw values the test wrote times the mapping's scale.
+    """
+    from det_sim_ros.calibration.logs import read_log
+    from det_sim_ros.io.cdr import serialize
+    from mcap.writer import Writer
+    from std_msgs.msg import Float64
+    volts_kv = synthetic.volts[:, 0] * 1e-3
+    dy_mm = synthetic.channels['dy'].values[:, 0] * 1e3
+    path = tmp_path / 'scalars.mcap'
+    with open(path, 'wb') as stream:
+        writer = Writer(stream)
+        writer.start(profile='ros2', library='test')
+        schema = writer.register_schema('std_msgs/msg/Float64', 'ros2msg', b'')
+        channels = {topic: writer.register_channel(topic, 'cdr', schema)
+                    for topic in ('/amp/kv', '/rig/dy_mm')}
+        for k, value in enumerate(dy_mm):
+            t_ns = STAMP0 + k * 1_000_000
+            if k < len(volts_kv):
+                writer.add_message(channels['/amp/kv'], t_ns,
+                                   serialize(Float64(data=float(volts_kv[k]))), t_ns)
+            writer.add_message(channels['/rig/dy_mm'], t_ns,
+                               serialize(Float64(data=float(value))), t_ns)
+        writer.finish()
+    measured = read_log(str(path), ['voltage=/amp/kv*1e3', 'dy=/rig/dy_mm.data*1e-3'])
+    # the same IEEE product on both sides: equal to within one rounding
+    assert measured.volts[:, 0] == pytest.approx(volts_kv * 1e3, rel=1e-15)
+    assert measured.channels['dy'].values[:, 0] == pytest.approx(dy_mm * 1e-3, rel=1e-15)
 
 
 def _csv(tmp_path, text, name='bad.csv'):

@@ -9,6 +9,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import time
 
 from conftest import child_env
 from det_sim_ros.io.contract import OutputContract
@@ -225,6 +226,29 @@ def test_timeout_holds_the_voltages_and_counts_missed_deadlines(det_sim):  # noq
     values = {kv.key: kv.value for kv in status.values}
     assert status.level == DiagnosticStatus.WARN and 'missed deadline' in status.message
     assert int(values['lockstep_missed_deadlines']) >= 20 and values['mode'] == 'lockstep'
+
+
+def test_the_lockstep_deadline_lasts_the_timeout_by_the_clock(det_sim):  # noqa: F811
+    """
+    Check that each missed deadline takes lockstep.timeout of wall time, by a clock.
+
+    A contract of the mode, not a speed target: with no controller, n periods take n timeouts
+    (a controller that answers late is cut off after the timeout it set, not earlier or ten
+    times later). The bounds are generous for a loaded host: no less than 0.9 n timeout (a
+    timer does not fire early; 0.9 allows the clocks' granularity) and no more than
+    3 n timeout + 1 s (each period's own step is ~0.1 ms; the slack is for a busy CPU), so a
+    deadline twice too short or ten times too long fails and scheduling noise does not.
+    """
+    timeout, periods = 0.05, 20
+    sim = det_sim('default', params={'lockstep.timeout': timeout})
+    sim.start(wait=False)
+    sim.spin_until(lambda: sim.node.simulator.k >= 2, 'the first deadlines')
+    k0, t0 = sim.node.simulator.k, time.monotonic()
+    sim.spin_until(lambda: sim.node.simulator.k >= k0 + periods, f'{periods} more periods')
+    elapsed = time.monotonic() - t0
+    done = sim.node.simulator.k - k0
+    assert sim.node.pacing.missed_deadlines == sim.node.simulator.k
+    assert 0.9 * done * timeout <= elapsed <= 3.0 * done * timeout + 1.0, (elapsed, done)
 
 
 def test_lockstep_pause_step_reset_and_clock(harness, ros_context):

@@ -10,7 +10,7 @@ import math
 from det_sim_ros.ros.pacing import (FreeRunPacing, LockstepPacing, make_pacing,
                                     RealTimePacing)
 from det_sim_ros.ros.params import (node_parameter_values, NODE_PARAMS, Param,
-                                    runtime_refusal)
+                                    runtime_refusal, unknown_parameters)
 from det_sim_ros.scenes.scene import SceneError
 import pytest
 
@@ -46,6 +46,20 @@ def test_a_p_override_wins_over_the_scene_file_which_wins_over_the_default():
 def test_unknown_keys_and_unfit_values_are_refused(scene_node, overrides, message):
     with pytest.raises(SceneError, match=message):
         node_parameter_values(scene_node, overrides)
+
+
+@pytest.mark.parametrize('given, sentence', [
+    ('modee', "unknown parameter 'modee' (ignored); did you mean 'mode'?"),
+    ('lockstep.timout', "unknown parameter 'lockstep.timout' (ignored); did you mean "
+                        "'lockstep.timeout'?"),
+    ('log.enable', "unknown parameter 'log.enable' (ignored); did you mean 'log.enabled'?"),
+    ('log.maxfiles', "unknown parameter 'log.maxfiles' (ignored); did you mean 'log.max_files'?"),
+    ('realtime', "unknown parameter 'realtime' (ignored); did you mean 'real_time'?"),
+    ('zzz', "unknown parameter 'zzz' (ignored) (sim_node --help lists them)"),
+])
+def test_an_unknown_name_is_answered_with_the_closest_known_one(given, sentence):
+    known = [*NODE_PARAMS, 'physics.Y', 'scene_file', 'use_sim_time']
+    assert unknown_parameters([given, 'mode', 'physics.Y'], known) == [sentence]
 
 
 @pytest.mark.parametrize('name, value, reason', [

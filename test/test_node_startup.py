@@ -8,6 +8,7 @@ entry point (``python -m det_sim_ros.cli.sim_node``) on the test domain.
 import concurrent.futures
 import os
 import queue
+import re
 import signal
 import subprocess
 import sys
@@ -15,7 +16,7 @@ import threading
 import time
 
 from conftest import child_env
-from det_sim_ros.ros.discovery import ANNOUNCE_S
+from det_sim_ros.ros.name_check import Claim, younger
 from det_sim_ros.ros.params import NODE_PARAMS
 import pytest
 
@@ -93,6 +94,9 @@ def test_help_prints_usage_modes_and_parameters(tmp_path, flag):
         assert f'  {name}  (default ' in result.stdout
         assert param.description.split()[0] in result.stdout
     assert '(default 256.0; 0 to 1e+06; fixed at start)' in result.stdout   # log.split_mb
+    intro = ' '.join(result.stdout.split('modes (')[0].split())
+    for topic in ('voltage_command', 'voltage_command_joint', 'displacement', 'structure'):
+        assert topic in re.findall(r'\w+', intro), topic   # the topics' own names
     assert result.stderr == ''                 # no ROS log line: rclpy was not initialised
     assert os.listdir(tmp_path) == []          # no log directory, no file
 
@@ -136,13 +140,80 @@ def test_unwritable_log_path_refuses_to_start(tmp_path):
         assert repr(path) in problems[0]
 
 
+def _params_file(tmp_path):
+    """Write a ROS params file with a misspelled key under a known section (lockstep)."""
+    path = tmp_path / 'params.yaml'
+    path.write_text('/**:\n  ros__parameters:\n    lockstep:\n      timout: 2.0\n'
+                    '    log:\n      enabled: false\n')
+    return str(path)
+
+
+def test_a_misspelled_parameter_is_named_with_the_closest_known_one(tmp_path):
+    """
+    Check a misspelled -p name and params-file key: a WARN naming the closest known parameter.
+
+    The node still starts (the misspelled values are ignored, as the warning says).
+    """
+    node = Node(tmp_path, '--ros-args', '-r', '__ns:=/startup_typo', '-p', 'modee:=free_run',
+                '--params-file', _params_file(tmp_path), '-p', 'info_period:=0.0')
+    try:
+        warning = node.wait_for("unknown parameter 'lockstep.timout'")
+        assert '[WARN]' in warning and "did you mean 'lockstep.timeout'?" in warning
+        warning = node.wait_for("unknown parameter 'modee'")
+        assert '[WARN]' in warning and "did you mean 'mode'?" in warning
+        node.wait_for(READY)
+    finally:
+        assert node.stop() == 0, ''.join(node.lines)
+
+
+def test_strict_parameters_makes_a_misspelled_name_fatal(tmp_path):
+    """Check that with strict_parameters an unknown name stops the start: one FATAL line."""
+    result = run_entry(['--ros-args', '-r', '__ns:=/startup_strict', '-p', 'modee:=free_run',
+                        '--params-file', _params_file(tmp_path),
+                        '-p', 'strict_parameters:=true'], cwd=tmp_path)
+    assert result.returncode == 1, result.stderr
+    problems = [line for line in result.stderr.splitlines() if '[INFO]' not in line]
+    assert len(problems) == 1 and '[FATAL]' in problems[0], result.stderr
+    assert "did you mean 'mode'?" in problems[0]
+    assert "did you mean 'lockstep.timeout'?" in problems[0]
+    assert READY not in result.stderr
+
+
+def test_a_stop_says_how_far_the_run_went_and_where_its_log_is(tmp_path):
+    """Check the INFO line a stopped node leaves: its sim time, periods and log file."""
+    node = Node(tmp_path, '--ros-args', '-r', '__ns:=/startup_stop', '-p', 'mode:=free_run',
+                '-p', f'log.path:={tmp_path / "logs"}', '-p', 'info_period:=0.0',
+                '-p', 'scene.fidelity:=paper')
+    try:
+        node.wait_for(READY)
+        time.sleep(1.0)   # past the start-up, which a stop unwinds without this line
+    finally:
+        assert node.stop() == 0, ''.join(node.lines)
+    stopped = [line for line in node.lines if 'stopped at t = ' in line]
+    assert len(stopped) == 1 and '[INFO]' in stopped[0], ''.join(node.lines)
+    logs = sorted((tmp_path / 'logs').glob('*.mcap'))
+    assert len(logs) == 1 and f'log: {logs[0]}' in stopped[0]
+    periods = int(re.search(r'after (\d+) period', stopped[0]).group(1))
+    t = float(re.search(r'stopped at t = ([\d.e+-]+) s', stopped[0]).group(1))
+    assert periods > 0 and t == pytest.approx(periods * 1e-3, rel=1e-6)   # free run, 1 kHz
+
+
+def test_claims_are_ordered_the_same_way_by_every_node():
+    """Check the claims' order: the earlier start wins, a tie goes to the smaller id."""
+    old, new, tie = Claim(100, 7), Claim(200, 1), Claim(100, 9)
+    assert younger(new, old) and not younger(old, new)
+    assert younger(tie, old) and not younger(old, tie)
+    assert not younger(old, old)                    # its own claim, heard back
+    assert Claim.parse(new.text()) == new and Claim.parse('not a claim') is None
+
+
 def test_duplicate_name_refused_unless_allowed(tmp_path):
     """
     Check a second node of one name: one FATAL line and exit 1, or a WARN when allowed.
 
-    The duplicates start once the first node is past its first announcements (ANNOUNCE_S), when
-    they depend on its periodic ones: at Fast DDS's 3 s period a fifth of them would not see it
-    within the check's window and start anyway.
+    The duplicates publish from their start (the name is settled by the claims the nodes
+    announce, det_sim_ros.ros.name_check) and stop themselves once they hear the running node's
+    older claim; the running node goes on.
     """
     args = ['--ros-args', '-r', '__ns:=/startup_dup', '-p', 'log.enabled:=false',
             '-p', 'info_period:=0.0']
@@ -150,14 +221,14 @@ def test_duplicate_name_refused_unless_allowed(tmp_path):
     try:
         # the start line names the level: the shipped default is the exact kinematics, 5 terms
         assert 'fidelity exact n_r=5' in first.wait_for(READY)
-        time.sleep(ANNOUNCE_S)
         with concurrent.futures.ThreadPoolExecutor(3) as pool:
             seconds = list(pool.map(lambda _: run_entry(args, cwd=tmp_path), range(3)))
         for second in seconds:
             assert second.returncode == 1, second.stderr
             fatal = [line for line in second.stderr.splitlines() if '[FATAL]' in line]
             assert len(fatal) == 1 and 'another node named /startup_dup/sim_node' in fatal[0]
-            assert READY not in second.stderr
+            assert 'Traceback' not in second.stderr
+        assert first.proc.poll() is None           # the running node was not the one refused
         allowed = Node(tmp_path, *args, '-p', 'allow_duplicate_name:=true')
         try:
             allowed.wait_for(READY)
@@ -167,6 +238,36 @@ def test_duplicate_name_refused_unless_allowed(tmp_path):
             assert allowed.stop() == 0
     finally:
         assert first.stop() == 0, ''.join(first.lines)
+
+
+def test_of_nodes_started_together_exactly_one_keeps_its_name(tmp_path):
+    """
+    Check three nodes of one name started at the same moment: one runs, two are refused.
+
+    Each orders the claims the same way (start time, then instance id), so exactly the oldest
+    goes on, whichever claim each hears first; none waits for the others before publishing.
+    """
+    args = ['--ros-args', '-r', '__ns:=/startup_together', '-p', 'log.enabled:=false',
+            '-p', 'info_period:=0.0']
+    nodes = [Node(tmp_path, *args) for _ in range(3)]
+    try:
+        for node in nodes:
+            node.wait_for(READY)
+        refused = []
+        for node in nodes:       # a refused node exits after its FATAL line
+            if node.proc.poll() is None:
+                try:
+                    node.proc.wait(timeout=10.0)
+                except subprocess.TimeoutExpired:
+                    continue
+            refused.append(node)
+        assert len(refused) == 2, [''.join(node.lines) for node in nodes]
+    finally:
+        codes = [node.stop() for node in nodes]
+    assert sorted(codes) == [0, 1, 1], codes
+    for node in refused:
+        fatal = [line for line in node.lines if '[FATAL]' in line]
+        assert len(fatal) == 1 and 'another node named /startup_together/sim_node' in fatal[0]
 
 
 def test_reset_answer_names_the_new_log_file(harness, tmp_path):

@@ -9,12 +9,15 @@ import faulthandler
 import subprocess
 import sys
 import textwrap
+import types
 
 from det_sim_ros.ros import spinning
 import pytest
 
 
 class _Recorder:
+    paths = ['run.mcap']
+
     def __init__(self, events):
         self.events = events
 
@@ -41,9 +44,15 @@ class _Executor:
 
 class _Node:
     context = None
+    steps_total = 0
+    simulator = types.SimpleNamespace(t=0.0)
 
     def __init__(self, events):
         self.recorder = _Recorder(events)
+        self.events = events
+
+    def get_logger(self):
+        return types.SimpleNamespace(info=lambda text: self.events.append('stop line'))
 
 
 class _Stop:
@@ -60,7 +69,7 @@ def test_the_log_is_finished_before_the_middleware_is_taken_down(monkeypatch):
     events = []
     monkeypatch.setattr(spinning, 'make_executor', lambda context: _Executor(events))
     spinning.spin_until_stopped(_Node(events), _Stop(events))
-    assert events == ['log finished', 'teardown bounded', 'executor teardown',
+    assert events == ['log finished', 'stop line', 'teardown bounded', 'executor teardown',
                       'executor shutdown']
 
 

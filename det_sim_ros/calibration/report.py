@@ -90,15 +90,39 @@ def report_text(result) -> str:
             f'{len(result.traces)} log(s), {result.samples} samples, {len(result.estimates)} '
             f'parameter(s), {result.simulate_calls} simulate() calls in {result.wall_time:.1f} s '
             f'({result.parallel})',
-            f'residual variance (weighted) {result.residual_variance:.4g} on {result.dof} '
-            'degrees of freedom (1: residuals at the noise level)']
-    starts = ['local searches on the 50 ms averages (start values -> cost after the probe):']
+            f'misfit: the residuals are {math.sqrt(result.residual_variance):.3g} times the '
+            'noise (RMS; 1 = the model explains the log down to its noise; residual variance '
+            f'{result.residual_variance:.4g} on {result.dof} degrees of freedom)']
+    names = ', '.join(e.name for e in result.estimates)
+    starts = ['starting points tried, first on the signals averaged over 50 ms (which hides the '
+              f'ringing); ({names}) -> misfit after a few steps (a start on the wrong side of '
+              'the snap-through stays far off and is dropped):']
     for n, s in enumerate(result.starts, start=1):
         values = ', '.join(f'{v:.4g}' for v in s.start)
-        starts.append(f'  {n}: ({values}) -> {s.cost:.6g} after {s.evaluations} evaluations')
+        starts.append(f'  {n}: ({values}) -> {_misfit(s.cost, result.samples)} after '
+                      f'{s.evaluations} runs')
     blocks = [head, _pass_rows(result), _channel_rows(result), _parameter_rows(result),
               _correlation_rows(result), starts, _warnings(result)]
     return '\n\n'.join('\n'.join(block) for block in blocks if block) + '\n'
+
+
+def _misfit(cost: float, samples: int) -> str:
+    """Return a cost 0.5 |r|^2 as the residuals' RMS in noise units ('12 x noise')."""
+    return f'{math.sqrt(2.0 * cost / max(samples, 1)):.3g} x noise'
+
+
+def rounded(value: float, se: float) -> float:
+    """
+    Return ``value`` rounded to the digits its standard error leaves meaningful.
+
+    Two significant digits of the standard error are kept (1299999.9999994477 with a standard
+    error of 2.1e4 -> 1300000.0); without a finite one, six significant digits.
+    """
+    if not math.isfinite(value) or value == 0.0:
+        return value
+    if not math.isfinite(se) or se <= 0.0:
+        return float(f'{value:.6g}')
+    return round(value, 1 - math.floor(math.log10(se)))
 
 
 def scene_yaml(result) -> str:
@@ -107,6 +131,12 @@ def scene_yaml(result) -> str:
     from ..scenes.scene import scene_to_dict
     fitted = ', '.join(f'{e.name} = {e.value:.6g}' for e in result.estimates)
     data = scene_to_dict(result.scene, wrap=True)
+    section = data['sim_node']['ros__parameters']
+    for e in result.estimates:   # the fitted values with the digits their intervals give
+        group, _, name = e.key.rpartition('.')
+        table = section.get(group) if group else section
+        if isinstance(table, dict) and isinstance(table.get(name), float):
+            table[name] = rounded(table[name], e.se)
     return (f'# det_sim fit: {fitted}\n# report: see the _report.txt file beside this one\n'
             + yaml.safe_dump(data, sort_keys=False))
 

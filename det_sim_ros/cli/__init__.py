@@ -4,16 +4,55 @@ Command-line entry points: ``det_sim``, ``det_sim_replay`` and ``sim_node``.
 ``det_sim`` (:func:`main`) is one command with its verbs, one module each in :mod:`.verbs`;
 ``det_sim_replay`` (:func:`main_replay`) is the ``replay`` verb on its own; ``sim_node`` is
 :mod:`.sim_node`. Nothing heavy is imported until a command runs.
+
+SIGINT and SIGTERM while the command's modules import and its arguments are read end it with
+'interrupted' and exit code 130 (an exception there could come out of a C extension's
+initialisation as an ImportError); the verbs then take the signals over (an offline verb as
+KeyboardInterrupt, the node verbs at their next wait, det_sim_ros.ros.shell).
 """
+
+import contextlib
+import os
+import signal
+import sys
+import threading
+
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+def _interrupted(signum, frame):
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except Exception:  # noqa: BLE001 - exiting anyway
+            pass
+    os.write(2, b'det_sim: interrupted\n')
+    os._exit(130)
+
+
+@contextlib.contextmanager
+def _quiet_start():
+    """Within the block (in the main thread), a stop signal ends the process at once, quietly."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {sig: signal.signal(sig, _interrupted) for sig in SIGNALS}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 def main(argv=None) -> int:
     """``det_sim``: parse ``argv`` (default: the command line) and run its verb."""
-    from .det_sim import main as run
-    return run(argv)
+    with _quiet_start():
+        from .det_sim import main as run
+        return run(argv)
 
 
 def main_replay(argv=None) -> int:
     """``det_sim_replay``: parse ``argv`` (default: the command line) and run it."""
-    from .det_sim import main_replay as run
-    return run(argv)
+    with _quiet_start():
+        from .det_sim import main_replay as run
+        return run(argv)

@@ -253,6 +253,15 @@ def _domain_error() -> type:
     return ModelDomainError
 
 
+def interruptible() -> None:
+    """Let SIGINT raise KeyboardInterrupt again and SIGTERM end the process (main thread)."""
+    import signal
+    import threading
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def run(action, args, prog: str) -> int:
     """
     Run ``action(args)`` as a command and return its exit code.

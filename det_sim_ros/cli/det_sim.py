@@ -77,6 +77,8 @@ def main(argv=None) -> int:
         print(f'{PROG}: error: choose a subcommand: {", ".join(names[:-1])} or {names[-1]}',
               file=sys.stderr)
         return 2
+    if args.verb not in node.VERBS:
+        common.interruptible()
     return common.run(args.run, args, PROG)
 
 
@@ -87,6 +89,7 @@ def main_replay(argv=None) -> int:
     args = _parse(parser, argv)
     if isinstance(args, int):
         return args
+    common.interruptible()
     return common.run(replay.main, args, replay.PROG)
 
 

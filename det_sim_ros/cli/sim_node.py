@@ -24,8 +24,8 @@ USAGE = 'usage: sim_node [-h] [--ros-args -p NAME:=VALUE ... [-r __ns:=/NAMESPAC
 
 HELP_HEAD = """\
 Simulate dielectric elastomer actuators on buckled beams as a ROS 2 node: one voltage per DET
-in (commands, joint_commands), the actuator's state out (deflection, displacement, charge,
-current); services ~/pause, ~/step, ~/reset (docs/topics.md). Stop it with Ctrl-C or SIGTERM.
+in ({inputs}), the actuator's state out ({outputs}; plates also {structure}); services
+~/pause, ~/step, ~/reset (docs/topics.md). Stop it with Ctrl-C or SIGTERM.
 
 modes (parameter mode):
   real_time  sim time follows the wall clock, scaled by real_time_factor (the default)
@@ -60,8 +60,12 @@ def _range(bounds) -> str:
 
 def help_text() -> str:
     """Return the ``--help`` text: usage, modes, options and the node parameters' table."""
+    from ..io.contract import COMMAND_TOPICS, OUTPUT_FIELDS, STRUCTURE_TOPIC
     from ..ros.params import NODE_PARAMS
-    lines = [USAGE, '', HELP_HEAD]
+    intro, rest = HELP_HEAD.format(inputs=', '.join(COMMAND_TOPICS),
+                                   outputs=', '.join(OUTPUT_FIELDS),
+                                   structure=STRUCTURE_TOPIC).split('\n\n', 1)
+    lines = [USAGE, '', textwrap.fill(' '.join(intro.split()), 95) + '\n\n' + rest]
     for name, param in NODE_PARAMS.items():
         facts = [f'default {_literal(param.default)}', _range(param.bounds),
                  'fixed at start' if param.read_only else 'runtime']

@@ -3,26 +3,53 @@ What ``det_sim watch`` prints: a line per wall second, or one CSV row per sample
 
 The node publishes every sample on four JointState topics (det_sim_ros.ros.shell.OUTPUT_TOPICS)
 stamped with its sim time; a sample is complete once all four have arrived. The line shows the
-latest complete sample in mm, µC and mA (per DET, or min / median / max over more than four
-DETs); the CSV rows hold SI units (m, m/s, C, A), one column per topic, field and DET.
+latest complete sample (per DET, or min / median / max over more than four DETs), each value in
+engineering notation (1.790 mm, 200.2 nA) and shown as 0 below its quantity's resolution (the
+rest state's round-off, e.g. Δy = -4e-11 m); a plate's height and tilt (the structure topic)
+follow. The CSV rows hold SI units (m, m/s, C, A), one column per topic, field and DET.
 """
 
 from __future__ import annotations
 
+import math
 import statistics
 
 from ..ros.shell import OUTPUT_TOPICS
 
 __all__ = ['Watcher', 'LINE_QUANTITIES']
 
-# (topic, field) -> (label, unit, scale from SI) of the live line
-LINE_QUANTITIES = {('displacement', 'position'): ('dy', 'mm', 1e3),
-                   ('deflection', 'position'): ('q', 'mm', 1e3),
-                   ('charge', 'position'): ('q_p', 'uC', 1e6),
-                   ('current', 'position'): ('i', 'mA', 1e3)}
+# (topic, field) -> (label, SI unit, resolution in it) of the live line: a value below the
+# resolution is round-off (a nanometre of a millimetre stroke, a picocoulomb of ~10 µC, a
+# nanoampere of ~mA currents) and shown as 0
+LINE_QUANTITIES = {('displacement', 'position'): ('dy', 'm', 1e-9),
+                   ('deflection', 'position'): ('q', 'm', 1e-9),
+                   ('charge', 'position'): ('q_p', 'C', 1e-12),
+                   ('current', 'position'): ('i', 'A', 1e-9)}
+# a plate's structure outputs (det_sim_ros.io.contract.STRUCTURE_NAMES): label, unit, resolution
+STRUCTURE_TOPIC = 'structure'
+STRUCTURE_QUANTITIES = {'plate_dy': ('height', 'm', 1e-9), 'plate_phi': ('tilt', 'rad', 1e-9)}
+PREFIXES = ((1e9, 'G'), (1e6, 'M'), (1e3, 'k'), (1.0, ''), (1e-3, 'm'), (1e-6, 'µ'),
+            (1e-9, 'n'), (1e-12, 'p'))
 CSV_FIELDS = (('deflection', 'position'), ('deflection', 'velocity'),
               ('displacement', 'position'), ('charge', 'position'), ('current', 'position'))
 PER_DET_LIMIT = 4
+
+
+def engineering(value: float, unit: str, resolution: float) -> str:
+    """
+    Return ``value`` (SI) with 4 significant digits and an SI prefix: 0.0002002 -> '200.2 µA'.
+
+    A value whose magnitude is below ``resolution`` is '0 <unit>'; not finite: as it is.
+    """
+    if not math.isfinite(value):
+        return f'{value} {unit}'
+    if abs(value) < resolution:
+        return f'0 {unit}'
+    for factor, prefix in PREFIXES:   # the largest prefix that leaves >= 1 after rounding
+        scaled = float(f'{value / factor:.4g}')
+        if abs(scaled) >= 1.0:
+            break
+    return f'{scaled:.4g} {prefix}{unit}'
 
 
 class Watcher:
@@ -43,10 +70,11 @@ class Watcher:
         self._shown = None
         self._next_line = None
         self._header = False
+        self._structure = None                # the latest structure message (plates)
 
     def subscribe(self, shell) -> None:
         """Subscribe to the node's output topics through ``shell`` (a NodeShell)."""
-        for topic in OUTPUT_TOPICS:
+        for topic in OUTPUT_TOPICS + (STRUCTURE_TOPIC,):
             shell.subscribe(topic, self.take)
 
     def waiting(self) -> bool:
@@ -59,6 +87,9 @@ class Watcher:
 
     def take(self, topic: str, msg) -> None:
         """Take one output message; a sample whose topics have all arrived is complete."""
+        if topic == STRUCTURE_TOPIC:
+            self._structure = msg
+            return
         stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         parts = self._partial.setdefault(stamp, {})
         parts[topic] = msg
@@ -96,17 +127,29 @@ class Watcher:
 
     def _line(self, stamp: int, parts: dict) -> str:
         names = list(parts['displacement'].name)
-        values = {key: [v * scale for v in getattr(parts[key[0]], key[1])]
-                  for key, (_, _, scale) in LINE_QUANTITIES.items()}
+        values = {key: list(getattr(parts[key[0]], key[1])) for key in LINE_QUANTITIES}
         if len(names) <= PER_DET_LIMIT:
-            cells = [f'{name}: ' + ' '.join(f'{label} {values[key][j]:.4g} {unit}' for key, (
-                label, unit, _) in LINE_QUANTITIES.items()) for j, name in enumerate(names)]
+            cells = [f'{name}: ' + ' '.join(
+                f'{label} {engineering(values[key][j], unit, resolution)}'
+                for key, (label, unit, resolution) in LINE_QUANTITIES.items())
+                for j, name in enumerate(names)]
         else:
-            cells = [f'{label} [{unit}] {min(values[key]):.4g} / '
-                     f'{statistics.median(values[key]):.4g} / {max(values[key]):.4g}'
-                     for key, (label, unit, _) in LINE_QUANTITIES.items()]
+            cells = [f'{label} ' + ' / '.join(engineering(v, unit, resolution) for v in (
+                min(values[key]), statistics.median(values[key]), max(values[key])))
+                for key, (label, unit, resolution) in LINE_QUANTITIES.items()]
             cells.insert(0, f'{len(names)} DETs, min / median / max:')
+        structure = self._structure
+        if structure is not None and self._stamp(structure) == stamp:
+            shown = [(STRUCTURE_QUANTITIES[name], value)
+                     for name, value in zip(structure.name, structure.position)
+                     if name in STRUCTURE_QUANTITIES]
+            cells.append('plate: ' + ' '.join(f'{label} {engineering(value, unit, resolution)}'
+                                              for (label, unit, resolution), value in shown))
         return f't = {stamp * 1e-9:.3f} s  ' + '  '.join(cells)
+
+    @staticmethod
+    def _stamp(msg) -> int:
+        return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
 
     def _csv_row(self, stamp: int, parts: dict) -> None:
         names = list(parts['displacement'].name)

@@ -12,7 +12,8 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
 from rclpy.parameter import Parameter
 
 from .params import (node_parameter_values, NODE_PARAMS, Param, runtime_refusal,
-                     SCENE_PARAM_DESCRIPTION, scene_parameters, SCENE_SECTIONS)
+                     SCENE_PARAM_DESCRIPTION, scene_parameters, SCENE_SECTIONS,
+                     unknown_parameters)
 from ..scenes.scene import load_scene, SceneError
 
 __all__ = ['declare_parameters', 'descriptor', 'load_node_scene', 'validate_parameters']
@@ -41,7 +42,17 @@ def load_node_scene(node):
         except ValueError as exc:
             raise SceneError(f"scene key 'integrator.method': {exc}") from None
     declare_parameters(node, scene, {name: p.value for name, p in overrides.items()})
+    _check_names(node, overrides)
     return scene, scene_file
+
+
+def _check_names(node, overrides) -> None:
+    """Warn about (or, with strict_parameters, refuse) the names the node does not declare."""
+    sentences = unknown_parameters(overrides, node.get_parameters_by_prefix(''))
+    if sentences and node.get_parameter('strict_parameters').value:
+        raise SceneError('; '.join(sentences) + ' (strict_parameters is true)')
+    for sentence in sentences:
+        node.get_logger().warning(sentence)
 
 
 def descriptor(param: Param) -> ParameterDescriptor:

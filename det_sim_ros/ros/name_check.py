@@ -1,48 +1,61 @@
 """
-Start-up check that no other node of this node's fully qualified name is in the ROS graph.
+One running node per fully qualified name, settled without delaying the start.
 
 Two nodes of one name (a fleet or a node started twice) would publish on the same topics and
-answer the same services, and a controller could not tell them apart. Discovery is not instant.
-A running ``sim_node`` announces itself every 0.1 s for its first 2 s, every 0.25 s after
-(det_sim_ros.ros.discovery); a new participant then saw it at most 0.61 s after its creation
-(280 creations, one to three at a time, 90 of them beside a busy core, the running node past
-its first 2 s, localhost discovery range). At Fast DDS's own 3 s period 12 of 60 took more than
-0.75 s, one 3.0 s, and the check would have let those duplicates start. So the check looks
-until :data:`DISCOVERY_WINDOW_S` after the node's creation, the scene's preparation included,
-before anything is published; only the newcomer looks, so the running node is never the one
-refused.
+answer the same services, and a controller could not tell them apart. Discovery is not instant
+(a new participant saw a running ``sim_node`` at most 0.61 s after its creation in 280
+creations, det_sim_ros.ros.discovery; up to 3 s at Fast DDS's own announcement period), so a
+look at the graph before publishing would hold the first sample back by that long.
+
+Instead each node claims its name at once and publishes from the start: on the hidden topic
+``~/_name_claim`` (reliable, transient local: a node that comes later still receives it) it
+announces its start time and a random instance id, and it listens there for the others'.
+The older claim wins, by (start time, instance id): every node orders two claims the same way,
+so of two or more nodes of one name exactly one goes on, whichever hears the other first, and a
+running node is never the one refused. The younger stops itself with one FATAL line
+(:attr:`NameClaim.refusal`, read by the spin loop); with ``allow_duplicate_name`` it logs one
+warning and goes on.
 """
 
 from __future__ import annotations
 
+import os
 import time
 import weakref
 
-from rclpy.clock import Clock, ClockType
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
 
-from ..scenes.scene import SceneError
+__all__ = ['CLAIM_TOPIC', 'Claim', 'NameClaim', 'younger']
 
-__all__ = ['DISCOVERY_WINDOW_S', 'check_unique_name', 'note_node_created']
-
-DISCOVERY_WINDOW_S = 0.75  # s after the context's first node: 1.2x the longest discovery seen
-POLL_S = 0.05              # s between two looks at the graph
-# an allowed duplicate is only warned about, which delays nothing: that look goes on past a
-# Fast DDS default announcement period (3 s), for a running node past its early announcements
-WARN_WINDOW_S = 3.5        # s after the context's first node
-WARN_POLL_S = 0.25         # s between two of those looks
-
-_first_node_time = weakref.WeakKeyDictionary()   # context -> monotonic time of its first node
+CLAIM_TOPIC = '~/_name_claim'
 
 
-def note_node_created(context) -> None:
-    """Note when ``context`` got its first node (discovery runs from then on)."""
-    _first_node_time.setdefault(context, time.monotonic())
+class Claim(tuple):
+    """(start time in ns since the epoch, random 64-bit instance id): smaller is older."""
+
+    __slots__ = ()
+
+    def __new__(cls, start_ns: int, instance: int):
+        return super().__new__(cls, (int(start_ns), int(instance)))
+
+    def text(self) -> str:
+        """Return the claim as its message's text: '<start_ns> <instance hex>'."""
+        return f'{self[0]} {self[1]:016x}'
+
+    @classmethod
+    def parse(cls, text: str) -> 'Claim | None':
+        """Return the claim of a message's text, or None if it is not one."""
+        try:
+            start, instance = text.split()
+            return cls(int(start), int(instance, 16))
+        except ValueError:
+            return None
 
 
-def _others(node) -> int:
-    """Return how many other nodes of ``node``'s name and namespace the graph holds."""
-    me = (node.get_name(), node.get_namespace())
-    return node.get_node_names_and_namespaces().count(me) - 1
+def younger(mine: Claim, other: Claim) -> bool:
+    """Return True if ``mine`` loses to ``other``: it is the later claim (ties: larger id)."""
+    return other != mine and other < mine
 
 
 def _refusal(node) -> str:
@@ -52,37 +65,39 @@ def _refusal(node) -> str:
             'allow_duplicate_name:=true')
 
 
-def check_unique_name(node, allow: bool) -> None:
+class NameClaim:
     """
-    Refuse to start (:class:`SceneError`) when another node of this name is in the graph.
+    The node's claim on its name: announced at once, compared with every other one heard.
 
-    Without ``allow`` this looks until :data:`DISCOVERY_WINDOW_S` after the context's first
-    node (at once when a duplicate shows up); with ``allow`` it does not wait, and a timer logs
-    a warning when it finds one, until :data:`WARN_WINDOW_S`.
+    ``refusal`` is '' while the node may run, else the one line it stops with.
     """
-    note_node_created(node.context)
-    if allow:
-        _warn_when_seen(node, _first_node_time[node.context] + WARN_WINDOW_S)
-        return
-    deadline = _first_node_time[node.context] + DISCOVERY_WINDOW_S
-    while True:
-        if _others(node) > 0:
-            raise SceneError(_refusal(node))
-        left = deadline - time.monotonic()
-        if left <= 0.0:
+
+    def __init__(self, node, allow: bool):
+        self.claim = Claim(time.time_ns(), int.from_bytes(os.urandom(8), 'little'))
+        self.refusal = ''
+        # weak: the node's subscription holds this object's callback, and a node whose start
+        # failed must be freed at once (it holds its logger's /rosout publisher)
+        self._node, self._allow, self._warned = weakref.ref(node), allow, False
+        # a writer keeps its one claim for the nodes that come later; the reader's history is
+        # shared by all writers of the (keyless) topic, so it keeps many: claims that arrive
+        # together must not overwrite the older one before it is read
+        claim_qos, reader_qos = (QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE,
+                                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
+                                 for depth in (1, 100))
+        self._subscription = node.create_subscription(String, CLAIM_TOPIC, self._heard,
+                                                      reader_qos)
+        self._publisher = node.create_publisher(String, CLAIM_TOPIC, claim_qos)
+        self._publisher.publish(String(data=self.claim.text()))
+
+    def _heard(self, msg) -> None:
+        other = Claim.parse(msg.data)
+        node = self._node()
+        if (node is None or other is None or not younger(self.claim, other) or self.refusal
+                or self._warned):
             return
-        time.sleep(min(POLL_S, left))
-
-
-def _warn_when_seen(node, give_up: float) -> None:
-    """Log one warning when another node of this name shows up in the graph before ``give_up``."""
-    timer = None
-
-    def look():
-        if _others(node) > 0:
-            timer.cancel()
-            node.get_logger().warning(_refusal(node).split(';')[0] + ' (allow_duplicate_name '
-                                      'is true: started anyway)')
-        elif time.monotonic() >= give_up:
-            timer.cancel()
-    timer = node.create_timer(WARN_POLL_S, look, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        if self._allow:
+            self._warned = True
+            node.get_logger().warning(_refusal(node).split(';')[0]
+                                      + ' (allow_duplicate_name is true: started anyway)')
+        else:
+            self.refusal = _refusal(node)

@@ -31,7 +31,7 @@ from .declaration import load_node_scene, validate_parameters
 from .discovery import announce_early
 from .live import open_live_view
 from .markers import attach_markers
-from .name_check import check_unique_name, note_node_created
+from .name_check import NameClaim
 from .pacing import make_pacing
 from .recording import open_recorder
 from .reports import NodeReports
@@ -72,7 +72,6 @@ class SimNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        note_node_created(self.context)   # discovery runs from here, beside the preparation
         self.scene, scene_file = load_node_scene(self)
         self._pacing = make_pacing(self._p)
         started = time.perf_counter()
@@ -96,13 +95,13 @@ class SimNode(Node):
         self.on_sample = None
         self._fault_reported = ''
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        check_unique_name(self, self._p('allow_duplicate_name'))
         self._start(scene_file)
 
     def _start(self, scene_file):
         """Create the endpoints, timers and the recorder; then sample 0 and the start-up line."""
         if self._p('qos_sensor_data') and self._p('qos_keep_all'):
             raise SceneError('parameters qos_sensor_data and qos_keep_all: choose one')
+        self.name_claim = NameClaim(self, self._p('allow_duplicate_name'))   # settled later
         keep_all = QoSProfile(history=HistoryPolicy.KEEP_ALL)
         in_qos = keep_all if self._p('qos_keep_all') else QoSProfile(depth=10)
         out_qos = qos_profile_sensor_data if self._p('qos_sensor_data') else in_qos

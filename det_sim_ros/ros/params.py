@@ -12,6 +12,7 @@ range (lo, hi), the allowed strings, or None. A :class:`Param` is a tuple, so
 
 from __future__ import annotations
 
+import difflib
 import math
 from typing import Any, Iterator, NamedTuple
 
@@ -21,7 +22,7 @@ from ..scenes.sensors import sensors_to_dict
 
 __all__ = ['NODE_PARAMS', 'Param', 'SCENE_PARAM_DESCRIPTION', 'SCENE_SECTIONS',
            'check_node_value', 'flatten', 'node_parameter_values', 'runtime_refusal',
-           'scene_parameters']
+           'scene_parameters', 'unknown_parameters']
 
 SCENE_SECTIONS = ('scene', 'physics', 'integrator', 'structure', 'dets', 'amplifier',
                   'sensors')
@@ -114,9 +115,14 @@ NODE_PARAMS = {
     'live.host': Param('127.0.0.1', "live view: address to listen on ('0.0.0.0': every "
                        'network interface; anyone who reaches it can command the node)', True,
                        None),
-    'allow_duplicate_name': Param(False, 'start even if another node of this fully qualified '
-                                  'name is running (one warning); false: refuse to start (the '
-                                  'check looks for 0.75 s after start)', True, None),
+    'allow_duplicate_name': Param(False, 'run even if another node of this fully qualified '
+                                  'name is running (one warning); false: the younger of two '
+                                  'stops itself with one FATAL line once it hears the older '
+                                  '(publishing is not held back for it)', True, None),
+    'strict_parameters': Param(False, 'a parameter name the node does not know (-p, a params '
+                               'file) stops the start with one FATAL line; false: one warning '
+                               'naming the closest known name, and the start goes on', True,
+                               None),
     'wait_for_subscribers': Param(0, 'publish sample 0 and start stepping only once this many '
                                   'subscriptions of displacement have matched (and received '
                                   'sample 0); 0 = at once (docs/real_time.md: the start of a '
@@ -220,3 +226,23 @@ def runtime_refusal(name: str, value) -> str:
     else:
         return ''
     return '' if ok else f'{name} must be {need} (got {value!r})'
+
+
+def unknown_parameters(given, known) -> list:
+    """
+    Return one sentence per name in ``given`` that is not in ``known``, naming the closest known.
+
+    ``given``: the names the node was started with (``-p``, a params file); ``known``: every
+    name it declares. The closest is by difflib's similarity among the known names of the same
+    section first (``lockstep.timout`` -> ``lockstep.timeout``), then among all of them.
+    """
+    known = sorted(known)
+    sentences = []
+    for name in sorted(set(given) - set(known)):
+        section = name.rpartition('.')[0]
+        same_section = [k for k in known if k.rpartition('.')[0] == section] if section else []
+        close = (difflib.get_close_matches(name, same_section, 1, 0.5)
+                 or difflib.get_close_matches(name, known, 1, 0.6))
+        hint = f"; did you mean '{close[0]}'?" if close else ' (sim_node --help lists them)'
+        sentences.append(f"unknown parameter '{name}' (ignored){hint}")
+    return sentences

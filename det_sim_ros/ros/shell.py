@@ -7,13 +7,18 @@ subscribes to its outputs. It stands in for the few ``ros2 topic / service / par
 a sim_node user needs, for installs without the ros2 command line (docs/shell.md).
 
 Every wait is bounded by ``timeout`` (wall seconds); a node that does not answer in time, a
-refused request or an unknown DET name raise :class:`ShellError` with one line.
+refused request or an unknown DET name raise :class:`ShellError` with one line. SIGINT and
+SIGTERM are taken note of while the shell is open and raised as KeyboardInterrupt at its next
+wait (within 0.05 s), never inside the executor's callbacks, where rclpy turns it into a
+RuntimeError; the shell's teardown runs to its end.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import signal
+import threading
 import time
 from typing import Callable
 
@@ -34,6 +39,35 @@ def target_name(namespace: str, node: str) -> str:
     return f"/{namespace + '/' if namespace else ''}{node.strip('/')}"
 
 
+class _Interrupts:
+    """SIGINT and SIGTERM noted by the handler and raised by :meth:`check` (main thread only)."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self):
+        self.signum = 0
+        self._previous = {}
+
+    def install(self) -> None:
+        if threading.current_thread() is threading.main_thread():
+            for sig in self.SIGNALS:
+                self._previous[sig] = signal.signal(sig, self._note)
+
+    def restore(self) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        self._previous.clear()
+
+    def check(self) -> None:
+        """Raise KeyboardInterrupt once for a signal that came since the last check."""
+        if self.signum:
+            self.signum = 0
+            raise KeyboardInterrupt
+
+    def _note(self, signum, frame):
+        self.signum = signum
+
+
 class NodeShell:
     """
     A client node that talks to the sim_node ``namespace``/``node``.
@@ -46,23 +80,40 @@ class NodeShell:
         self.target = target_name(namespace, node)
         self.timeout = timeout
         self._context = self._node = self._executor = None
+        self._interrupts = _Interrupts()
 
     def __enter__(self) -> 'NodeShell':
-        import rclpy
-        from rclpy.context import Context
-        self._context = Context()
-        rclpy.init(args=[], context=self._context)
-        self._node = rclpy.create_node(f'det_sim_shell_{os.getpid()}', context=self._context,
-                                       start_parameter_services=False)
-        self._executor = _executor(self._context)
-        self._executor.add_node(self._node)
+        self._interrupts.install()      # before rclpy's import: a Ctrl-C there waits too
+        try:
+            import rclpy
+            from rclpy.context import Context
+            from rclpy.signals import SignalHandlerOptions
+            self._context = Context()
+            # rclpy's handlers would shut the context down under a running callback
+            rclpy.init(args=[], context=self._context,
+                       signal_handler_options=SignalHandlerOptions.NO)
+            self._node = rclpy.create_node(f'det_sim_shell_{os.getpid()}',
+                                           context=self._context,
+                                           start_parameter_services=False)
+            self._executor = _executor(self._context)
+            self._executor.add_node(self._node)
+            self._interrupts.check()
+        except BaseException:
+            self.__exit__()
+            raise
         return self
 
     def __exit__(self, *exc) -> None:
-        import rclpy
-        self._executor.shutdown()
-        self._node.destroy_node()
-        rclpy.try_shutdown(context=self._context)
+        try:
+            if self._executor is not None:
+                self._executor.shutdown()
+            if self._node is not None:
+                self._node.destroy_node()
+            if self._context is not None:
+                import rclpy
+                rclpy.try_shutdown(context=self._context)
+        finally:
+            self._interrupts.restore()
 
     def topic(self, name: str) -> str:
         """Return a sim_node topic's name in the shell's namespace."""
@@ -72,7 +123,25 @@ class NodeShell:
         """Serve the shell's callbacks for ``seconds`` of wall time."""
         end = time.monotonic() + seconds
         while self._context.ok() and time.monotonic() < end:
-            self._executor.spin_once(timeout_sec=min(0.05, max(end - time.monotonic(), 0.0)))
+            self._spin_once(min(0.05, max(end - time.monotonic(), 0.0)))
+
+    def _spin_once(self, seconds: float) -> None:
+        self._executor.spin_once(timeout_sec=seconds)
+        self._interrupts.check()
+
+    def _until(self, condition: Callable[[], bool], seconds: float, step=None) -> bool:
+        """Spin (or call ``step(seconds)``) until ``condition()``; return it at the end."""
+        end = time.monotonic() + seconds
+        while not condition():
+            left = end - time.monotonic()
+            if left <= 0.0:
+                return False
+            if step is None:
+                self._spin_once(min(0.05, left))
+            else:
+                step(min(0.05, left))
+                self._interrupts.check()
+        return True
 
     # -- services -----------------------------------------------------------------------------
     def call(self, service: str, srv_type, request):
@@ -80,12 +149,11 @@ class NodeShell:
         name = service if service.startswith('/') else f'{self.target}/{service}'
         client = self._node.create_client(srv_type, name)
         try:
-            if not client.wait_for_service(timeout_sec=self.timeout):
+            if not self._until(client.service_is_ready, self.timeout):
                 raise ShellError(f'no service {name} within {self.timeout:g} s (is sim_node '
                                  'running, with this --ns and --node?)')
             future = client.call_async(request)
-            self._executor.spin_until_future_complete(future, timeout_sec=self.timeout)
-            if not future.done():
+            if not self._until(future.done, self.timeout):
                 raise ShellError(f'{name} did not answer within {self.timeout:g} s')
             return future.result()
         finally:
@@ -154,7 +222,11 @@ class NodeShell:
             self._wait_for(lambda: publisher.get_subscription_count() > 0,
                            f'no subscriber on {self.topic(topic)}')
             publisher.publish(msg)
-            if not publisher.wait_for_all_acked(_duration(self.timeout)):
+            acked = [False]
+
+            def wait_acked(seconds):
+                acked[0] = publisher.wait_for_all_acked(_duration(seconds))
+            if not self._until(lambda: acked[0], self.timeout, wait_acked):
                 raise ShellError(f'{self.target} did not acknowledge the command on '
                                  f'{self.topic(topic)} within {self.timeout:g} s')
         finally:
@@ -168,12 +240,9 @@ class NodeShell:
                                        lambda msg: callback(topic, msg), depth)
 
     def _wait_for(self, condition: Callable[[], bool], what: str) -> None:
-        end = time.monotonic() + self.timeout
-        while not condition():
-            if time.monotonic() > end:
-                raise ShellError(f'{what} within {self.timeout:g} s (is sim_node running, '
-                                 'with this --ns?)')
-            self.spin(0.05)
+        if not self._until(condition, self.timeout):
+            raise ShellError(f'{what} within {self.timeout:g} s (is sim_node running, '
+                             'with this --ns?)')
 
 
 def _executor(context):

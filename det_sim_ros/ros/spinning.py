@@ -118,17 +118,38 @@ def spin_until_stopped(node, stop) -> None:
     start-up made (modules, the model, rclpy's and DDS's objects) lives as long as the process:
     it is frozen (:func:`gc.freeze`), so the garbage collector's full collections no longer walk
     it. Unfrozen, one such collection a fraction of a second into a run held the node for
-    250 ms beside a busy core: 250 periods late, a slip in real time.
+    250 ms beside a busy core: 250 periods late, a slip in real time. A node that
+    finds an older one of its name (``node.name_claim.refusal``) stops the same way, then
+    raises :class:`SceneError` with that line.
     """
     executor = make_executor(node.context)
     executor.add_node(node)
     gc.freeze()
     try:
-        while not stop.requested and node.context.ok():
+        while not stop.requested and node.context.ok() and not node.name_claim.refusal:
             executor.spin_once(timeout_sec=0.1)
     finally:
         if node.recorder is not None:
             node.recorder.close()
+        _say_stopped(node)
         stop.end()
         executor.remove_node(node)
         executor.shutdown(timeout_sec=0.0)
+    if not stop.requested and node.name_claim.refusal:
+        from ..scenes.scene import SceneError
+        raise SceneError(node.name_claim.refusal)
+
+
+def _say_stopped(node) -> None:
+    """Log one INFO line: how far the run went and where its (finished) log is."""
+    recorder = node.recorder
+    if recorder is None or not recorder.paths:
+        where = 'no log (log.enabled is false)'
+    else:
+        earlier = len(recorder.paths) - 1
+        where = f'log: {recorder.paths[-1]}'
+        if earlier:
+            where += f' (and {earlier} earlier file(s))'
+
+    node.get_logger().info(f'stopped at t = {node.simulator.t:.6g} s after '
+                           f'{node.steps_total} period(s); {where}')

@@ -88,8 +88,14 @@ def _send(args) -> int:
             raise common.CliError(f'unknown or repeated DET {bad[0]!r}; the DETs: '
                                   + ', '.join(dets))
         topic = shell.send(volts, names)
-        pairs = zip(names or dets, volts)
+        pairs = list(zip(names or dets, volts))
         print(f"sent {', '.join(f'{n}={v:g}' for n, v in pairs)} V on {topic}")
+        v_max = float(shell.get_parameter('physics.v_max'))
+        clamped = [f'{n}: {v:g} V' for n, v in pairs if not 0.0 <= v <= v_max]
+        if clamped:   # the node clamps them (and warns): say so here too
+            from ...io.contract import clamp_message
+            print(f'det_sim: note: the node applies {clamp_message(topic, clamped, v_max)}',
+                  file=sys.stderr)
     return _run(args, action)
 
 
@@ -125,7 +131,10 @@ def _watch(args) -> int:
         except KeyboardInterrupt:   # the usual way to stop watching
             pass
         return 0
-    return _run(args, action)
+    try:
+        return _run(args, action)
+    except KeyboardInterrupt:       # also before the first sample, or while it winds up
+        return 0
 
 
 # -- pause, resume, advance, reset ------------------------------------------------------------
