@@ -58,6 +58,30 @@ def _fit(tmp_path, *logs_and_options):
     return out, stdout
 
 
+def test_progress_says_the_misfit_in_noise_units_and_the_time_up_front(tmp_path, truth):
+    """
+    Check the progress lines: the expected runs and time first, misfits in units of the noise.
+
+    The weighted cost 0.5 |r|^2 of a start far off reads as a failure (1e17 on a noise floor of
+    1e-12 m); its RMS in noise units is what the report states, and the lines must not show it.
+    """
+    sim = Simulator(truth)
+    volts = step_and_sine(T_END, sim.dt)
+    path = tmp_path / 'node.mcap'
+    with Recorder(path, truth, metadata={'method': sim.method.name}) as recorder:
+        simulate_to_log(recorder, sim, lambda k: [float(volts[k])], len(volts))
+    code, stdout, stderr = run_cli('fit', path, '--params', 'Y', '--start', 'Y=1.5e6',
+                                   '--starts', '1', '--parallel', 'serial', '--no-plots',
+                                   '-o', tmp_path / 'f.yaml')
+    assert code == 0, stderr
+    lines = [line for line in stderr.splitlines() if line.startswith('det_sim fit: ')]
+    searching = next(n for n, line in enumerate(lines) if 'searching at' in line)
+    assert re.search(r'one run takes [0-9.e-]+ s; expect about \d+ runs, ~\d+ s', lines[searching])
+    steps = [line for line in lines if ', step ' in line]
+    assert steps and all(re.search(r'misfit [0-9.e+-]+ x noise', line) for line in steps)
+    assert not any('cost' in line for line in lines[searching:] if 'converged' not in line)
+
+
 def test_sim_node_log_fits_and_the_scene_file_loads_as_it_is(tmp_path, truth):
     sim = Simulator(truth)
     volts = step_and_sine(T_END, sim.dt)

@@ -52,6 +52,10 @@ POLISH_DECREASE = 0.05
 # Gauss-Newton steps at the scene's level after the space-mapping step before a local search
 # takes over (each is one batch of a run and one per parameter)
 POLISH_STEPS = 2
+# Runs per fitted parameter, for the time said up front (bench/fit_speed.py, 3 and 5 parameters
+# of a 10 s log: 59 and 75 at the coarse level's search, 8-10 at the scene's level's polish)
+SEARCH_RUNS_PER_PARAMETER = 70
+POLISH_RUNS_PER_PARAMETER = 10
 
 
 @dataclasses.dataclass
@@ -196,7 +200,7 @@ class _Objective:
         if point is None or not np.array_equal(point, z):
             f0 = self.residual(z)
         self.iterations += 1
-        self.report(self.iterations, z, 0.5 * float(f0 @ f0))
+        self.report(self.iterations, z, f0)
         known, _, jacobian = self._known
         if known is not None and np.array_equal(known, z):
             return jacobian
@@ -238,8 +242,11 @@ def _searches(problem, evaluator, z0, starts: int, candidates: int, seed: int,
     parameters = problem.parameters
     window = max(1, int(round(SMOOTHING / min(m.dt for m in problem.measurements))))
     points = _candidates(parameters, z0, max(candidates, starts), seed)
-    costs = [0.5 * float(f @ f) for f in evaluator.evaluate(points, window)]
-    say(f'scored {len(points)} candidate starts: costs {min(costs):.4g} .. {max(costs):.4g}')
+    residuals = evaluator.evaluate(points, window)
+    costs = [0.5 * float(f @ f) for f in residuals]
+    misfits = [_misfit(f) for f in residuals]
+    say(f'tried {len(points)} starting points: misfit {min(misfits):.3g} .. {max(misfits):.3g} x '
+        'noise (a start on the wrong side of the snap-through is far off)')
     order = [0] + [i for i in np.argsort(costs) if i != 0][:max(starts - 1, 0)]
     probe = PROBE_EVALUATIONS if len(order) > 1 else max_evaluations
     results, outcomes = [], []
@@ -261,10 +268,15 @@ def _searches(problem, evaluator, z0, starts: int, candidates: int, seed: int,
     return final, outcomes
 
 
+def _misfit(f) -> float:
+    """Return the weighted residual's RMS: the misfit in units of the noise (1 = at the noise)."""
+    return math.sqrt(float(f @ f) / max(len(f), 1))
+
+
 def _reporter(parameters, say, label: str):
-    def report(iteration, z, cost):
+    def report(iteration, z, f):
         shown = ', '.join(f'{p.name}={v:.5g}' for p, v in zip(parameters, from_z(parameters, z)))
-        say(f'{label}, iteration {iteration}: cost {cost:.6g} ({shown})')
+        say(f'{label}, step {iteration}: misfit {_misfit(f):.3g} x noise ({shown})')
     return report
 
 
@@ -328,7 +340,8 @@ def fit(logs, params: Sequence[str] | str, scene=None, *, mapping: Mapping | Non
     search = _Pass(levels[0], problems[0], parallel, say)
     search.time_a_run(z0)
     try:
-        say(f'searching at {search.level.describe()}')
+        say(f'searching at {search.level.describe()}: '
+            f'{search.expected(SEARCH_RUNS_PER_PARAMETER)}')
         best, outcomes = _searches(problems[0], search.evaluator, z0, starts, candidates, seed,
                                    max_evaluations, say)
         search.done(f'{len(outcomes)} local search(es) from {max(candidates, starts)} '
@@ -354,6 +367,7 @@ class _Pass:
         self.level, self.problem, self.parallel, self.say = level, problem, parallel, say
         self.evaluator = None
         self.extra_runs = 0   # runs outside the evaluator: the timed one
+        self.run_seconds = 0.0   # wall time of that run
         self.work = ''
         self.z = None
         self._began = time.monotonic()
@@ -363,9 +377,16 @@ class _Pass:
         """Run at z once and pick the evaluator by its cost; return the runs or the residual."""
         timed = time.monotonic()
         value = _runs_or_none(self.problem, z) if simulate else self.problem.residual(z)
-        self.evaluator = make_evaluator(self.problem, self.parallel, time.monotonic() - timed)
+        self.run_seconds = time.monotonic() - timed
+        self.evaluator = make_evaluator(self.problem, self.parallel, self.run_seconds)
         self.extra_runs += 1
         return value
+
+    def expected(self, runs_per_parameter: int) -> str:
+        """Say roughly how long the pass will take, from its first run's wall time."""
+        runs = runs_per_parameter * len(self.problem.parameters)
+        return (f'one run takes {self.run_seconds:.2g} s; expect about {runs} runs, '
+                f'~{runs * self.run_seconds:.0f} s (fewer on two threads)')
 
     def done(self, work: str, z=None) -> None:
         """Note what the pass did and where it ended (z); stop its clock."""
@@ -406,9 +427,10 @@ def _polish(polish: _Pass, search: _Pass, coarse, max_evaluations: int):
     problem, parameters = polish.problem, polish.problem.parameters
     lower = np.array([p.to_z(p.lower) for p in parameters])
     upper = np.array([p.to_z(p.upper) for p in parameters])
-    polish.say(f'polishing at {polish.level.describe()}')
     z = np.array(coarse.x, dtype=float)
     runs = polish.time_a_run(z, simulate=True)
+    polish.say(f'polishing at {polish.level.describe()}: '
+               f'{polish.expected(POLISH_RUNS_PER_PARAMETER)}')
     coarse_runs = 0
     free = _determined(coarse, parameters)
     if runs is not None and free:
@@ -426,8 +448,10 @@ def _polish(polish: _Pass, search: _Pass, coarse, max_evaluations: int):
     f, jacobian = problem.linearize(z, polish.evaluator)
     for steps in range(POLISH_STEPS + 1):
         step, decrease, variance = _gauss_newton(f, jacobian)
-        polish.say(f"at the scene's level: cost {0.5 * float(f @ f):.6g}, a Gauss-Newton step "
-                   f'would lower it by {decrease:.3g} (residual variance {variance:.4g})')
+        moves = math.sqrt(2.0 * max(decrease, 0.0) / variance) if variance > 0 else math.inf
+        polish.say(f"at the scene's level: misfit {_misfit(f):.3g} x noise; one more step would "
+                   f'move the estimates by about {moves:.2g} standard errors (done below '
+                   f'{math.sqrt(2.0 * POLISH_DECREASE):.2g})')
         if decrease <= POLISH_DECREASE * variance:
             polish.done(f'a space-mapping step from the coarse optimum ({coarse_runs} of the runs '
                         f'at the coarse level) and {steps} Gauss-Newton step(s), checked by one',
