@@ -14,7 +14,7 @@ lockstep  N lockstep nodes, each answered by its own controller process
           (bench/peer_processes.py's CONTROLLER): aggregate simulated seconds per wall second
           (sum over nodes).
 hosts     One node at 1 kHz in real time (lockstep_* cases: lockstep, sim s per wall s) on
-          namespace host h0 (det_sim_ros.ros.netns), its controller (CONTROLLER: answers every
+          namespace host h0 (test/netns_hosts.py), its controller (CONTROLLER: answers every
           displacement sample) on host h1, unicast discovery over UDP: command-to-effect
           latency p50/p99 (controller publishes a command -> it receives the first sample that
           shows it) and samples lost at the controller; the h1 link direct (veth) or through
@@ -41,6 +41,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
+sys.path.insert(1, os.path.join(ROOT, 'test'))   # netns_hosts: the tests' namespace hosts
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 101))
 
@@ -227,7 +228,7 @@ CASES = {
 
 
 def hosts(case, seconds):
-    from det_sim_ros.ros.netns import NetnsHosts
+    from netns_hosts import NetnsHosts
     link, keep_all, profile, same_host, mode = CASES[case]
     extra = ({'FASTRTPS_DEFAULT_PROFILES_FILE': os.path.join(ROOT, 'config', 'dds_lossy.xml')}
              if profile else {})

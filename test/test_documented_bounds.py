@@ -20,7 +20,7 @@ SCENE_BOUNDS = {
     'scene.eps_b': (-1.0, False, 2.0),
     'scene.n_ritz': (1, True, 12),
     'physics.n': (1, True, 10000),
-    'integrator.tolerance': (0.0, False, 0.1),
+    'integrator.tolerance': (0.0, True, 0.1),     # 0 = auto
     'integrator.substeps': (0, True, 100000),
     'structure.copies': (1, True, 100000),
     'structure.spread': (0.0, True, 0.3),
@@ -48,6 +48,8 @@ NODE_BOUNDS = {
     'log.max_files': (0, 1000000),
     'info_period': (0.0, 3600.0),
     'markers.rate_hz': (0.0, 1.0e4),
+    'live.port': (0, 65535),
+    'live.rate_hz': (0.0, 1.0e6),
     'wait_for_subscribers': (0, 10000),
 }
 PAPER = {'scene.fidelity': 'paper'}

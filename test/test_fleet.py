@@ -305,7 +305,7 @@ def test_fleet_across_three_namespace_hosts(tmp_path):
     on every host, its PI controller on host i + 1. Every loop brings Δy to its target within
     5 %, and the lockstep logs equal those of the same fleet and controllers on one host.
     """
-    from det_sim_ros.ros.netns import can_make_namespaces, NetnsHosts
+    from netns_hosts import can_make_namespaces, NetnsHosts
     why = can_make_namespaces()
     if why:
         pytest.skip(f'{why}: the hosts of this test are network namespaces')
@@ -364,7 +364,7 @@ def test_qos_keep_all_for_lossy_links(harness, tmp_path, ros_context):
 
 
 def _needs_namespaces():
-    from det_sim_ros.ros.netns import can_make_namespaces
+    from netns_hosts import can_make_namespaces
     why = can_make_namespaces()
     if why:
         pytest.skip(f'{why}: the hosts of this test are network namespaces')
@@ -378,8 +378,8 @@ def test_namespaces_left_by_a_killed_run_are_removed(tmp_path):
     only those of dead processes).
     """
     _needs_namespaces()
-    from det_sim_ros.ros.netns import NetnsHosts
-    code = ('import sys, time\nfrom det_sim_ros.ros.netns import NetnsHosts\n'
+    from netns_hosts import NetnsHosts
+    code = ('import sys, time\nfrom netns_hosts import NetnsHosts\n'
             'net = NetnsHosts(2).create()\nprint(" ".join(net.hosts + [net.bridge]), flush=True)'
             '\ntime.sleep(600)\n')
     proc = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE, text=True,
@@ -430,7 +430,7 @@ def test_relay_link_delays_and_drops_frames():
     answers all.
     """
     _needs_namespaces()
-    from det_sim_ros.ros.netns import NetnsHosts
+    from netns_hosts import NetnsHosts
     with NetnsHosts(3, lossy={1: (0.005, 0.2)}) as net:
         results = {}
         for host in (1, 2):

@@ -177,7 +177,7 @@ class NetnsHosts:
         """
         delay, loss = self.lossy[i]
         proc = subprocess.Popen(
-            ['ip', 'netns', 'exec', self.bridge, sys.executable, '-m', 'det_sim_ros.ros.netns',
+            ['ip', 'netns', 'exec', self.bridge, sys.executable, os.path.abspath(__file__),
              'relay', f'tap{i}', f'port{i}', str(delay), str(loss), str(self.seed + i)],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
             env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)))
@@ -285,6 +285,6 @@ if __name__ == '__main__':
     if len(sys.argv) == 7 and sys.argv[1] == 'relay':
         relay(sys.argv[2], sys.argv[3], float(sys.argv[4]), float(sys.argv[5]), int(sys.argv[6]))
     else:
-        print('usage: python -m det_sim_ros.ros.netns relay TAP_A TAP_B DELAY_S LOSS SEED',
+        print('usage: python test/netns_hosts.py relay TAP_A TAP_B DELAY_S LOSS SEED',
               file=sys.stderr)
         sys.exit(2)
