@@ -5,7 +5,7 @@
  * few hundred ns. contract.SampleEncoder (the struct packs) and io.log's one-by-one writer
  * stay the references the tests hold this code to, byte for byte.
  */
-#include "wire.h"
+#include "wire/wire.h"
 
 /*
  * Write sample ``out`` at ``stamp_ns`` into ``messages`` (every message's CDR bytes, one after

@@ -3,7 +3,7 @@
  * (det_sim_ros.sim.integrators), the charge-transient settings and the per-period step-count
  * control, one count per independent coupled group.
  */
-#include "binding.h"
+#include "binding/binding.h"
 
 #include <math.h>
 #include <stdlib.h>

@@ -27,8 +27,8 @@
 #include <math.h>
 #include <string.h>
 
-#include "detsim.h"
-#include "stepping.h"
+#include "physics/detsim.h"
+#include "stepping/stepping.h"
 
 #define LIMIT_MARGIN 1e-6   /* relative: the limit law starts at |i| = I (1 - LIMIT_MARGIN) */
 #define SLEW_MARGIN 1e-9    /* relative: a gap within S tau_a (1 + SLEW_MARGIN) is followed */

@@ -10,8 +10,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "detsim.h"
-#include "stepping.h"
+#include "physics/detsim.h"
+#include "stepping/stepping.h"
 
 /* Forward-difference increment: sqrt(eps) times the state's scale (the error norm's). */
 #define FD_RELATIVE 1.4901161193847656e-08

@@ -8,7 +8,7 @@
  * [low[j], high[j]]. read() writes the output vector and then the readings into one buffer,
  * which the measured topics' SampleCodec reads. IEEE operations only (no contraction).
  */
-#include "binding.h"
+#include "binding/binding.h"
 
 #include <math.h>
 #include <stdlib.h>

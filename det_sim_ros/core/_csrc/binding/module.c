@@ -2,7 +2,7 @@
  * The module det_sim_ros.core._ckernel: its types (model_type.c, stepper_type.c, io_types.c),
  * its function and its constants. binding.h lists the binding's files; detsim.h the kernel's.
  */
-#include "binding.h"
+#include "binding/binding.h"
 
 static PyMethodDef module_functions[] = {
     {"pack_records", (PyCFunction)(void (*)(void))pack_records, METH_FASTCALL,

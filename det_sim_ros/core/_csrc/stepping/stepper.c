@@ -5,8 +5,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "detsim.h"
-#include "stepping.h"
+#include "physics/detsim.h"
+#include "stepping/stepping.h"
 
 /* Whether a group's charge couples exactly to its amplifier outputs (coupling.c). */
 static int coupled(const ds_group *g, const ds_method *me)

@@ -9,8 +9,8 @@
 #include <math.h>
 #include <string.h>
 
-#include "detsim.h"
-#include "stepping.h"
+#include "physics/detsim.h"
+#include "stepping/stepping.h"
 
 #define CTL_SAFETY 0.5   /* aim the next period's estimate at half the local tolerance */
 

@@ -5,7 +5,7 @@
  * SampleCodec(fields) one sample's output messages (det_sim_ros.io.contract)
  * pack_records(...)   consecutive samples' MCAP Message records (det_sim_ros.io.log.packing)
  */
-#include "binding.h"
+#include "binding/binding.h"
 
 #include <stdlib.h>
 #include <string.h>

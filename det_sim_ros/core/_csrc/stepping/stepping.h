@@ -12,8 +12,8 @@
 #ifndef DETSIM_STEPPING_H
 #define DETSIM_STEPPING_H
 
-#include "detsim.h"
-#include "linear_part.h"
+#include "physics/detsim.h"
+#include "stepping/linear_part.h"
 
 /* A method table decoded for the core (see det_sim_ros/sim/integrators.py; method.c). */
 typedef struct {

@@ -6,7 +6,7 @@
  */
 #include <math.h>
 
-#include "detsim.h"
+#include "physics/detsim.h"
 
 /* The beams' kinetic and elastic energy (J), with the interface mass's kinetic energy; the
  * end-shortening rates dy/dt into w->ydot (w->J, w->Us4 from ds_kinematics with bending). */

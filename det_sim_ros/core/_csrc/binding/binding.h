@@ -18,9 +18,9 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 
-#include "detsim.h"
-#include "stepping.h"
-#include "wire.h"
+#include "physics/detsim.h"
+#include "stepping/stepping.h"
+#include "wire/wire.h"
 
 /* Shared between the binding's files, never exported from the module nor interposable. */
 #if defined(__GNUC__)

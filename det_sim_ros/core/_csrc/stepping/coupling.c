@@ -17,8 +17,8 @@
  */
 #include <math.h>
 
-#include "detsim.h"
-#include "stepping.h"
+#include "physics/detsim.h"
+#include "stepping/stepping.h"
 
 #define CLOSE 1e-4   /* relative gap below which the divided difference is a derivative */
 #define MAX_PHI 16   /* phi_0 .. phi_{MAX_PHI - 1} */

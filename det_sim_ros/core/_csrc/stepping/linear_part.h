@@ -9,7 +9,7 @@
 #ifndef DETSIM_LINEAR_PART_H
 #define DETSIM_LINEAR_PART_H
 
-#include "detsim.h"
+#include "physics/detsim.h"
 
 #define DS_LIN_SLOTS 4   /* step sizes whose weights are kept (a period uses 1-3) */
 

@@ -3,7 +3,7 @@
  * det_sim_ros.physics.model.ModelArrays (attribute by attribute: never positional) into its own
  * copy in C structs (ds_model, ds_cell, ds_det); its methods evaluate the physics (physics.c).
  */
-#include "binding.h"
+#include "binding/binding.h"
 
 #include <stdlib.h>
 #include <string.h>

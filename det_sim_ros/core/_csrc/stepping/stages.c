@@ -9,8 +9,8 @@
 #include <math.h>
 #include <string.h>
 
-#include "detsim.h"
-#include "stepping.h"
+#include "physics/detsim.h"
+#include "stepping/stepping.h"
 
 #define CORE_PART static inline __attribute__((always_inline))
 

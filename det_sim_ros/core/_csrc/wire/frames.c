@@ -9,7 +9,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "wire.h"
+#include "wire/wire.h"
 
 /*
  * The frame's values at state x into f->values; unless ``force``, 0 when no value moved by

@@ -10,7 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "detsim.h"
+#include "physics/detsim.h"
 
 int64_t ds_work_size(const ds_model *m)
 {

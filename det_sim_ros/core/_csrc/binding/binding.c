@@ -3,7 +3,7 @@
  * object's named fields (read attribute by attribute), and the checks of the types built once
  * from fields (FrameMap, SampleCodec).
  */
-#include "binding.h"
+#include "binding/binding.h"
 
 #include <stdlib.h>
 #include <string.h>

@@ -9,8 +9,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "detsim.h"
-#include "stepping.h"
+#include "physics/detsim.h"
+#include "stepping/stepping.h"
 
 /* Gather the group's part of the whole model's x into the local layout (energies start at 0:
  * the group adds what it books to the model's totals, see ds_period). */
