@@ -18,8 +18,15 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 
-#include "physics/detsim.h"
+#include "physics/amplifier.h"
+#include "physics/exact.h"
+#include "physics/model.h"
+#include "physics/outputs.h"
+#include "physics/physics.h"
+#include "stepping/matrix_phi.h"
+#include "stepping/method.h"
 #include "stepping/stepping.h"
+#include "wire/frames.h"
 #include "wire/wire.h"
 
 /* Shared between the binding's files, never exported from the module nor interposable. */

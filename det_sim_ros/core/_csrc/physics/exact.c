@@ -12,7 +12,7 @@
  */
 #include <math.h>
 
-#include "physics/detsim.h"
+#include "physics/exact.h"
 
 /* With GCC on x86-64 glibc the two entry points are compiled twice, for AVX2 and for the
  * baseline, and the loader picks one for the machine: the same IEEE operations in the same

@@ -6,7 +6,14 @@
  */
 #include <math.h>
 
-#include "physics/detsim.h"
+#include "physics/outputs.h"
+#include "physics/amplifier.h"
+#include "physics/physics.h"
+
+int64_t ds_n_outputs(const ds_model *m)
+{
+    return m->n_cells * DS_CELL_OUTPUTS + m->n_structure + 3;
+}
 
 /* The beams' kinetic and elastic energy (J), with the interface mass's kinetic energy; the
  * end-shortening rates dy/dt into w->ydot (w->J, w->Us4 from ds_kinematics with bending). */

@@ -10,7 +10,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "physics/detsim.h"
+#include "physics/physics.h"
+#include "physics/amplifier.h"
+#include "physics/exact.h"
 
 int64_t ds_work_size(const ds_model *m)
 {
@@ -49,11 +51,6 @@ void ds_work_free(ds_work *w)
         free(w->y);
     w->y = NULL;
     w->owned = 0;
-}
-
-int64_t ds_n_outputs(const ds_model *m)
-{
-    return m->n_cells * DS_CELL_OUTPUTS + m->n_structure + 3;
 }
 
 /* y = c2 q^2 + kappa c4 q^4 of a one-term cell (paper/consistent kinematics). */

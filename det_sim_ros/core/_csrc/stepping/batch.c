@@ -9,7 +9,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "physics/detsim.h"
+#include "physics/outputs.h"
+#include "physics/physics.h"
 #include "stepping/stepping.h"
 
 /* Gather the group's part of the whole model's x into the local layout (energies start at 0:

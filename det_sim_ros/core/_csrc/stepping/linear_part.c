@@ -10,7 +10,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "physics/detsim.h"
+#include "physics/physics.h"
+#include "stepping/matrix_phi.h"
 #include "stepping/stepping.h"
 
 /* Forward-difference increment: sqrt(eps) times the state's scale (the error norm's). */

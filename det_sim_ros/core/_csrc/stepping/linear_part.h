@@ -9,7 +9,8 @@
 #ifndef DETSIM_LINEAR_PART_H
 #define DETSIM_LINEAR_PART_H
 
-#include "physics/detsim.h"
+#include "physics/model.h"
+#include "stepping/method.h"
 
 #define DS_LIN_SLOTS 4   /* step sizes whose weights are kept (a period uses 1-3) */
 
@@ -38,9 +39,18 @@ typedef struct {
     double *mem;                        /* the doubles above, one allocation */
 } ds_linear;
 
-/* matrix_phi.c */
-int64_t ds_matrix_phi_work(int64_t n, int64_t kmax);
-void ds_matrix_phis(const double *Z, double scale, int64_t n, int64_t kmax, double *full,
-                    double *half, double *work);
+struct ds_stepper;   /* stepping.h: the stepper and its groups, which hold a ds_linear */
+struct ds_group;
+
+int ds_linear_init(ds_linear *lin, const ds_method *me, const ds_model *m);
+void ds_linear_free(ds_linear *lin);
+void ds_linear_reset(ds_linear *lin);
+/* Take A at the group's state x and input u when it is invalid or the state left it. */
+int ds_linear_update(const struct ds_stepper *st, struct ds_group *g, const double *x,
+                     const double *u);
+/* The weights for step size h (a kept slot, or computed into the least recently filled one
+ * but ``keep``). */
+const ds_lin_slot *ds_linear_weights(const ds_method *me, ds_linear *lin, double h,
+                                     const ds_lin_slot *keep);
 
 #endif

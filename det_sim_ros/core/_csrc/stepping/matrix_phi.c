@@ -11,7 +11,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "stepping/linear_part.h"
+#include "stepping/matrix_phi.h"
 
 #define TAYLOR_DEGREE 13   /* |Z| <= 1/2: the first term left out is < 1e-15 of the sum */
 #define PHI_NORM 0.5

@@ -7,8 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "physics/detsim.h"
-#include "stepping/stepping.h"
+#include "stepping/method.h"
 
 /* phi_k(z) = sum_m z^m / (m + k)!, the exponential integrators' functions (phi_0 = e^z). */
 static double phi(int64_t k, double z)

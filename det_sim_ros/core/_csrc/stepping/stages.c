@@ -9,7 +9,8 @@
 #include <math.h>
 #include <string.h>
 
-#include "physics/detsim.h"
+#include "physics/physics.h"
+#include "stepping/coupling.h"
 #include "stepping/stepping.h"
 
 #define CORE_PART static inline __attribute__((always_inline))

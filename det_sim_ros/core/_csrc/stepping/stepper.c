@@ -5,7 +5,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "physics/detsim.h"
+#include "physics/physics.h"
+#include "stepping/coupling.h"
 #include "stepping/stepping.h"
 
 /* Whether a group's charge couples exactly to its amplifier outputs (coupling.c). */
@@ -157,6 +158,7 @@ void ds_stepper_free(ds_stepper *st)
         free(g->view_cells);
         free(g->view_ints);
         free(g->view_mi);
+        free(g->transient);
         if (g->lin)
             ds_linear_free(g->lin);
         free(g->lin);
@@ -201,6 +203,11 @@ int ds_stepper_init(ds_stepper *st, const ds_model *m, double dt, double z_tol, 
         group_attach(g, &st->method, next);
         next += group_size(g, &st->method) + ds_work_size(g->m);
         g->ctl = g->ctl_initial = *ctl;
+        if (g->m->amp) {   /* the DETs' transients in an amplified period (amp_period.c) */
+            g->transient = calloc((size_t)g->m->n_cells, sizeof(ds_amp_transient));
+            if (!g->transient)
+                return -1;
+        }
         /* the error norm's weights in the group's layout (only q, qdot are in the norm) */
         const int64_t nq = g->m->n_q;
         for (int64_t k = 0; k < nq; k++) {

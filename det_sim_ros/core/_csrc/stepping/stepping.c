@@ -9,7 +9,8 @@
 #include <math.h>
 #include <string.h>
 
-#include "physics/detsim.h"
+#include "physics/physics.h"
+#include "stepping/amp_period.h"
 #include "stepping/stepping.h"
 
 #define CTL_SAFETY 0.5   /* aim the next period's estimate at half the local tolerance */
@@ -69,7 +70,7 @@ static void charge_transient(const ds_stepper *st, ds_group *g, const double *x,
 static int fixed_period(const ds_stepper *st, ds_group *g, double *x, const double *u_old,
                         const double *u, double h, int64_t n_sub)
 {
-    if (g->m->amp)   /* the amplifier's switches split the steps (amplifier.c) */
+    if (g->m->amp)   /* the amplifier's switches split the steps (amp_period.c) */
         return ds_amp_period(st, g, x, u_old, u, h, n_sub);
     if (st->z_tol > 0.0 && g->m->rc_source) {
         const double dt = h * (double)n_sub;

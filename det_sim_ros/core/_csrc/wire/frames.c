@@ -9,7 +9,8 @@
 #include <math.h>
 #include <string.h>
 
-#include "wire/wire.h"
+#include "wire/frames.h"
+#include "wire/endian.h"
 
 /*
  * The frame's values at state x into f->values; unless ``force``, 0 when no value moved by

@@ -6,6 +6,7 @@
  * stay the references the tests hold this code to, byte for byte.
  */
 #include "wire/wire.h"
+#include "wire/endian.h"
 
 /*
  * Write sample ``out`` at ``stamp_ns`` into ``messages`` (every message's CDR bytes, one after

@@ -1,66 +1,11 @@
 /*
- * The node's I/O path in compiled code, not physics (see detsim.h for the kernel's files):
- * frames.c (marker frames) and wire.c (sample messages, MCAP records), with the little-endian
- * writers they share.
+ * Sample messages and MCAP message records in compiled code (wire.c): the node's I/O path,
+ * not physics.
  */
-#ifndef DETSIM_WIRE_H
-#define DETSIM_WIRE_H
+#ifndef DETSIM_WIRE_WIRE_H
+#define DETSIM_WIRE_WIRE_H
 
 #include <stdint.h>
-#include <string.h>
-
-/* Marker frames (frames.c): the stacked polynomial map of one-coordinate cells. */
-typedef struct {
-    int64_t n_cells, n_values;             /* cells; drawn values per cell */
-    const double *maps;                    /* (cells, values, 4): the 4 coefficients of V */
-    const double *thickness_times_height;  /* n d0 l0 per cell (m^2) */
-    const int64_t *coordinate;             /* each cell's q in the state vector */
-    const int64_t *position;               /* byte offset of each value in the frame */
-    const int64_t *stamp_position;         /* byte offset of each header stamp (sec, nanosec) */
-    int64_t n_stamps;
-    int64_t height, thickness;             /* indices in a cell's values */
-    double min_thickness, tolerance;       /* m */
-    double *values, *last;                 /* scratch: this frame's and the last written */
-} ds_frame_map;
-
-int ds_frame_update(ds_frame_map *f, const double *x, unsigned char *frame, int force,
-                    int64_t stamp_ns);
-
-/* Little-endian (CDR, MCAP) scalars at ``at``. */
-static inline void ds_put_u64(unsigned char *at, uint64_t v)
-{
-#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
-    v = __builtin_bswap64(v);
-#endif
-    memcpy(at, &v, 8);
-}
-
-static inline void ds_put_u32(unsigned char *at, uint32_t v)
-{
-#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
-    v = __builtin_bswap32(v);
-#endif
-    memcpy(at, &v, 4);
-}
-
-static inline void ds_put_f64(unsigned char *at, double v)
-{
-    uint64_t bits;
-    memcpy(&bits, &v, 8);
-    ds_put_u64(at, bits);
-}
-
-/* A ROS header stamp (int32 sec, uint32 nanosec) of ``stamp_ns``, as Python's divmod gives. */
-static inline void ds_put_stamp(unsigned char *at, int64_t stamp_ns)
-{
-    int64_t sec = stamp_ns / 1000000000, nanosec = stamp_ns % 1000000000;
-    if (nanosec < 0) {
-        sec -= 1;
-        nanosec += 1000000000;
-    }
-    ds_put_u32(at, (uint32_t)(int32_t)sec);
-    ds_put_u32(at + 4, (uint32_t)nanosec);
-}
 
 /*
  * One sample's output messages (wire.c): every published double is read from the simulator's

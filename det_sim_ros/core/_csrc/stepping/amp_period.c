@@ -1,144 +1,26 @@
 /*
- * The high-voltage amplifier in the supply circuit (det_sim_ros/scenes/amplifier.py, the
- * numpy reference in det_sim_ros/physics/reference.py):
- *
- *   output voltage  dv_a/dt = clip((u - v_a) / tau_a, -S, S)   (tau_a = 1/(2 pi bandwidth);
- *                   without a bandwidth v_a ramps at +-S to u; without either v_a = u)
- *   supply current  i = clip((v_a - v_p) / Rs, -I, I),  dq_p/dt = i - v_p / Rp
- *
- * Both are piecewise smooth: each DET follows one law per step (ds_det.v_law: following,
- * slewing up or down, held; ds_det.i_law: linear or at the limit), set at the step's start,
- * and the steps end where a law switches. A slew ends at a time known in advance (v_a does
- * not depend on the load); the current limit's switches depend on the state and are located:
- * a step that ends with a DET's current past the switch is retried shorter (regula falsi on
- * the step size) until it ends within LIMIT_MARGIN of the switch, on its far side. The limit
- * law starts at |i| = I (1 - LIMIT_MARGIN) and holds while the linear law's current i_lin is
- * beyond that on its own side, so the current never exceeds I, and at a switch it moves by at
- * most 2 LIMIT_MARGIN I. (A step that leaves the limit and comes back within itself, e.g. a
- * DET discharged through 0 V, is caught by the signed test.) A period whose currents cannot
- * come near a limit (may_reach_limit) steps as if there were none. Within a law everything is
- * smooth, and each law's own linear part goes to the exponential stages (physics.c,
- * ds_stiff_rates; coupling.c): at the limit the charge relaxes through Rp only, and v_a's
- * rate is -1/tau_a when following, 0 otherwise, with the charge's coupling to a following v_a
- * exact; so no stiff term is left to the explicit stages. The supplied power is v_out i at the
- * amplifier's terminal, v_out = v_a (linear) or v_p + Rs i (at the limit): what the amplifier
- * delivers into Rs and the DET.
+ * An amplified control period (see physics/amplifier.h for the laws): the steps end where a
+ * law switches. A slew ends at a time known in advance (v_a does not depend on the load); the
+ * current limit's switches depend on the state and are located: a step that ends with a DET's
+ * current past the switch is retried shorter (regula falsi on the step size) until it ends
+ * within DS_AMP_LIMIT_MARGIN of the switch, on its far side, so at a switch the current moves
+ * by at most 2 DS_AMP_LIMIT_MARGIN I. (A step that leaves the limit and comes back within
+ * itself, e.g. a DET discharged through 0 V, is caught by the signed test.) A period whose
+ * currents cannot come near a limit (may_reach_limit) steps as if there were none. Each law's
+ * linear part goes to the exponential stages, with the charge's coupling to a following v_a
+ * exact (coupling.c); so no stiff term is left to the explicit stages.
  */
 #include <math.h>
 #include <string.h>
 
-#include "physics/detsim.h"
-#include "stepping/stepping.h"
+#include "physics/amplifier.h"
+#include "physics/physics.h"
+#include "stepping/amp_period.h"
 
-#define LIMIT_MARGIN 1e-6   /* relative: the limit law starts at |i| = I (1 - LIMIT_MARGIN) */
-#define SLEW_MARGIN 1e-9    /* relative: a gap within S tau_a (1 + SLEW_MARGIN) is followed */
 #define SQRT_HALF 0.70710678118654752440
 #define MAX_LOCATE 60       /* regula falsi iterations to locate a current-limit switch */
 #define REACH_SHARE 0.5     /* a period whose currents stay below this share of the limit
                                steps without watching for the limit */
-
-static inline int has_output_state(const ds_det *d)
-{
-    return d->amp_tau > 0.0 || d->amp_slew > 0.0;
-}
-
-/* The voltage behind Rs: the amplifier's output v_a, or the command when it has no lag. */
-static inline double source_voltage(const ds_model *m, const ds_det *d, int64_t i,
-                                    const double *x, const double *u)
-{
-    return m->amp_state && has_output_state(d) ? x[m->i_va + i] : u[i];
-}
-
-static int output_law(const ds_det *d, double u, double va)
-{
-    if (!has_output_state(d))
-        return VA_HOLD;
-    const double gap = u - va;
-    if (d->amp_slew > 0.0 && fabs(gap) > d->amp_slew * d->amp_tau * (1.0 + SLEW_MARGIN))
-        return gap > 0.0 ? VA_SLEW_UP : VA_SLEW_DOWN;
-    return d->amp_tau > 0.0 ? VA_FOLLOW : VA_HOLD;
-}
-
-static double output_rate(const ds_det *d, double u, double va)
-{
-    switch (d->v_law) {
-    case VA_FOLLOW: return (u - va) / d->amp_tau;
-    case VA_SLEW_UP: return d->amp_slew;
-    case VA_SLEW_DOWN: return -d->amp_slew;
-    default: return 0.0;
-    }
-}
-
-/* v_p of cell i from x (w->y from ds_stretches), and its capacitance *cap. */
-static inline double det_voltage(const ds_model *m, int64_t i, const double *x,
-                                 const ds_work *w, double *cap)
-{
-    const ds_det *d = &m->det[i];
-    const double lam = (m->cell[i].length - w->y[i]) * d->inv_l0;
-    *cap = d->C0 * lam * lam;
-    return x[m->i_qp + i] / *cap;
-}
-
-/* The linear law's current over the limit, i_lin / I. */
-static inline double linear_share(const ds_model *m, int64_t i, const double *x,
-                                  const double *u, const ds_work *w)
-{
-    const ds_det *d = &m->det[i];
-    double cap;
-    const double vp = det_voltage(m, i, x, w, &cap);
-    return (source_voltage(m, d, i, x, u) - vp) * d->inv_Rs / d->amp_imax;
-}
-
-/* How far past the switch out of DET i's current law the state is (< 0: the law holds; the
- * limit law holds while i_lin is beyond I (1 - LIMIT_MARGIN) on its own side). */
-static inline double past_switch(const ds_model *m, int64_t i, const double *x,
-                                 const double *u, const ds_work *w)
-{
-    const double s = linear_share(m, i, x, u, w), edge = 1.0 - LIMIT_MARGIN;
-    switch (m->det[i].i_law) {
-    case AMP_LIMIT_POS: return edge - s;
-    case AMP_LIMIT_NEG: return s + edge;
-    default: return fabs(s) - edge;
-    }
-}
-
-void ds_amp_laws(const ds_model *m, const double *x, const double *u, ds_work *w)
-{
-    ds_stretches(m, x, w, w->Us4);   /* w->y */
-    for (int64_t i = 0; i < m->n_cells; i++) {
-        ds_det *d = &m->det[i];
-        d->v_law = m->amp_state ? output_law(d, u[i], x[m->i_va + i]) : VA_HOLD;
-        d->i_law = AMP_LINEAR;
-        if (d->amp_imax > 0.0) {
-            const double s = linear_share(m, i, x, u, w);
-            if (fabs(s) >= 1.0 - LIMIT_MARGIN)
-                d->i_law = s > 0.0 ? AMP_LIMIT_POS : AMP_LIMIT_NEG;
-        }
-    }
-}
-
-ds_amp_supply ds_amp_supply_of(const ds_model *m, int64_t i, const double *x, const double *u,
-                               double vp)
-{
-    const ds_det *d = &m->det[i];
-    ds_amp_supply s;
-    s.v_src = source_voltage(m, d, i, x, u);
-    s.v_src_rate = m->amp_state && has_output_state(d) ? output_rate(d, u[i], s.v_src) : 0.0;
-    if (d->i_law != AMP_LINEAR) {
-        s.current = d->i_law == AMP_LIMIT_POS ? d->amp_imax : -d->amp_imax;
-        s.v_out = vp + d->Rs * s.current;
-    } else {
-        s.current = (s.v_src - vp) * d->inv_Rs;
-        s.v_out = s.v_src;
-    }
-    return s;
-}
-
-double ds_amp_relax(const ds_model *m, int64_t i, const double *x, const double *u)
-{
-    const ds_det *d = &m->det[i];
-    return d->i_law == AMP_LINEAR ? source_voltage(m, d, i, x, u) : 0.0;
-}
 
 /* How far past its switch the current law of any DET ended (>= 0: a switch was passed). */
 static double passed_switch(const ds_model *m, const double *x, const double *u, ds_work *w)
@@ -149,7 +31,7 @@ static double passed_switch(const ds_model *m, const double *x, const double *u,
         const ds_det *d = &m->det[i];
         if (!(d->amp_imax > 0.0))
             continue;
-        const double past = past_switch(m, i, x, u, w);
+        const double past = ds_amp_past_switch(m, i, x, u, w);
         if (past > worst)
             worst = past;
     }
@@ -174,11 +56,11 @@ static double slew_end(const ds_model *m, const double *x, const double *u)
 
 /* The slewing outputs whose ramp ends within this step of length h from x_start: exactly at
  * their band's edge (the ramp is exact but for rounding); the charge follows a new slope. */
-static void finish_slews(const ds_model *m, double *x, const double *x_start, const double *u,
-                         double h, double t_now)
+static void finish_slews(const ds_model *m, ds_amp_transient *tr, double *x,
+                         const double *x_start, const double *u, double h, double t_now)
 {
     for (int64_t i = 0; i < m->n_cells; i++) {
-        ds_det *d = &m->det[i];
+        const ds_det *d = &m->det[i];
         if (d->v_law != VA_SLEW_UP && d->v_law != VA_SLEW_DOWN)
             continue;
         const double band = d->amp_slew * d->amp_tau;
@@ -187,11 +69,11 @@ static void finish_slews(const ds_model *m, double *x, const double *x_start, co
             continue;
         x[m->i_va + i] = d->v_law == VA_SLEW_UP ? u[i] - band : u[i] + band;
         if (d->amp_tau == 0.0) {   /* held from here: the ramp's slope stops */
-            d->charge_t0 = t_now;
-            d->charge_dv = d->amp_slew * d->charge_tau;
+            tr[i].charge_t0 = t_now;
+            tr[i].charge_dv = d->amp_slew * tr[i].charge_tau;
         } else {                   /* following from here: v_a bends on tau_a */
-            d->output_t0 = t_now;
-            d->output_dv = band;
+            tr[i].output_t0 = t_now;
+            tr[i].output_dv = band;
         }
     }
 }
@@ -202,28 +84,29 @@ static void finish_slews(const ds_model *m, double *x, const double *x_start, co
  * itself relaxes on tau_a, and the charge lags by about du tau/(tau + tau_a); a slew: the
  * charge lags the ramp by S tau). w->y from ds_amp_laws.
  */
-static void start_transients(const ds_model *m, const double *x, const double *u_old,
-                             const double *u, const ds_work *w)
+static void start_transients(const ds_model *m, ds_amp_transient *tr, const double *x,
+                             const double *u_old, const double *u, const ds_work *w)
 {
     for (int64_t i = 0; i < m->n_cells; i++) {
-        ds_det *d = &m->det[i];
+        const ds_det *d = &m->det[i];
+        ds_amp_transient *t = &tr[i];
         double cap;
-        det_voltage(m, i, x, w, &cap);
-        d->charge_tau = cap * d->Rs * d->share;   /* C (Rs || Rp) */
-        d->charge_t0 = d->output_t0 = 0.0;
-        d->charge_dv = d->output_dv = 0.0;
+        ds_amp_det_voltage(m, i, x, w, &cap);
+        t->charge_tau = cap * d->Rs * d->share;   /* C (Rs || Rp) */
+        t->charge_t0 = t->output_t0 = 0.0;
+        t->charge_dv = t->output_dv = 0.0;
         if (u[i] == u_old[i])
             continue;
-        if (!m->amp_state || !has_output_state(d)) {
-            d->charge_dv = fabs(u[i] - u_old[i]);
+        if (!m->amp_state || !ds_amp_has_output_state(d)) {
+            t->charge_dv = fabs(u[i] - u_old[i]);
             continue;
         }
         const double gap = fabs(u[i] - x[m->i_va + i]);
         if (d->v_law == VA_FOLLOW) {
-            d->output_dv = gap;
-            d->charge_dv = gap * d->charge_tau / (d->charge_tau + d->amp_tau);
+            t->output_dv = gap;
+            t->charge_dv = gap * t->charge_tau / (t->charge_tau + d->amp_tau);
         } else if (d->v_law != VA_HOLD) {
-            d->charge_dv = fmin(gap, d->amp_slew * d->charge_tau);
+            t->charge_dv = fmin(gap, d->amp_slew * t->charge_tau);
         }
     }
 }
@@ -245,20 +128,22 @@ static double graded(const ds_stepper *st, double tau, double dv, double cap_sha
 }
 
 /* The largest step the transients still under way at time t of the period allow. */
-static double transient_bound(const ds_stepper *st, const ds_model *m, double t)
+static double transient_bound(const ds_stepper *st, const ds_group *g, double t)
 {
+    const ds_model *m = g->m;
     double bound = INFINITY;
     if (st->z_tol <= 0.0)
         return bound;
     for (int64_t i = 0; i < m->n_cells; i++) {
         const ds_det *d = &m->det[i];
-        const double cap_share = d->charge_tau * d->inv_Rs;
+        const ds_amp_transient *tr = &g->transient[i];
+        const double cap_share = tr->charge_tau * d->inv_Rs;
         if (d->i_law == AMP_LINEAR)
-            bound = fmin(bound, graded(st, d->charge_tau, d->charge_dv, cap_share,
-                                       t - d->charge_t0));
+            bound = fmin(bound, graded(st, tr->charge_tau, tr->charge_dv, cap_share,
+                                       t - tr->charge_t0));
         if (d->v_law == VA_FOLLOW)
-            bound = fmin(bound, graded(st, d->amp_tau, d->output_dv, cap_share,
-                                       t - d->output_t0));
+            bound = fmin(bound, graded(st, d->amp_tau, tr->output_dv, cap_share,
+                                       t - tr->output_t0));
     }
     return bound;
 }
@@ -273,7 +158,7 @@ static double graded_rung(double h, double bound)
 }
 
 /* Retry the step just taken from x_start (ending past a current-limit switch) shorter until it
- * ends at most LIMIT_MARGIN past the switch (Illinois regula falsi on the step size); *h
+ * ends at most DS_AMP_LIMIT_MARGIN past the switch (Illinois regula falsi on the step size); *h
  * receives its length. A DET that left its limit starts a charge transient (a lag of Rs I). */
 static int locate_switch(const ds_stepper *st, ds_group *g, double *x, const double *x_start,
                          const double *u, double *h, double t)
@@ -285,7 +170,7 @@ static int locate_switch(const ds_stepper *st, ds_group *g, double *x, const dou
         return DS_OK;
     double lo = 0.0, f_lo = fmin(passed_switch(m, x_start, u, &g->w), 0.0), f_hi = past_hi;
     int at_hi = 1, side = 0, status = DS_OK;
-    for (int it = 0; it < MAX_LOCATE && past_hi > LIMIT_MARGIN && hi - lo > 1e-15 * hi; it++) {
+    for (int it = 0; it < MAX_LOCATE && past_hi > DS_AMP_LIMIT_MARGIN && hi - lo > 1e-15 * hi; it++) {
         double h_try = lo - f_lo * (hi - lo) / (f_hi - f_lo);
         if (!(h_try > lo && h_try < hi))
             h_try = 0.5 * (lo + hi);
@@ -316,10 +201,10 @@ static int locate_switch(const ds_stepper *st, ds_group *g, double *x, const dou
     *h = hi;
     ds_stretches(m, x, &g->w, g->w.Us4);   /* w->y */
     for (int64_t i = 0; i < m->n_cells && status == DS_OK; i++) {
-        ds_det *d = &m->det[i];
-        if (d->i_law != AMP_LINEAR && past_switch(m, i, x, u, &g->w) >= 0.0) {
-            d->charge_t0 = t + hi;
-            d->charge_dv = d->Rs * d->amp_imax;
+        const ds_det *d = &m->det[i];
+        if (d->i_law != AMP_LINEAR && ds_amp_past_switch(m, i, x, u, &g->w) >= 0.0) {
+            g->transient[i].charge_t0 = t + hi;
+            g->transient[i].charge_dv = d->Rs * d->amp_imax;
         }
     }
     return status;
@@ -339,7 +224,7 @@ static int may_reach_limit(const ds_model *m, int64_t i, const double *x, const 
     if (d->i_law != AMP_LINEAR)
         return 1;
     double cap;
-    const double vp = det_voltage(m, i, x, w, &cap), v_src = source_voltage(m, d, i, x, u);
+    const double vp = ds_amp_det_voltage(m, i, x, w, &cap), v_src = ds_amp_source_voltage(m, d, i, x, u);
     const double lo = fmin(v_src, u[i]), hi = fmax(v_src, u[i]);
     const double vp_lo = fmin(vp, d->share * lo), vp_hi = fmax(vp, d->share * hi);
     const double gap = fmax(fabs(hi - vp_lo), fabs(vp_hi - lo));
@@ -361,7 +246,7 @@ static int ends_near_limit(const ds_model *m, const double *x, const double *u, 
 {
     ds_stretches(m, x, w, w->Us4);   /* w->y */
     for (int64_t i = 0; i < m->n_cells; i++)
-        if (m->det[i].amp_imax > 0.0 && !(fabs(linear_share(m, i, x, u, w)) < REACH_SHARE))
+        if (m->det[i].amp_imax > 0.0 && !(fabs(ds_amp_linear_share(m, i, x, u, w)) < REACH_SHARE))
             return 1;
     return 0;
 }
@@ -382,7 +267,7 @@ static int period_steps(const ds_stepper *st, ds_group *g, double *x, const doub
         const double rest = dt - t, n_rest = ceil(rest / h - 1e-9);
         /* h itself while the steps so far were whole steps: equal sizes share their weights */
         double hs = fabs(n_rest * h - rest) <= 1e-9 * h ? h : rest / n_rest;
-        const double bound = transient_bound(st, m, t), t_slew = slew_end(m, x, u);
+        const double bound = transient_bound(st, g, t), t_slew = slew_end(m, x, u);
         if (!limited && bound >= hs && t_slew >= rest * (1.0 + 1e-12)) {
             /* no law can switch before the period's end and the graded bounds only grow */
             return ds_advance(st, g, x, u, hs, (int64_t)n_rest, 1.0);
@@ -395,7 +280,7 @@ static int period_steps(const ds_stepper *st, ds_group *g, double *x, const doub
         if (status == DS_OK && limited)
             status = locate_switch(st, g, x, x_start, u, &hs, t);
         if (status == DS_OK && m->amp_state)
-            finish_slews(m, x, x_start, u, hs, t + hs);
+            finish_slews(m, g->transient, x, x_start, u, hs, t + hs);
         t += hs;
         ds_amp_laws(m, x, u, &g->w);
     }
@@ -412,7 +297,7 @@ int ds_amp_period(const ds_stepper *st, ds_group *g, double *x, const double *u_
     const size_t bytes = (size_t)m->n_state * sizeof(double);
     memcpy(g->x0, x, bytes);
     ds_amp_laws(m, x, u, &g->w);
-    start_transients(m, x, u_old, u, &g->w);
+    start_transients(m, g->transient, x, u_old, u, &g->w);
     const int limited = limit_within_reach(m, x, u, &g->w);
     g->watched += limited;
     int status = period_steps(st, g, x, u, h, n_sub, limited);
@@ -420,7 +305,7 @@ int ds_amp_period(const ds_stepper *st, ds_group *g, double *x, const double *u_
         g->watched += 1.0;
         memcpy(x, g->x0, bytes);
         ds_amp_laws(m, x, u, &g->w);
-        start_transients(m, x, u_old, u, &g->w);
+        start_transients(m, g->transient, x, u_old, u, &g->w);
         status = period_steps(st, g, x, u, h, n_sub, 1);
     }
     if (status != DS_OK)
