@@ -264,8 +264,10 @@ static PyObject *Model_rhs(ModelObject *self, PyObject *const *args, Py_ssize_t 
     if (get_buffers(args, specs, 3, b) < 0)
         return NULL;
     int qs = n == 4 ? PyObject_IsTrue(args[3]) : 0;
-    if (m->amp)   /* the amplifier's laws at this state (while stepping: at each step's start) */
+    if (m->amp) {   /* the amplifier's laws at this state (while stepping: at each step's start) */
+        ds_stretches(m, b[0].view.buf, &self->w, self->w.Us4);   /* w->y */
         ds_amp_laws(m, b[0].view.buf, b[1].view.buf, &self->w);
+    }
     int status = ds_rhs(m, b[0].view.buf, b[1].view.buf, b[2].view.buf, &self->w, qs > 0);
     release_buffers(b, 3);
     return Py_BuildValue("(idd)", status, self->w.p_in, self->w.p_diss);

@@ -5,7 +5,6 @@
 #include <math.h>
 
 #include "physics/amplifier.h"
-#include "physics/physics.h"
 
 #define SLEW_MARGIN 1e-9    /* relative: a gap within S tau_a (1 + SLEW_MARGIN) is followed */
 
@@ -31,7 +30,6 @@ static double output_rate(const ds_det *d, double u, double va)
 
 void ds_amp_laws(const ds_model *m, const double *x, const double *u, ds_work *w)
 {
-    ds_stretches(m, x, w, w->Us4);   /* w->y */
     for (int64_t i = 0; i < m->n_cells; i++) {
         ds_det *d = &m->det[i];
         d->v_law = m->amp_state ? output_law(d, u[i], x[m->i_va + i]) : VA_HOLD;

@@ -37,7 +37,8 @@ typedef struct {
     double current, v_out, v_src, v_src_rate;
 } ds_amp_supply;
 
-/* The laws at (x, u) into each DET's i_law, v_law; one DET's supply (v_p: its voltage); the
+/* The laws at (x, u) into each DET's i_law, v_law (w->y from ds_stretches at x, which the
+ * caller runs first); one DET's supply (v_p: its voltage); the
  * voltage DET i's charge relaxes towards (times Rp/(Rs+Rp)) in its current law, against which
  * the quasi-static coordinates count charge and energy: v_src while linear, 0 at the limit
  * (where the charge does not relax). */

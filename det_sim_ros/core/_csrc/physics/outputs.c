@@ -63,8 +63,10 @@ int ds_outputs(const ds_model *m, const double *x, const double *u, double *out,
     for (int64_t k = 0; k < m->n_state; k++)
         if (!isfinite(x[k]))
             status = DS_NON_FINITE;
-    if (m->amp && status == DS_OK)
+    if (m->amp && status == DS_OK) {
+        ds_stretches(m, x, w, w->Us4);   /* w->y */
         ds_amp_laws(m, x, u, w);
+    }
     const int rhs_status = ds_rhs(m, x, u, w->dx, w, 0);
     if (status == DS_OK)
         status = rhs_status;

@@ -13,9 +13,11 @@
 #include <math.h>
 #include <string.h>
 
+#include "stepping/amp_period.h"
 #include "physics/amplifier.h"
 #include "physics/physics.h"
-#include "stepping/amp_period.h"
+#include "stepping/linear_part.h"
+#include "stepping/stages.h"
 
 #define SQRT_HALF 0.70710678118654752440
 #define MAX_LOCATE 60       /* regula falsi iterations to locate a current-limit switch */
@@ -82,7 +84,7 @@ static void finish_slews(const ds_model *m, ds_amp_transient *tr, double *x,
  * The transients a control period starts with (see stepping.c, charge_transient): a command
  * jump du moves the charge's target at once (no output lag) or through v_a (a bandwidth: v_a
  * itself relaxes on tau_a, and the charge lags by about du tau/(tau + tau_a); a slew: the
- * charge lags the ramp by S tau). w->y from ds_amp_laws.
+ * charge lags the ramp by S tau). w->y from ds_stretches.
  */
 static void start_transients(const ds_model *m, ds_amp_transient *tr, const double *x,
                              const double *u_old, const double *u, const ds_work *w)
@@ -231,7 +233,7 @@ static int may_reach_limit(const ds_model *m, int64_t i, const double *x, const 
     return !(gap * d->inv_Rs < REACH_SHARE * d->amp_imax);
 }
 
-/* Whether any DET's current may reach its limit in the period from x (w->y from ds_amp_laws). */
+/* Whether any DET's current may reach its limit in the period from x (w->y from ds_stretches). */
 static int limit_within_reach(const ds_model *m, const double *x, const double *u,
                               const ds_work *w)
 {
@@ -282,6 +284,7 @@ static int period_steps(const ds_stepper *st, ds_group *g, double *x, const doub
         if (status == DS_OK && m->amp_state)
             finish_slews(m, g->transient, x, x_start, u, hs, t + hs);
         t += hs;
+        ds_stretches(m, x, &g->w, g->w.Us4);   /* w->y */
         ds_amp_laws(m, x, u, &g->w);
     }
     return status;
@@ -296,6 +299,7 @@ int ds_amp_period(const ds_stepper *st, ds_group *g, double *x, const double *u_
     ds_model *m = g->m;
     const size_t bytes = (size_t)m->n_state * sizeof(double);
     memcpy(g->x0, x, bytes);
+    ds_stretches(m, x, &g->w, g->w.Us4);   /* w->y */
     ds_amp_laws(m, x, u, &g->w);
     start_transients(m, g->transient, x, u_old, u, &g->w);
     const int limited = limit_within_reach(m, x, u, &g->w);
@@ -304,6 +308,7 @@ int ds_amp_period(const ds_stepper *st, ds_group *g, double *x, const double *u_
     if (status == DS_OK && !limited && ends_near_limit(m, x, u, &g->w)) {
         g->watched += 1.0;
         memcpy(x, g->x0, bytes);
+        ds_stretches(m, x, &g->w, g->w.Us4);   /* w->y */
         ds_amp_laws(m, x, u, &g->w);
         start_transients(m, g->transient, x, u_old, u, &g->w);
         status = period_steps(st, g, x, u, h, n_sub, 1);

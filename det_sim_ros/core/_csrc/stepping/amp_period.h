@@ -6,7 +6,7 @@
 #ifndef DETSIM_STEPPING_AMP_PERIOD_H
 #define DETSIM_STEPPING_AMP_PERIOD_H
 
-#include "stepping/stepping.h"
+#include "stepping/group.h"
 
 int ds_amp_period(const ds_stepper *st, ds_group *g, double *x, const double *u_old,
                   const double *u, double h, int64_t n_sub);

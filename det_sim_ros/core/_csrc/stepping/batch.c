@@ -9,9 +9,11 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "stepping/batch.h"
 #include "physics/outputs.h"
 #include "physics/physics.h"
-#include "stepping/stepping.h"
+#include "stepping/period.h"
+#include "stepping/stepper.h"
 
 /* Gather the group's part of the whole model's x into the local layout (energies start at 0:
  * the group adds what it books to the model's totals, see ds_period). */

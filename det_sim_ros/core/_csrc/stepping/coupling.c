@@ -17,9 +17,9 @@
  */
 #include <math.h>
 
+#include "stepping/coupling.h"
 #include "physics/amplifier.h"
 #include "physics/physics.h"
-#include "stepping/coupling.h"
 
 #define CLOSE 1e-4   /* relative gap below which the divided difference is a derivative */
 #define MAX_PHI 16   /* phi_0 .. phi_{MAX_PHI - 1} */

@@ -5,7 +5,7 @@
 #ifndef DETSIM_STEPPING_COUPLING_H
 #define DETSIM_STEPPING_COUPLING_H
 
-#include "stepping/stepping.h"
+#include "stepping/group.h"
 
 int64_t ds_coupling_size(const ds_method *me);
 int ds_coupling_fits(const ds_method *me);

@@ -10,9 +10,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "stepping/linear_part.h"
 #include "physics/physics.h"
 #include "stepping/matrix_phi.h"
-#include "stepping/stepping.h"
 
 /* Forward-difference increment: sqrt(eps) times the state's scale (the error norm's). */
 #define FD_RELATIVE 1.4901161193847656e-08

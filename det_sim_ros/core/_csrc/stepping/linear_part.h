@@ -10,6 +10,7 @@
 #define DETSIM_LINEAR_PART_H
 
 #include "physics/model.h"
+#include "stepping/group.h"
 #include "stepping/method.h"
 
 #define DS_LIN_SLOTS 4   /* step sizes whose weights are kept (a period uses 1-3) */
@@ -21,7 +22,7 @@ typedef struct {
     double *E, *W;
 } ds_lin_slot;
 
-typedef struct {
+typedef struct ds_linear {
     int64_t nd;                         /* linearised states: q, qdot (2 n_q) */
     int64_t n_pairs;                    /* merged (row, stage) pairs of the table */
     int64_t *pair_start, *pair_stage;   /* row i: pairs pair_start[i] .. [i + 1] */
@@ -39,17 +40,13 @@ typedef struct {
     double *mem;                        /* the doubles above, one allocation */
 } ds_linear;
 
-struct ds_stepper;   /* stepping.h: the stepper and its groups, which hold a ds_linear */
-struct ds_group;
-
 int ds_linear_init(ds_linear *lin, const ds_method *me, const ds_model *m);
 void ds_linear_free(ds_linear *lin);
 void ds_linear_reset(ds_linear *lin);
 /* Take A at the group's state x and input u when it is invalid or the state left it. */
-int ds_linear_update(const struct ds_stepper *st, struct ds_group *g, const double *x,
-                     const double *u);
-/* The weights for step size h (a kept slot, or computed into the least recently filled one
- * but ``keep``). */
+int ds_linear_update(const ds_stepper *st, ds_group *g, const double *x, const double *u);
+/* The weights of step size h: a kept slot, or the next slot in turn filled anew (never
+ * ``keep``, the last step's). */
 const ds_lin_slot *ds_linear_weights(const ds_method *me, ds_linear *lin, double h,
                                      const ds_lin_slot *keep);
 

@@ -9,9 +9,10 @@
 #include <math.h>
 #include <string.h>
 
+#include "stepping/stages.h"
 #include "physics/physics.h"
 #include "stepping/coupling.h"
-#include "stepping/stepping.h"
+#include "stepping/linear_part.h"
 
 #define CORE_PART static inline __attribute__((always_inline))
 

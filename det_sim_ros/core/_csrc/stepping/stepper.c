@@ -5,9 +5,10 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "stepping/stepper.h"
 #include "physics/physics.h"
 #include "stepping/coupling.h"
-#include "stepping/stepping.h"
+#include "stepping/linear_part.h"
 
 /* Whether a group's charge couples exactly to its amplifier outputs (coupling.c). */
 static int coupled(const ds_group *g, const ds_method *me)

@@ -9,9 +9,11 @@
 #include <math.h>
 #include <string.h>
 
+#include "stepping/period.h"
 #include "physics/physics.h"
 #include "stepping/amp_period.h"
-#include "stepping/stepping.h"
+#include "stepping/linear_part.h"
+#include "stepping/stages.h"
 
 #define CTL_SAFETY 0.5   /* aim the next period's estimate at half the local tolerance */
 

@@ -1,22 +1,26 @@
 /*
- * The stepper (see physics/model.h for the kernel's layers):
+ * The stepper's records (see physics/model.h for the kernel's layers): a model's stepper
+ * (ds_stepper) and what each coupled group steps with (ds_group), shared by the stepping
+ * units, each with its own header:
  *
- * stages.c   n steps of the exponential Runge-Kutta stages on one group (ds_advance)
- * stepping.c one group's control period: charge transient, step-count controller
- * stepper.c  the stepper's set-up: a model view and scratch per coupled group
- * batch.c    the whole model's control periods (groups one by one or over threads), runs
- *
- * with the units it steps through: method.h (the method table, phi functions),
- * linear_part.h and matrix_phi.h (a dense linear part over the beams' q, qdot), coupling.h
- * (the charge's exact coupling to an amplifier output that follows its command) and
- * amp_period.h (an amplified period split where a law switches).
+ * stepper.h     the set-up: a model view and scratch per coupled group (stepper.c)
+ * stages.h      n steps of the exponential Runge-Kutta stages on one group (stages.c)
+ * period.h      one group's control period: charge transient, step-count controller
+ *               (period.c)
+ * batch.h       the whole model's control periods (groups one by one or over threads), runs
+ *               (batch.c)
+ * amp_period.h  an amplified period, split where a law of the amplifier switches
+ * coupling.h    the charge's exact coupling to an amplifier output that follows its command
+ * linear_part.h a dense linear part over the beams' q, qdot (with matrix_phi.h)
+ * method.h      the method table and the phi functions
  */
-#ifndef DETSIM_STEPPING_H
-#define DETSIM_STEPPING_H
+#ifndef DETSIM_STEPPING_GROUP_H
+#define DETSIM_STEPPING_GROUP_H
 
 #include "physics/model.h"
-#include "stepping/linear_part.h"
 #include "stepping/method.h"
+
+struct ds_linear;   /* linear_part.h */
 
 /* The transients of one DET in an amplified control period (amp_period.c): the charge's and
  * the output's last transient (start time in the period, s; time constant, s; size, V). */
@@ -47,7 +51,7 @@ typedef struct ds_group {
     int64_t s0, s1;                     /* states with a stiff rate: [s0, s1) */
     int64_t q_first, c_first;           /* first coordinate and cell in the whole model */
     int quasi_static;
-    ds_linear *lin;                     /* dense linear part over q, qdot (NULL: none) */
+    struct ds_linear *lin;              /* dense linear part over q, qdot (NULL: none) */
     double *cpl;                        /* the charge's coupling to v_a (coupling.c; NULL:
                                            none) */
     int status;                         /* of the last period (batch) */
@@ -77,19 +81,5 @@ typedef struct ds_stepper {
     double lin_refresh;                 /* weighted state change that renews it */
     double lin_refresh_input;           /* input change (V) that renews it (0: any) */
 } ds_stepper;
-
-/* st->method must be initialised (ds_method_init) before. */
-int ds_stepper_init(ds_stepper *st, const ds_model *m, double dt, double z_tol, double fine,
-                    const ds_control *ctl, const double *inv_scale);
-void ds_stepper_free(ds_stepper *st);
-int ds_advance(const ds_stepper *st, ds_group *g, double *x, const double *u, double h,
-               int64_t n_steps, double growth);
-int ds_period(ds_stepper *st, double *x, const double *u_old, const double *u);
-/* One control period of one group (stepping.c); ds_period runs it for each group. */
-int ds_period_core(const ds_stepper *st, ds_group *g, double *x, const double *u_old,
-                   const double *u);
-void ds_reset_control(ds_stepper *st);
-int ds_run(ds_stepper *st, ds_work *ow, double *x, const double *u_held, const double *u_last,
-           const double *U, int64_t n, double *X, double *Y, int64_t *done);
 
 #endif
