@@ -16,7 +16,7 @@ from setuptools.command.build_ext import build_ext
 
 package_name = 'det_sim_ros'
 # the kernel by layer: physics/, stepping/ (on physics), wire/ (ROS message bytes) and
-# binding/ (the Python types, on all three); includes name the layer ("physics/detsim.h")
+# binding/ (the Python types, on all three); includes name the layer ("physics/model.h")
 KERNEL_DIR = 'det_sim_ros/core/_csrc'
 KERNEL_SOURCES = sorted(glob(KERNEL_DIR + '/*/*.c'))
 # -O3 without -ffast-math: IEEE semantics (NaN checks, bit-identical runs) are kept;

@@ -1,5 +1,5 @@
 /*
- * Stepper(model, ...): a Model's stepping (stepper.c, stepping.c, batch.c): its method table
+ * Stepper(model, ...): a Model's stepping (stepping/: stepper.c, period.c, batch.c): its method table
  * (det_sim_ros.sim.integrators), the charge-transient settings and the per-period step-count
  * control, one count per independent coupled group.
  */

@@ -7,11 +7,12 @@
  *            readable numpy in det_sim_ros/physics/reference.py, which the tests hold this
  *            code to), outputs.h (the named outputs), exact.h (the exact kinematics'
  *            quadrature), amplifier.h (the amplifier's laws in the supply circuit)
- * stepping/  on physics: stepping.h (the stepper: method tables, exponential Runge-Kutta
- *            stages, a group's control period, set-up, batch runs), method.h, linear_part.h
- *            and matrix_phi.h (a dense linear part over the beams), coupling.h (the charge's
- *            exact coupling to an amplifier output), amp_period.h (an amplified period split
- *            where a law switches)
+ * stepping/  on physics: group.h (the stepper's records, ds_stepper and ds_group, which hold
+ *            the stepping state), stepper.h (set-up), stages.h (the exponential Runge-Kutta
+ *            stages), period.h (a group's control period), batch.h (the whole model's
+ *            periods, runs), amp_period.h (an amplified period split where a law switches),
+ *            coupling.h (the charge's exact coupling to an amplifier output), method.h,
+ *            linear_part.h and matrix_phi.h (a dense linear part over the beams)
  * wire/      beside physics, the node's I/O path: frames.h (marker frames), wire.h (sample
  *            messages in CDR, MCAP message records), endian.h (the writers they share)
  * binding/   on all three: the Python types (buffer protocol only: no numpy C API)

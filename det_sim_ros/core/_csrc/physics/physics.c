@@ -586,7 +586,7 @@ rhs_general(const ds_model *m, const double *x, const double *u, double *dx, ds_
  * dx = f(x, u); returns a status code. Finiteness of x is checked once per step by the callers.
  *
  * With ``quasi_static`` the charge slots hold z = q_p - C(q) v_inf (v_inf = v Rp/(Rs+Rp), the
- * charge the circuit relaxes to for frozen q) and receive dz/dt (see stepping.c), and the
+ * charge the circuit relaxes to for frozen q) and receive dz/dt (see stepping/period.c), and the
  * supplied-energy slot receives the rate of W_in - v q_p, v v_p / Rp (see ds_shift_charge).
  * w->p_in, w->p_diss receive the supplied and dissipated power (W) either way.
  */

@@ -81,7 +81,7 @@ static void finish_slews(const ds_model *m, ds_amp_transient *tr, double *x,
 }
 
 /*
- * The transients a control period starts with (see stepping.c, charge_transient): a command
+ * The transients a control period starts with (see period.c, charge_transient): a command
  * jump du moves the charge's target at once (no output lag) or through v_a (a bandwidth: v_a
  * itself relaxes on tau_a, and the charge lags by about du tau/(tau + tau_a); a slew: the
  * charge lags the ramp by S tau). w->y from ds_stretches.
@@ -114,7 +114,7 @@ static void start_transients(const ds_model *m, ds_amp_transient *tr, const doub
 }
 
 /* The largest step a transient of size dv (V) on the time scale tau allows, ``since`` its start
- * (the graded steps of stepping.c: fine tau (jump_ref/dv)^(1/5), growing like exp(t/(5 tau)),
+ * (the graded steps of period.c: fine tau (jump_ref/dv)^(1/5), growing like exp(t/(5 tau)),
  * until the charge lag cap_share dv exp(-t/tau) is below z_tol). */
 static double graded(const ds_stepper *st, double tau, double dv, double cap_share,
                      double since)
