@@ -1,6 +1,7 @@
 /*
  * The module det_sim_ros.core._ckernel: its types (model_type.c, stepper_type.c, io_types.c),
- * its function and its constants. binding.h lists the binding's files; physics/model.h the kernel's layers.
+ * its function and its constants. binding.h lists the binding's files; physics/model.h the
+ * kernel's layers.
  */
 #include "binding/binding.h"
 
@@ -16,7 +17,8 @@ static PyMethodDef module_functions[] = {
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_ckernel",
-    "Compiled DET-beam kernel: the model's rhs/outputs and the stepping core (see physics/model.h).",
+    "Compiled DET-beam kernel: the model's rhs/outputs and the stepping core "
+    "(see physics/model.h).",
     -1, module_functions,
 };
 

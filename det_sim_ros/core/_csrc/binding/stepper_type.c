@@ -1,7 +1,7 @@
 /*
- * Stepper(model, ...): a Model's stepping (stepping/: stepper.c, period.c, batch.c): its method table
- * (det_sim_ros.sim.integrators), the charge-transient settings and the per-period step-count
- * control, one count per independent coupled group.
+ * Stepper(model, ...): a Model's stepping (stepping/: stepper.c, period.c, batch.c): its
+ * method table (det_sim_ros.sim.integrators), the charge-transient settings and the per-period
+ * step-count control, one count per independent coupled group.
  */
 #include "binding/binding.h"
 
@@ -140,6 +140,10 @@ static PyObject *Stepper_advance(StepperObject *self, PyObject *const *args, Py_
         return NULL;
     ds_group *g = &self->st.group[0];
     int status = DS_OK;
+    if (g->m->amp) {   /* the amplifier's laws at the start state, as a period sets them */
+        ds_stretches(g->m, b[0].view.buf, &g->w, g->w.Us4);   /* w->y */
+        ds_amp_laws(g->m, b[0].view.buf, b[1].view.buf, &g->w);
+    }
     if (g->lin)   /* the dense linear part at the start state */
         status = ds_linear_update(&self->st, g, b[0].view.buf, b[1].view.buf);
     if (status == DS_OK)

@@ -6,8 +6,8 @@
  *                   without a bandwidth v_a ramps at +-S to u; without either v_a = u)
  *   supply current  i = clip((v_a - v_p) / Rs, -I, I),  dq_p/dt = i - v_p / Rp
  *
- * Both are piecewise smooth: each DET follows one law per step (ds_det.v_law: following,
- * slewing up or down, held; ds_det.i_law: linear or at the limit), set at the step's start
+ * Both are piecewise smooth: each DET follows one law per step (ds_work.v_law: following,
+ * slewing up or down, held; ds_work.i_law: linear or at the limit), set at the step's start
  * (ds_amp_laws). The limit law starts at |i| = I (1 - DS_AMP_LIMIT_MARGIN) and holds while the
  * linear law's current i_lin is beyond that on its own side, so the current never exceeds I.
  * Within a law everything is smooth, and each law's own linear part goes to the exponential
@@ -37,15 +37,16 @@ typedef struct {
     double current, v_out, v_src, v_src_rate;
 } ds_amp_supply;
 
-/* The laws at (x, u) into each DET's i_law, v_law (w->y from ds_stretches at x, which the
+/* The laws at (x, u) into w->i_law, w->v_law (w->y from ds_stretches at x, which the
  * caller runs first); one DET's supply (v_p: its voltage); the
  * voltage DET i's charge relaxes towards (times Rp/(Rs+Rp)) in its current law, against which
  * the quasi-static coordinates count charge and energy: v_src while linear, 0 at the limit
  * (where the charge does not relax). */
 void ds_amp_laws(const ds_model *m, const double *x, const double *u, ds_work *w);
 ds_amp_supply ds_amp_supply_of(const ds_model *m, int64_t i, const double *x, const double *u,
-                               double vp);
-double ds_amp_relax(const ds_model *m, int64_t i, const double *x, const double *u);
+                               const ds_work *w, double vp);
+double ds_amp_relax(const ds_model *m, int64_t i, const double *x, const double *u,
+                    const ds_work *w);
 
 /* Whether the amplifier's output v_a is a state (a bandwidth or a slew-rate limit). */
 static inline int ds_amp_has_output_state(const ds_det *d)
@@ -86,7 +87,7 @@ static inline double ds_amp_past_switch(const ds_model *m, int64_t i, const doub
                                         const double *u, const ds_work *w)
 {
     const double s = ds_amp_linear_share(m, i, x, u, w), edge = 1.0 - DS_AMP_LIMIT_MARGIN;
-    switch (m->det[i].i_law) {
+    switch (w->i_law[i]) {
     case AMP_LIMIT_POS: return edge - s;
     case AMP_LIMIT_NEG: return s + edge;
     default: return fabs(s) - edge;

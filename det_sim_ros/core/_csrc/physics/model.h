@@ -54,9 +54,8 @@ typedef struct {
     /* derived once: the rhs multiplies instead of dividing */
     double inv_l0, inv_C0, inv_Rs, inv_Rp, share /* Rp/(Rs+Rp) */, relax_M /* E_M/eta_M */;
     /* the amplifier (0: off): output time constant 1/(2 pi bandwidth) (s), slew-rate limit
-     * (V/s), current limit (A); the laws of the current step (AMP_*, VA_*: amplifier.h) */
+     * (V/s), current limit (A) */
     double amp_tau, amp_slew, amp_imax;
-    int i_law, v_law;
 } ds_det;
 
 /* A model (or one coupled group of a model: a view with local indices). */
@@ -87,6 +86,8 @@ typedef struct {
     double *Us4, *ydot;                /* outputs: bending energy beyond EI int w''^2, dy/dt */
     double *dx;                        /* outputs: a rate buffer */
     double p_in, p_diss;               /* supplied and dissipated power of the last rhs, W */
+    int *i_law, *v_law;                /* each DET's amplifier laws at the state of the last
+                                        * ds_amp_laws on this scratch (amplifier.h) */
     int owned;                         /* the buffer is this scratch's (ds_work_init) */
 } ds_work;
 

@@ -81,7 +81,7 @@ int ds_outputs(const ds_model *m, const double *x, const double *u, double *out,
         if (m->rc_source) {
             qp = x[m->i_qp + c];
             vp = qp / cap;
-            i_de = m->amp ? ds_amp_supply_of(m, c, x, u, vp).current : (u[c] - vp) / d->Rs;
+            i_de = m->amp ? ds_amp_supply_of(m, c, x, u, w, vp).current : (u[c] - vp) / d->Rs;
         } else {
             vp = u[c];
             qp = cap * vp;

@@ -17,7 +17,9 @@
 int64_t ds_work_size(const ds_model *m)
 {
     const int64_t nc = m->n_cells, nq = m->n_q;
-    return 2 * nc + 2 * nq + nq * m->mass_block + 2 * nc + m->n_state + 1;
+    const int64_t laws = (2 * nc * (int64_t)sizeof(int) + (int64_t)sizeof(double) - 1)
+                         / (int64_t)sizeof(double);   /* i_law, v_law */
+    return 2 * nc + 2 * nq + nq * m->mass_block + 2 * nc + m->n_state + 1 + laws;
 }
 
 /* Lay the scratch out in ``buf`` (ds_work_size doubles, owned by the caller). */
@@ -33,6 +35,8 @@ void ds_work_attach(ds_work *w, const ds_model *m, double *buf)
     w->Us4 = w->Mt + nq * m->mass_block;
     w->ydot = w->Us4 + nc;
     w->dx = w->ydot + nc;
+    w->i_law = (int *)(w->dx + m->n_state + 1);
+    w->v_law = w->i_law + nc;
 }
 
 int ds_work_init(ds_work *w, const ds_model *m)
@@ -338,11 +342,12 @@ rc_circuit(const ds_det *d, double v, const det_state *s, int quasi_static, doub
 /* The supply circuit of DET i under its amplifier's laws (amplifier.c): dq_p/dt, dv_a/dt into
  * dx; the supplied power v_out i, the rate of W_in - v_relax q_p and Rs i^2 added to *pw. */
 static void amplified_circuit(const ds_model *m, int64_t i, const double *x, const double *u,
-                              const det_state *s, int quasi_static, double *dx, det_power *pw)
+                              const ds_work *w, const det_state *s, int quasi_static,
+                              double *dx, det_power *pw)
 {
     const ds_det *d = &m->det[i];
-    const ds_amp_supply a = ds_amp_supply_of(m, i, x, u, s->vp);
-    const double relax_rate = d->i_law == AMP_LINEAR ? a.v_src_rate : 0.0;
+    const ds_amp_supply a = ds_amp_supply_of(m, i, x, u, w, s->vp);
+    const double relax_rate = w->i_law[i] == AMP_LINEAR ? a.v_src_rate : 0.0;
     dx[m->i_qp + i] = a.current - s->vp * d->inv_Rp;
     if (m->amp_state)
         dx[m->i_va + i] = a.v_src_rate;
@@ -404,7 +409,7 @@ static int rhs_one_term(const ds_model *m, const double *x, const double *u, dou
         return lam == lam ? DS_BAD_STRETCH : DS_BAD_SLOPE;
     const double inv_lam = 1.0 / lam, inv_lam2 = inv_lam * inv_lam;
     const double v = u[0];
-    const double v_relax = m->amp ? ds_amp_relax(m, 0, x, u) : v;
+    const double v_relax = m->amp ? ds_amp_relax(m, 0, x, u, w) : v;
     double vp, bracket, qp = 0.0;
     if (m->rc_source) {
         qp = x[m->i_qp];
@@ -428,7 +433,7 @@ static int rhs_one_term(const ds_model *m, const double *x, const double *u, dou
     det_power pw = {0.0, v * vp * d->inv_Rp, 0.0};
     if (m->amp) {
         pw.p_leak_in = 0.0;
-        amplified_circuit(m, 0, x, u, &s, quasi_static, dx, &pw);
+        amplified_circuit(m, 0, x, u, w, &s, quasi_static, dx, &pw);
         p_diss += pw.p_diss;
     } else {
         const double i_de = m->rc_source
@@ -514,7 +519,7 @@ static int det_cell(const ds_model *m, int64_t i, const double *x, const double 
     const double inv_lam = 1.0 / lam, inv_lam2 = inv_lam * inv_lam;
     double vp, bracket, qp = 0.0;
     /* the voltage the charge relaxes towards (times Rp/(Rs+Rp)); see ds_amp_relax */
-    const double v_relax = m->amp ? ds_amp_relax(m, i, x, u) : u[i];
+    const double v_relax = m->amp ? ds_amp_relax(m, i, x, u, w) : u[i];
     /* dU_DE/dlambda without the sign of dlambda/dq = -J/l0 (eq 53, corrected eq 71) */
     if (m->rc_source) {
         qp = x[m->i_qp + i];
@@ -540,7 +545,7 @@ static int det_cell(const ds_model *m, int64_t i, const double *x, const double 
         dx[m->i_eps + i] = lzd - d->relax_M * eps;
     const det_state s = {lam, jqd, qp, vp, v_relax};
     if (m->amp) {   /* the amplifier's laws of this step (amplifier.c) */
-        amplified_circuit(m, i, x, u, &s, quasi_static, dx, pw);
+        amplified_circuit(m, i, x, u, w, &s, quasi_static, dx, pw);
     } else {
         double i_de;
         if (m->rc_source)
@@ -616,10 +621,10 @@ int ds_stiff_rates(const ds_model *m, const double *x, double *L, ds_work *w, in
         if (!(lam > 0.0))
             return lam == lam ? DS_BAD_STRETCH : DS_BAD_SLOPE;
         /* at the amplifier's current limit the charge relaxes through Rp only */
-        const double g = d->i_law == AMP_LINEAR ? d->inv_Rs + d->inv_Rp : d->inv_Rp;
+        const double g = w->i_law[i] == AMP_LINEAR ? d->inv_Rs + d->inv_Rp : d->inv_Rp;
         L[m->i_qp + i] = -g * d->inv_C0 / (lam * lam);
         if (m->amp_state)   /* v_a: exact in each law (a first-order lag, a ramp, held) */
-            L[m->i_va + i] = d->v_law == VA_FOLLOW ? -1.0 / d->amp_tau : 0.0;
+            L[m->i_va + i] = w->v_law[i] == VA_FOLLOW ? -1.0 / d->amp_tau : 0.0;
     }
     return DS_OK;
 }
@@ -650,7 +655,7 @@ void ds_shift_charge(const ds_model *m, double *x, const double *u, double sign,
         const ds_det *d = &m->det[i];
         const double lam = (m->cell[i].length - w->y[i]) / d->l0;
         /* with an amplifier: against what its current law relaxes the charge to */
-        const double v = m->amp ? ds_amp_relax(m, i, x, u) : u[i];
+        const double v = m->amp ? ds_amp_relax(m, i, x, u, w) : u[i];
         work_in += v * x[m->i_qp + i];
         x[m->i_qp + i] += sign * d->C0 * lam * lam * v * d->share;
         work_out += v * x[m->i_qp + i];

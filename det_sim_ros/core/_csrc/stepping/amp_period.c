@@ -41,12 +41,12 @@ static double passed_switch(const ds_model *m, const double *x, const double *u,
 }
 
 /* The time (from now) at which the first slewing output reaches its target band. */
-static double slew_end(const ds_model *m, const double *x, const double *u)
+static double slew_end(const ds_model *m, const double *x, const double *u, const ds_work *w)
 {
     double t = INFINITY;
     for (int64_t i = 0; i < m->n_cells; i++) {
         const ds_det *d = &m->det[i];
-        if (d->v_law != VA_SLEW_UP && d->v_law != VA_SLEW_DOWN)
+        if (w->v_law[i] != VA_SLEW_UP && w->v_law[i] != VA_SLEW_DOWN)
             continue;
         const double ti = (fabs(u[i] - x[m->i_va + i]) - d->amp_slew * d->amp_tau)
                           / d->amp_slew;
@@ -58,18 +58,18 @@ static double slew_end(const ds_model *m, const double *x, const double *u)
 
 /* The slewing outputs whose ramp ends within this step of length h from x_start: exactly at
  * their band's edge (the ramp is exact but for rounding); the charge follows a new slope. */
-static void finish_slews(const ds_model *m, ds_amp_transient *tr, double *x,
+static void finish_slews(const ds_model *m, const ds_work *w, ds_amp_transient *tr, double *x,
                          const double *x_start, const double *u, double h, double t_now)
 {
     for (int64_t i = 0; i < m->n_cells; i++) {
         const ds_det *d = &m->det[i];
-        if (d->v_law != VA_SLEW_UP && d->v_law != VA_SLEW_DOWN)
+        if (w->v_law[i] != VA_SLEW_UP && w->v_law[i] != VA_SLEW_DOWN)
             continue;
         const double band = d->amp_slew * d->amp_tau;
         const double ti = (fabs(u[i] - x_start[m->i_va + i]) - band) / d->amp_slew;
         if (ti > h * (1.0 + 1e-12))
             continue;
-        x[m->i_va + i] = d->v_law == VA_SLEW_UP ? u[i] - band : u[i] + band;
+        x[m->i_va + i] = w->v_law[i] == VA_SLEW_UP ? u[i] - band : u[i] + band;
         if (d->amp_tau == 0.0) {   /* held from here: the ramp's slope stops */
             tr[i].charge_t0 = t_now;
             tr[i].charge_dv = d->amp_slew * tr[i].charge_tau;
@@ -104,10 +104,10 @@ static void start_transients(const ds_model *m, ds_amp_transient *tr, const doub
             continue;
         }
         const double gap = fabs(u[i] - x[m->i_va + i]);
-        if (d->v_law == VA_FOLLOW) {
+        if (w->v_law[i] == VA_FOLLOW) {
             t->output_dv = gap;
             t->charge_dv = gap * t->charge_tau / (t->charge_tau + d->amp_tau);
-        } else if (d->v_law != VA_HOLD) {
+        } else if (w->v_law[i] != VA_HOLD) {
             t->charge_dv = fmin(gap, d->amp_slew * t->charge_tau);
         }
     }
@@ -140,10 +140,10 @@ static double transient_bound(const ds_stepper *st, const ds_group *g, double t)
         const ds_det *d = &m->det[i];
         const ds_amp_transient *tr = &g->transient[i];
         const double cap_share = tr->charge_tau * d->inv_Rs;
-        if (d->i_law == AMP_LINEAR)
+        if (g->w.i_law[i] == AMP_LINEAR)
             bound = fmin(bound, graded(st, tr->charge_tau, tr->charge_dv, cap_share,
                                        t - tr->charge_t0));
-        if (d->v_law == VA_FOLLOW)
+        if (g->w.v_law[i] == VA_FOLLOW)
             bound = fmin(bound, graded(st, d->amp_tau, tr->output_dv, cap_share,
                                        t - tr->output_t0));
     }
@@ -172,7 +172,8 @@ static int locate_switch(const ds_stepper *st, ds_group *g, double *x, const dou
         return DS_OK;
     double lo = 0.0, f_lo = fmin(passed_switch(m, x_start, u, &g->w), 0.0), f_hi = past_hi;
     int at_hi = 1, side = 0, status = DS_OK;
-    for (int it = 0; it < MAX_LOCATE && past_hi > DS_AMP_LIMIT_MARGIN && hi - lo > 1e-15 * hi; it++) {
+    for (int it = 0; it < MAX_LOCATE && past_hi > DS_AMP_LIMIT_MARGIN && hi - lo > 1e-15 * hi;
+         it++) {
         double h_try = lo - f_lo * (hi - lo) / (f_hi - f_lo);
         if (!(h_try > lo && h_try < hi))
             h_try = 0.5 * (lo + hi);
@@ -204,7 +205,7 @@ static int locate_switch(const ds_stepper *st, ds_group *g, double *x, const dou
     ds_stretches(m, x, &g->w, g->w.Us4);   /* w->y */
     for (int64_t i = 0; i < m->n_cells && status == DS_OK; i++) {
         const ds_det *d = &m->det[i];
-        if (d->i_law != AMP_LINEAR && ds_amp_past_switch(m, i, x, u, &g->w) >= 0.0) {
+        if (g->w.i_law[i] != AMP_LINEAR && ds_amp_past_switch(m, i, x, u, &g->w) >= 0.0) {
             g->transient[i].charge_t0 = t + hi;
             g->transient[i].charge_dv = d->Rs * d->amp_imax;
         }
@@ -223,10 +224,11 @@ static int may_reach_limit(const ds_model *m, int64_t i, const double *x, const 
     const ds_det *d = &m->det[i];
     if (!(d->amp_imax > 0.0))
         return 0;
-    if (d->i_law != AMP_LINEAR)
+    if (w->i_law[i] != AMP_LINEAR)
         return 1;
     double cap;
-    const double vp = ds_amp_det_voltage(m, i, x, w, &cap), v_src = ds_amp_source_voltage(m, d, i, x, u);
+    const double vp = ds_amp_det_voltage(m, i, x, w, &cap);
+    const double v_src = ds_amp_source_voltage(m, d, i, x, u);
     const double lo = fmin(v_src, u[i]), hi = fmax(v_src, u[i]);
     const double vp_lo = fmin(vp, d->share * lo), vp_hi = fmax(vp, d->share * hi);
     const double gap = fmax(fabs(hi - vp_lo), fabs(vp_hi - lo));
@@ -269,7 +271,7 @@ static int period_steps(const ds_stepper *st, ds_group *g, double *x, const doub
         const double rest = dt - t, n_rest = ceil(rest / h - 1e-9);
         /* h itself while the steps so far were whole steps: equal sizes share their weights */
         double hs = fabs(n_rest * h - rest) <= 1e-9 * h ? h : rest / n_rest;
-        const double bound = transient_bound(st, g, t), t_slew = slew_end(m, x, u);
+        const double bound = transient_bound(st, g, t), t_slew = slew_end(m, x, u, &g->w);
         if (!limited && bound >= hs && t_slew >= rest * (1.0 + 1e-12)) {
             /* no law can switch before the period's end and the graded bounds only grow */
             return ds_advance(st, g, x, u, hs, (int64_t)n_rest, 1.0);
@@ -282,7 +284,7 @@ static int period_steps(const ds_stepper *st, ds_group *g, double *x, const doub
         if (status == DS_OK && limited)
             status = locate_switch(st, g, x, x_start, u, &hs, t);
         if (status == DS_OK && m->amp_state)
-            finish_slews(m, g->transient, x, x_start, u, hs, t + hs);
+            finish_slews(m, &g->w, g->transient, x, x_start, u, hs, t + hs);
         t += hs;
         ds_stretches(m, x, &g->w, g->w.Us4);   /* w->y */
         ds_amp_laws(m, x, u, &g->w);

@@ -91,7 +91,7 @@ void ds_coupling_weights(const ds_method *me, ds_group *g, double h)
         double *cp = g->cpl + i * size;
         const int64_t kz = m->i_qp + i, kv = m->i_va + i;
         cp[0] = 0.0;
-        if (d->v_law != VA_FOLLOW || d->i_law != AMP_LINEAR || !(g->L[kz] < 0.0))
+        if (g->w.v_law[i] != VA_FOLLOW || g->w.i_law[i] != AMP_LINEAR || !(g->L[kz] < 0.0))
             continue;
         cp[0] = -d->inv_Rs / (g->L[kz] * d->amp_tau);
         det_corners(me, g->L, cp[0], kz, kv, h, cp);
