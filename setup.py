@@ -15,7 +15,10 @@ from setuptools import Extension, find_packages, setup
 from setuptools.command.build_ext import build_ext
 
 package_name = 'det_sim_ros'
-KERNEL_SOURCES = sorted(glob('det_sim_ros/core/_csrc/*.c'))
+# the kernel by layer: physics/, stepping/ (on physics), wire/ (ROS message bytes) and
+# binding/ (the Python types, on all three); includes name the layer ("physics/model.h")
+KERNEL_DIR = 'det_sim_ros/core/_csrc'
+KERNEL_SOURCES = sorted(glob(KERNEL_DIR + '/*/*.c'))
 # -O3 without -ffast-math: IEEE semantics (NaN checks, bit-identical runs) are kept;
 # -fno-math-errno lets sqrt/exp compile to plain instructions.
 KERNEL_FLAGS = ['-O3', '-std=c99', '-fno-math-errno']
@@ -56,7 +59,8 @@ setup(
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*', 'bench']),
     ext_modules=[Extension('det_sim_ros.core._ckernel', KERNEL_SOURCES,
-                           depends=glob('det_sim_ros/core/_csrc/*.h'),
+                           depends=sorted(glob(KERNEL_DIR + '/*/*.h')),
+                           include_dirs=[KERNEL_DIR],
                            extra_compile_args=KERNEL_FLAGS)],
     cmdclass={'build_ext': BuildKernel},
     data_files=[

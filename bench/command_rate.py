@@ -3,7 +3,7 @@ What a controller's command rate costs the physics: CPU and internal steps per c
 
 The node holds each command for a whole control period, so a controller that sends a new voltage
 every period makes every period start with an input jump; on RC scenes the exponential steppers
-then resolve the charge transient with graded fine steps (fixed_period in _csrc/stepping.c,
+then resolve the charge transient with graded fine steps (fixed_period in _csrc/stepping/period.c,
 calibrated on the 'step' scenes' kV jumps), even when the jump is 1 V.
 
 For the default scene and the 100-copy array at integrator.tolerance 1e-6, after the start has

@@ -351,7 +351,7 @@ def test_stress_long_run_million_steps():
     for name, values in r.outputs.items():
         assert np.all(np.isfinite(values)), name
     # the charging transients after each of the 20 switches are resolved (fixed_period in
-    # _csrc/stepping.c)
+    # _csrc/stepping/period.c)
     assert abs(sim.power_residual()) < 1e-3
 
 

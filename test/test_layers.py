@@ -148,3 +148,105 @@ def test_importing_the_package_has_no_side_effects():
             'if m in sys.modules]\n'
             'assert not heavy, heavy\n')
     subprocess.run([sys.executable, '-c', code], check=True)
+
+
+# The C kernel's layers (folders of det_sim_ros/core/_csrc): physics and wire (the node's
+# message bytes) at the ground, stepping on physics, the Python binding on all three. A unit is
+# a .c file with the header of the same name (group.h, model.h: records without a .c file).
+C_DIR = os.path.join(PACKAGE_DIR, 'core', '_csrc')
+C_LAYERS = {'physics': 0, 'wire': 0, 'stepping': 1, 'binding': 2}
+
+
+def _c_files():
+    for folder, _, files in os.walk(C_DIR):
+        for name in sorted(files):
+            if name.endswith(('.c', '.h')):
+                yield os.path.relpath(os.path.join(folder, name), C_DIR).replace(os.sep, '/')
+
+
+def _c_includes(rel):
+    """Yield (included path as written, line) for every quoted #include of a kernel file."""
+    with open(os.path.join(C_DIR, rel), encoding='utf-8') as f:
+        for line_no, line in enumerate(f, 1):
+            parts = line.split()
+            if len(parts) >= 2 and parts[0] == '#include' and parts[1].startswith('"'):
+                yield parts[1].strip('"'), line_no
+
+
+def _c_unit(rel):
+    return rel.rsplit('.', 1)[0]
+
+
+def _c_graph(files):
+    """Map each unit to the units it includes, from {path: [(included, line)]}."""
+    graph = {}
+    for rel, found in files.items():
+        graph.setdefault(_c_unit(rel), set()).update(
+            _c_unit(target) for target, _ in found if _c_unit(target) != _c_unit(rel))
+    return graph
+
+
+def _c_cycles(graph):
+    state, cycles = {}, []
+
+    def visit(node, trail):
+        state[node] = 'open'
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 'open':
+                cycles.append(' -> '.join(trail[trail.index(nxt):] + [nxt]))
+            elif nxt not in state:
+                visit(nxt, trail + [nxt])
+        state[node] = 'done'
+
+    for unit in sorted(graph):
+        if unit not in state:
+            visit(unit, [unit])
+    return cycles
+
+
+def test_every_kernel_file_sits_in_a_layer():
+    files = list(_c_files())
+    assert files, f'no kernel sources under {C_DIR}'
+    stray = [rel for rel in files if rel.split('/')[0] not in C_LAYERS or rel.count('/') != 1]
+    assert not stray, f'kernel files outside the layer folders: {stray}'
+
+
+def _c_upward(files):
+    """List the includes in {path: [(included, line)]} not of a header of a lower layer."""
+    wrong = []
+    for rel, found in files.items():
+        home = rel.split('/')[0]
+        for target, line in found:
+            layer = target.split('/')[0]
+            if target not in files or not target.endswith('.h') or layer not in C_LAYERS:
+                wrong.append(f'{rel}:{line} includes "{target}" (not a layer/header.h)')
+            elif layer != home and C_LAYERS[layer] >= C_LAYERS[home]:
+                wrong.append(f'{rel}:{line} includes {target} (not below {home})')
+    return wrong
+
+
+def test_kernel_includes_point_down_only():
+    """
+    Check that every quoted include names an existing header of its own or a lower layer.
+
+    "physics/model.h", never a bare "model.h": the folder in the include is the layer it
+    comes from, so this check (and a reader) sees the arrow.
+    """
+    wrong = _c_upward({rel: list(_c_includes(rel)) for rel in _c_files()})
+    assert not wrong, 'kernel includes that do not point down:\n' + '\n'.join(wrong)
+
+
+def test_no_kernel_unit_includes_one_that_includes_it():
+    graph = _c_graph({rel: list(_c_includes(rel)) for rel in _c_files()})
+    cycles = _c_cycles(graph)
+    assert not cycles, 'kernel include cycles:\n' + '\n'.join(cycles)
+
+
+def test_the_kernel_checks_see_a_planted_upward_include():
+    """Check that the include checks read what they claim: a planted include is found."""
+    files = {rel: list(_c_includes(rel)) for rel in _c_files()}
+    assert not _c_upward(files) and not _c_cycles(_c_graph(files))
+    files['physics/physics.c'] = files['physics/physics.c'] + [('stepping/stages.h', 0)]
+    assert _c_upward(files) == ['physics/physics.c:0 includes stepping/stages.h '
+                                '(not below physics)']
+    assert 'physics/physics -> stepping/stages -> physics/physics' in _c_cycles(_c_graph(files))

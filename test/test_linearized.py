@@ -199,7 +199,7 @@ def test_a_new_command_every_period_through_the_lab_amplifier_takes_few_more_ste
 
     A controller's command, new every period (1.5 kV + 1 kV sin(2 pi 5 Hz t)), under the
     linearized method: the bandwidth's output transient after each command is integrated
-    exactly with the charge (core/_csrc/coupling.c), so the steps need not stay below its
+    exactly with the charge (core/_csrc/stepping/coupling.c), so the steps need not stay below its
     4 us time constant (measured: 1.7x the steps without the amplifier; 28x with the coupling
     left to the explicit stages).
     """

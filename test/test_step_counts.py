@@ -9,7 +9,7 @@ AUTO_TOLERANCE). They follow from the step-size control's constants
 TRANSIENT_FINE, TRANSIENT_CHARGE, MAX_STEP, STABLE_STEP, LINEAR_REFRESH, LINEAR_REFRESH_INPUT,
 LINEARIZED_MAX_FACTOR, AUTO_TOLERANCE;
 CTL_SAFETY, the growth rules and the count ladder of linearized methods in
-core/_csrc/stepping.c; 'default' and 'exact_n3' step with 'etdrk4_linearized', the others
+core/_csrc/stepping/period.c; 'default' and 'exact_n3' step with 'etdrk4_linearized', the others
 with 'etdrk4' or 'dp5'), so a change to any of them shows here by name rather than only as a
 changed fingerprint in bench/behaviour_hashes.py.
 

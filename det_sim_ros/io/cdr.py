@@ -11,7 +11,7 @@ a sequence is a uint32 count and its items; a fixed array is its items; an empty
 uint8. Padding is written as zeros, so equal messages give equal bytes (rclpy's own serializer
 leaves padding and trailing bytes uninitialised, which strict readers such as rosbags refuse).
 
-The compiled encoders (``core/_csrc/wire.c``) are the fast paths of :class:`Writer`'s layouts;
+The compiled encoders (``core/_csrc/wire/wire.c``) are the fast paths of :class:`Writer`'s layouts;
 this module is the reference the tests hold them to.
 """
 

@@ -84,8 +84,8 @@ class ModelArrays:
     """
     Everything the compiled kernel reads, by name.
 
-    core/_csrc/model_type.c reads these fields one attribute at a time; no positional tuple. SI
-    units. Built by :func:`build_model`.
+    core/_csrc/binding/model_type.c reads these fields one attribute at a time; no positional
+    tuple. SI units. Built by :func:`build_model`.
 
     The state is q (n_q Ritz coordinates, cell by cell), qdot (n_q), eps_E (n_cells, if
     ``creep``), q_p (n_cells, if ``rc_source``), the amplifiers' output voltages v_a (n_cells,
@@ -133,7 +133,7 @@ class ModelArrays:
     eta_v: np.ndarray          # Kelvin-Voigt viscosity, Pa s
     Rs: np.ndarray             # series resistance, Ohm
     Rp: np.ndarray             # leakage resistance, Ohm
-    # the amplifier in the supply circuit (core/_csrc/amplifier.c), read when ``amplifier``
+    # the amplifier in the supply circuit (core/_csrc/physics/amplifier.c), read when ``amplifier``
     amplifier: int = 0         # 1: a bandwidth, slew rate or current limit shapes the supply
     amp_state: int = 0         # 1: the outputs v_a are states (a bandwidth or slew rate)
     amp_tau: np.ndarray = None   # output time constant 1/(2 pi bandwidth), s (0: ideal)
@@ -235,8 +235,8 @@ class Model:
         """
         Book an instantaneous recharge of an ideal source in the power monitor.
 
-        In place; see ds_book_input_jump in _csrc/physics.c. Nothing to book for an RC source,
-        without the monitor, or without a change.
+        In place; see ds_book_input_jump in _csrc/physics/physics.c. Nothing to book for an RC
+        source, without the monitor, or without a change.
         """
         if self.scene.source != 'ideal' or not self.scene.monitor_power:
             return

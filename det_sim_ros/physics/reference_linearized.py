@@ -2,9 +2,9 @@
 The numpy reference of the linearized exponential methods (``etdrk4_linearized``).
 
 A dense linear part over the beams' Ritz coordinates and rates next to the stiff diagonal of
-:func:`det_sim_ros.physics.reference.stiff_rates`; the kernel's ``core/_csrc/linear_part.c``
-and ``stages.c`` are held to these functions by test/test_linearized.py. Without an
-amplifier: the kernel's amplified circuit under a linearized method is held to the plain
+:func:`det_sim_ros.physics.reference.stiff_rates`; the kernel's ``linear_part.c`` and
+``stages.c`` (``core/_csrc/stepping``) are held to these functions by test/test_linearized.py.
+Without an amplifier: the kernel's amplified circuit under a linearized method is held to the plain
 method at a tight tolerance instead.
 """
 

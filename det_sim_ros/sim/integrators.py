@@ -3,7 +3,7 @@ Fixed-step steppers declared as coefficient tables over one compiled stepping co
 
 Each :class:`Method` is data: stage nodes ``c`` and the coefficients a_ij, b_i written as sums of
 ``weight * phi_k(c_arg * h * L)`` (``k = -1``: a constant weight). The compiled core
-(``ds_advance`` in det_sim_ros/core/_csrc/stages.c) treats x' = L x + N(x) with the stiff
+(``ds_advance`` in det_sim_ros/core/_csrc/stepping/stages.c) treats x' = L x + N(x) with the stiff
 diagonal L of the charge equation (dq_p/dt = -q_p / (C0 lam^2 Rs||Rp) + v/Rs, linear in q_p for
 frozen q) exactly and everything else explicitly; for states with L = 0 every exponential method
 reduces to the classical Runge-Kutta method with the same table (phi_k(0) = 1/k!).
@@ -206,9 +206,9 @@ def get_method(name: str) -> Method:
 # Step size that meets a tolerance: a method of order p reaches a relative Delta-y error of about
 # ERROR_CONSTANT * (h / 1 ms)^p on the 'step' scenario. Measured on all six scenes (both beams,
 # eps_b 0.15/0.20/0.25) against Radau/DOP853 rtol 1e-12 references, with the charge transients
-# resolved (fixed_period in _csrc/stepping.c): etdrk4 (RC source) 0.035...0.14, dp5 (ideal source)
-# 0.0013...0.05; the largest, at eps_b = 0.15 where the snap-through is most sensitive, is used so
-# the tolerance holds on every shared scene.
+# resolved (fixed_period in _csrc/stepping/period.c): etdrk4 (RC source) 0.035...0.14, dp5
+# (ideal source) 0.0013...0.05; the largest, at eps_b = 0.15 where the snap-through is most
+# sensitive, is used so the tolerance holds on every shared scene.
 ERROR_CONSTANT = {'etdrk4': 0.15, 'etdrk4_linearized': 0.15, 'dp5': 0.06}
 MAX_STEP = 1.0e-3   # s: keeps h * omega_beam < 0.6 (stable for every table here)
 
@@ -239,7 +239,7 @@ def min_substeps(dt: float, beam_rate: float = 0.0) -> int:
     return max(1, int(math.ceil(dt / h_max - 1e-9)))
 
 
-# Adaptive step counts (ds_period_core in _csrc/stepping.c): fixed steps inside each control
+# Adaptive step counts (ds_period_core in _csrc/stepping/period.c): fixed steps inside each control
 # period, their number chosen per period from the method's embedded error estimate, weighted per
 # Ritz coordinate by 1/l (deflection) and dt/l (velocity) with l the cell's beam length. The local
 # tolerance is LOCAL_TOLERANCE[embedded order] times the scene tolerance: the scene tolerance
@@ -273,7 +273,7 @@ LINEARIZED_MAX_FACTOR = 16
 @dataclasses.dataclass(frozen=True)
 class StepControl:
     """
-    The per-period step-count controller's settings (ds_period_core in _csrc/stepping.c).
+    The per-period step-count controller's settings (ds_period_core in _csrc/stepping/period.c).
 
     Fixed at ``substeps`` when ``tolerance`` is 0, else adaptive between ``min_substeps`` and
     ``max_substeps`` from the embedded estimate (which scales as n^-``exponent``).
@@ -358,9 +358,9 @@ def error_weights(model) -> np.ndarray:
     return w
 
 
-# Resolving the charge transient after an input jump (fixed_period in _csrc/stepping.c): steps of
-# TRANSIENT_FINE * tau while the charge lag exceeds TRANSIENT_CHARGE * tolerance * C0 v_max.
-# The first step after a jump is TRANSIENT_FINE * tau, later ones grow geometrically (see
+# Resolving the charge transient after an input jump (fixed_period in _csrc/stepping/period.c):
+# steps of TRANSIENT_FINE * tau while the charge lag exceeds TRANSIENT_CHARGE * tolerance * C0
+# v_max. The first step after a jump is TRANSIENT_FINE * tau, later ones grow geometrically (see
 # fixed_period). Measured on 'step' with etdrk4 (fixed 0.15/0.20, simply supported 0.15):
 # 0.35 at 3e-6, scaled as tolerance^(1/4), keeps the error below the tolerance at 1e-6 and 1e-8
 # (2.4e-7...5.7e-7 and 2.5e-9...4.9e-9), so the first step follows the tolerance.
@@ -373,10 +373,10 @@ class TransientSettings:
     """
     How the stepper resolves the charge transient after an input jump.
 
-    See fixed_period in _csrc/stepping.c: while the charge lag exceeds ``z_tol`` (C; 0: never),
-    graded steps from ``fine`` * tau, ``fine`` sized for jumps of ``jump_ref`` (V); a smaller
-    jump du starts at fine * (jump_ref / du)^(1/5), the same local error for its smaller lag
-    (0: every jump at ``fine``).
+    See fixed_period in _csrc/stepping/period.c: while the charge lag exceeds ``z_tol`` (C; 0:
+    never), graded steps from ``fine`` * tau, ``fine`` sized for jumps of ``jump_ref`` (V); a
+    smaller jump du starts at fine * (jump_ref / du)^(1/5), the same local error for its smaller
+    lag (0: every jump at ``fine``).
     """
 
     z_tol: float = 0.0

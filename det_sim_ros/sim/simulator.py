@@ -4,8 +4,9 @@ The simulator: state, the sim-time grid t = k dt, and inputs held between comman
 :class:`Simulator` advances exactly one control period dt per :meth:`Simulator.step` with the input
 held constant (zero-order hold), in fixed internal steps of the chosen method. With
 ``integrator.substeps: 0`` and a method that has an embedded error estimate (the default) their
-number adapts from period to period to the scene's tolerance (ds_period_core in _csrc/stepping.c);
-else it is fixed. Independent coupled groups (the copies of an array) each keep their own count.
+number adapts from period to period to the scene's tolerance (ds_period_core in
+_csrc/stepping/period.c); else it is fixed. Independent coupled groups (the copies of an array)
+each keep their own count.
 Time is always ``k * dt`` (never accumulated), and the same inputs give bit-identical outputs: the
 step count depends only on the state and the inputs. A state that leaves the model's domain puts
 the simulator in a fault: the last good state is kept, ``fault`` names the cause, and
