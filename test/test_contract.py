@@ -276,13 +276,13 @@ def test_inputs_within_is_the_generator_check():
 
 def test_sample_codec_refuses_inconsistent_fields():
     """
-    Check that _ckernel.SampleCodec checks its named fields.
+    Check that SampleCodec checks its named fields.
 
-    _ckernel.SampleCodec checks its named fields: a value or stamp outside the messages, a
+    SampleCodec (core.kernel) checks its named fields: a value or stamp outside the messages, a
     bad op, offsets that do not span the template; it is built once.
     """
     import dataclasses
-    from det_sim_ros.core._ckernel import SampleCodec
+    from det_sim_ros.core.kernel import SampleCodec
     encoder = OutputContract(Simulator(load_scene('default')).model).encoder()
     wire = encoder.wire
     size = len(wire.template)
