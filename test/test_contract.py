@@ -228,6 +228,7 @@ def test_vector_command_fast_path_gives_what_the_general_path_gives(n):
     assert decoder.decode('voltage_command', big, held).volts == volts
 
 
+@pytest.mark.ros
 def test_contract_and_replay_need_no_rclpy(tmp_path):
     """The contract, the recorder and re-simulation run without importing rclpy."""
     code = (

@@ -102,6 +102,7 @@ def test_common_frame_lays_out_the_cells():
     assert len(ys) == 3 and ys[0] == 0.0 and ys[1] > 0.0
 
 
+@pytest.mark.ros
 def test_node_publishes_markers_at_the_display_rate(harness, tmp_path):
     """
     Check that the node publishes 30 frames per simulated second, all logged.
@@ -289,6 +290,7 @@ def test_frame_paths_refuse_what_the_model_cannot_take():
         MarkerFrames(sim.model, paths=('fast',))
 
 
+@pytest.mark.ros
 def test_no_frames_without_a_viewer_or_a_log(harness):
     """
     Check that the node builds no frames without a marker subscriber or a log.
@@ -309,6 +311,7 @@ def test_no_frames_without_a_viewer_or_a_log(harness):
     h.close()
 
 
+@pytest.mark.ros
 def test_markers_off(harness):
     h = harness(**{'markers.rate_hz': 0.0})
     assert h.node.markers is None

@@ -252,6 +252,7 @@ def _wait_flushes(child, count):
     return flushed
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize('mode', ['sync', 'bg'])
 def test_sigkill_loses_at_most_the_last_flush_period(tmp_path, mode):
     """A SIGKILL keeps everything written up to the last flush (with the writer thread too)."""
@@ -286,6 +287,7 @@ def test_sigkill_loses_at_most_the_last_flush_period(tmp_path, mode):
         assert {m.name for m in reader.iter_metadata()} >= {'det_sim_ros'}
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize('mode', ['sync', 'bg'])
 def test_sigint_finishes_the_file(tmp_path, mode):
     from mcap.reader import make_reader

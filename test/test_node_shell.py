@@ -11,6 +11,8 @@ import threading
 from det_sim_ros.cli import main
 import pytest
 
+pytestmark = pytest.mark.ros
+
 NS = ['--ns', 'arm1']
 RATE = 0.1   # real_time_factor: 100 samples per wall second
 

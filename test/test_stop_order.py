@@ -13,6 +13,8 @@ import textwrap
 from det_sim_ros.ros import spinning
 import pytest
 
+pytestmark = pytest.mark.ros
+
 
 class _Recorder:
     def __init__(self, events):
