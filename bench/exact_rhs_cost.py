@@ -15,7 +15,7 @@ method 'auto') at fidelity exact with n_r 3, 5, 7:
 
 ~3 min on a shared 2-core host:
 
-    flock /work/bench.lock python bench/exact_rhs_cost.py --baseline DIR [--levels 5,7]
+    flock bench/.lock python bench/exact_rhs_cost.py --baseline DIR [--levels 5,7]
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ Prints the smallest 'exact' n_r within 1 % on all three cases (by either scale) 
 "How to choose" section of docs/fidelity.md (between its markers) with date, commit and machine.
 Run it under the bench lock on a quiet host:
 
-    flock /work/bench.lock env PYTHONPATH=. python bench/fidelity_choice.py [--no-docs]
+    flock bench/.lock env PYTHONPATH=. python bench/fidelity_choice.py [--no-docs]
 """
 
 from __future__ import annotations

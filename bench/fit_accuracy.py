@@ -11,7 +11,7 @@ error is below 1 % (Rp, the leakage resistance, has a time constant of ~100 s: a
 identify it, and it must be flagged).
 
 The fit runs as ``det_sim fit`` does: the search at the coarse level, the polish at the default
-scene's (docs/calibration.md, Two levels). Run: ``flock /work/bench.lock python
+scene's (docs/calibration.md, Two levels). Run: ``flock bench/.lock python
 bench/fit_accuracy.py --seeds 0:5`` (each fit of four parameters takes ~20-60 s on a shared
 2-core host; split the seeds over runs of <= 3 min).
 """

@@ -1,7 +1,7 @@
 """
 Speed of ``det_sim fit``: a 10 s, 1 kHz log, 5 parameters, on this machine's cores.
 
-Measured side by side in one run (run it alone: ``flock /work/bench.lock python
+Measured side by side in one run (run it alone: ``flock bench/.lock python
 bench/fit_speed.py``):
 
 - one simulate() call of the 10 s log (the fit's unit of work) at ``fidelity: paper`` and at

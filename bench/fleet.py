@@ -2,7 +2,7 @@
 """
 Benchmark fleets of sim_nodes: nodes per host, lockstep loops per host, QoS across hosts.
 
-A script, not a test. Run each part under the CPU lock.
+A script, not a test. Run each part under the bench lock (bench/README.md).
 
 capacity  N default-scene nodes in real time at 1 kHz on this host (det_sim_ros.ros.fleet), one
           listener process subscribed (reliable, depth 1000) to every node's displacement:
@@ -22,9 +22,9 @@ hosts     One node at 1 kHz in real time (lockstep_* cases: lockstep, sim s per 
           with or without config/dds_lossy.xml.
 
 Usage (root for hosts):
-    flock /tmp/det_cpu.lock python bench/fleet.py capacity --nodes 1,2,4 --seconds 15
-    flock /tmp/det_cpu.lock python bench/fleet.py lockstep --nodes 1,2,4,8 --seconds 10
-    flock /tmp/det_cpu.lock python bench/fleet.py hosts --cases direct,lossy_keep_all_profile
+    flock bench/.lock python bench/fleet.py capacity --nodes 1,2,4 --seconds 15
+    flock bench/.lock python bench/fleet.py lockstep --nodes 1,2,4,8 --seconds 10
+    flock bench/.lock python bench/fleet.py hosts --cases direct,lossy_keep_all_profile
 Add --json FILE to append the numbers (one JSON object per line).
 """
 

@@ -13,8 +13,8 @@ worst case only, or none). --baseline DIR times the paper level through another 
 kernel in a subprocess, interleaved with this one, for a same-host ratio. One case takes ~2 min
 on a shared 2-core host:
 
-    flock /work/bench.lock python bench/stiff_speed.py --cases simply_supported0.20 \
-        [--scipy worst] [--baseline /work/main] [--ref-dir DIR]
+    flock bench/.lock python bench/stiff_speed.py --cases simply_supported0.20 \
+        [--scipy worst] [--baseline ../other-checkout] [--ref-dir DIR]
 """
 
 from __future__ import annotations

@@ -30,7 +30,7 @@ Writes bench/data/work_precision_map.csv (one row per point and workload) and, w
 docs/figures/work_precision_map.png (error against CPU, one curve per level and n_r, the front
 marked). ``--plot-only`` redraws from the CSV. Run it under the bench lock:
 
-    flock /work/bench.lock env PYTHONPATH=. python bench/work_precision_map.py [--quick]
+    flock bench/.lock env PYTHONPATH=. python bench/work_precision_map.py [--quick]
         [--array] [--lsoda] [--plot]
 """
 

@@ -1,5 +1,10 @@
 """
-Fixtures for launch-free, in-process ROS 2 tests.
+Fixtures for launch-free, in-process ROS 2 tests, and the check of the ``ros`` mark.
+
+A test that starts rclpy (a context, a node) or a process carries ``@pytest.mark.ros`` (a
+module of such tests ``pytestmark = pytest.mark.ros``), so ``pytest -m "not ros"`` runs the rest
+as a fast inner loop. A test that uses a ROS fixture without the mark is refused at collection;
+one that starts rclpy or a process without it fails when it does.
 
 rclpy runs in an isolated domain with localhost-only discovery, set before rclpy.init: the
 ROS_DOMAIN_ID the user has set (respected), else one picked from the pid. Each test gets its
@@ -11,6 +16,7 @@ SingleThreadedExecutor.
 import math
 import os
 import signal
+import subprocess
 import sys
 import time
 
@@ -56,6 +62,40 @@ DOMAIN_ID = pick_domain_id(os.environ, os.getpid())
 os.environ['ROS_DOMAIN_ID'] = str(DOMAIN_ID)
 
 WALL_TIMEOUT = 120.0  # s; a safety net only: a wait that hits it fails the test
+
+ROS_FIXTURES = ('ros_context', 'det_sim')   # harness uses ros_context
+ROS_MARK_HINT = ('mark it @pytest.mark.ros (or its module pytestmark = pytest.mark.ros): '
+                 'pytest -m "not ros" must stay free of rclpy and processes')
+
+
+def pytest_collection_modifyitems(config, items):
+    """Refuse the run when a test uses a ROS fixture without the ``ros`` mark."""
+    unmarked = [item.nodeid for item in items
+                if set(ROS_FIXTURES) & set(getattr(item, 'fixturenames', ()))
+                and item.get_closest_marker('ros') is None]
+    if unmarked:
+        raise pytest.UsageError(f'{len(unmarked)} test(s) use {" or ".join(ROS_FIXTURES)} '
+                                f'without the ros mark ({", ".join(unmarked[:5])}): '
+                                + ROS_MARK_HINT)
+
+
+@pytest.fixture(autouse=True)
+def ros_mark_checked(request, monkeypatch):
+    """Fail a test without the ``ros`` mark when it starts rclpy or a process."""
+    if request.node.get_closest_marker('ros') is not None:
+        return
+
+    def refuse(what):
+        def refused(*args, **kwargs):
+            pytest.fail(f'{request.node.nodeid} {what}: {ROS_MARK_HINT}', pytrace=False)
+        return refused
+
+    monkeypatch.setattr(subprocess.Popen, '__init__', refuse('starts a process'))
+    try:
+        from rclpy.context import Context
+    except ImportError:   # no rclpy: nothing to start
+        return
+    monkeypatch.setattr(Context, 'init', refuse('initialises rclpy'))
 
 
 @pytest.fixture

@@ -14,6 +14,8 @@ from det_sim_ros.ros.testing import det_sim  # noqa: F401
 from det_sim_ros.scenes.scene import load_scene
 import pytest
 
+pytestmark = pytest.mark.ros
+
 T_STEP, TARGET, KP, KI = 0.1, 2.0e-3, 2.0e4, 6.0e6   # s, m, V/m, V/(m s)
 
 

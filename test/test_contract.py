@@ -228,6 +228,7 @@ def test_vector_command_fast_path_gives_what_the_general_path_gives(n):
     assert decoder.decode('voltage_command', big, held).volts == volts
 
 
+@pytest.mark.ros
 def test_contract_and_replay_need_no_rclpy(tmp_path):
     """The contract, the recorder and re-simulation run without importing rclpy."""
     code = (
@@ -276,13 +277,13 @@ def test_inputs_within_is_the_generator_check():
 
 def test_sample_codec_refuses_inconsistent_fields():
     """
-    Check that _ckernel.SampleCodec checks its named fields.
+    Check that SampleCodec checks its named fields.
 
-    _ckernel.SampleCodec checks its named fields: a value or stamp outside the messages, a
+    SampleCodec (core.kernel) checks its named fields: a value or stamp outside the messages, a
     bad op, offsets that do not span the template; it is built once.
     """
     import dataclasses
-    from det_sim_ros.core._ckernel import SampleCodec
+    from det_sim_ros.core.kernel import SampleCodec
     encoder = OutputContract(Simulator(load_scene('default')).model).encoder()
     wire = encoder.wire
     size = len(wire.template)

@@ -25,6 +25,7 @@ def _other_than_the_pid_default():
     return str(session if session != from_pid else from_pid + 101)
 
 
+@pytest.mark.ros
 def test_the_fixture_runs_on_the_users_domain(det_sim, monkeypatch):
     users = _other_than_the_pid_default()
     monkeypatch.setenv('ROS_DOMAIN_ID', users)

@@ -55,6 +55,7 @@ def wait_for_text(proc, needle, count=1):
         time.sleep(0.05)
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize('stop', [signal.SIGINT, signal.SIGTERM])
 def test_fleet_starts_its_nodes_and_forwards_the_stop(tmp_path, stop):
     """
@@ -99,6 +100,7 @@ def _running(pid):
         return False
 
 
+@pytest.mark.ros
 def test_nodes_stop_cleanly_when_the_fleet_process_is_killed(tmp_path):
     """
     Check that the nodes stop cleanly when the fleet process is killed.
@@ -126,6 +128,7 @@ def test_nodes_stop_cleanly_when_the_fleet_process_is_killed(tmp_path):
     assert len(finished_logs(str(tmp_path / 'logs' / 'orphan'))) == 1
 
 
+@pytest.mark.ros
 def test_a_node_that_cannot_start_stops_the_fleet(tmp_path):
     """
     Check that a node that cannot start stops the fleet.
@@ -296,6 +299,7 @@ def _namespaces():
                           timeout=STEP_LIMIT).stdout
 
 
+@pytest.mark.ros
 def test_fleet_across_three_namespace_hosts(tmp_path):
     """
     Check a fleet across three hosts against the same fleet on one host.
@@ -332,6 +336,7 @@ def test_fleet_across_three_namespace_hosts(tmp_path):
         assert len(finished_logs(across[i])) == 1
 
 
+@pytest.mark.ros
 def test_qos_keep_all_for_lossy_links(harness, tmp_path, ros_context):
     """
     Check that qos_keep_all makes every endpoint reliable KEEP_ALL for lossy links.
@@ -370,6 +375,7 @@ def _needs_namespaces():
         pytest.skip(f'{why}: the hosts of this test are network namespaces')
 
 
+@pytest.mark.ros
 def test_namespaces_left_by_a_killed_run_are_removed(tmp_path):
     """
     Check that namespaces left by a killed run are removed by the next run.
@@ -421,6 +427,7 @@ print(len(rtts), min(rtts.values()))
 """
 
 
+@pytest.mark.ros
 def test_relay_link_delays_and_drops_frames():
     """
     Check that the relay link delays and drops frames.

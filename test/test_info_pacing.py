@@ -11,6 +11,8 @@ import re
 
 import pytest
 
+pytestmark = pytest.mark.ros
+
 PERIOD = 0.05    # s, info_period and diagnostics_period
 
 

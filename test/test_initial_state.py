@@ -188,6 +188,7 @@ def test_missing_rest_state_is_refused_with_a_reason(monkeypatch):
 MS = 1_000_000  # ns
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize('initial_state', ['rest', 'released'])
 def test_node_starts_and_resets_to_the_initial_state_and_logs_it(tmp_path, harness,
                                                                  initial_state):

@@ -12,6 +12,7 @@ import subprocess
 import sys
 
 import det_sim_ros
+import pytest
 
 PACKAGE_DIR = os.path.dirname(det_sim_ros.__file__)
 # rank of each layer: a module may import its own layer and any layer of a lower rank
@@ -137,6 +138,7 @@ def test_the_layer_check_sees_a_planted_upward_import(tmp_path):
     assert 'det_sim_ros.ros.node' in found
 
 
+@pytest.mark.ros
 def test_importing_the_package_has_no_side_effects():
     """Check that ``import det_sim_ros`` is cheap and inert: no signal handlers, rclpy, numpy."""
     code = ('import signal, sys\n'

@@ -300,6 +300,7 @@ def live_node(tmp_path, **params):
     return node, port_of(node.wait_for('live view on ws://'))
 
 
+@pytest.mark.ros
 def test_node_live_view(tmp_path):
     node, port = live_node(tmp_path, scene_file='sensor_laser', diagnostics_period=0.25)
     try:
@@ -333,6 +334,7 @@ def test_node_live_view(tmp_path):
     assert len(seen) < logged - 1000, (len(seen), logged)
 
 
+@pytest.mark.ros
 def test_view_serves_a_log_from_start_to_end(tmp_path):
     from det_sim_ros.io.log import Recorder
     from det_sim_ros.io.replay import simulate_to_log
@@ -390,6 +392,7 @@ def test_view_serves_a_log_from_start_to_end(tmp_path):
     assert [stamp(msg) for _, msg in first_pass['/displacement']] == logged['/displacement']
 
 
+@pytest.mark.ros
 def test_without_the_extra_or_with_the_port_taken_the_node_refuses_in_one_line(tmp_path):
     blocked = tmp_path / 'blocked'
     (blocked / 'foxglove').mkdir(parents=True)
@@ -451,6 +454,7 @@ def test_a_client_json_command_is_the_cdr_a_dds_publisher_sends():
     assert nan.volts is None and 'non-finite voltage on det0' in nan.reason, nan.reason
 
 
+@pytest.mark.ros
 def test_live_rate_serves_every_nth_sample_and_the_log_keeps_all(tmp_path):
     node, port = live_node(tmp_path, **{'live.rate_hz': 100, 'allow_duplicate_name': 'true'})
     try:

@@ -23,6 +23,8 @@ from det_sim_ros.sim.simulator import Simulator
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 KP, KI, T_STEP, TARGET = 2.0e4, 6.0e6, 0.6, 2.0e-3   # V/m, V/(m s), s, m
 
 

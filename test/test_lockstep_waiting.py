@@ -13,6 +13,8 @@ from conftest import WALL_TIMEOUT
 import pytest
 from test_fleet import start_fleet, text, wait_for_text, write_fleet
 
+pytestmark = pytest.mark.ros
+
 WAIT = re.compile(r'^waiting \d+\.\d s for 1 answer to t = 0 s on /voltage_command or '
                   r'/voltage_command_joint \(0 of 1\)$')
 

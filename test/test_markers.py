@@ -102,6 +102,7 @@ def test_common_frame_lays_out_the_cells():
     assert len(ys) == 3 and ys[0] == 0.0 and ys[1] > 0.0
 
 
+@pytest.mark.ros
 def test_node_publishes_markers_at_the_display_rate(harness, tmp_path):
     """
     Check that the node publishes 30 frames per simulated second, all logged.
@@ -241,14 +242,12 @@ def test_stacked_cells_give_the_general_paths_frame(name, overrides, volts):
     sim = driven(load_scene(name, overrides=overrides), volts, 40)
 
     def paths():
-        compiled, stacked, general = (MarkerFrames(sim.model) for _ in range(3))
-        stacked._compiled = general._compiled = None
-        general._stacked = None
-        return compiled, stacked, general
+        return (MarkerFrames(sim.model), MarkerFrames(sim.model, paths=('stacked',)),
+                MarkerFrames(sim.model, paths=('general',)))
 
     compiled, stacked, general = paths()
-    assert stacked._stacked is not None and len(stacked._stacked.maps) == len(volts)
-    assert (compiled._compiled is None) == (name == 'plate')
+    assert (stacked.path, general.path) == ('stacked', 'general')
+    assert compiled.path == ('stacked' if name == 'plate' else 'compiled')
     np.testing.assert_allclose(stacked.values(sim.x), general.values(sim.x),
                                rtol=1e-12, atol=1e-16)
     drawn = [[(p.x, p.y, p.z) for m in deserialize(MARKER_TYPE, f.frame(sim.x, sim.u, 7)).markers
@@ -258,7 +257,7 @@ def test_stacked_cells_give_the_general_paths_frame(name, overrides, volts):
     assert sent == stacked.frame(sim.x, sim.u, 5_000_000_007)
     for shift in (0.0, 1e-13, 1e-9, 1e-6):   # still, below, near and above the tolerance
         moved = sim.x.copy()
-        moved[stacked._stacked.coordinate] += shift
+        moved[[cell.start for cell in stacked.geometry.slices]] += shift   # each cell's q
         frames = paths()
         for f in frames:
             f.frame_if_moved(sim.x, sim.u, 0)
@@ -271,17 +270,27 @@ def test_stacked_cells_give_the_general_paths_frame(name, overrides, volts):
 def test_compiled_frames_refuse_wrong_buffers():
     """FrameMap.update checks what it writes into: the frame's size and the state's length."""
     sim = Simulator(load_scene('default', PAPER))
-    frames = MarkerFrames(sim.model)
-    update = frames._compiled.update
+    frames = MarkerFrames(sim.model, paths=('compiled',))
+    update = frames.frame_map.update
     with pytest.raises(ValueError, match='frame: expected'):
         update(sim.x, bytearray(10), True, 0)
     with pytest.raises(ValueError, match='shorter than'):
-        update(sim.x[:0].copy(), frames._raw, True, 0)
+        update(sim.x[:0].copy(), bytearray(frames.size), True, 0)
     with pytest.raises(BufferError):
         update(sim.x, bytes(frames.size), True, 0)      # read-only bytes
-    assert update(sim.x, frames._raw, True, 0) is True
+    assert update(sim.x, bytearray(frames.size), True, 0) is True
 
 
+def test_frame_paths_refuse_what_the_model_cannot_take():
+    """A plate has no compiled or stacked path; asking for only those is a clear error."""
+    sim = Simulator(load_scene('plate', PAPER))
+    with pytest.raises(ValueError, match='none of them'):
+        MarkerFrames(sim.model, paths=('compiled',))
+    with pytest.raises(ValueError, match='expected some of'):
+        MarkerFrames(sim.model, paths=('fast',))
+
+
+@pytest.mark.ros
 def test_no_frames_without_a_viewer_or_a_log(harness):
     """
     Check that the node builds no frames without a marker subscriber or a log.
@@ -302,6 +311,7 @@ def test_no_frames_without_a_viewer_or_a_log(harness):
     h.close()
 
 
+@pytest.mark.ros
 def test_markers_off(harness):
     h = harness(**{'markers.rate_hz': 0.0})
     assert h.node.markers is None

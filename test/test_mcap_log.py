@@ -252,6 +252,7 @@ def _wait_flushes(child, count):
     return flushed
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize('mode', ['sync', 'bg'])
 def test_sigkill_loses_at_most_the_last_flush_period(tmp_path, mode):
     """A SIGKILL keeps everything written up to the last flush (with the writer thread too)."""
@@ -286,6 +287,7 @@ def test_sigkill_loses_at_most_the_last_flush_period(tmp_path, mode):
         assert {m.name for m in reader.iter_metadata()} >= {'det_sim_ros'}
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize('mode', ['sync', 'bg'])
 def test_sigint_finishes_the_file(tmp_path, mode):
     from mcap.reader import make_reader
@@ -498,13 +500,13 @@ def test_fast_sample_path_writes_the_same_file_as_add_message(tmp_path, monkeypa
 
 def test_pack_records_is_the_records_of_one_by_one_writes():
     """
-    Check that _ckernel.pack_records writes the records of one-by-one writes.
+    Check that pack_records writes the records of one-by-one writes.
 
-    _ckernel.pack_records: MCAP Message records (opcode 5, length, channel, sequence, log
+    pack_records (core.kernel): MCAP Message records (opcode 5, length, channel, sequence, log
     and publish time, payload), sequences counting up per sample; it stops before a row of
     other payload sizes and refuses bad arguments.
     """
-    from det_sim_ros.core._ckernel import pack_records
+    from det_sim_ros.core.kernel import pack_records
     rows = [[b'ab', b'xyz'], (b'cd', b'uvw'), [b'e', b'rst']]
     records, count = pack_records((3, 70000 % 65536), [5, 9], [10, 2**40, 2**41], rows,
                                   (2, 3))

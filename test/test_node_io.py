@@ -16,6 +16,8 @@ from det_sim_ros.sim.simulator import Simulator
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 
 class FakeWall:
     """A wall clock that moves only when the test says so."""

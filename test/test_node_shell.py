@@ -17,6 +17,8 @@ from conftest import child_env
 from det_sim_ros.cli import main
 import pytest
 
+pytestmark = pytest.mark.ros
+
 NS = ['--ns', 'arm1']
 RATE = 0.1   # real_time_factor: 100 samples per wall second
 

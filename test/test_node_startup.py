@@ -20,6 +20,8 @@ from det_sim_ros.ros.name_check import Claim, younger
 from det_sim_ros.ros.params import NODE_PARAMS
 import pytest
 
+pytestmark = pytest.mark.ros
+
 ENTRY = [sys.executable, '-m', 'det_sim_ros.cli.sim_node']
 READY = 'voltage command order'     # the node's last start-up line
 TIMEOUT = 60.0                      # s, a safety net only

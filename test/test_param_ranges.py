@@ -54,6 +54,7 @@ def node(ros_context):
     made.destroy_node()
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize('name', RUNTIME)
 def test_runtime_value_above_the_range_is_refused_and_the_old_value_kept(node, name):
     old = node.get_parameter(name).value
@@ -67,6 +68,7 @@ def test_runtime_value_above_the_range_is_refused_and_the_old_value_kept(node, n
     assert node.set_parameters([Parameter(name, value=old)])[0].successful, name
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize('name', RUNTIME + READ_ONLY)
 def test_start_up_value_above_the_range_is_refused(ros_context, name):
     for value in _above(name):

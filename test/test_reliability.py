@@ -34,6 +34,8 @@ from det_sim_ros.scenes.scene import (INTEGRATOR_SPEC, load_scene, PHYSICS_SPEC,
                                       scene_to_dict, STRUCTURE_SPEC)
 import pytest
 
+pytestmark = pytest.mark.ros
+
 FULL = os.environ.get('DET_SIM_RELIABILITY', '') == 'full'
 READY = 'voltage command order'     # the node's last start-up line
 WALL_LIMIT = 120.0                  # s, a safety net only

@@ -206,6 +206,7 @@ def _wait_matched(player_node, topics, context):
     raise AssertionError('subscribers were not discovered')
 
 
+@pytest.mark.ros
 def test_play_preserves_order_stamps_and_rate(tmp_path, scene, ros_context):
     import time
 
@@ -259,6 +260,7 @@ def test_play_preserves_order_stamps_and_rate(tmp_path, scene, ros_context):
         node.destroy_node()
 
 
+@pytest.mark.ros
 def test_node_log_resimulates_bit_for_bit(tmp_path, harness):
     """
     Check that the node's own log re-simulates bit for bit.
@@ -321,6 +323,7 @@ def test_resim_plate_log(tmp_path, joint_commands):
     assert all(value == 0.0 for value in result.max_deviation.values())
 
 
+@pytest.mark.ros
 def test_node_plate_log_resimulates_bit_for_bit(tmp_path, harness):
     """
     Check that the node's log of a plate run re-simulates bit for bit.

@@ -144,6 +144,7 @@ def test_no_traceback_on_random_cuts_and_bytes(bad_files, tmp_path, capsys):
             assert (code == 0) == (err == ''), (subcommand, trial, err)
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize('kind', ['random', 'torn'])
 def test_the_console_command_prints_one_line(bad_files, kind):
     """The command as a process: nothing on stderr but the one line (no library noise)."""

@@ -14,6 +14,7 @@ import pytest
 from rclpy.parameter import Parameter
 
 
+@pytest.mark.ros
 def test_diagnostics_name_the_fully_qualified_node(ros_context):
     node = SimNode(context=ros_context, namespace='arm1', parameter_overrides=[
         Parameter('real_time', value=False), Parameter('start_paused', value=True),

@@ -147,6 +147,7 @@ def test_a_log_of_an_inheriting_scene_holds_the_resolved_scene(tmp_path):
     assert result.steps == 200 and result.ok(tolerance=0.0), result.table()
 
 
+@pytest.mark.ros
 def test_the_node_logs_the_resolved_scene_of_an_inheriting_file(tmp_path, harness):
     path = _write(tmp_path, 'soft.yaml', 'scene: {beam: simply_supported, eps_b: 0.15}\n')
     h = harness(scene_file=str(path), **{'log.path': str(tmp_path / 'logs'),

@@ -42,6 +42,7 @@ def test_det_sim_says_it_in_one_line(tmp_path, capsys):
     _check_line(lines[0])
 
 
+@pytest.mark.ros
 def test_sim_node_says_it_in_one_fatal_line(capfd):
     code = sim_node(['sim_node', '--ros-args', '-p', 'scene_file:=plates',
                      '-p', 'log.enabled:=false'])

@@ -8,7 +8,10 @@ from det_sim_ros.io.log.reader import LogReader
 from det_sim_ros.io.messages import decode_joint_state
 from det_sim_ros.io.replay import resimulate
 from det_sim_ros.ros.testing import det_sim  # noqa: F401
+import pytest
 from test_lockstep import make_pi
+
+pytestmark = pytest.mark.ros
 
 NOISY = {'sensors.seed': 3, 'sensors.displacement.noise_std': 5e-6,
          'sensors.displacement.correlation_time': 2e-3, 'sensors.displacement.dropout': 0.1,

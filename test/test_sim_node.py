@@ -16,6 +16,8 @@ from det_sim_ros.sim.simulator import Simulator
 import pytest
 from rclpy.parameter import Parameter
 
+pytestmark = pytest.mark.ros
+
 MS = 1_000_000  # ns
 
 

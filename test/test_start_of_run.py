@@ -21,6 +21,7 @@ def spin_until(executor, condition, what):
         executor.spin_once(timeout_sec=0.01)
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize('mode', ['free_run', 'real_time'])
 def test_a_late_subscriber_gets_sample_0(ros_context, mode):
     """

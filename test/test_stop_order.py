@@ -14,6 +14,8 @@ import types
 from det_sim_ros.ros import spinning
 import pytest
 
+pytestmark = pytest.mark.ros
+
 
 class _Recorder:
     paths = ['run.mcap']

@@ -54,6 +54,8 @@ PLATE_COLOR = (0.4, 0.6, 0.4, 0.8)
 MOVE_TOLERANCE = 1.0e-7
 KEEPALIVE_S = 1.0
 KEEPALIVE_NS = int(KEEPALIVE_S * 1e9)
+# MarkerFrames' ways of building a frame, fastest first
+FRAME_PATHS = ('compiled', 'stacked', 'general')
 
 
 class _StackedCells(NamedTuple):
@@ -171,9 +173,17 @@ class MarkerFrames:
         'arm1/'); ignored when ``frame_id`` is given.
     :param frame_id: one frame for everything (cells laid out side by side), or '' for one
         frame per DET.
+    :param paths: the ways of building a frame allowed, fastest first (:data:`FRAME_PATHS`);
+        the first one this model supports is used (:attr:`path`). All give the same frames:
+        'compiled' (frames.c, stacked cells without a plate), 'stacked' (numpy, cells of one
+        coordinate each), 'general' (numpy, any model).
     """
 
-    def __init__(self, model, frame_prefix: str = '', frame_id: str = '', n_points: int = 41):
+    def __init__(self, model, frame_prefix: str = '', frame_id: str = '', n_points: int = 41,
+                 paths=FRAME_PATHS):
+        unknown = set(paths) - set(FRAME_PATHS)
+        if unknown or not paths:
+            raise ValueError(f'paths: expected some of {FRAME_PATHS}, got {tuple(paths)}')
         self.geometry = geo = ActuatorGeometry(model, n_points)
         self.v_max = model.scene.physics.v_max
         common = bool(frame_id)
@@ -220,8 +230,25 @@ class MarkerFrames:
         self._colored_for = None
         self._last_sent = None    # frame_if_moved's last frame: (volts, stamp, values or None)
         self.skipped = 0
-        self._stacked = self._stack_polynomial_cells()
-        self._compiled = self._compile()
+        self._stacked = (self._stack_polynomial_cells()
+                         if {'compiled', 'stacked'} & set(paths) else None)
+        self._compiled = self._compile() if 'compiled' in paths else None
+        if self._compiled is None and self._stacked is not None and 'stacked' not in paths:
+            self._stacked = None
+        if self.path not in paths:
+            raise ValueError(f'paths {tuple(paths)}: none of them can draw this model')
+
+    @property
+    def path(self) -> str:
+        """Return the way frames are built: 'compiled', 'stacked' or 'general' (``paths``)."""
+        if self._compiled is not None:
+            return 'compiled'
+        return 'general' if self._stacked is None else 'stacked'
+
+    @property
+    def frame_map(self):
+        """Return the compiled builder (``core.kernel.FrameMap``); None off the 'compiled' path."""
+        return self._compiled
 
     @staticmethod
     def _cell_map(sampler, off):
