@@ -16,7 +16,10 @@ import threading
 import time
 
 from conftest import child_env
+import pytest
 from test_node_startup import Node, READY
+
+pytestmark = pytest.mark.ros
 
 README = __file__.rsplit('/test/', 1)[0] + '/README.md'
 SECTION = '## Send a voltage and watch the outputs'
