@@ -13,6 +13,7 @@ import os
 import subprocess
 import sys
 
+from det_sim_ros.calibration.logs import NODE_TOPICS
 from det_sim_ros.cli.watch import CSV_FIELDS, LINE_QUANTITIES
 from det_sim_ros.io.contract import OUTPUT_FIELDS, OUTPUT_UNITS, RELATIVE_TO_Y0
 from det_sim_ros.io.logplot import PANELS
@@ -109,6 +110,8 @@ def test_the_tables_are_the_output_table():
     assert list(LINE_QUANTITIES) == [(t, 'position') for t in SENSOR_TOPICS]
     assert list(CSV_FIELDS) == list(PANELS) == [(r.topic, r.field) for r in outputs.OUTPUTS]
     assert PANELS[('charge', 'position')] == ('charge q_p', 'µC', 1e6)
+    # calibration fits the measured channels it names (its own vocabulary) from output topics
+    assert set(NODE_TOPICS) <= set(OUTPUT_FIELDS)
 
 
 def test_a_sensor_number_used_twice_is_refused():
