@@ -14,9 +14,9 @@ import subprocess
 import sys
 
 from det_sim_ros.calibration.logs import NODE_TOPICS
-from det_sim_ros.cli.watch import CSV_FIELDS, LINE_QUANTITIES
-from det_sim_ros.io.contract import OUTPUT_FIELDS, OUTPUT_UNITS, RELATIVE_TO_Y0
-from det_sim_ros.io.logplot import PANELS
+from det_sim_ros.cli.watch import CSV_FIELDS, LINE_QUANTITIES, STRUCTURE_QUANTITIES
+from det_sim_ros.io.contract import OUTPUT_FIELDS, OUTPUT_UNITS, RELATIVE_TO_Y0, STRUCTURE_NAMES
+from det_sim_ros.io.logplot import PANELS, PANELS_STRUCTURE
 from det_sim_ros.ros.shell import OUTPUT_TOPICS
 from det_sim_ros.scenes import outputs
 from det_sim_ros.scenes.sensors import SENSOR_TOPICS
@@ -110,6 +110,10 @@ def test_the_tables_are_the_output_table():
     assert list(LINE_QUANTITIES) == [(t, 'position') for t in SENSOR_TOPICS]
     assert list(CSV_FIELDS) == list(PANELS) == [(r.topic, r.field) for r in outputs.OUTPUTS]
     assert PANELS[('charge', 'position')] == ('charge q_p', 'µC', 1e6)
+    # the structure topic's table: the contract's names and signs, watch's line, the plot
+    assert STRUCTURE_NAMES == {'plate_y': ('plate_dy', -1.0), 'plate_phi': ('plate_phi', 1.0)}
+    assert list(STRUCTURE_QUANTITIES) == list(PANELS_STRUCTURE) == ['plate_dy', 'plate_phi']
+    assert PANELS_STRUCTURE['plate_phi'] == ('plate tilt φ − φ0', 'mrad', 1e3)
     # calibration fits the measured channels it names (its own vocabulary) from output topics
     assert set(NODE_TOPICS) <= set(OUTPUT_FIELDS)
 

@@ -16,17 +16,17 @@ from __future__ import annotations
 import math
 import statistics
 
+from ..io.contract import STRUCTURE_TOPIC
 from ..ros.shell import OUTPUT_TOPICS
-from ..scenes.outputs import csv_fields, line_quantities
+from ..scenes.outputs import csv_fields, line_quantities, structure_line_quantities
 
 __all__ = ['Watcher', 'LINE_QUANTITIES']
 
 # (topic, field) -> (label, SI unit, resolution in it) of the live line, from the output table
 # (det_sim_ros.scenes.outputs): a value below the resolution is round-off and shown as 0
 LINE_QUANTITIES = line_quantities()
-# a plate's structure outputs (det_sim_ros.io.contract.STRUCTURE_NAMES): label, unit, resolution
-STRUCTURE_TOPIC = 'structure'
-STRUCTURE_QUANTITIES = {'plate_dy': ('height', 'm', 1e-9), 'plate_phi': ('tilt', 'rad', 1e-9)}
+# a plate's structure outputs by published name: label, unit, resolution
+STRUCTURE_QUANTITIES = structure_line_quantities()
 PREFIXES = ((1e9, 'G'), (1e6, 'M'), (1e3, 'k'), (1.0, ''), (1e-3, 'm'), (1e-6, 'µ'),
             (1e-9, 'n'), (1e-12, 'p'))
 CSV_FIELDS = csv_fields()   # (topic, field) columns, publishing order

@@ -25,7 +25,7 @@ from .cdr import CdrError, deserialize, Reader
 from .contract import basename, COMMAND_TOPICS, JOINT_COMMAND_TOPIC
 from .log import file_kind, LogReader
 from .sensing import is_truth_topic
-from ..scenes.outputs import plot_panels
+from ..scenes.outputs import plot_panels, structure_panels
 
 __all__ = ['LogData', 'Channel', 'read_log', 'summary', 'plot_log', 'LogPlotError',
            'PANELS']
@@ -39,8 +39,7 @@ class LogPlotError(ValueError):
 # (det_sim_ros.scenes.outputs); structure channels get one panel each (PANELS_STRUCTURE), by
 # published name
 PANELS = plot_panels()
-PANELS_STRUCTURE = {'plate_dy': ('plate height Δy', 'mm', 1e3),
-                    'plate_phi': ('plate tilt φ − φ0', 'mrad', 1e3)}
+PANELS_STRUCTURE = structure_panels()
 ENVELOPE_COLUMNS = 2000
 
 

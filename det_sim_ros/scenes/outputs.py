@@ -7,7 +7,8 @@ the plot's title, the display unit and its scale from SI) and, for a topic's ``p
 stream number of its sensor noise. The topic contract (det_sim_ros.io.contract), the scene's
 ``sensors`` section (det_sim_ros.scenes.sensors), the node shell and ``det_sim watch``, and
 ``det_sim plot`` read this table; adding an output is one row here plus the model output it
-names.
+names. The structure topic's outputs (a plate's height and tilt) are the second, smaller table
+:data:`STRUCTURE_OUTPUTS`.
 
 The table lives in the scenes layer, the lowest layer that needs it: the scene's ``sensors``
 section has one subsection per sensed topic. It describes the published channels and imports
@@ -24,7 +25,9 @@ from __future__ import annotations
 import dataclasses
 
 __all__ = ['OutputQuantity', 'OUTPUTS', 'output_fields', 'output_units', 'relative_to_y0',
-           'output_topics', 'sensor_topics', 'line_quantities', 'csv_fields', 'plot_panels']
+           'output_topics', 'sensor_topics', 'line_quantities', 'csv_fields', 'plot_panels',
+           'StructureQuantity', 'STRUCTURE_OUTPUTS', 'structure_names',
+           'structure_line_quantities', 'structure_panels']
 
 
 @dataclasses.dataclass(frozen=True)
@@ -130,3 +133,51 @@ def plot_panels(rows=None) -> dict[tuple[str, str], tuple[str, str, float]]:
     """Return (topic, field) -> (panel title, display unit, scale from SI), publishing order."""
     return {(row.topic, row.field): (row.title, row.display_unit, row.display_scale)
             for row in _rows(rows)}
+
+
+@dataclasses.dataclass(frozen=True)
+class StructureQuantity:
+    """
+    One output of the structure topic: model structure output ``output`` published as ``name``.
+
+    The published value is ``sign`` * (output - output at rest at 0 V), in the displacement's
+    sign; ``label`` to ``resolution`` as in :class:`OutputQuantity`.
+    """
+
+    output: str
+    name: str
+    sign: float
+    label: str
+    title: str
+    unit: str
+    display_unit: str
+    display_scale: float
+    resolution: float
+
+
+STRUCTURE_OUTPUTS: tuple[StructureQuantity, ...] = (
+    # m: y0_plate - plate_y = mean of the two displacements
+    StructureQuantity('plate_y', 'plate_dy', -1.0, 'height', 'plate height Δy', 'm', 'mm', 1e3,
+                      1e-9),
+    # rad: phi - phi0 = (dy_right - dy_left) / w
+    StructureQuantity('plate_phi', 'plate_phi', 1.0, 'tilt', 'plate tilt φ − φ0', 'rad', 'mrad',
+                      1e3, 1e-9),
+)
+
+
+def structure_names(rows=None) -> dict[str, tuple[str, float]]:
+    """Return model structure output -> (published name, sign)."""
+    return {row.output: (row.name, row.sign)
+            for row in (STRUCTURE_OUTPUTS if rows is None else rows)}
+
+
+def structure_line_quantities(rows=None) -> dict[str, tuple[str, str, float]]:
+    """Return published name -> (label, SI unit, resolution) on the live line."""
+    return {row.name: (row.label, row.unit, row.resolution)
+            for row in (STRUCTURE_OUTPUTS if rows is None else rows)}
+
+
+def structure_panels(rows=None) -> dict[str, tuple[str, str, float]]:
+    """Return published name -> (panel title, display unit, scale from SI)."""
+    return {row.name: (row.title, row.display_unit, row.display_scale)
+            for row in (STRUCTURE_OUTPUTS if rows is None else rows)}
