@@ -42,7 +42,8 @@ node.create_subscription(MarkerArray, 'markers', lambda m: count.__setitem__(0, 
                          raw='raw' in sys.argv)
 if 'all' in sys.argv:    # a controller's view too: every output topic is delivered
     from sensor_msgs.msg import JointState
-    for topic in ('deflection', 'displacement', 'charge', 'current'):
+    from det_sim_ros.io.contract import OUTPUT_FIELDS
+    for topic in OUTPUT_FIELDS:
         node.create_subscription(JointState, topic, lambda m: None, 10)
 try:
     rclpy.spin(node)

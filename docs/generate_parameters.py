@@ -58,7 +58,7 @@ SI. `dets.<DET name>.<key>` overrides one physics or amplifier value for one DET
 is the value in `config/default.yaml` (the `structure` and `amplifier` sections are optional;
 their defaults are shown; every amplifier knob is off by default, docs/realism.md).
 The optional `sensors` section has one subsection per output topic whose `position` a sensor
-measures, `<topic>` = `displacement`, `deflection`, `charge` or `current`, its values in that
+measures, `<topic>` = {sensed_topics}, its values in that
 channel's unit; every key is off by default ([realism.md](realism.md#sensors)).
 
 | key | type | range or choices | unit | default scene | meaning |
@@ -168,7 +168,10 @@ def render(params=None) -> str:
     if params is None:
         from det_sim_ros.ros.params import NODE_PARAMS as params
     rows = '\n'.join(row(name, entry) for name, entry in params.items())
-    return HEADER + rows + '\n' + SCENE_HEADER + '\n'.join(scene_rows()) + '\n'
+    from det_sim_ros.scenes.sensors import SENSOR_TOPICS
+    *first, last = (f'`{topic}`' for topic in SENSOR_TOPICS)
+    scene_header = SCENE_HEADER.replace('{sensed_topics}', ', '.join(first) + f' or {last}')
+    return HEADER + rows + '\n' + scene_header + '\n'.join(scene_rows()) + '\n'
 
 
 def main(argv=None) -> int:

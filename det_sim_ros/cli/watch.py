@@ -1,12 +1,14 @@
 """
 What ``det_sim watch`` prints: a line per wall second, or one CSV row per sample.
 
-The node publishes every sample on four JointState topics (det_sim_ros.ros.shell.OUTPUT_TOPICS)
-stamped with its sim time; a sample is complete once all four have arrived. The line shows the
-latest complete sample (per DET, or min / median / max over more than four DETs), each value in
-engineering notation (1.790 mm, 200.2 nA) and shown as 0 below its quantity's resolution (the
-rest state's round-off, e.g. Δy = -4e-11 m); a plate's height and tilt (the structure topic)
-follow. The CSV rows hold SI units (m, m/s, C, A), one column per topic, field and DET.
+The node publishes every sample on its JointState output topics
+(det_sim_ros.ros.shell.OUTPUT_TOPICS) stamped with its sim time; a sample is complete once all
+of them have arrived. The line shows the latest complete sample (per DET, or min / median / max
+over more than four DETs), each value in engineering notation (1.790 mm, 200.2 nA) and shown as
+0 below its quantity's resolution (the rest state's round-off, e.g. Δy = -4e-11 m); a plate's
+height and tilt (the structure topic) follow. The CSV rows hold SI units (m, m/s, C, A), one
+column per topic, field and DET. Which quantities, labels and resolutions: the output table
+(det_sim_ros.scenes.outputs).
 """
 
 from __future__ import annotations
@@ -14,24 +16,20 @@ from __future__ import annotations
 import math
 import statistics
 
+from ..io.contract import STRUCTURE_TOPIC
 from ..ros.shell import OUTPUT_TOPICS
+from ..scenes.outputs import csv_fields, line_quantities, structure_line_quantities
 
 __all__ = ['Watcher', 'LINE_QUANTITIES']
 
-# (topic, field) -> (label, SI unit, resolution in it) of the live line: a value below the
-# resolution is round-off (a nanometre of a millimetre stroke, a picocoulomb of ~10 µC, a
-# nanoampere of ~mA currents) and shown as 0
-LINE_QUANTITIES = {('displacement', 'position'): ('dy', 'm', 1e-9),
-                   ('deflection', 'position'): ('q', 'm', 1e-9),
-                   ('charge', 'position'): ('q_p', 'C', 1e-12),
-                   ('current', 'position'): ('i', 'A', 1e-9)}
-# a plate's structure outputs (det_sim_ros.io.contract.STRUCTURE_NAMES): label, unit, resolution
-STRUCTURE_TOPIC = 'structure'
-STRUCTURE_QUANTITIES = {'plate_dy': ('height', 'm', 1e-9), 'plate_phi': ('tilt', 'rad', 1e-9)}
+# (topic, field) -> (label, SI unit, resolution in it) of the live line, from the output table
+# (det_sim_ros.scenes.outputs): a value below the resolution is round-off and shown as 0
+LINE_QUANTITIES = line_quantities()
+# a plate's structure outputs by published name: label, unit, resolution
+STRUCTURE_QUANTITIES = structure_line_quantities()
 PREFIXES = ((1e9, 'G'), (1e6, 'M'), (1e3, 'k'), (1.0, ''), (1e-3, 'm'), (1e-6, 'µ'),
             (1e-9, 'n'), (1e-12, 'p'))
-CSV_FIELDS = (('deflection', 'position'), ('deflection', 'velocity'),
-              ('displacement', 'position'), ('charge', 'position'), ('current', 'position'))
+CSV_FIELDS = csv_fields()   # (topic, field) columns, publishing order
 PER_DET_LIMIT = 4
 
 

@@ -31,6 +31,7 @@ from .cdr import CdrError, HEADER_LE, NS, Writer
 from .messages import (decode_float64_multi_array, decode_joint_state, encode_clock,
                        encode_float64_multi_array, encode_joint_state, JointStateData)
 from ..core.kernel import SampleCodec
+from ..scenes.outputs import output_fields, output_units, relative_to_y0, structure_names
 from ..sim.simulator import inputs_within
 
 __all__ = [
@@ -47,24 +48,17 @@ JOINT_STATE = 'sensor_msgs/msg/JointState'
 FLOAT64_MULTI_ARRAY = 'std_msgs/msg/Float64MultiArray'
 CLOCK = 'rosgraph_msgs/msg/Clock'
 
-# output topic -> JointState field -> per-DET model output (Model.channel: one value per DET)
-OUTPUT_FIELDS: dict[str, dict[str, str]] = {
-    'deflection': {'position': 'q', 'velocity': 'q_dot'},
-    'displacement': {'position': 'y'},
-    'charge': {'position': 'q_p'},
-    'current': {'position': 'i_DE'},
-}
-OUTPUT_UNITS = {'deflection': ('m', 'm/s'), 'displacement': ('m',), 'charge': ('C',),
-                'current': ('A',)}
-RELATIVE_TO_Y0 = frozenset({('displacement', 'position')})   # published as y0_i - y_i
+# output topic -> JointState field -> per-DET model output (Model.channel: one value per DET),
+# each topic's SI units in field order, and the fields published as y0_i - value: all derived
+# from the one output table (det_sim_ros.scenes.outputs.OUTPUTS)
+OUTPUT_FIELDS: dict[str, dict[str, str]] = output_fields()
+OUTPUT_UNITS = output_units()
+RELATIVE_TO_Y0 = relative_to_y0()   # the displacement: y0_i - y_i
 # The structure topic (only for structures that have outputs: the plate), relative to rest at
 # 0 V and in the displacement's sign: value = sign * (output - output at rest).
-# model structure output -> (published name, sign)
+# model structure output -> (published name, sign), from the output tables
 STRUCTURE_TOPIC = 'structure'
-STRUCTURE_NAMES = {
-    'plate_y': ('plate_dy', -1.0),     # m: y0_plate - plate_y = mean of the two displacements
-    'plate_phi': ('plate_phi', 1.0),   # rad: phi - phi0 = (dy_right - dy_left) / w
-}
+STRUCTURE_NAMES = structure_names()
 COMMAND_TOPIC = 'voltage_command'              # Float64MultiArray: all voltages, DET order
 JOINT_COMMAND_TOPIC = 'voltage_command_joint'  # JointState: position[i] = voltage of name[i]
 COMMAND_TOPICS = (COMMAND_TOPIC, JOINT_COMMAND_TOPIC)

@@ -25,6 +25,7 @@ from .cdr import CdrError, deserialize, Reader
 from .contract import basename, COMMAND_TOPICS, JOINT_COMMAND_TOPIC
 from .log import file_kind, LogReader
 from .sensing import is_truth_topic
+from ..scenes.outputs import plot_panels, structure_panels
 
 __all__ = ['LogData', 'Channel', 'read_log', 'summary', 'plot_log', 'LogPlotError',
            'PANELS']
@@ -34,17 +35,11 @@ class LogPlotError(ValueError):
     """A log that cannot be plotted (one line)."""
 
 
-# (topic, field) -> (panel title, unit label, scale to the unit); structure channels get one
-# panel each (PANELS_STRUCTURE), by published name
-PANELS = {
-    ('deflection', 'position'): ('deflection q', 'mm', 1e3),
-    ('deflection', 'velocity'): ('deflection rate dq/dt', 'm/s', 1.0),
-    ('displacement', 'position'): ('displacement Δy', 'mm', 1e3),
-    ('charge', 'position'): ('charge q_p', 'µC', 1e6),
-    ('current', 'position'): ('current i_DE', 'mA', 1e3),
-}
-PANELS_STRUCTURE = {'plate_dy': ('plate height Δy', 'mm', 1e3),
-                    'plate_phi': ('plate tilt φ − φ0', 'mrad', 1e3)}
+# (topic, field) -> (panel title, unit label, scale to the unit), from the output table
+# (det_sim_ros.scenes.outputs); structure channels get one panel each (PANELS_STRUCTURE), by
+# published name
+PANELS = plot_panels()
+PANELS_STRUCTURE = structure_panels()
 ENVELOPE_COLUMNS = 2000
 
 

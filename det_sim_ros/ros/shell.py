@@ -22,11 +22,11 @@ import threading
 import time
 from typing import Callable
 
-from ..io.contract import COMMAND_TOPIC, JOINT_COMMAND_TOPIC
+from ..io.contract import COMMAND_TOPIC, JOINT_COMMAND_TOPIC, OUTPUT_FIELDS
 
 __all__ = ['NodeShell', 'ShellError', 'OUTPUT_TOPICS', 'target_name']
 
-OUTPUT_TOPICS = ('deflection', 'displacement', 'charge', 'current')
+OUTPUT_TOPICS = tuple(OUTPUT_FIELDS)   # the per-DET output topics, in publishing order
 
 
 class ShellError(RuntimeError):

@@ -1,7 +1,8 @@
 """
 The scene's optional ``sensors:`` section: what each output topic's sensor does to its position.
 
-One subsection per output topic whose ``position`` a sensor measures (:data:`SENSOR_TOPICS`),
+One subsection per output topic whose ``position`` a sensor measures (:data:`SENSOR_TOPICS`,
+the output table's rows with a sensor number: det_sim_ros.scenes.outputs),
 each with the keys of :data:`SENSOR_SPEC`, and a ``seed`` for the sensor noise. Every key is
 off by default, and a scene without the section (or with every key off) publishes the exact
 state as before. Values are in the measured channel's unit (m for displacement and
@@ -16,13 +17,15 @@ import math
 from typing import Mapping
 
 from .keys import check_section, check_value, SceneError
+from .outputs import sensor_topics
 
 __all__ = ['SENSOR_TOPICS', 'SENSOR_SPEC', 'SENSOR_DEFAULTS', 'SEED_SPEC', 'SensorSpec',
            'Sensors', 'check_sensors', 'sensors_to_dict']
 
 # output topic -> its stream number in the noise key (fixed: a log's noise must not depend on
 # which topics a scene senses or in which order they are listed)
-SENSOR_TOPICS = {'displacement': 0, 'deflection': 1, 'charge': 2, 'current': 3}
+# (displacement 0, deflection 1, charge 2, current 3: the output table's sensor numbers)
+SENSOR_TOPICS = sensor_topics()
 _CHANNEL = 'channel unit'
 _ANY = (-math.inf, False, math.inf)
 _NON_NEGATIVE = (0.0, True, math.inf)
@@ -75,25 +78,66 @@ class SensorSpec:
 _OFF = SensorSpec()
 
 
-@dataclasses.dataclass(frozen=True)
 class Sensors:
-    """The scene's sensors: the noise seed and one :class:`SensorSpec` per output topic."""
+    """
+    The scene's sensors: the noise seed and one :class:`SensorSpec` per sensed output topic.
 
-    seed: int = 0
-    displacement: SensorSpec = _OFF
-    deflection: SensorSpec = _OFF
-    charge: SensorSpec = _OFF
-    current: SensorSpec = _OFF
+    ``Sensors(seed, displacement=SensorSpec(...))``; a topic not given is off. Each topic of
+    :data:`SENSOR_TOPICS` is an attribute (``sensors.charge``). Immutable and hashable.
+    """
+
+    __slots__ = ('seed', 'specs')
+
+    def __init__(self, seed: int = 0, **specs: SensorSpec):
+        unknown = [topic for topic in specs if topic not in SENSOR_TOPICS]
+        if unknown:
+            raise TypeError(f'Sensors: unknown topic(s) {unknown}; sensed topics: '
+                            + ', '.join(SENSOR_TOPICS))
+        object.__setattr__(self, 'seed', seed)
+        object.__setattr__(self, 'specs', {topic: specs.get(topic, _OFF)
+                                           for topic in SENSOR_TOPICS})
+
+    def __getattr__(self, topic: str) -> SensorSpec:
+        """Return one topic's :class:`SensorSpec` (``sensors.displacement``)."""
+        try:
+            return object.__getattribute__(self, 'specs')[topic]
+        except KeyError:
+            raise AttributeError(topic) from None
+
+    def __setattr__(self, name, value):
+        raise dataclasses.FrozenInstanceError(f'cannot assign to field {name!r}')
+
+    def __eq__(self, other) -> bool:
+        """Return True for the same seed and specs."""
+        if not isinstance(other, Sensors):
+            return NotImplemented
+        return (self.seed, self.specs) == (other.seed, other.specs)
+
+    def __hash__(self) -> int:
+        """Hash of the seed and the specs."""
+        return hash((self.seed, tuple(self.specs.items())))
+
+    def __reduce__(self):
+        """Pickle and copy by the constructor's arguments."""
+        return _sensors, (self.seed, tuple(self.specs.items()))
+
+    def __repr__(self) -> str:
+        """Return Sensors(seed, topic=spec, ...) of the topics with a knob on."""
+        on = ''.join(f', {topic}={spec!r}' for topic, spec in self.active.items())
+        return f'Sensors(seed={self.seed!r}{on})'
 
     @property
     def active(self) -> dict:
         """Return topic -> SensorSpec of every topic with a knob on, in SENSOR_TOPICS order."""
-        return {topic: getattr(self, topic) for topic in SENSOR_TOPICS
-                if getattr(self, topic).active}
+        return {topic: spec for topic, spec in self.specs.items() if spec.active}
 
     def __bool__(self) -> bool:
         """Return True if any topic's sensor has a knob on."""
         return bool(self.active)
+
+
+def _sensors(seed, specs) -> Sensors:
+    return Sensors(seed, **dict(specs))
 
 
 def _check_spec(topic: str, content) -> SensorSpec:
