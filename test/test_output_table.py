@@ -125,6 +125,7 @@ def test_a_sensor_number_used_twice_is_refused():
         outputs.sensor_topics(rows)
 
 
+@pytest.mark.ros   # a child interpreter (the table is read at import)
 def test_one_added_row_is_published_logged_watched_plotted_and_sensed(tmp_path):
     before, after = _run(tmp_path, 'plain'), _run(tmp_path, 'row')
     # the contract and the shell
