@@ -106,20 +106,7 @@ def test_no_import_cycles():
     graph = {m: {t for _, t, _ in found if t and t != m and t.startswith('det_sim_ros.')
                  and t not in ROOT_MODULES}
              for m, found in edges.items()}
-    state, cycles = {}, []
-
-    def visit(node, trail):
-        state[node] = 'open'
-        for nxt in sorted(graph.get(node, ())):
-            if state.get(nxt) == 'open':
-                cycles.append(' -> '.join(trail[trail.index(nxt):] + [nxt]))
-            elif nxt not in state:
-                visit(nxt, trail + [nxt])
-        state[node] = 'done'
-
-    for module in sorted(graph):
-        if module not in state:
-            visit(module, [module])
+    cycles = _cycles(graph)
     assert not cycles, 'import cycles:\n' + '\n'.join(cycles)
 
 
@@ -188,7 +175,8 @@ def _c_graph(files):
     return graph
 
 
-def _c_cycles(graph):
+def _cycles(graph):
+    """Return the cycles of a graph {node: set of nodes it points to}, each as 'a -> b -> a'."""
     state, cycles = {}, []
 
     def visit(node, trail):
@@ -200,9 +188,9 @@ def _c_cycles(graph):
                 visit(nxt, trail + [nxt])
         state[node] = 'done'
 
-    for unit in sorted(graph):
-        if unit not in state:
-            visit(unit, [unit])
+    for node in sorted(graph):
+        if node not in state:
+            visit(node, [node])
     return cycles
 
 
@@ -240,15 +228,15 @@ def test_kernel_includes_point_down_only():
 
 def test_no_kernel_unit_includes_one_that_includes_it():
     graph = _c_graph({rel: list(_c_includes(rel)) for rel in _c_files()})
-    cycles = _c_cycles(graph)
+    cycles = _cycles(graph)
     assert not cycles, 'kernel include cycles:\n' + '\n'.join(cycles)
 
 
 def test_the_kernel_checks_see_a_planted_upward_include():
     """Check that the include checks read what they claim: a planted include is found."""
     files = {rel: list(_c_includes(rel)) for rel in _c_files()}
-    assert not _c_upward(files) and not _c_cycles(_c_graph(files))
+    assert not _c_upward(files) and not _cycles(_c_graph(files))
     files['physics/physics.c'] = files['physics/physics.c'] + [('stepping/stages.h', 0)]
     assert _c_upward(files) == ['physics/physics.c:0 includes stepping/stages.h '
                                 '(not below physics)']
-    assert 'physics/physics -> stepping/stages -> physics/physics' in _c_cycles(_c_graph(files))
+    assert 'physics/physics -> stepping/stages -> physics/physics' in _cycles(_c_graph(files))
