@@ -142,7 +142,10 @@ def test_importing_the_package_has_no_side_effects():
 # The C kernel's layers (folders of det_sim_ros/core/_csrc): physics and wire (the node's
 # message bytes) at the ground, stepping on physics, the Python binding on all three. A unit is
 # a .c file with the header of the same name (group.h, model.h: records without a .c file).
-C_DIR = os.path.join(PACKAGE_DIR, 'core', '_csrc')
+# The sources are read in the repository beside this file: an installed package holds only the
+# compiled kernel.
+C_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'det_sim_ros',
+                     'core', '_csrc')
 C_LAYERS = {'physics': 0, 'wire': 0, 'stepping': 1, 'binding': 2}
 
 
