@@ -31,7 +31,7 @@ enum { DS_OK = 0, DS_BAD_STRETCH = 1, DS_NON_FINITE = 2, DS_BAD_SLOPE = 3 };
 enum { KIN_PAPER = 0, KIN_CONSISTENT = 1, KIN_EXACT = 2 };
 
 #define DS_CELL_OUTPUTS 9   /* q_ref, qdot_ref, y, lambda, q_p, v_p, i_DE, C, eps_E */
-#define DS_MAX_CELL_NODES 64   /* quadrature nodes per cell (62 at 12 Ritz terms, exact) */
+#define DS_MAX_CELL_NODES 72   /* quadrature nodes per cell (66 at 12 Ritz terms, exact) */
 
 /* One beam pair ("cell"): its Ritz coordinates, quadrature nodes and beam constants. */
 typedef struct {
