@@ -15,9 +15,11 @@ SingleThreadedExecutor.
 
 import math
 import os
+import queue
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
@@ -42,6 +44,58 @@ def child_env(**extra):
     whatever PYTHONPATH a developer gave).
     """
     return dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path), **extra)
+
+
+class ChildProcess:
+    """
+    A child process whose output lines (stdout and stderr) are read by a thread.
+
+    A line that never comes fails the test at the deadline instead of blocking readline() for
+    ever.
+    """
+
+    TIMEOUT = 60.0   # s, a safety net only
+
+    def __init__(self, args, cwd):
+        self.proc = subprocess.Popen(list(args), cwd=cwd, text=True, bufsize=1,
+                                     env=child_env(PYTHONUNBUFFERED='1'),
+                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+        self.lines = []
+        self._queue = queue.Queue()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self):
+        for line in self.proc.stdout:
+            self._queue.put(line)
+        self._queue.put(None)
+
+    def wait_for(self, text) -> str:
+        """Read lines until one holds ``text``; fail if the process ends first."""
+        deadline = time.monotonic() + self.TIMEOUT
+        while (left := deadline - time.monotonic()) > 0.0:
+            try:
+                line = self._queue.get(timeout=left)
+            except queue.Empty:
+                break
+            if line is None:
+                break
+            self.lines.append(line)
+            if text in line:
+                return line
+        pytest.fail(f'no {text!r} from {self.proc.args[2:4]}: {"".join(self.lines)}')
+
+    def stop(self) -> int:
+        """SIGINT, then wait (kill at the deadline); return the exit code."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+        try:
+            self.proc.wait(timeout=self.TIMEOUT)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        while (line := self._queue.get(timeout=self.TIMEOUT)) is not None:
+            self.lines.append(line)
+        return self.proc.returncode
 
 
 def pick_domain_id(environ, pid) -> int:

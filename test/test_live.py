@@ -10,8 +10,6 @@ a working client and a stalled one (connected, subscribed, never reading).
 import asyncio
 import json
 import os
-import queue
-import signal
 import socket
 import struct
 import subprocess
@@ -19,7 +17,7 @@ import sys
 import threading
 import time
 
-from conftest import child_env
+from conftest import child_env, ChildProcess
 from mcap.records import Schema
 from mcap_ros2.decoder import DecoderFactory
 import pytest
@@ -31,42 +29,6 @@ SUBPROTOCOL = 'foxglove.sdk.v1'
 TIMEOUT = 60.0   # s; a safety net only: a wait that hits it fails the test
 NODE = [sys.executable, '-m', 'det_sim_ros.cli.sim_node']
 VIEW = [sys.executable, '-m', 'det_sim_ros.cli', 'view']
-
-
-class Process:
-    """A child process whose output lines are read by a thread (a line that never comes fails)."""
-
-    def __init__(self, args, cwd):
-        self.proc = subprocess.Popen(args, cwd=cwd, text=True, bufsize=1,
-                                     env=child_env(PYTHONUNBUFFERED='1'),
-                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
-        self.lines = []
-        self._queue = queue.Queue()
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self):
-        for line in self.proc.stdout:
-            self._queue.put(line)
-        self._queue.put(None)
-
-    def wait_for(self, text) -> str:
-        deadline = time.monotonic() + TIMEOUT
-        while (left := deadline - time.monotonic()) > 0.0:
-            line = self._queue.get(timeout=left)
-            if line is None:
-                pytest.fail(f'ended before {text!r}:\n' + ''.join(self.lines))
-            self.lines.append(line)
-            if text in line:
-                return line
-        pytest.fail(f'no {text!r} within {TIMEOUT} s:\n' + ''.join(self.lines))
-
-    def stop(self) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-        code = self.proc.wait(timeout=TIMEOUT)
-        while (line := self._queue.get(timeout=TIMEOUT)) is not None:
-            self.lines.append(line)
-        return code
 
 
 def port_of(line: str) -> int:
@@ -295,8 +257,8 @@ def live_node(tmp_path, **params):
     params = {'scene.fidelity': 'paper', 'live.enabled': 'true', 'live.port': 0,
               'log.path': tmp_path, 'info_period': '0.0', **params}
     args = [f'{name}:={value}' for name, value in params.items()]
-    node = Process(NODE + ['--ros-args'] + [word for arg in args for word in ('-p', arg)],
-                   tmp_path)
+    node = ChildProcess(NODE + ['--ros-args'] + [word for arg in args for word in ('-p', arg)],
+                        tmp_path)
     return node, port_of(node.wait_for('live view on ws://'))
 
 
@@ -352,7 +314,7 @@ def test_view_serves_a_log_from_start_to_end(tmp_path):
         logged = {}
         for _, channel, message in make_reader(stream).iter_messages():
             logged.setdefault(channel.topic, []).append(message.log_time)
-    view = Process(VIEW + [str(run), '--port', '0', '--speed', '4'], tmp_path)
+    view = ChildProcess(VIEW + [str(run), '--port', '0', '--speed', '4'], tmp_path)
     try:
         port = port_of(view.wait_for('on ws://'))
 

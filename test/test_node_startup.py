@@ -7,15 +7,12 @@ entry point (``python -m det_sim_ros.cli.sim_node``) on the test domain.
 
 import concurrent.futures
 import os
-import queue
 import re
-import signal
 import subprocess
 import sys
-import threading
 import time
 
-from conftest import child_env
+from conftest import child_env, ChildProcess
 from det_sim_ros.ros.name_check import Claim, younger
 from det_sim_ros.ros.params import NODE_PARAMS
 import pytest
@@ -37,51 +34,11 @@ def run_entry(args, cwd, timeout=TIMEOUT):
                     f'{(exc.stderr or b"")[-2000:]}')
 
 
-class Node:
+class Node(ChildProcess):
     """A sim_node process whose output is read line by line."""
 
     def __init__(self, cwd, *args):
-        self.proc = subprocess.Popen(ENTRY + list(args), cwd=cwd, text=True, bufsize=1,
-                                     env=child_env(PYTHONUNBUFFERED='1'),
-                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
-        self.lines = []
-        # a reader thread, so that a line that never comes fails at the deadline instead of
-        # blocking readline() for ever
-        self._queue = queue.Queue()
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self):
-        for line in self.proc.stdout:
-            self._queue.put(line)
-        self._queue.put(None)
-
-    def wait_for(self, text):
-        """Read lines until one holds ``text``; fail if the process ends first."""
-        deadline = time.monotonic() + TIMEOUT
-        while (left := deadline - time.monotonic()) > 0.0:
-            try:
-                line = self._queue.get(timeout=left)
-            except queue.Empty:
-                break
-            if line is None:
-                break
-            self.lines.append(line)
-            if text in line:
-                return line
-        pytest.fail(f'no {text!r} from sim_node: {"".join(self.lines)}')
-
-    def stop(self):
-        """SIGINT, then wait; return the exit code."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-        try:
-            self.proc.wait(timeout=TIMEOUT)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
-        while (line := self._queue.get(timeout=TIMEOUT)) is not None:
-            self.lines.append(line)
-        return self.proc.returncode
+        super().__init__(ENTRY + list(args), cwd)
 
 
 @pytest.mark.parametrize('flag', ['--help', '-h'])
