@@ -20,14 +20,25 @@ import threading
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
-def _interrupted(signum, frame):
+def exit_at_once(code: int, line: bytes = b'') -> None:
+    """
+    Flush stdout and stderr, write ``line`` to stderr and end the process with ``code``.
+
+    For signal handlers that run while C extensions initialise: an exception raised there could
+    come out as an ImportError traceback, so the process ends without one.
+    """
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
         except Exception:  # noqa: BLE001 - exiting anyway
             pass
-    os.write(2, b'det_sim: interrupted\n')
-    os._exit(130)
+    if line:
+        os.write(2, line)
+    os._exit(code)
+
+
+def _interrupted(signum, frame):
+    exit_at_once(130, b'det_sim: interrupted\n')
 
 
 @contextlib.contextmanager

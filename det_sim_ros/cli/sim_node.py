@@ -15,10 +15,11 @@ instead of a KeyboardInterrupt traceback or a kill by the signal: nothing has be
 then, so there is nothing to finish. This module imports nothing heavy before that.
 """
 
-import os
 import signal
 import sys
 import textwrap
+
+from . import exit_at_once
 
 USAGE = 'usage: sim_node [-h] [--ros-args -p NAME:=VALUE ... [-r __ns:=/NAMESPACE]]'
 
@@ -93,14 +94,7 @@ def stray_arguments(argv) -> list:
 
 
 def _quiet_stop(signum, frame):
-    # not an exception: raised inside a C extension's initialisation (rclpy's pybind11 module)
-    # it would come out as an ImportError traceback
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except Exception:  # noqa: BLE001 - exiting anyway
-            pass
-    os._exit(0)
+    exit_at_once(0)   # a stop during start-up (rclpy's imports) is a clean stop
 
 
 def main(args=None) -> int:
