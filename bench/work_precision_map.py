@@ -1,37 +1,37 @@
 """
-Work-precision map against the continuum: level x Ritz terms x tolerance, error against CPU.
+Work-precision map against the continuum: level x Ritz family x terms x tolerance, error vs CPU.
 
-Workloads, each at every point of GRID (level, n_r, tolerances):
+A level is (fidelity, Ritz family, n_r); each point adds the integrator tolerance. Workloads at
+every point of GRID, each case run through ``simulate()`` (CPU: time.process_time, one run):
 
-'Periods repeated': the fraction of control periods the step-count controller ran again with
-more steps (the embedded estimate over the tolerance). Each point's integration error is its
-error against the same level's own converged run (at tolerance OWN), on the same scale.
-
-- the three 'step' cases of bench/continuum_reference.py (fixed eps_b 0.15 / 0.20, simply
-  supported 0.20; released, 3 kV from 1.5 to 3 s, 4.5 s) through ``simulate()``
-  (bench/fidelity_choice.run_level): error = max |dy - dy_ref| over the 3 kV phase / stroke
-  against the stored converged reference (exact n_r 11, LSODA rtol 1e-10), whether the beam
-  switches as the reference does, CPU s per simulated s (one run, time.process_time), internal
-  steps per period;
-- a controller's input (CONTROLLER_END s of the default scene from rest: a new command every
-  period, a 0 / 2.5 kV square wave at 2 Hz, so the beam switches twice a second, plus a uniform
-  +-DITHER V dither per sample): error = max |dy - dy_ref| over the run / the travel of y_ref,
-  dy = y - y(0) the displacement from the rest state,
-  y_ref the simulator at exact n_r 11, tolerance 1e-8 (which agrees with the continuum
-  reference to 1.5e-7 of the stroke on the step cases), switching right = the sign of q at the
-  end of every half period as the reference's;
+- 'step': the three step cases of bench/continuum_reference.py (fixed eps_b 0.15 / 0.20,
+  simply supported 0.20; released, 3 kV from 1.5 to 3 s, 4.5 s): error = max |dy - dy_ref| over
+  the 3 kV phase / stroke; whether the beam switches as the reference does;
+- 'switching' (shared scenarios): both beams at eps_b 0.15 and 0.20, released, a 3 kV square
+  wave from 0.5 s to 2.5 s at 2 Hz: error = max |y - y_ref| from 0.5 s / the travel there; the
+  snaps (sign changes of q) as the reference's: as many, each within 2 ms; and at 10 Hz
+  (error and snaps reported, not scored: there the converged model's own refinements differ by
+  27-85 % of the travel, bench/continuum_reference.py's table: the path depends on rounding);
+- 'controller': both beams at 0.20 from rest, a new command every period (a 0 / 2.5 kV square
+  wave at 2 Hz plus a +-25 V dither), 2.5 s: error as for switching;
 - with ``--array``: the shipped array (100 copies, two threads) under the controller's input
-  (each copy its own dither), ARRAY_END s, wall clock: x real time and steps per period per
-  copy, at ARRAY_POINTS only (an array run costs up to 100x a single cell's);
+  (each copy its own dither), ARRAY_END s: x real time from both threads' CPU and the wall clock;
 - with ``--lsoda``: scipy's LSODA on the same compiled right-hand side (``Model.f``, one solve
-  per constant voltage, bench/continuum_reference.solve_case) on the step cases at LSODA_POINTS.
+  per constant voltage, bench/continuum_reference.solve_case) at LSODA_POINTS, on the step and
+  2 Hz switching cases, against this stepper at the default level.
 
-Writes bench/data/work_precision_map.csv (one row per point and workload) and, with ``--plot``,
-docs/figures/work_precision_map.png (error against CPU, one curve per level and n_r, the front
-marked). ``--plot-only`` redraws from the CSV. Run it under the bench lock:
+Each beam is judged on its own cases (a Ritz family is per beam): a point's score for a beam is
+its worst scored error there, whether it makes every snap, and its slowest case's x real time.
+"integration": its error against the same level at the tightest tolerance of the grid (the
+level's own converged run), over that run's error against the continuum.
+
+Writes bench/data/work_precision_map.csv (one row per point and case) and, with ``--plot``,
+docs/figures/work_precision_map.png (per beam: worst error against the slowest case's CPU, one
+curve per level, the front marked); ``--docs`` rewrites the map's section of docs/fidelity.md;
+``--plot-only`` redraws from the CSV. Run it under the bench lock:
 
     flock bench/.lock env PYTHONPATH=. python bench/work_precision_map.py [--quick]
-        [--array] [--lsoda] [--plot]
+        [--array] [--lsoda] [--plot] [--docs]
 """
 
 from __future__ import annotations
@@ -42,144 +42,143 @@ import os
 import sys
 import time
 
-from continuum_reference import (case_name, CASES, load_reference, solve_case, stroke,
-                                 stroke_error, switched)
-from det_sim_ros.analysis.scenarios import delta_y, STEP_END
+from continuum_reference import (case_name, CASES, controller_volts, load_reference, solve_case,
+                                 stroke, stroke_error, switched, switching_case_name,
+                                 SWITCHING_CASES, switching_inputs)
+from det_sim_ros.analysis.scenarios import (delta_y, snap_times, STEP_END, step_scene,
+                                            step_voltage, SWITCHING_END, switching_error)
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import simulate, Simulator
-from fidelity_choice import DOC, MACHINE, run_level, write_doc
+from fidelity_choice import DOC, MACHINE, write_doc
 import numpy as np
 
-TOLERANCES = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-8)
-GRID = {   # (fidelity, n_r): tolerances (the paper's and the consistent level's error is %)
-    ('paper', 1): (1e-2, 1e-4, 1e-6),
-    ('consistent', 3): (1e-2, 1e-3, 1e-4, 1e-6),
-    ('consistent', 5): (1e-2, 1e-3, 1e-4, 1e-6),
-    ('exact', 3): TOLERANCES,
-    ('exact', 4): (1e-2, 1e-3, 1e-4, 1e-6),
-    ('exact', 5): (1e-2, 3e-3, 1e-3, 1e-4, 1e-5, 1e-6, 1e-8),
-    ('exact', 6): (1e-2, 1e-3, 1e-4, 1e-5, 1e-6),
-    ('exact', 7): (1e-2, 1e-3, 3e-4, 1e-4, 1e-5, 1e-6, 1e-8),
-    ('exact', 8): (1e-3, 1e-4, 1e-5),
-    ('exact', 9): (1e-3, 1e-4, 1e-5, 1e-6, 1e-8),
+POLY, MODES = 'polynomial', 'buckling_modes'
+GRID = {   # (fidelity, family, n_r): tolerances; the last of each is its own converged run
+    ('paper', POLY, 1): (1e-2, 1e-6),
+    ('consistent', POLY, 3): (1e-2, 1e-4, 1e-6),
+    ('exact', POLY, 3): (1e-2, 1e-3, 1e-6),
+    ('exact', POLY, 5): (1e-2, 1e-3, 1e-4, 1e-6),
+    ('exact', POLY, 6): (1e-2, 1e-3, 1e-6),
+    ('exact', POLY, 7): (1e-2, 3e-3, 1e-3, 1e-4, 1e-6),
+    ('exact', POLY, 8): (1e-2, 1e-3, 1e-4, 1e-6),
+    ('exact', POLY, 9): (1e-3, 1e-4, 1e-6),
+    ('exact', MODES, 2): (1e-2, 1e-3, 1e-6),
+    ('exact', MODES, 3): (1e-2, 3e-3, 1e-3, 1e-4, 1e-6),
+    ('exact', MODES, 4): (1e-2, 1e-3, 1e-4, 1e-6),
+    ('exact', MODES, 5): (1e-2, 1e-3, 1e-6),
+    ('exact', MODES, 7): (1e-2, 1e-3, 1e-6),
 }
-QUICK_GRID = {('paper', 1): (1e-6,), ('exact', 3): (1e-3,), ('exact', 5): (1e-3, 1e-6),
-              ('exact', 7): (1e-4,)}
-ARRAY_POINTS = (('paper', 1, 1e-6), ('exact', 3, 1e-2), ('exact', 3, 1e-3), ('exact', 4, 1e-2),
-                ('exact', 5, 1e-2), ('exact', 5, 1e-3))
-LSODA_POINTS = (('exact', 5, 1e-4), ('exact', 5, 1e-6), ('exact', 7, 1e-4), ('exact', 7, 1e-6))
-CONTROLLER_END = 3.0    # s
-CONTROLLER_HIGH = 2500.0   # V
-CONTROLLER_HZ = 2.0     # square wave frequency: one switch per high half period
-DITHER = 25.0           # V, uniform +- per sample
+QUICK_GRID = {('exact', MODES, 3): (1e-2, 1e-6), ('exact', POLY, 7): (1e-2, 1e-6)}
+ARRAY_POINTS = (('paper', POLY, 1, 1e-6), ('exact', POLY, 3, 1e-2), ('exact', MODES, 3, 1e-2),
+                ('exact', MODES, 3, 1e-3))
+LSODA_POINTS = (('exact', MODES, 3, 1e-4), ('exact', MODES, 3, 1e-6), ('exact', POLY, 7, 1e-4),
+                ('exact', POLY, 7, 1e-6))
 ARRAY_END = 1.0         # s
 ARRAY_THREADS = 2
-REFERENCE = ('exact', 11, 1e-8)
+BEAMS = ('fixed', 'simply_supported')
 BEGIN, END = '<!-- work_precision_map: begin -->', '<!-- work_precision_map: end -->'
 HERE = os.path.dirname(os.path.abspath(__file__))
 CSV = os.path.join(HERE, 'data', 'work_precision_map.csv')
 FIGURE = os.path.join(HERE, os.pardir, 'docs', 'figures', 'work_precision_map.png')
-FIELDS = ('workload', 'fidelity', 'n_r', 'tolerance', 'error', 'integration_error',
-          'switch_ok', 'cpu_per_s', 'x_real_time', 'steps_per_period', 'repeated')
-OWN = 1e-8   # each level's own converged run: its tolerance
+FIELDS = ('workload', 'case', 'beam', 'fidelity', 'shapes', 'n_r', 'tolerance', 'error',
+          'integration_error', 'snaps', 'snaps_ref', 'right', 'scored', 'cpu_per_s',
+          'x_real_time', 'steps_per_period', 'repeated')
 
 
-def level_overrides(fidelity, n_r, tolerance) -> dict:
+def level_overrides(fidelity, shapes, n_r, tolerance) -> dict:
     """Return the scene overrides of one map point."""
-    return {'scene.fidelity': fidelity, 'scene.n_ritz': n_r, 'integrator.tolerance': tolerance}
+    return {'scene.fidelity': fidelity, 'scene.shapes': shapes, 'scene.n_ritz': n_r,
+            'integrator.tolerance': tolerance}
 
 
-def controller_volts(periods: int, dt: float, copies: int = 1, seed: int = 0) -> np.ndarray:
-    """Return (periods x copies) commands: the 2 Hz 0 / 2.5 kV square wave plus the dither."""
-    t = np.arange(periods) * dt
-    square = CONTROLLER_HIGH * (((t * CONTROLLER_HZ) % 1.0) < 0.5)
-    dither = np.random.default_rng(seed).uniform(-DITHER, DITHER, (periods, copies))
-    return np.clip(square[:, None] + dither, 0.0, None)
+def workloads():
+    """Return (workload, case name, beam, eps_b, drive) of every case the map runs."""
+    out = [('step', case_name(b, e), b, e, None) for b, e in CASES]
+    for beam, eps_b, drive in SWITCHING_CASES:
+        kind = 'controller' if drive == 'controller' else f'switching {drive:g} Hz'
+        out.append((kind, switching_case_name(beam, eps_b, drive), beam, eps_b, drive))
+    return out
 
 
-def half_period_signs(t, q) -> np.ndarray:
-    """Return the sign of q at the end of every half period of the square wave."""
-    ends = np.arange(1, int(t[-1] * 2 * CONTROLLER_HZ) + 1) / (2 * CONTROLLER_HZ)
-    return np.sign(q[np.searchsorted(t, ends - 1e-9) - 1])
-
-
-def run_controller(fidelity, n_r, tolerance):
-    """Return (result, CPU s, steps per period) of the controller's input on the default scene."""
-    scene = load_scene('default', level_overrides(fidelity, n_r, tolerance))
-    periods = round(CONTROLLER_END / scene.dt)
-    volts = controller_volts(periods, scene.dt)
+def run_case(point, beam, eps_b, drive):
+    """Return (t, y, q, CPU s, steps per period, periods repeated) of one case at one point."""
+    overrides = level_overrides(*point)
+    if drive is None:
+        scene = step_scene(beam, eps_b, **overrides)
+        end = STEP_END
+        volts = np.array([step_voltage(scene.physics.v_max)(k * scene.dt)
+                          for k in range(round(end / scene.dt))])
+    else:
+        extra, volts = switching_inputs(beam, eps_b, drive, 1e-3)
+        scene = step_scene(beam, eps_b, **overrides, **extra)
+        end = SWITCHING_END
     sim = Simulator(scene)
     start = time.process_time()
-    result = simulate(sim, volts, CONTROLLER_END)
-    result.periods_repeated = sim.stepper.periods_repeated / periods
-    return result, time.process_time() - start, sim.steps_taken / periods
+    run = simulate(sim, volts, end)
+    cpu = time.process_time() - start
+    periods = len(volts)
+    return (run.t, run['y'], run['q'], cpu / end, sim.steps_taken / periods,
+            sim.stepper.periods_repeated / periods, scene)
 
 
-def _displacement(result) -> np.ndarray:
-    """Return y - y(0): the travel from the rest state (whose y differs a little by level)."""
-    return result['y'] - result['y'][0]
+def score(workload, t, y, q, ref, own_y=None):
+    """Return (error, integration error, snaps, reference snaps, right, scored) of one run."""
+    if workload == 'step':
+        dy = delta_y(t, y, 0.0)[0]
+        error = stroke_error(t, dy, ref['dy'], stroke(ref['y']))
+        own = (stroke_error(t, dy, delta_y(t, own_y, 0.0)[0], stroke(ref['y']))
+               if own_y is not None else 0.0)
+        right = switched(t, q) == switched(ref['t'], ref['q'])
+        return error, own, int(switched(t, q)), int(switched(ref['t'], ref['q'])), right, True
+    error = switching_error(t, y, ref['y'])
+    travel = ref['y'][t >= 0.5 - 1e-9]
+    own = (float(np.max(np.abs((y - own_y)[t >= 0.5 - 1e-9])) / np.ptp(travel))
+           if own_y is not None else 0.0)
+    made, expected = snap_times(t, q), snap_times(ref['t'], ref['q'])
+    right = len(made) == len(expected) and (
+        not len(made) or float(np.max(np.abs(made - expected))) <= 2.0e-3)
+    scored = not workload.startswith('switching 10')
+    return error, own, len(made), len(expected), right, scored
 
 
-def controller_rows(point, reference, own=None):
-    """
-    Return ([the controller run's row], its result) at one point.
-
-    Error against ``reference`` (the continuum) and, with ``own``, against the level's own
-    converged run: max |y - y_ref| over the run / the travel of the continuum's y.
-    """
-    result, cpu, steps = run_controller(*point)
-    travel = reference['y'].max() - reference['y'].min()
-    error = float(np.max(np.abs(_displacement(result) - _displacement(reference))) / travel)
-    own = own if own is not None else result
-    own_error = float(np.max(np.abs(_displacement(result) - _displacement(own))) / travel)
-    ok = np.array_equal(half_period_signs(result.t, result['q']),
-                        half_period_signs(reference.t, reference['q']))
-    row = _row('controller', point, error, own_error, ok, cpu / CONTROLLER_END, steps)
-    row['repeated'] = result.periods_repeated
-    return [row], result
-
-
-def step_rows(point, reference, own=None):
-    """
-    Return (the map rows of the three step cases at one point, their dy by case).
-
-    Error against the continuum ``reference`` and, with ``own`` (dy by case of the level's own
-    converged run), against its own model: the integration error.
-    """
-    rows, dys = [], {}
-    for beam, eps_b in CASES:
-        name = case_name(beam, eps_b)
-        ref = reference[name]
-        run, cpu, steps = run_level(beam, eps_b, point[0], point[1], repeats=1,
-                                    **{'integrator.tolerance': point[2]})
-        dy, _ = delta_y(run.t, run['y'], run.scene.beam_length)
-        dys[name] = dy
-        scale = stroke(ref['y'])
-        error = stroke_error(run.t, dy, ref['dy'], scale)
-        own_error = stroke_error(run.t, dy, (own or dys)[name], scale)
-        ok = switched(run.t, run['q']) == switched(ref['t'], ref['q'])
-        rows.append(_row(name, point, error, own_error, ok, cpu / STEP_END, steps))
-        rows[-1]['repeated'] = run.periods_repeated / round(STEP_END / run.scene.dt)
-    return rows, dys
+def point_rows(point, reference, own=None):
+    """Return (the rows of every case at one point, its y by case)."""
+    rows, ys = [], {}
+    for workload, name, beam, eps_b, drive in workloads():
+        t, y, q, cpu, steps, repeated, _ = run_case(point, beam, eps_b, drive)
+        ys[name] = y
+        error, own_error, snaps, snaps_ref, right, scored = score(
+            workload, t, y, q, reference[name], None if own is None else own[name])
+        rows.append(dict(zip(FIELDS, (workload, name, beam, *point, error, own_error, snaps,
+                                      snaps_ref, right, scored, cpu, 1.0 / cpu, steps,
+                                      repeated))))
+        print(f'  {name:>40} {_level(*point[:3]):>24} {point[3]:.0e}: error {error:.2e} '
+              f'(own {own_error:.1e}) snaps {snaps}/{snaps_ref}{"" if right else " WRONG"} '
+              f'{1 / cpu:.0f}x {steps:.1f} steps/period', flush=True)
+    return rows, ys
 
 
 def lsoda_rows(point, reference):
-    """Return LSODA's rows (same compiled rhs) on the step cases at one point."""
+    """Return LSODA's rows (same compiled rhs) on the step and 2 Hz switching cases."""
     rows = []
-    for beam, eps_b in CASES:
-        ref = reference[case_name(beam, eps_b)]
+    for workload, name, beam, eps_b, drive in workloads():
+        if workload not in ('step', 'switching 2 Hz'):
+            continue
         start = time.process_time()
-        run = solve_case(beam, eps_b, point[1], point[2])
-        cpu = time.process_time() - start
-        error = stroke_error(run['t'], run['dy'], ref['dy'], stroke(ref['y']))
-        ok = switched(run['t'], run['q']) == switched(ref['t'], ref['q'])
-        rows.append(_row(f'lsoda {case_name(beam, eps_b)}', point, error, float('nan'), ok,
-                         cpu / run['t'][-1], float('nan')))
+        run = solve_case(beam, eps_b, point[2], point[3], drive, shapes=point[1])
+        cpu = (time.process_time() - start) / run['t'][-1]
+        error, _, snaps, snaps_ref, right, _ = score(workload, run['t'], run['y'], run['q'],
+                                                     reference[name])
+        rows.append(dict(zip(FIELDS, (f'lsoda {workload}', name, beam, *point, error,
+                                      float('nan'), snaps, snaps_ref, right, True, cpu,
+                                      1.0 / cpu, float('nan'), float('nan')))))
+        print(f'  lsoda {name:>34} {_level(*point[:3])} rtol {point[3]:.0e}: error '
+              f'{error:.2e} {1 / cpu:.1f}x', flush=True)
     return rows
 
 
-def array_row(point):
-    """Return the shipped array's row (wall clock, ARRAY_THREADS threads) at one point."""
+def array_rows(point):
+    """Return the shipped array's rows (wall clock and CPU, ARRAY_THREADS threads)."""
     scene = load_scene('array', level_overrides(*point))
     periods = round(ARRAY_END / scene.dt)
     volts = controller_volts(periods, scene.dt, scene.n_dets)
@@ -187,22 +186,49 @@ def array_row(point):
     start, cpu = time.perf_counter(), time.process_time()
     simulate(sim, volts, ARRAY_END)
     wall = (time.perf_counter() - start) / ARRAY_END
-    cpu = (time.process_time() - cpu) / ARRAY_END
+    cpu = (time.process_time() - cpu) / ARRAY_END / ARRAY_THREADS
     steps = sim.steps_taken / periods / sim.model.arrays.n_groups
-    print(f'    array CPU (both threads) {cpu:.3f} s/s: {ARRAY_THREADS / cpu:.2f}x real time '
-          f'on {ARRAY_THREADS} idle cores')
-    return [_row('array', point, float('nan'), float('nan'), True, wall, steps),
-            _row('array cpu', point, float('nan'), float('nan'), True, cpu / ARRAY_THREADS,
-                 steps)]
+    print(f'  array {_level(*point[:3])} {point[3]:.0e}: {1 / cpu:.2f}x real time on '
+          f'{ARRAY_THREADS} cores (CPU), {1 / wall:.2f}x by the wall clock', flush=True)
+    nan = float('nan')
+    return [dict(zip(FIELDS, (kind, 'array', 'fixed', *point, nan, nan, 0, 0, True, False,
+                              cost, 1.0 / cost, steps, nan)))
+            for kind, cost in (('array', wall), ('array cpu', cpu))]
 
 
-def _row(workload, point, error, own_error, ok, cpu_per_s, steps) -> dict:
-    row = dict(zip(FIELDS, (workload, point[0], point[1], point[2], error, own_error, ok,
-                            cpu_per_s, 1.0 / cpu_per_s, steps, float('nan'))))
-    print(f'  {workload:>22} {point[0]:>10} {point[1]} {point[2]:.0e}: error {error:.2e} '
-          f'(own {own_error:.1e}) {"" if ok else "SWITCHING WRONG "}{cpu_per_s:.4f} CPU s/s '
-          f'({1 / cpu_per_s:.1f}x) {steps:.1f} steps/period', flush=True)
-    return row
+def _level(fidelity, shapes, n_r) -> str:
+    if fidelity == 'paper':
+        return 'paper'
+    return f'{fidelity} {"modes" if shapes == MODES else "poly"} n_r {n_r}'
+
+
+def _num(row):
+    out = {}
+    for k, v in row.items():
+        if k in ('workload', 'case', 'beam', 'fidelity', 'shapes'):
+            out[k] = v
+        elif k in ('right', 'scored'):
+            out[k] = v in (True, 'True')
+        else:
+            out[k] = float(v)
+    return out
+
+
+def by_point(rows):
+    """Return {(fidelity, shapes, n_r, tolerance): [rows]} of the simulator's own rows."""
+    out = {}
+    for r in map(_num, rows):
+        if r['workload'].startswith(('lsoda', 'array')):
+            continue
+        out.setdefault((r['fidelity'], r['shapes'], int(r['n_r']), r['tolerance']), []).append(r)
+    return out
+
+
+def beam_score(rows, beam):
+    """Return (worst scored error, all snaps right, slowest x real time, worst integration)."""
+    mine = [r for r in rows if r['beam'] == beam and r['scored']]
+    return (max(r['error'] for r in mine), all(r['right'] for r in mine),
+            min(r['x_real_time'] for r in mine), max(r['integration_error'] for r in mine))
 
 
 def front(points):
@@ -216,152 +242,135 @@ def front(points):
     return keep
 
 
-def summary(rows):
-    """Return {(fidelity, n_r, tolerance): (worst step error, slowest step CPU/s, ...)}."""
-    out = {}
-    for r in rows:
-        if r['workload'] in [case_name(b, e) for b, e in CASES]:
-            key = (r['fidelity'], int(r['n_r']), float(r['tolerance']))
-            err, cpu, ok = out.get(key, (0.0, 0.0, True))
-            out[key] = (max(err, float(r['error'])), max(cpu, float(r['cpu_per_s'])),
-                        ok and r['switch_ok'] in (True, 'True'))
-    return out
+def beam_front(points, beam):
+    """Return the keys on one beam's front among the points that make every snap."""
+    keys = [k for k, rows in points.items() if beam_score(rows, beam)[1]]
+    scores = [beam_score(points[k], beam) for k in keys]
+    return {keys[i] for i in front([(1.0 / s[2], s[0]) for s in scores])}
 
 
 def plot(rows, path=FIGURE):
-    """Draw worst step-case error against the slowest case's CPU, a curve per level and n_r."""
+    """Per beam: worst scored error against the slowest case's CPU, one curve per level."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
-    best = summary(rows)
-    fig, ax = plt.subplots(figsize=(8, 5.5))
-    levels = sorted({(f, n) for f, n, _ in best}, key=lambda k: (k[0] != 'paper', k))
-    for fidelity, n_r in levels:
-        pts = sorted((t, *best[(f, n, t)]) for f, n, t in best if (f, n) == (fidelity, n_r))
-        label = 'paper' if fidelity == 'paper' else f'{fidelity} n_r {n_r}'
-        style = {'paper': ':', 'consistent': '--'}.get(fidelity, '-')
-        line, = ax.loglog([p[2] for p in pts], [p[1] for p in pts], style, marker='o', ms=4,
-                          label=label)
-        for tol, err, cpu, _ in pts:
-            ax.annotate(f'{tol:.0e}', (cpu, err), fontsize=6, color=line.get_color(),
-                        xytext=(3, 2), textcoords='offset points')
-    lsoda = {}
-    for r in rows:
-        if r['workload'].startswith('lsoda'):
-            key = (int(r['n_r']), float(r['tolerance']))
-            e, c = lsoda.get(key, (0.0, 0.0))
-            lsoda[key] = (max(e, float(r['error'])), max(c, float(r['cpu_per_s'])))
-    if lsoda:
-        ax.loglog([v[1] for v in lsoda.values()], [v[0] for v in lsoda.values()], 'kx', ms=7,
-                  label='scipy LSODA, exact (same rhs)')
-    keys = list(best)
-    idx = front([(best[k][1], best[k][0]) for k in keys])
-    ax.loglog([best[keys[i]][1] for i in idx], [best[keys[i]][0] for i in idx], color='k',
-              lw=3, alpha=0.25, label='front')
-    ax.axhline(0.01, color='r', lw=0.8, ls='--')
-    ax.axvline(1 / 25, color='g', lw=0.8, ls='--')
-    ax.text(1 / 25, ax.get_ylim()[0] * 1.5, ' 25x real time', color='g', fontsize=7)
-    ax.text(ax.get_xlim()[0] * 1.1, 0.011, '1 % of the stroke', color='r', fontsize=7)
-    ax.set_xlabel('CPU s per simulated s, slowest of the three step cases')
-    ax.set_ylabel('worst error against the continuum / stroke')
-    ax.set_title('Work-precision map (labels: integrator.tolerance)')
-    ax.grid(True, which='both', lw=0.3)
-    ax.legend(fontsize=7, ncol=2)
+    points = by_point(rows)
+    fig, axes = plt.subplots(1, 2, figsize=(12, 5.2), sharey=True)
+    for ax, beam in zip(axes, BEAMS):
+        levels = sorted({k[:3] for k in points}, key=lambda k: (k[0] != 'paper', k))
+        for level in levels:
+            pts = sorted((k[3], *beam_score(points[k], beam)) for k in points if k[:3] == level)
+            style = {'paper': ':', 'consistent': '--'}.get(level[0], '-')
+            line, = ax.loglog([1.0 / p[3] for p in pts], [p[1] for p in pts], style,
+                              marker='o' if level[1] == MODES else 's', ms=4,
+                              label=_level(*level))
+            for tol, err, right, x, _ in pts:
+                ax.annotate(f'{tol:.0e}' + ('' if right else ' ✗'), (1.0 / x, err), fontsize=6,
+                            color=line.get_color(), xytext=(3, 2), textcoords='offset points')
+        keys = sorted(beam_front(points, beam), key=lambda k: 1.0 / beam_score(points[k], beam)[2])
+        ax.loglog([1.0 / beam_score(points[k], beam)[2] for k in keys],
+                  [beam_score(points[k], beam)[0] for k in keys], color='k', lw=3, alpha=0.25,
+                  label='front (every snap made)')
+        ax.axhline(0.01, color='r', lw=0.8, ls='--')
+        ax.axvline(1 / 50, color='g', lw=0.8, ls='--')
+        ax.set_xlabel('CPU s per simulated s, slowest case')
+        ax.set_title(f'{beam.replace("_", " ")} beam: step and 2 Hz switching cases', fontsize=9)
+        ax.grid(True, which='both', lw=0.3)
+    axes[0].set_ylabel('worst error against the continuum (stroke / travel)')
+    axes[1].legend(fontsize=6, ncol=2)
+    fig.suptitle('Work-precision map (labels: integrator.tolerance; ✗: a snap missed or '
+                 'mistimed; red: 1 %, green: 50x real time)', fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     print(f'wrote {os.path.normpath(path)}')
 
 
-def _level(fidelity, n_r) -> str:
-    return 'paper' if fidelity == 'paper' else f'{fidelity} n_r {n_r}'
-
-
-def _by_point(rows):
-    """Return {(fidelity, n_r, tolerance): {workload: row}} with numbers as numbers."""
-    out = {}
-    for r in rows:
-        key = (r['fidelity'], int(r['n_r']), float(r['tolerance']))
-        out.setdefault(key, {})[r['workload']] = {
-            k: (v if k in ('workload', 'fidelity') else
-                (v in (True, 'True')) if k == 'switch_ok' else float(v)) for k, v in r.items()}
-    return out
-
-
 def doc_section(rows) -> str:
-    """Return the markdown of the map: the front, the auto tolerances' evidence, array, LSODA."""
+    """Return the markdown of the map: per beam, error, snaps and cost of every point."""
     import datetime
     import subprocess
-    cases = [case_name(b, e) for b, e in CASES]
-    points = _by_point(rows)
-    steps = {k: v for k, v in points.items() if all(c in v for c in cases)}
-    best = summary(rows)
-    keys = list(best)
-    on_front = {keys[i] for i in front([(best[k][1], best[k][0]) for k in keys])}
+    points = by_point(rows)
+    fronts = {beam: beam_front(points, beam) for beam in BEAMS}
     try:
         commit = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True,
                                 text=True, check=True, cwd=HERE).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         commit = 'unknown'
-    out = [f'Measured {datetime.date.today().isoformat()}, commit {commit}, {MACHINE} (one run '
-           'per point, CPU time of one core: ±30 % with the load; ratios side by side in one '
-           'run). Error: max |Δy − Δy_ref| of a step case over its 3 kV phase / stroke, the '
-           'worst of the three; CPU: the slowest of the three; "integration": the error against '
-           f'the same level at tolerance {OWN:g}, as a fraction of the own error of the level '
-           'against the continuum (worst case); controller: '
-           f'{CONTROLLER_END:g} s of the default scene under a new command every period (a '
-           f'{CONTROLLER_HZ:g} Hz 0 / {CONTROLLER_HIGH / 1e3:g} kV square wave, ±{DITHER:g} V '
-           f'dither), max |Δy − Δy_ref| / travel against exact n_r {REFERENCE[1]} at '
-           f'{REFERENCE[2]:g}. Front: no other point both cheaper and more accurate on the step '
-           'cases. `bench/work_precision_map.py --docs` rewrites this section.', '',
+    out = [f'Measured {datetime.date.today().isoformat()}, commit {commit}, {MACHINE}, by '
+           '`flock bench/.lock env PYTHONPATH=. python bench/work_precision_map.py --lsoda '
+           '--array --plot --docs` (one run per point, CPU time of one core: ±30 % with the '
+           'load; ratios side by side in one run). Per beam: the worst error over its step '
+           'cases (max |Δy − Δy_ref| over the 3 kV phase / stroke), its 2 Hz switching cases '
+           'and its controller case (max |y − y_ref| from 0.5 s / travel); "snaps": every '
+           'snap of the converged beam made, each within 2 ms (the step cases: switching as '
+           'it does); × real time: its slowest case; "integration": the error against the '
+           "same level at the tightest tolerance listed for it, over that run's own error. "
+           'Front: no point that makes every snap is both cheaper and more accurate.', '',
            '![work-precision map](figures/work_precision_map.png)', '',
-           '| level | tolerance | worst error | integration / model | slowest × real time | '
-           'steps per period (slowest) | periods repeated (slowest) | controller error | '
-           'controller × real time | front |',
-           '|---|---|---|---|---|---|---|---|---|---|']
-    own_error = {(f, n): max(steps[(f, n, OWN)][c]['error'] for c in cases)
-                 for f, n, _ in steps if (f, n, OWN) in steps}
-    for key in sorted(steps, key=lambda k: (k[0] != 'paper', k[0], k[1], -k[2])):
-        fidelity, n_r, tol = key
-        if tol == OWN and tol not in GRID.get((fidelity, n_r), ()):
-            continue
-        v = steps[key]
-        slow = max(cases, key=lambda c: v[c]['cpu_per_s'])
-        ratio = max(v[c]['integration_error'] / steps[(fidelity, n_r, OWN)][c]['error']
-                    for c in cases) if (fidelity, n_r) in own_error else float('nan')
-        ctl = v.get('controller')
-        wrong = '' if all(v[c]['switch_ok'] for c in cases) else ' (switches wrongly)'
-        out.append(f'| {_level(fidelity, n_r)} | {tol:g} | {best[key][0]:.2%}{wrong} | '
-                   f'{ratio:.1%} | {1 / best[key][1]:.0f} | {v[slow]["steps_per_period"]:.1f} | '
-                   f'{v[slow]["repeated"]:.1%} | '
-                   + (f'{ctl["error"]:.2%} | {ctl["x_real_time"]:.0f} | ' if ctl
-                      else '– | – | ')
-                   + ('**yes**' if key in on_front else '') + ' |')
-    arrays = {k: v for k, v in points.items() if 'array' in v}
+           '| level | tolerance | fixed: worst error | snaps | × real time | '
+           'simply supported: worst error | snaps | × real time | integration / model | '
+           '10 Hz error (fixed / simply supp.) | front |',
+           '|---|---|---|---|---|---|---|---|---|---|---|']
+    for key in sorted(points, key=lambda k: (k[0] != 'paper', k[0], k[1] != MODES, k[2], -k[3])):
+        rows_k = points[key]
+        cells = []
+        integration = []
+        for beam in BEAMS:
+            err, right, x, own = beam_score(rows_k, beam)
+            cells += [f'{err:.2%}', 'all' if right else '**missed**', f'{x:.0f}']
+            integration.append(own / max(err, 1e-12))
+        fast = [max(r['error'] for r in rows_k if r['workload'] == 'switching 10 Hz'
+                    and r['beam'] == beam) for beam in BEAMS]
+        tightest = key[3] == min(k[3] for k in points if k[:3] == key[:3])
+        marks = [beam.split('_')[0] for beam in BEAMS if key in fronts[beam]]
+        out.append(f'| {_level(*key[:3])} | {key[3]:g} | ' + ' | '.join(cells) + ' | '
+                   + ('–' if tightest else f'{max(integration):.0%}') + ' | '
+                   + f'{fast[0]:.0%} / {fast[1]:.0%} | ' + ', '.join(marks) + ' |')
+    arrays = {}
+    lsoda = {}
+    for r in map(_num, rows):
+        key = (r['fidelity'], r['shapes'], int(r['n_r']), r['tolerance'])
+        if r['workload'].startswith('array'):
+            arrays.setdefault(key, {})[r['workload']] = r
+        elif r['workload'].startswith('lsoda'):
+            lsoda.setdefault(key, []).append(r)
     if arrays:
-        out += ['', f'The shipped array (100 copies, {ARRAY_THREADS} threads, {ARRAY_END:g} s of '
-                'the input of the controller, each copy its own dither): × real time from the '
-                f'CPU time of both threads ({ARRAY_THREADS} idle cores) and from the wall clock '
-                'on this shared host (other sessions running beside it):', '',
-                '| level | tolerance | × real time (CPU, 2 cores) | × real time (wall, shared) '
-                '| steps per period per copy | error, fixed ε_b 0.20 (the cell of the array) |',
-                '|---|---|---|---|---|---|']
-        for (fidelity, n_r, tol), v in arrays.items():
-            cell = steps.get((fidelity, n_r, tol), {}).get('fixed_0.20')
-            out.append(f'| {_level(fidelity, n_r)} | {tol:g} | '
-                       f'{v["array cpu"]["x_real_time"]:.2f} | {v["array"]["x_real_time"]:.2f} | '
-                       f'{v["array"]["steps_per_period"]:.1f} | '
-                       + (f'{cell["error"]:.2%}' if cell else '–') + ' |')
-    lsoda = {k: v for k, v in points.items() if any(w.startswith('lsoda') for w in v)}
+        out += ['', f'The shipped array (100 copies of the fixed ε_b 0.20 cell, {ARRAY_THREADS} '
+                f"threads, {ARRAY_END:g} s of the controller's input, each copy its own "
+                'dither): × real time from the CPU time of both threads, and by the wall clock:',
+                '', '| level | tolerance | × real time (CPU, 2 cores) | × real time (wall) | '
+                'steps per period per copy | fixed: worst error |', '|---|---|---|---|---|---|']
+        for key, v in arrays.items():
+            cell = points.get(key)
+            out.append(f'| {_level(*key[:3])} | {key[3]:g} | '
+                       f'{v["array cpu"]["x_real_time"]:.2f} | {v["array"]["x_real_time"]:.2f} '
+                       f'| {v["array"]["steps_per_period"]:.1f} | '
+                       + (f'{beam_score(cell, "fixed")[0]:.2%}' if cell else '–') + ' |')
     if lsoda:
-        out += ['', 'LSODA (scipy) on the same compiled right-hand side (`Model.f`, one solve '
-                'per constant voltage), the step cases, against this stepper at the same level:',
-                '', '| level | LSODA rtol | worst error | slowest × real time |',
-                '|---|---|---|---|']
-        for (fidelity, n_r, tol), v in lsoda.items():
-            err = max(v[f'lsoda {c}']['error'] for c in cases)
-            x = min(v[f'lsoda {c}']['x_real_time'] for c in cases)
-            out.append(f'| {_level(fidelity, n_r)} | {tol:g} | {err:.2%} | {x:.0f} |')
+        out += ['', "scipy's LSODA on the same compiled right-hand side (`Model.f`, one solve "
+                'per constant voltage) against this stepper at the default level (auto '
+                'tolerance), per beam on the step and 2 Hz switching cases: worst error and '
+                "slowest × real time; 'cost ratio': LSODA's CPU over the stepper's at the "
+                'default, slowest cases:', '',
+                '| level | LSODA rtol | beam | LSODA worst error | LSODA × real time | '
+                'cost ratio |', '|---|---|---|---|---|---|']
+        for key, rs in lsoda.items():
+            for beam in BEAMS:
+                mine = [r for r in rs if r['beam'] == beam]
+                default = load_scene('default', {'scene.beam': beam})
+                own_key = ('exact', *default.ritz_level, _auto_tolerance(default))
+                if not mine or own_key not in points or own_key[1:3] != key[1:3]:
+                    continue
+                x = min(r['x_real_time'] for r in mine)
+                ratio = beam_score(points[own_key], beam)[2] / x
+                out.append(f'| {_level(*key[:3])} | {key[3]:g} | {beam.replace("_", " ")} | '
+                           f'{max(r["error"] for r in mine):.2%} | {x:.1f} | {ratio:.1f} |')
     return '\n'.join(out)
+
+
+def _auto_tolerance(scene) -> float:
+    from det_sim_ros.sim.integrators import integration_tolerance
+    return integration_tolerance(scene)
 
 
 def read_csv(path=CSV):
@@ -371,12 +380,11 @@ def read_csv(path=CSV):
 
 
 def main(argv=None) -> int:
-    """Run the sweep, write the CSV (and the figure)."""
+    """Run the sweep, write the CSV (and the figure, and the doc section)."""
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--quick', action='store_true', help='a handful of points only')
     ap.add_argument('--array', action='store_true', help='also the 100-copy array')
     ap.add_argument('--lsoda', action='store_true', help='also scipy LSODA')
-    ap.add_argument('--no-controller', action='store_true', help='skip the controller run')
     ap.add_argument('--plot', action='store_true', help='draw the figure')
     ap.add_argument('--plot-only', action='store_true', help='redraw from the CSV only')
     ap.add_argument('--docs', action='store_true',
@@ -391,27 +399,17 @@ def main(argv=None) -> int:
     reference = load_reference()
     simulate(Simulator(load_scene('default')), np.zeros(10), 0.01)   # warm up
     rows = []
-    controller_ref = None
-    if not args.no_controller:
-        controller_ref, _, _ = run_controller(*REFERENCE)
-    for (fidelity, n_r), tolerances in (QUICK_GRID if args.quick else GRID).items():
-        own_rows, own = step_rows((fidelity, n_r, OWN), reference)
-        if controller_ref is not None:
-            own_ctl_rows, own_ctl = controller_rows((fidelity, n_r, OWN), controller_ref)
-            own_rows += own_ctl_rows
+    for level, tolerances in (QUICK_GRID if args.quick else GRID).items():
+        own_rows, own = point_rows((*level, tolerances[-1]), reference)
         rows += own_rows
-        for tol in tolerances:
-            if tol == OWN:
-                continue
-            rows += step_rows((fidelity, n_r, tol), reference, own)[0]
-            if controller_ref is not None:
-                rows += controller_rows((fidelity, n_r, tol), controller_ref, own_ctl)[0]
+        for tol in tolerances[:-1]:
+            rows += point_rows((*level, tol), reference, own)[0]
     if args.lsoda:
         for point in LSODA_POINTS:
             rows += lsoda_rows(point, reference)
     if args.array:
         for point in ARRAY_POINTS:
-            rows += array_row(point)
+            rows += array_rows(point)
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     with open(args.out, 'w', encoding='utf-8', newline='') as fh:
         writer = csv.DictWriter(fh, FIELDS)

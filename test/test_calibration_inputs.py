@@ -113,8 +113,9 @@ def test_csv_fits(tmp_path, synthetic):
     assert fitted_y(out) == pytest.approx(Y_TRUE, rel=0.01)
     assert '2 log(s), ' in stdout
     default = load_scene('default')
-    assert '\n  coarse: exact, n_ritz 1, ' in stdout
-    assert f'\n  scene: exact, n_ritz {default.n_ritz}, ' in stdout
+    coarse = default.replace(**{'scene.n_ritz': 1, 'scene.shapes': default.ritz_level[0]})
+    assert f'\n  coarse: {coarse.fidelity_label}, ' in stdout
+    assert f'\n  scene: {default.fidelity_label}, ' in stdout
 
 
 def test_no_coarse_searches_at_the_scene_level_alone(tmp_path, synthetic):
@@ -122,7 +123,7 @@ def test_no_coarse_searches_at_the_scene_level_alone(tmp_path, synthetic):
     _write_csv(path, synthetic)
     out, stdout = _fit(tmp_path, path, '--scene', 'default', '--no-coarse')
     assert fitted_y(out) == pytest.approx(Y_TRUE, rel=0.01)
-    assert '\n  scene: exact, ' in stdout and '\n  coarse: ' not in stdout
+    assert '\n  scene: exact buckling modes n_r=3, ' in stdout and '\n  coarse: ' not in stdout
 
 
 def test_the_scene_file_keeps_the_digits_the_interval_gives_and_the_report_reads_plainly(

@@ -38,7 +38,8 @@ def test_the_default_scene_is_searched_coarse_and_polished_at_its_own_level(trut
     assert (coarse.role, own.role) == ('coarse', 'scene') and own.scene is truth
     looser = max(COARSE_TOLERANCE, truth.tolerance) \
         if isinstance(truth.tolerance, float) else COARSE_TOLERANCE
-    assert coarse.scene.n_ritz == COARSE_N_RITZ < truth.n_ritz
+    assert coarse.scene.ritz_level == (truth.ritz_level[0], COARSE_N_RITZ)
+    assert COARSE_N_RITZ < truth.ritz_level[1]
     assert coarse.scene.tolerance == looser
     assert coarse.scene.fidelity == truth.fidelity and coarse.scene.physics == truth.physics
 
@@ -65,8 +66,8 @@ def test_the_polish_recovers_the_true_values_the_coarse_level_misses(truth, fitt
     assert fitted.converged, fitted.message
     coarse, polish = fitted.passes
     assert (coarse.role, polish.role) == ('coarse', 'scene')
-    assert f'n_ritz {COARSE_N_RITZ},' in coarse.level
-    assert f'n_ritz {truth.n_ritz},' in polish.level
+    assert f'n_r={COARSE_N_RITZ},' in coarse.level
+    assert f'{truth.fidelity_label},' in polish.level
     final, before = _errors(fitted.values, truth), _errors(coarse.values, truth)
     for estimate in fitted.estimates:
         name, true = estimate.name, getattr(truth.physics, estimate.name)

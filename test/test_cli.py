@@ -313,4 +313,4 @@ def test_the_paper_verbs_run_the_paper_model_unless_a_fidelity_is_set():
     assert (scene.fidelity, scene.n_ritz, scene.eps_b) == ('paper', 1, 0.15)
     args.overrides.append(('scene.fidelity', 'exact'))
     scene = common.paper_level(common.base_scene(args), args)
-    assert (scene.fidelity, scene.n_ritz) == ('exact', 5)    # the shipped default's n_ritz
+    assert (scene.fidelity, scene.n_ritz) == ('exact', 0)    # the shipped default's: auto

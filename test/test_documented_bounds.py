@@ -18,7 +18,7 @@ import pytest
 # key: (lowest allowed, whether it is allowed itself, highest allowed)
 SCENE_BOUNDS = {
     'scene.eps_b': (-1.0, False, 2.0),
-    'scene.n_ritz': (1, True, 12),
+    'scene.n_ritz': (0, True, 12),                # 0 = auto
     'physics.n': (1, True, 10000),
     'integrator.tolerance': (0.0, True, 0.1),     # 0 = auto
     'integrator.substeps': (0, True, 100000),

@@ -86,7 +86,7 @@ def test_equilibrium_and_jacobians_match_finite_differences(name, overrides, vol
     # linearization's model
     model = build_model(scene.replace(**{'scene.monitor_power': False}))
     a = model.arrays
-    assert a.n_q == scene.n_ritz * scene.n_dets
+    assert a.n_q == scene.ritz_level[1] * scene.n_dets
     # an equilibrium of the compiled model: dx/dt = 0 (relative to the rates' scale)
     rate = model.f(0.0, lin.x0, lin.u0)
     assert np.max(np.abs(rate) / (state_scales(lin) * 1e3)) < 1e-9

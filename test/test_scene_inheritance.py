@@ -47,9 +47,10 @@ def test_the_fidelity_is_inherited_and_paper_is_one_term(tmp_path):
     """Check a file without a level gets the default's; one that picks 'paper' gets one term."""
     default = load_scene('default')
     plain = load_scene(str(_write(tmp_path, 'plain.yaml', 'scene: {eps_b: 0.15}\n')))
-    assert (plain.fidelity, plain.n_ritz) == (default.fidelity, default.n_ritz) == ('exact', 5)
+    assert (plain.fidelity, plain.ritz_level) == (default.fidelity, default.ritz_level) == (
+        'exact', ('buckling_modes', 3))
     paper = load_scene(str(_write(tmp_path, 'paper.yaml', 'scene: {fidelity: paper}\n')))
-    assert (paper.fidelity, paper.n_ritz) == ('paper', 1)
+    assert (paper.fidelity, paper.n_ritz, paper.ritz_level) == ('paper', 1, ('polynomial', 1))
     assert load_scene('default', {'scene.fidelity': 'paper', 'scene.n_ritz': 7}).n_ritz == 1
     exact = load_scene(str(_write(tmp_path, 'exact.yaml', 'scene: {n_ritz: 3}\n')))
     assert (exact.fidelity, exact.n_ritz) == ('exact', 3)

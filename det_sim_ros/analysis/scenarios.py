@@ -5,6 +5,11 @@ Named reference scenarios (described in docs/model.md) and the benchmark error m
 Delta-y = y0 - y with y0 the end shortening at the end of the 0 V phase, eps_y = Delta-y / l_y,
 l_y = l - y0 (eqs 83-84). The reference solution restarts a tight solve_ivp run at every input
 switch (zero-order hold, no interpolation of inputs).
+
+'switching': what a controller does. Released at q0 at 0 V; from 0.5 s a square wave between
+v_max and 0 V (v_max first) to 2.5 s, at 2 Hz (or faster). Scored by the snaps (sign changes
+of q after 0.5 s: how many, and when) and max |y - y_ref| over 0.5-2.5 s divided by the
+reference's travel there (max y_ref - min y_ref).
 """
 
 from __future__ import annotations
@@ -17,10 +22,13 @@ from ..physics.statics import initial_state
 from ..scenes.scene import load_scene
 
 __all__ = ['STEP_SWITCH_TIMES', 'step_voltage', 'step_scene', 'delta_y', 'reference_solution',
-           'step_error']
+           'step_error', 'SWITCHING_START', 'SWITCHING_END', 'switching_voltage',
+           'switching_scene', 'snap_times', 'switching_error']
 
 STEP_SWITCH_TIMES = (1.5, 3.0)   # s
 STEP_END = 4.5                   # s
+SWITCHING_START = 0.5            # s: the square wave starts here, the score from here
+SWITCHING_END = 2.5              # s
 
 
 def step_voltage(v_max: float):
@@ -39,6 +47,49 @@ def step_scene(beam: str = 'fixed', eps_b: float = 0.20, **overrides):
     return load_scene('default', {'scene.beam': beam, 'scene.eps_b': eps_b, 'rate_hz': 1000.0,
                                   'scene.initial_state': 'released', 'scene.fidelity': 'paper',
                                   **overrides})
+
+
+def switching_voltage(v_max: float, hz: float = 2.0):
+    """
+    Return the 'switching' profile v(t) (V) as a function.
+
+    0 V to SWITCHING_START, then a square wave at ``hz`` between v_max and 0 V, v_max first,
+    exact at its edges on the 1 ms grid.
+    """
+    half = 0.5 / hz
+
+    def voltage(t):
+        if t + 1e-12 < SWITCHING_START:
+            return 0.0
+        return v_max if int((t + 1e-12 - SWITCHING_START) / half) % 2 == 0 else 0.0
+    return voltage
+
+
+def switching_scene(beam: str = 'fixed', eps_b: float = 0.20, **overrides):
+    """
+    Return the default scene for the 'switching' scenario: released from q0, 1 kHz.
+
+    At the default scene's own level (the package's default) unless ``overrides`` name another.
+    """
+    return load_scene('default', {'scene.beam': beam, 'scene.eps_b': eps_b, 'rate_hz': 1000.0,
+                                  'scene.initial_state': 'released', **overrides})
+
+
+def snap_times(t, q, start: float = SWITCHING_START) -> np.ndarray:
+    """Return the times (s) of the sample after each sign change of q at or after ``start``."""
+    t, q = np.asarray(t), np.asarray(q)
+    keep = t >= start - 1e-9
+    t, sign = t[keep], np.sign(q[keep])
+    nonzero = sign != 0
+    t, sign = t[nonzero], sign[nonzero]
+    return t[1:][sign[1:] != sign[:-1]]
+
+
+def switching_error(t, y, y_ref, start: float = SWITCHING_START) -> float:
+    """Return max |y - y_ref| from ``start`` on over the travel of y_ref there (max - min)."""
+    keep = np.asarray(t) >= start - 1e-9
+    y, y_ref = np.asarray(y)[keep], np.asarray(y_ref)[keep]
+    return float(np.max(np.abs(y - y_ref)) / (np.max(y_ref) - np.min(y_ref)))
 
 
 def delta_y(t, y, l_beam):

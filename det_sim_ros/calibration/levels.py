@@ -41,7 +41,7 @@ class Level:
         scene = self.scene
         tolerance = scene.tolerance
         shown = f'{tolerance:g}' if isinstance(tolerance, (int, float)) else str(tolerance)
-        text = f'{scene.fidelity}, n_ritz {scene.n_ritz}, tolerance {shown}'
+        text = f'{scene.fidelity_label}, tolerance {shown}'
         if scene.substeps:
             text += f', {scene.substeps} substeps per period'
         return text
@@ -56,9 +56,11 @@ def fit_levels(scene) -> list:
     """
     tolerance = scene.tolerance
     numeric = isinstance(tolerance, (int, float))
-    n_ritz = min(scene.n_ritz, COARSE_N_RITZ)
+    shapes, own_n_ritz = scene.ritz_level
+    n_ritz = min(own_n_ritz, COARSE_N_RITZ)
     looser = max(float(tolerance), COARSE_TOLERANCE) if numeric else COARSE_TOLERANCE
-    if n_ritz == scene.n_ritz and numeric and looser == tolerance:
+    if n_ritz == own_n_ritz and numeric and looser == tolerance:
         return [Level('scene', scene)]
-    coarse = scene.replace(**{'scene.n_ritz': n_ritz, 'integrator.tolerance': looser})
+    coarse = scene.replace(**{'scene.n_ritz': n_ritz, 'scene.shapes': shapes,
+                              'integrator.tolerance': looser})
     return [Level('coarse', coarse), Level('scene', scene)]

@@ -289,8 +289,8 @@ _landscapes: 'collections.OrderedDict[tuple, Landscape]' = collections.OrderedDi
 
 
 def cache_key(scene: Scene) -> tuple:
-    """Return what a landscape depends on: beam, pre-strain, fidelity, n_ritz and physics."""
-    return (scene.beam, float(scene.eps_b), scene.fidelity, scene.n_ritz, scene.physics)
+    """Return what a landscape depends on: beam, pre-strain, fidelity, Ritz level, physics."""
+    return (scene.beam, float(scene.eps_b), scene.fidelity, scene.ritz_level, scene.physics)
 
 
 def landscape(scene: Scene) -> Landscape:

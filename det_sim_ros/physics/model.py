@@ -201,14 +201,15 @@ class Model:
         """
         Return the 'released' initial state.
 
-        q = q0 at the first Ritz coordinate of each cell, everything else 0.
+        Each cell's beam in the paper's shape with q = q0 at the reference point (the Ritz
+        coordinates of :meth:`RitzBasis.released_coordinates`), everything else 0.
         :func:`det_sim_ros.physics.statics.initial_state` gives the scene's own (rest or
         released).
         """
         x = np.zeros(self.n_states)
         cell_q = self.arrays.cell_q
         for c, physics in enumerate(self.scene.cell_physics()):
-            x[cell_q[c]] = physics.q0 / self.bases[c].reference_row()[0]
+            x[cell_q[c]:cell_q[c + 1]] = self.bases[c].released_coordinates(physics.q0)
         return x
 
     def f(self, t, x, u, params=None) -> np.ndarray:  # noqa: ARG002 - nlsys signature
@@ -302,7 +303,8 @@ def build_model(scene: Scene) -> Model:
       the second cell's side rises more, i.e. its Delta-y = y0 - y is larger).
     """
     physics = scene.cell_physics()
-    cells = [make_basis(scene.beam, ph.l0 * (1.0 + scene.eps_b), scene.fidelity, scene.n_ritz)
+    shapes, n_ritz = scene.ritz_level
+    cells = [make_basis(scene.beam, ph.l0 * (1.0 + scene.eps_b), scene.fidelity, n_ritz, shapes)
              for ph in physics]
     kind = scene.structure['type']
     if kind == 'plate':

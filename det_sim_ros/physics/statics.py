@@ -297,8 +297,7 @@ def rest_coords(scene: Scene, branch: str = 'buckled+') -> np.ndarray:
         _rest_cache.move_to_end(key)
         return cached.copy()
     st = landscape(scene)
-    where = (f'{scene.beam} beam, eps_b = {scene.eps_b:g}, fidelity {scene.fidelity!r}, '
-             f'n_ritz {scene.n_ritz}')
+    where = f'{scene.beam} beam, eps_b = {scene.eps_b:g}, {scene.fidelity_label}'
     try:
         rows = st.equilibria(0.0, 0.0)
     except ModelDomainError as exc:

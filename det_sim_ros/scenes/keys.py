@@ -10,13 +10,17 @@ from __future__ import annotations
 
 import math
 
-__all__ = ['SceneError', 'BEAMS', 'FIDELITIES', 'SOURCES', 'STRUCTURES', 'INITIAL_STATES',
+__all__ = ['SceneError', 'BEAMS', 'FIDELITIES', 'SHAPES', 'SOURCES', 'STRUCTURES',
+           'INITIAL_STATES',
            'REST_BRANCHES', 'PHYSICS_SPEC', 'SCENE_SPEC', 'INTEGRATOR_SPEC', 'STRUCTURE_SPEC',
            'STRUCTURE_DEFAULTS', 'SECTION_DEFAULTS', 'TOP_SPEC', 'SECTIONS', 'check_value',
            'AMPLIFIER_SPEC', 'AMPLIFIER_DEFAULTS']
 
 BEAMS = ('simply_supported', 'fixed')
 FIDELITIES = ('paper', 'consistent', 'exact')
+# the Ritz family: 'polynomial' (the paper's shape and admissible polynomials), 'buckling_modes'
+# (the straight beam's Euler buckling modes), 'auto' (per beam: det_sim_ros.physics.shapes)
+SHAPES = ('auto', 'polynomial', 'buckling_modes')
 SOURCES = ('rc', 'ideal')
 STRUCTURES = ('single', 'plate', 'array')
 # 'rest': every cell at its stable buckled equilibrium at 0 V (on rest_branch), at rest, no
@@ -56,8 +60,10 @@ SCENE_SPEC = {
     'beam': ('choice', BEAMS, 'mechanical interface'),
     'eps_b': ('float', -1.0, False, 2.0, '-', 'pre-strain, eq 77 (l = l0 (1 + eps_b) > 0)'),
     'fidelity': ('choice', FIDELITIES, 'model fidelity'),
-    'n_ritz': ('int', 1, True, 12, '-', "Ritz terms per beam ('consistent', 'exact'; "
-               "'paper' is the one-term model and takes 1)"),
+    'n_ritz': ('int', 0, True, 12, '-', "Ritz terms per beam ('consistent', 'exact'; 0 = auto: "
+               "the fewest right under switching; 'paper' is the one-term model and takes 1)"),
+    'shapes': ('choice', SHAPES, 'Ritz family: polynomial, buckling_modes or auto (per beam, '
+               'the one that needs the fewest terms)'),
     'creep': ('bool', 'Maxwell creep state'),
     'source': ('choice', SOURCES, 'electrical source model'),
     'monitor_power': ('bool', 'integrate the power balance'),
@@ -68,7 +74,8 @@ SCENE_SPEC = {
 }
 # Optional keys and their values when a scene (a file, a mapping, or a log's stored scene) omits
 # them; every other key of SECTIONS must be given.
-SECTION_DEFAULTS = {('scene', 'initial_state'): 'rest', ('scene', 'rest_branch'): 'buckled+'}
+SECTION_DEFAULTS = {('scene', 'initial_state'): 'rest', ('scene', 'rest_branch'): 'buckled+',
+                    ('scene', 'shapes'): 'polynomial'}   # a scene or log from before the key
 INTEGRATOR_SPEC = {
     'method': ('str', 'stepper name or auto'),
     'tolerance': ('float', 0.0, True, 0.1, '-', 'target error of auto (0 = auto: follows the '

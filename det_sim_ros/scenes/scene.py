@@ -31,6 +31,7 @@ from .keys import (AMPLIFIER_DEFAULTS, AMPLIFIER_SPEC, BEAMS, check_section, che
                    FIDELITIES, INITIAL_STATES, INTEGRATOR_SPEC, PHYSICS_SPEC, REST_BRANCHES,
                    SCENE_SPEC, SceneError, SECTION_DEFAULTS, SECTIONS, SOURCES,
                    STRUCTURE_DEFAULTS, STRUCTURE_SPEC, STRUCTURES, TOP_SPEC)
+from .levels import resolve_level
 from .sensors import check_sensors, Sensors, sensors_to_dict
 
 __all__ = ['SceneError', 'Physics', 'Scene', 'load_scene', 'scene_to_dict', 'find_config',
@@ -92,7 +93,7 @@ class Scene:
     beam: str
     eps_b: float
     fidelity: str
-    n_ritz: int
+    n_ritz: int                     # as given: 0 = auto (see ritz_level)
     creep: bool
     source: str
     monitor_power: bool
@@ -107,6 +108,7 @@ class Scene:
     dets: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
     initial_state: str = 'rest'     # 'rest' | 'released' (INITIAL_STATES)
     rest_branch: str = 'buckled+'   # 'buckled+' | 'buckled-' (REST_BRANCHES)
+    shapes: str = 'polynomial'      # as given: 'auto' | a Ritz family (SHAPES; see ritz_level)
     amplifier: Mapping[str, Any] = dataclasses.field(
         default_factory=lambda: dict(AMPLIFIER_DEFAULTS))
     sensors: Sensors = Sensors()    # what each output topic's sensor does (default: nothing)
@@ -167,11 +169,22 @@ class Scene:
                                    structure=dict(STRUCTURE_DEFAULTS, dets=['det0']))
 
     @property
+    def ritz_level(self) -> tuple:
+        """
+        Return the (Ritz family, terms) the model runs: 'auto' and n_ritz 0 resolved per beam.
+
+        The tables are det_sim_ros.scenes.levels'; 'paper' is one polynomial term.
+        """
+        return resolve_level(self.beam, self.fidelity, self.shapes, self.n_ritz)
+
+    @property
     def fidelity_label(self) -> str:
         """Return the model level in a few words, e.g. 'exact n_r=5' or 'paper (one term)'."""
         if self.fidelity == 'paper':
             return 'paper (one term)'
-        return f'{self.fidelity} n_r={self.n_ritz}'
+        shapes, n_ritz = self.ritz_level
+        family = ' buckling modes' if shapes == 'buckling_modes' else ''
+        return f'{self.fidelity}{family} n_r={n_ritz}'
 
     @property
     def dt(self) -> float:

@@ -190,8 +190,9 @@ def integration_tolerance(scene) -> float:
     """Return the scene's integrator tolerance: its own, or AUTO_TOLERANCE's when it is 0."""
     if scene.tolerance > 0.0:
         return scene.tolerance
+    n_ritz = scene.ritz_level[1]
     return next(tol for fidelity, n_max, tol in AUTO_TOLERANCE
-                if fidelity == scene.fidelity and scene.n_ritz <= n_max)
+                if fidelity == scene.fidelity and n_ritz <= n_max)
 
 
 def get_method(name: str) -> Method:

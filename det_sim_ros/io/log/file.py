@@ -147,12 +147,14 @@ def scene_text(scene) -> str:
 
 def logged_scene(scene):
     """
-    Return a Scene as a log stores it: its tolerance the number it resolves to.
+    Return a Scene as a log stores it: its tolerance, Ritz family and terms as they resolve.
 
-    Not 'auto' (0): a log re-simulates as recorded whatever the auto table says later.
+    Not 'auto' (0): a log re-simulates as recorded whatever the auto tables say later.
     """
     from ...sim.integrators import integration_tolerance
-    return scene.replace(**{'integrator.tolerance': integration_tolerance(scene)})
+    shapes, n_ritz = scene.ritz_level
+    return scene.replace(**{'integrator.tolerance': integration_tolerance(scene),
+                            'scene.shapes': shapes, 'scene.n_ritz': n_ritz})
 
 
 def package_version() -> str:
