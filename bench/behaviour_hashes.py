@@ -44,6 +44,13 @@ except ImportError:   # a package with the flat module layout (no layer subpacka
 # 'default' is the shipped default scene as it is, and 'default_paper' the same scene at the
 # paper's level.
 PAPER = {'scene.fidelity': 'paper'}
+# the polynomial Ritz family, named where the scene has the key (the shipped scenes pick the
+# family per beam): 'exact_n3' stays the same model on both sides of a change of that choice
+try:
+    from det_sim_ros.scenes.keys import SCENE_SPEC
+    POLYNOMIAL = {'scene.shapes': 'polynomial'} if 'shapes' in SCENE_SPEC else {}
+except ImportError:
+    POLYNOMIAL = {}
 SCENES = {
     'default': ('default', {}),
     'default_paper': ('default', PAPER),
@@ -52,7 +59,7 @@ SCENES = {
     'no_creep_no_monitor': ('default', {**PAPER, 'scene.creep': False,
                                         'scene.monitor_power': False}),
     'consistent_n3': ('default', {'scene.fidelity': 'consistent', 'scene.n_ritz': 3}),
-    'exact_n3': ('default', {'scene.fidelity': 'exact', 'scene.n_ritz': 3}),
+    'exact_n3': ('default', {'scene.fidelity': 'exact', 'scene.n_ritz': 3, **POLYNOMIAL}),
     'plate': ('plate', PAPER),
     'array20': ('array', {**PAPER, 'structure.copies': 20}),
     'substeps12': ('default', {**PAPER, 'integrator.substeps': 12}),
