@@ -2,9 +2,10 @@
 How to choose the fidelity: each level's error against the converged reference and its cost.
 
 On the three 'step' cases of bench/continuum_reference.py (fixed beam eps_b 0.15 and 0.20,
-simply supported 0.20; released from q0, 3 kV from 1.5 s to 3.0 s, 4.5 s), for 'paper',
-'consistent' n_r 3 and 5 and 'exact' n_r 3, 5 and 7, each run through ``simulate()`` with the
-scene's integrator (auto, at the level's own tolerance: integrator.tolerance 0, AUTO_TOLERANCE):
+simply supported 0.20; released from q0, 3 kV from 1.5 s to 3.0 s, 4.5 s), for each of LEVELS
+(the shipped default, 'auto': per beam its Ritz family and terms), each run through
+``simulate()`` with the scene's integrator (auto, at the level's own tolerance:
+integrator.tolerance 0, AUTO_TOLERANCE):
 
 - the max |dy - dy_ref| over the 3 kV phase as a fraction of the stroke (the travel of the beam
   end over the run, max y_ref - min y_ref: from the released, nearly straight start to the
@@ -44,8 +45,11 @@ from det_sim_ros.sim.integrators import integration_tolerance
 from det_sim_ros.sim.simulator import simulate, Simulator
 import numpy as np
 
-LEVELS = (('paper', 1), ('consistent', 3), ('consistent', 5), ('exact', 3), ('exact', 5),
-          ('exact', 7), ('exact', 9))
+POLY, MODES = 'polynomial', 'buckling_modes'
+# (fidelity, Ritz family, terms); ('exact', 'auto', 0) is the shipped default
+LEVELS = (('paper', POLY, 1), ('consistent', POLY, 3), ('consistent', POLY, 5),
+          ('exact', POLY, 3), ('exact', POLY, 5), ('exact', POLY, 7), ('exact', POLY, 9),
+          ('exact', MODES, 2), ('exact', MODES, 3), ('exact', MODES, 4), ('exact', 'auto', 0))
 SCENES = (('default', 1), ('plate', 1), ('array', 2))   # shipped scenes, stepping threads
 SCENE_RUN = 1.0         # s simulated per shipped-scene run
 LIMIT = 0.01            # of the stroke: the default level must stay within it on every case
@@ -55,7 +59,7 @@ DOC = os.path.join(HERE, os.pardir, 'docs', 'fidelity.md')
 BEGIN, END = '<!-- fidelity_choice: begin -->', '<!-- fidelity_choice: end -->'
 
 
-def run_level(beam, eps_b, fidelity, n_r, repeats=3, **overrides):
+def run_level(beam, eps_b, fidelity, n_r, repeats=3, shapes=POLY, **overrides):
     """
     Return (run, CPU s per run, internal steps per period) of one case at one level.
 
@@ -63,7 +67,7 @@ def run_level(beam, eps_b, fidelity, n_r, repeats=3, **overrides):
     ``overrides``: further scene keys (``{'integrator.tolerance': 1e-4}``).
     """
     scene = step_scene(beam, eps_b, **{'scene.fidelity': fidelity, 'scene.n_ritz': n_r,
-                                       **overrides})
+                                       'scene.shapes': shapes, **overrides})
     voltage = step_voltage(scene.physics.v_max)
     times = []
     while len(times) < (repeats if not times or times[0] < 2.0 else 1):
@@ -80,14 +84,16 @@ def run_level(beam, eps_b, fidelity, n_r, repeats=3, **overrides):
 def study(reference):
     """Return one row per level: errors, switching and cost per case."""
     rows = []
-    for fidelity, n_r in LEVELS:
-        row = {'fidelity': fidelity, 'n_r': n_r, 'error': [], 'error_peak': [],
-               'switch_ok': [], 'cpu': [], 'steps': [],
-               'tolerance': integration_tolerance(step_scene(
-                   **{'scene.fidelity': fidelity, 'scene.n_ritz': n_r}))}
+    for fidelity, shapes, n_r in LEVELS:
+        level = {'scene.fidelity': fidelity, 'scene.n_ritz': n_r, 'scene.shapes': shapes}
+        row = {'fidelity': fidelity, 'n_r': n_r, 'shapes': shapes, 'error': [],
+               'error_peak': [], 'switch_ok': [], 'cpu': [], 'steps': [], 'labels': [],
+               'tolerance': [integration_tolerance(step_scene(beam, eps_b, **level))
+                             for beam, eps_b in CASES]}
         for beam, eps_b in CASES:
             ref = reference[case_name(beam, eps_b)]
-            run, cpu, steps = run_level(beam, eps_b, fidelity, n_r)
+            run, cpu, steps = run_level(beam, eps_b, fidelity, n_r, shapes=shapes)
+            row['labels'].append(run.scene.fidelity_label)
             dy, _ = delta_y(run.t, run['y'], run.scene.beam_length)
             row['error'].append(stroke_error(run.t, dy, ref['dy'], stroke(ref['y'])))
             row['error_peak'].append(stroke_error(run.t, dy, ref['dy'],
@@ -96,7 +102,7 @@ def study(reference):
             row['cpu'].append(cpu / STEP_END)
             row['steps'].append(steps)
             outcome = 'right' if row['switch_ok'][-1] else 'WRONG'
-            print(f'  {fidelity} n_r={n_r} {case_name(beam, eps_b)}: error '
+            print(f'  {run.scene.fidelity_label} {case_name(beam, eps_b)}: error '
                   f'{row["error"][-1]:.2%} ({row["error_peak"][-1]:.2%} of the peak), '
                   f'switching {outcome}, {cpu / STEP_END:.3f} CPU s/s, '
                   f'{steps:.1f} steps/period', flush=True)
@@ -140,8 +146,9 @@ def scene_costs():
 
 
 def choice(rows, key='error'):
-    """Return the smallest exact n_r within LIMIT on every case (None if none is)."""
-    ok = [r['n_r'] for r in rows if r['fidelity'] == 'exact' and max(r[key]) <= LIMIT]
+    """Return the smallest exact polynomial n_r within LIMIT on every case (None if none)."""
+    ok = [r['n_r'] for r in rows
+          if r['fidelity'] == 'exact' and r['shapes'] == POLY and max(r[key]) <= LIMIT]
     return min(ok) if ok else None
 
 
@@ -178,9 +185,12 @@ def table(rows, reference) -> str:
              + ' | switching right | CPU s per simulated s | × real time | steps per period |',
              '|---|---|' + '---|' * (len(CASES) + 4)]
     for r in rows:
-        level = r['fidelity'] if r['fidelity'] == 'paper' else f'{r["fidelity"]} n_r {r["n_r"]}'
+        level = ' / '.join(dict.fromkeys(r['labels']))
+        if r['shapes'] == 'auto':
+            level = f'default ({level})'
+        tolerance = ' / '.join(f'{t:g}' for t in dict.fromkeys(r['tolerance']))
         cpu_lo, cpu_hi = min(r['cpu']), max(r['cpu'])
-        lines.append(f'| {level} | {r["tolerance"]:g} | '
+        lines.append(f'| {level} | {tolerance} | '
                      + ' | '.join(f'{e:.2%} ({p:.2%})'
                                   for e, p in zip(r['error'], r['error_peak']))
                      + f' | {sum(r["switch_ok"])} of {len(CASES)}'
@@ -195,12 +205,12 @@ def convergence_table(meta) -> str:
     lines = [f'The reference\'s own convergence (bench/continuum_reference.py, {meta["solver"]};'
              f' commit {meta["commit"]}): the same error measure against the stored reference, '
              f'exact n_r {meta["n_ritz"]} at tolerance {meta["rtol"]:g}.', '',
-             '| case | n_r | tolerance | CPU s | max |Δy − Δy_ref| / stroke | switched |',
+             '| case | n_r | tolerance | CPU s | error | switched (step) / snaps |',
              '|---|---|---|---|---|---|']
-    for name, n_r, rtol, cpu, error, did_switch in meta['convergence']:
+    for name, n_r, rtol, cpu, error, outcome in meta['convergence']:
         if (n_r, rtol) != (meta['n_ritz'], meta['rtol']):
             lines.append(f'| {name.replace("_", " ")} | {n_r} | {rtol:g} | {cpu:g} | '
-                         f'{error:.1e} | {"yes" if did_switch else "no"} |')
+                         f'{error:.1e} | {outcome} |')
     return '\n'.join(lines)
 
 
