@@ -30,6 +30,7 @@ void ds_linear_reset(ds_linear *lin)
     lin->next_slot = 0;
     for (int s = 0; s < DS_LIN_SLOTS; s++)
         lin->slot[s].h = 0.0;
+    ds_phi_chains_clear(lin->chain, DS_LIN_CHAINS);
 }
 
 /* The table's (row, stage) pairs that carry a term, by row (stage order within a row). */
@@ -84,8 +85,10 @@ int ds_linear_init(ds_linear *lin, const ds_method *me, const ds_model *m)
     }
     const int64_t per_slot = (s + 1 + lin->n_pairs) * nn;
     const int64_t n_phis = (me->n_args + 1) * kp * nn;
+    const int64_t per_chain = ds_phi_chain_doubles(nd, kp - 1);
     const int64_t total = nn + 2 * nd + m->n_cells + DS_LIN_SLOTS * per_slot + n_phis
-                          + ds_matrix_phi_work(nd, kp - 1) + 3 * m->n_state;
+                          + ds_matrix_phi_work(nd, kp - 1) + 3 * m->n_state
+                          + DS_LIN_CHAINS * per_chain;
     lin->mem = calloc((size_t)total, sizeof(double));
     if (!lin->mem) {
         ds_linear_free(lin);
@@ -105,6 +108,9 @@ int ds_linear_init(ds_linear *lin, const ds_method *me, const ds_model *m)
     lin->xq = lin->work + ds_matrix_phi_work(nd, kp - 1);
     lin->f0 = lin->xq + m->n_state;
     lin->f1 = lin->f0 + m->n_state;
+    for (int k = 0; k < DS_LIN_CHAINS; k++)
+        ds_phi_chain_init(&lin->chain[k], lin->f1 + m->n_state + k * per_chain);
+    ds_phi_chains_clear(lin->chain, DS_LIN_CHAINS);
     return 0;
 }
 
@@ -206,7 +212,8 @@ static void argument_phis(const ds_method *me, ds_linear *lin, double h)
                 twice = b;
         if (twice >= 0)
             continue;   /* from its double's chain */
-        ds_matrix_phis(lin->A, arg * h, nd, kp - 1, out, spare, lin->work);
+        lin->chain_builds += ds_matrix_phis_chained(lin->A, arg * h, nd, kp - 1, lin->chain,
+                                                    DS_LIN_CHAINS, out, spare, lin->work);
         for (int64_t b = 0; b < me->n_args; b++)
             if (2.0 * me->args[b] == arg)
                 memcpy(lin->phis + b * nb, spare, (size_t)nb * sizeof(double));

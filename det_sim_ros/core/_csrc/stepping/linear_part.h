@@ -11,9 +11,11 @@
 
 #include "physics/model.h"
 #include "stepping/group.h"
+#include "stepping/matrix_phi.h"
 #include "stepping/method.h"
 
 #define DS_LIN_SLOTS 4   /* step sizes whose weights are kept (a period uses 1-3) */
+#define DS_LIN_CHAINS 3  /* phi chains kept per A: the step-count ladder's odd factors 1, 3, 5 */
 
 /* The weights of one step size: phi_0(c_i h A) (rows 0..s) and the table's merged
  * (row, stage) weights sum_t w_t phi_{k_t}(c_t h A), each nd x nd. */
@@ -34,7 +36,9 @@ typedef struct ds_linear {
     int q_rates;                        /* A's q rows are [0 I] (q' = qdot): the remainder
                                            N is 0 there, bit for bit, and is skipped */
     int64_t next_slot, refreshes, fills;   /* Jacobians taken, weight sets computed */
+    int64_t chain_builds;               /* phi chains built anew (the rest were doublings) */
     ds_lin_slot slot[DS_LIN_SLOTS];
+    ds_phi_chain chain[DS_LIN_CHAINS];  /* of the current A (matrix_phi.h) */
     double *phis;                       /* per table argument: phi_0..k_max, full and half */
     double *work, *xq, *f0, *f1;
     double *mem;                        /* the doubles above, one allocation */

@@ -124,16 +124,11 @@ int64_t ds_matrix_phi_work(int64_t n, int64_t kmax)
     return 2 * (kmax + 1) * n * n + n * n + n;
 }
 
-/*
- * full[k] = phi_k(scale Z), half[k] = phi_k(scale Z / 2) for k = 0..kmax (blocks of n x n,
- * row-major); work: ds_matrix_phi_work(n, kmax) doubles.
- */
-void ds_matrix_phis(const double *Z, double scale, int64_t n, int64_t kmax, double *full,
-                    double *half, double *work)
+/* The doubling count s of scale Z (1-norm of the balanced scale Z at most PHI_NORM 2^s, at
+ * least one doubling). Computed with the scale inside each term: for scale 2^j the terms, their
+ * sums and so s move by exactly j (powers of two), which keeps chains comparable. */
+static int doublings(const double *Z, double scale, int64_t n, const double *d)
 {
-    const int64_t nn = n * n, nb = (kmax + 1) * nn;
-    double *P = work, *tmp = P + nb, *Y = tmp + nb, *d = Y + nn;
-    balance(Z, n, d);
     double norm = 0.0;
     for (int64_t j = 0; j < n; j++) {
         double col = 0.0;
@@ -145,21 +140,130 @@ void ds_matrix_phis(const double *Z, double scale, int64_t n, int64_t kmax, doub
     int s = 1;   /* at least one doubling: phi_k(Z / 2) comes from the chain */
     while (s < 1000 && norm > PHI_NORM * ldexp(1.0, s))
         s++;
+    return s;
+}
+
+/* phi(Z) = D phi(D^-1 Z D) D^-1: the balanced blocks P into out. */
+static void unbalance(const double *P, const double *d, int64_t n, int64_t kmax, double *out)
+{
+    const int64_t nn = n * n;
+    for (int64_t b = 0; b <= kmax; b++)
+        for (int64_t i = 0; i < n; i++)
+            for (int64_t j = 0; j < n; j++)
+                out[b * nn + i * n + j] = P[b * nn + i * n + j] * (d[i] / d[j]);
+}
+
+/* The Taylor base of the chain of scale Z with s doublings, balanced, into P. */
+static void chain_base(const double *Z, double scale, int64_t n, int64_t kmax, int s,
+                       const double *d, double *P, double *tmp, double *Y)
+{
     for (int64_t i = 0; i < n; i++)
         for (int64_t j = 0; j < n; j++)
             Y[i * n + j] = ldexp(scale * Z[i * n + j] * d[j] / d[i], -s);
     taylor_phis(Y, n, kmax, P, tmp);
+}
+
+/*
+ * full[k] = phi_k(scale Z), half[k] = phi_k(scale Z / 2) for k = 0..kmax (blocks of n x n,
+ * row-major); work: ds_matrix_phi_work(n, kmax) doubles.
+ */
+void ds_matrix_phis(const double *Z, double scale, int64_t n, int64_t kmax, double *full,
+                    double *half, double *work)
+{
+    const int64_t nn = n * n, nb = (kmax + 1) * nn;
+    double *P = work, *tmp = P + nb, *Y = tmp + nb, *d = Y + nn;
+    balance(Z, n, d);
+    const int s = doublings(Z, scale, n, d);
+    chain_base(Z, scale, n, kmax, s, d, P, tmp, Y);
     for (int i = 0; i < s; i++) {
         if (i == s - 1)
-            memcpy(half, P, (size_t)nb * sizeof(double));
+            unbalance(P, d, n, kmax, half);
         double_phis(P, n, kmax, tmp);
     }
-    memcpy(full, P, (size_t)nb * sizeof(double));
-    /* undo the balancing: phi(Z) = D phi(D^-1 Z D) D^-1 */
-    for (int64_t b = 0; b <= kmax; b++)
-        for (int64_t i = 0; i < n; i++)
-            for (int64_t j = 0; j < n; j++) {
-                full[b * nn + i * n + j] *= d[i] / d[j];
-                half[b * nn + i * n + j] *= d[i] / d[j];
-            }
+    unbalance(P, d, n, kmax, full);
+}
+
+int64_t ds_phi_chain_doubles(int64_t n, int64_t kmax)
+{
+    return n + (DS_CHAIN_LEVELS + 1) * (kmax + 1) * n * n;
+}
+
+void ds_phi_chain_init(ds_phi_chain *c, double *mem)
+{
+    c->base = 0.0;
+    c->top = -1;
+    c->used = 0;
+    c->d = mem;
+    c->levels = mem + 0;   /* set by the first build (n known then) */
+}
+
+void ds_phi_chains_clear(ds_phi_chain *chains, int n_chains)
+{
+    for (int k = 0; k < n_chains; k++) {
+        chains[k].base = 0.0;
+        chains[k].top = -1;
+        chains[k].used = 0;
+    }
+}
+
+/*
+ * As ds_matrix_phis, through chains of the same Z (cleared when Z changes): the chain of
+ * scale Z is its Taylor base Y = scale Z / 2^s and the doublings Y 2^i, i = 1..s, kept
+ * balanced per level. A scale 2^j times another's has the same base, bit for bit (every
+ * operation before the base scales exactly by powers of two), so its phis are a kept level
+ * (j < 0) or a few more doublings of the top one (j > 0): the same numbers as computed anew,
+ * at no or 4 n^3 (kmax + 1) operations per level instead of the whole chain. The step counts
+ * of linearized methods (1, 2, 3, 4, 5, 6, 8, 10, 12, 16, ...) fall in a few such families.
+ * Returns 1 when a chain was built anew, 0 when a kept one served.
+ */
+int ds_matrix_phis_chained(const double *Z, double scale, int64_t n, int64_t kmax,
+                           ds_phi_chain *chains, int n_chains, double *full, double *half,
+                           double *work)
+{
+    const int64_t nn = n * n, nb = (kmax + 1) * nn;
+    double *tmp = work + nb, *Y = tmp + nb;
+    ds_phi_chain *c = NULL;
+    int s = 0, built = 0;
+    for (int k = 0; k < n_chains && !c; k++) {
+        ds_phi_chain *ck = &chains[k];
+        if (ck->top < 0)
+            continue;
+        s = doublings(Z, scale, n, ck->d);
+        if (ldexp(scale, -s) == ck->base)
+            c = ck;
+    }
+    if (!c) {   /* the least recently used chain, built anew */
+        c = &chains[0];
+        for (int k = 1; k < n_chains; k++)
+            if (chains[k].used < c->used)
+                c = &chains[k];
+        balance(Z, n, c->d);
+        s = doublings(Z, scale, n, c->d);
+        if (s > DS_CHAIN_LEVELS) {   /* beyond the kept levels: computed alone */
+            ds_matrix_phis(Z, scale, n, kmax, full, half, work);
+            return 1;
+        }
+        c->levels = c->d + n;
+        chain_base(Z, scale, n, kmax, s, c->d, c->levels, tmp, Y);
+        c->base = ldexp(scale, -s);
+        c->top = 0;
+        built = 1;
+    }
+    if (s > DS_CHAIN_LEVELS) {
+        ds_matrix_phis(Z, scale, n, kmax, full, half, work);
+        return 1;
+    }
+    for (; c->top < s; c->top++) {
+        double *next = c->levels + (c->top + 1) * nb;
+        memcpy(next, c->levels + c->top * nb, (size_t)nb * sizeof(double));
+        double_phis(next, n, kmax, tmp);
+    }
+    int64_t newest = 0;
+    for (int k = 0; k < n_chains; k++)
+        if (chains[k].used > newest)
+            newest = chains[k].used;
+    c->used = newest + 1;
+    unbalance(c->levels + (s - 1) * nb, c->d, n, kmax, half);
+    unbalance(c->levels + s * nb, c->d, n, kmax, full);
+    return built;
 }
