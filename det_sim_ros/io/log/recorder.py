@@ -7,7 +7,9 @@ counters and its fault, and hands the rest to collaborators: :class:`~.rotation.
 channels), :class:`~.packing.RecordPacker` (the records, packed in C for runs of
 samples), :class:`~.flush_policy.FlushPolicy` (when to flush) and, with ``background=True``,
 :class:`~.writer_thread.WriterThread` (the writer thread and its bounded queue), reached
-through the recording mode (:mod:`~.write_modes`).
+through the recording mode (:mod:`~.write_modes`), which gets the recorder's writing steps as a
+:class:`~.write_modes.WriteSteps` (so the recorder's public API stays ``record``,
+``record_sample`` and ``new_file``: nothing outside can write past the writer thread).
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from .file import file_info, LogFile, package_version, scene_text
 from .flush_policy import FlushPolicy
 from .packing import layout_segments
 from .rotation import LogRotation
-from .write_modes import WriteBehind, WriteNow
+from .write_modes import WriteBehind, WriteNow, WriteSteps
 from ..cdr import serialize
 from ..schemas import type_name_of
 
@@ -115,8 +117,10 @@ class Recorder:
             self._open()
         except Exception as exc:  # noqa: BLE001 - a logging fault must not stop the simulation
             self._set_fault(exc)
-        self._mode = (WriteBehind(self, drain_period_s, max_queue)
-                      if background and self._file is not None else WriteNow(self))
+        steps = WriteSteps(self._write, self._write_sample, self._write_sample_run,
+                           self._new_file_now, self.maybe_flush, self._set_fault)
+        self._mode = (WriteBehind(self, steps, drain_period_s, max_queue)
+                      if background and self._file is not None else WriteNow(self, steps))
         _open_recorders.add(self)
 
     def _resolve(self, topic: str) -> str:
