@@ -13,9 +13,10 @@ import os
 import time
 from typing import Mapping
 
-from .format import (compression as compression_kind, END_METADATA_NAME, LIBRARY, METADATA_NAME,
-                     SCENE_ATTACHMENT, TailStream)
+from .compression import compression as compression_kind
+from .format import END_METADATA_NAME, LIBRARY, METADATA_NAME, SCENE_ATTACHMENT
 from .packing import RecordPacker
+from .tail_stream import TailStream
 from .writer import McapWriter
 from ..schemas import message_definition, qos_profiles_yaml
 

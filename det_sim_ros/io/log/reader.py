@@ -24,10 +24,11 @@ import zlib
 
 import numpy as np
 
-from .format import (chunk_compression, compression as compression_kind, LIBRARY, MAGIC,
-                     MESSAGE_FIELDS, MESSAGE_HEAD, MESSAGE_HEAD_LENGTH, METADATA_NAME,
-                     OP_ATTACHMENT, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_HEADER,
+from .compression import chunk_compression, compression as compression_kind
+from .format import (LIBRARY, MAGIC, MESSAGE_FIELDS, MESSAGE_HEAD, MESSAGE_HEAD_LENGTH,
+                     METADATA_NAME, OP_ATTACHMENT, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_HEADER,
                      OP_MESSAGE, OP_METADATA, OP_SCHEMA, RECORD_HEAD, SCENE_ATTACHMENT)
+from .sniff import is_torn
 from ..cdr import deserialize
 from ..schemas import qos_profiles_yaml
 
@@ -371,7 +372,6 @@ def recover_unfinished(folder: str, exclude: Iterable[str] = ()) -> list[tuple[s
 
     :returns: ``[(path, {'messages': n, 'complete': False}), ...]`` for the repaired files.
     """
-    from .format import is_torn
     done = []
     skip = {os.path.abspath(p) for p in exclude}
     if not os.path.isdir(folder):

@@ -24,7 +24,8 @@ from mcap.records import (Attachment, AttachmentIndex, Channel, Chunk, ChunkInde
                           Footer, Header, Message, MessageIndex as _MessageIndex, Metadata,
                           MetadataIndex, Schema, Statistics, SummaryOffset)
 
-from .format import Compression, MAGIC, OP_FOOTER, OP_MESSAGE_INDEX
+from .compression import Compression
+from .format import MAGIC, OP_FOOTER, OP_MESSAGE_INDEX
 
 __all__ = ['McapWriter', 'OpenChunk', 'MessageIndex']
 
