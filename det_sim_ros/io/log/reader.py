@@ -26,8 +26,9 @@ import numpy as np
 
 from .compression import chunk_compression, compression as compression_kind
 from .format import (LIBRARY, MAGIC, MESSAGE_FIELDS, MESSAGE_HEAD, MESSAGE_HEAD_LENGTH,
-                     METADATA_NAME, OP_ATTACHMENT, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_HEADER,
-                     OP_MESSAGE, OP_METADATA, OP_SCHEMA, RECORD_HEAD, SCENE_ATTACHMENT)
+                     METADATA_NAME, OP_ATTACHMENT, OP_CHANNEL, OP_CHUNK, OP_DATA_END,
+                     OP_FOOTER, OP_HEADER, OP_MESSAGE, OP_METADATA, OP_SCHEMA, RECORD_HEAD,
+                     SCENE_ATTACHMENT)
 from .sniff import is_torn
 from ..cdr import deserialize
 from ..schemas import qos_profiles_yaml

@@ -1,6 +1,4 @@
-"""
-What a file on disk is, read from its ends: MCAP or not, finished or torn.
-"""
+"""What a file on disk is, read from its ends: MCAP or not, finished or torn."""
 
 from __future__ import annotations
 

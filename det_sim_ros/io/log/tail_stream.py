@@ -1,6 +1,4 @@
-"""
-The writer's output file, a complete MCAP between flushes (:class:`TailStream`).
-"""
+"""The writer's output file, a complete MCAP between flushes (:class:`TailStream`)."""
 
 from __future__ import annotations
 
