@@ -319,8 +319,10 @@ class LogReader:
 
 
 def _start_writer(stream, reader: LogReader, kind):
-    from .writer import McapWriter
-    writer = McapWriter(stream, chunk_size=1024 * 1024, compression=kind)
+    """mcap's own Writer: recover needs no open chunk (the bytes of io/log/writer.McapWriter)."""
+    from mcap.writer import CompressionType, Writer
+    writer = Writer(stream, chunk_size=1024 * 1024,
+                    compression=CompressionType[(kind.field or 'none').upper()])
     writer.start(profile=reader.profile or 'ros2', library=f'{LIBRARY} recover')
     return writer
 
