@@ -132,8 +132,8 @@ class SampleEncoder:
 
     :meth:`encode` is one compiled call (``_ckernel.SampleCodec``, built from the
     :class:`SampleWire` fields here): it reads the published doubles, computes y0 - y and the
-    structure outputs, and writes them and the stamp into each message's preallocated bytes
-    (~1 us per sample; the struct packs below cost 4-7 us for one DET and ~50 us for 100).
+    structure outputs, and writes them and the stamp into each message's preallocated bytes, at
+    a fraction of the cost of the struct packs below (docs/performance.md).
 
     :meth:`encode_values` is the readable reference the tests hold it to byte for byte: per
     topic one precompiled ``struct.Struct`` whose format is the whole message (the constant

@@ -223,7 +223,7 @@ def rest_shortenings(scene: Scene) -> list[float]:
 
     Cell i is alone at 0 V (``scene.cell_scene(i)``). Cells with identical physics share one
     statics solve, so an array of identical copies costs one solve; an array with spread costs
-    one per copy (about 20 ms).
+    one per copy (docs/development.md).
     """
     cells = scene.cell_physics()
     template = scene.cell_scene(0)

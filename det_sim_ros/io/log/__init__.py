@@ -21,8 +21,8 @@ the last flush is not in the file: a SIGKILL loses it. The writer is flushed eve
 ``flush_sim_s`` of log (sim) time (0.05 s) and every ``flush_period_s`` of wall time (0.1 s),
 whichever comes first: a SIGKILL loses at most ~50 ms of sim time, in real-time and free-run
 mode alike (with ``background=True``, the writer thread's queue too: at most ``max_queue``
-items more, which the recording thread writes itself when the writer falls behind) (a
-wall-clock period alone lost 7 s of sim time per 0.1 s in a 70x free run). Every
+items more, which the recording thread writes itself when the writer falls behind; why both
+periods: docs/logging.md). Every
 flush is one write: the new records followed by a provisional end (DataEnd, a Footer without
 summary, the closing magic), written where the next flush continues. So a killed file is a
 valid MCAP up to its last flush, which mcap's reader and rosbags open without a manual step

@@ -55,8 +55,7 @@ class Recorder:
         in all (oldest deleted first; 0: no limit).
     :param max_files: keep at most this many of them (0: no limit).
     :param chunk_size: chunk size limit in bytes (a chunk also ends at every flush: at most
-        50 ms of sim time at the default periods; with mcap's 64 KiB a 100-DET array's log
-        costs a third more).
+        50 ms of sim time at the default periods; why not mcap's 64 KiB: docs/logging.md).
     :param compression: 'zstd', 'lz4' or 'none'.
     :param split_mb: start a new file when the current one exceeds this many MiB (0: never).
     :param split_s: start a new file every this many seconds of log time (0: never).
@@ -364,7 +363,8 @@ class Recorder:
 
         The bytes are those _write_sample writes one by one. A run stops before a sample that
         would end the chunk, split the file or come after a due flush, so the lookups, checks and
-        counters are done once per run (10 us per sample one by one; 3.5 us in runs packed in C).
+        counters are done once per run (what that saves: docs/logging.md, mcap's Writer and
+        readers).
         """
         i, n = 0, len(items)
         while i < n:

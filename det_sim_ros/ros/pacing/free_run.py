@@ -13,14 +13,14 @@ class FreeRunPacing(Pacing):
     """
     As fast as possible: each tick runs steps_per_tick periods, then publishes them.
 
-    The samples go out back to back: DDS spends about half the CPU per message on a burst that
-    it spends on the same messages ~0.1 ms apart (it wakes its own and the subscribers'
-    threads per message then; measured on the 2-core test host), and free run has no
-    wall-clock deadline to keep. Commands are still taken before every period.
+    The samples go out back to back: DDS spends less CPU per message on a burst than on the
+    same messages spread out (it wakes its own and the subscribers' threads per message then),
+    and free run has no wall-clock deadline to keep. Commands are still taken before every
+    period.
 
-    The always-due 1 us timer starves the node's other timers in rclpy's EventsExecutor (a 1 s
-    timer next to it fired at 1, 2, 2, 4, 4, 4, 7 s...), so each tick also runs the node's
-    periodic reports that are due by the wall clock (``run_due_reports``).
+    The always-due 1 us timer starves the node's other timers in rclpy's EventsExecutor, so each
+    tick also runs the node's periodic reports that are due by the wall clock
+    (``run_due_reports``). The measurements: docs/real_time.md (Free run).
     """
 
     mode = 'free_run'

@@ -44,10 +44,10 @@ class RealTimePacing(Pacing):
         self._behind_log = BehindLog(logger.warning, logger.info, lambda: node.wall_clock())
         self._cost.take(node.simulator)   # the first window starts here
         # the schedule starts at the first tick: the node's start-up after its timer was made
-        # (the log opened, sample 0, the first spin) took 0.1-0.2 s beside a busy core, which
-        # the first tick would otherwise find due and slip. It moves by whole periods: the
-        # periods stay due just before the timer's ticks (a schedule set at the first tick's
-        # own, late, time put every period a tick late: ~1 ms of lag)
+        # (the log opened, sample 0, the first spin) is what the first tick would otherwise
+        # find due and slip. It moves by whole periods: the periods stay due just before the
+        # timer's ticks (a schedule set at the first tick's own, late, time puts every period a
+        # tick late). How long and how late: docs/real_time.md (Real-time pacing)
         self._first_tick = True
 
     def label(self) -> str:

@@ -11,15 +11,14 @@ class FifoRequest:
     """
     ``realtime_priority``: SCHED_FIFO for every thread of the node's process, all or nothing.
 
-    Not the stepping thread alone, measured: it shares locks with DDS's threads (a publisher's
-    history, a subscription's queue) and the GIL with the log writer, and one of those holding
-    one while a busy process has its core holds the stepping thread up (the likely cause; not
-    traced to the lock). Beside a busy core, a
-    controller at SCHED_FIFO 40, 20-30 s runs: arrival lag p99 5.7-42 ms with the stepping
-    thread alone, 1.1-7.7 ms with every thread but the log writer (the stepping thread writing
-    the log), 0.6-1.0 ms with every thread (bench/realtime_switching.py). Threads started
-    later inherit the policy from the thread that starts them. ``state`` says what is in
-    force: 'off', 'SCHED_FIFO N' or why it was refused.
+    Not the stepping thread alone, which measured worse: it shares locks with DDS's threads (a
+    publisher's history, a subscription's queue) and the GIL with the log writer, and one of
+    those holding one while a busy process has its core holds the stepping thread up (the
+    likely cause; not traced to the lock). The arrival lags of each choice:
+    docs/performance.md (Real time through switching; bench/realtime_switching.py), from
+    docs/real_time.md (Scheduling priority). Threads started later inherit the policy from the
+    thread that starts them. ``state`` says what is in force: 'off', 'SCHED_FIFO N' or why it
+    was refused.
     """
 
     def __init__(self, priority: int):
