@@ -266,18 +266,23 @@ def plot(rows, path=FIGURE):
     import matplotlib.pyplot as plt
     points = by_point(rows)
     fig, axes = plt.subplots(1, 2, figsize=(12, 5.2), sharey=True)
+    levels = sorted({k[:3] for k in points}, key=lambda k: (k[0] != 'paper', k))
+    cycle = plt.get_cmap('tab20').colors
+    colors = {level: cycle[i % len(cycle)] for i, level in enumerate(levels)}
     for ax, beam in zip(axes, BEAMS):
-        levels = sorted({k[:3] for k in points}, key=lambda k: (k[0] != 'paper', k))
         for level in levels:
             pts = sorted((k[3], *beam_score(points[k], beam)) for k in points if k[:3] == level)
+            pts = [p for p in pts if p[3] > 0.0]   # a level that cannot run the case: none
+            if not pts:
+                continue
             style = {'paper': ':', 'consistent': '--'}.get(level[0], '-')
             line, = ax.loglog([1.0 / p[3] for p in pts], [p[1] for p in pts], style,
                               marker='o' if level[1] == MODES else 's', ms=4,
-                              label=_level(*level))
+                              color=colors[level], label=_level(*level))
             for tol, err, right, x, _ in pts:
                 ax.annotate(f'{tol:.0e}' + ('' if right else ' ✗'), (1.0 / x, err), fontsize=6,
                             color=line.get_color(), xytext=(3, 2), textcoords='offset points')
-        keys = sorted(beam_front(points, beam), key=lambda k: 1.0 / beam_score(points[k], beam)[2])
+        keys = sorted(beam_front(points, beam), key=lambda k: -beam_score(points[k], beam)[2])
         ax.loglog([1.0 / beam_score(points[k], beam)[2] for k in keys],
                   [beam_score(points[k], beam)[0] for k in keys], color='k', lw=3, alpha=0.25,
                   label='front (every snap made)')
@@ -287,7 +292,9 @@ def plot(rows, path=FIGURE):
         ax.set_title(f'{beam.replace("_", " ")} beam: step and 2 Hz switching cases', fontsize=9)
         ax.grid(True, which='both', lw=0.3)
     axes[0].set_ylabel('worst error against the continuum (stroke / travel)')
-    axes[1].legend(fontsize=6, ncol=2)
+    handles = {h.get_label(): h for ax in axes for h in ax.get_lines()}
+    axes[1].legend([handles[k] for k in handles if not k.startswith('_')],
+                   [k for k in handles if not k.startswith('_')], fontsize=6, ncol=2)
     fig.suptitle('Work-precision map (labels: integrator.tolerance; ✗: a snap missed or '
                  'mistimed; red: 1 %, green: 50x real time)', fontsize=9)
     fig.tight_layout()

@@ -9,7 +9,7 @@ packed path writes the bytes of its one-by-one path; an unknown compression is r
 import io
 import random
 
-from det_sim_ros.io.log.format import compression, COMPRESSIONS
+from det_sim_ros.io.log.compression import compression, COMPRESSIONS
 from det_sim_ros.io.log.writer import McapWriter
 import pytest
 

@@ -14,7 +14,7 @@ def brentq(f, a, b, args=(), xtol=2e-12, rtol=8.9e-16, maxiter=100):
     kept inside the bracket, bisection when they would not shrink it fast enough; stops when the
     bracket is below xtol + rtol |x|. The same algorithm and stopping rule as scipy.optimize's
     brentq (test_statics checks equal roots), written here so that a node's start does not
-    import scipy.optimize (0.4-0.9 s).
+    import scipy.optimize (its cost: docs/development.md, Costs the code is shaped by).
     """
     x_pre, x_cur = float(a), float(b)
     f_pre, f_cur = f(x_pre, *args), f(x_cur, *args)

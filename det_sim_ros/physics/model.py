@@ -261,7 +261,8 @@ class Model:
         for c in range(len(cell_q) - 1):
             s, r = slice(cell_q[c], cell_q[c + 1]), cell_q[c + 1] - cell_q[c]
             # symmetric-definite pencils (K, Mb), (D, Mb) by Cholesky Mb = L L': the eigenvalues
-            # of L^-1 K L^-T (numpy only: scipy.linalg costs a node's start 0.3-0.5 s to import)
+            # of L^-1 K L^-T (numpy only: importing scipy.linalg slows a node's start;
+            # docs/development.md)
             L_inv = np.linalg.inv(np.linalg.cholesky(Mb[s, :r]))
             omega2 = np.linalg.eigvalsh(L_inv @ K[s, :r] @ L_inv.T)
             decay = np.linalg.eigvalsh(L_inv @ D[s, :r] @ L_inv.T)

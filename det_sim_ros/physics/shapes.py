@@ -188,8 +188,8 @@ def _gauss_legendre(n_nodes: int):
     """
     Return numpy's Gauss-Legendre rule on [-1, 1], computed once per size.
 
-    An array scene builds one model per distinct copy; leggauss costs ~0.6 ms a call. Read-only:
-    shared.
+    An array scene builds one model per distinct copy, and leggauss is not free
+    (docs/development.md). Read-only: shared.
     """
     xi, w = np.polynomial.legendre.leggauss(n_nodes)
     xi.flags.writeable = False

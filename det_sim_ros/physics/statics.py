@@ -214,7 +214,24 @@ def rest_shortening(scene: Scene) -> float:
     0.0 if the straight beam is stable. Cached per scene structure and physics; fast after the
     first call.
     """
-    return landscape(scene).rest_shortening()
+    return float(landscape(scene).rest_shortening())
+
+
+def rest_shortenings(scene: Scene) -> list[float]:
+    """
+    Return the rest shortening y0_i (m) of each cell in DET order.
+
+    Cell i is alone at 0 V (``scene.cell_scene(i)``). Cells with identical physics share one
+    statics solve, so an array of identical copies costs one solve; an array with spread costs
+    one per copy (docs/development.md).
+    """
+    cells = scene.cell_physics()
+    template = scene.cell_scene(0)
+    solved = {}
+    for physics in cells:
+        if physics not in solved:
+            solved[physics] = rest_shortening(dataclasses.replace(template, physics=physics))
+    return [solved[physics] for physics in cells]
 
 
 def branches(scene: Scene, eps_grid: Sequence[float], v: float = 0.0, progress=None) -> list:

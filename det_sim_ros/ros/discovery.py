@@ -4,13 +4,12 @@ How sim_node announces itself to DDS, so readers and nodes that start after it f
 A Fast DDS participant announces itself 5 times 0.1 s apart when it is created, then every 3 s.
 A participant created after that first burst (a subscriber or controller process started a
 moment after the node, or slower to import) hears nothing from the node until its next
-announcement: it learns of the node up to 3 s late and misses those seconds of samples
-(measured: a subscriber started 1 s after the node missed 3.4-3.5 s of samples in 3 of 4
-starts, bench/first_sample_race.py). A newcomer's own announcements do not always make up for
-it: the running participant answers the first one it hears, and when that answer is lost the
-newcomer waits for the next periodic announcement (a node 10 s old was seen by 12 of 60 new
-participants more than 0.75 s after their creation, by one 3.0 s after; that is how long a
-second node of one name would need to notice the first, det_sim_ros.ros.name_check). The node
+announcement: it learns of the node up to 3 s late and misses those seconds of samples. A
+newcomer's own announcements do not always make up for it: the running participant answers
+the first one it hears, and when that answer is lost the newcomer waits for the next periodic
+announcement (that is also how long a second node of one name would need to notice the first,
+det_sim_ros.ros.name_check). How late, with and without these announcements: docs/real_time.md
+(bench/first_sample_race.py). The node
 cannot know that a reader is coming, so :func:`announce_early` makes its participant announce
 itself every 0.1 s for its first ``ANNOUNCE_S`` seconds and every ``REANNOUNCE_S`` after that,
 for as long as it runs: a Fast DDS XML profile for this process only, used when the user has

@@ -3,9 +3,8 @@ One running node per fully qualified name, settled without delaying the start.
 
 Two nodes of one name (a fleet or a node started twice) would publish on the same topics and
 answer the same services, and a controller could not tell them apart. Discovery is not instant
-(a new participant saw a running ``sim_node`` at most 0.61 s after its creation in 280
-creations, det_sim_ros.ros.discovery; up to 3 s at Fast DDS's own announcement period), so a
-look at the graph before publishing would hold the first sample back by that long.
+(det_sim_ros.ros.discovery; how long: docs/topics.md), so a look at the graph before
+publishing would hold the first sample back by that long.
 
 Instead each node claims its name at once and publishes from the start: on the hidden topic
 ``~/_name_claim`` (reliable, transient local: a node that comes later still receives it) it

@@ -16,7 +16,7 @@ import difflib
 import math
 from typing import Any, Iterator, NamedTuple
 
-from ..io.log.format import COMPRESSIONS
+from ..io.log.compression import COMPRESSIONS
 from ..scenes.scene import scene_to_dict, SceneError
 from ..scenes.sensors import sensors_to_dict
 

@@ -40,9 +40,8 @@ __all__ = ['Simulator', 'InputCheck', 'simulate', 'SimulationResult', 'POWER_RES
 # 3 kV: v_max = 1e5 V at 1e5 V gave 0.06 from rest and 30 from the released start)
 POWER_RESIDUAL_LIMIT = 1e-3
 # ... or this many times the integrator's tolerance, if larger: the residual is the integration
-# error of the energy states, and it grows with the tolerance (4-47 x the tolerance on the
-# 'step' cases and a switching controller's input from 1e-6 to 1e-2, bench/work_precision_map.py
-# runs: a loose tolerance leaves the charge transients after input jumps unresolved, whose
+# error of the energy states, and it grows with the tolerance (docs/fidelity.md has the ratios:
+# a loose tolerance leaves the charge transients after input jumps unresolved, whose
 # dissipation the energy states then miss; the mechanics stay within the tolerance)
 POWER_RESIDUAL_PER_TOLERANCE = 50.0
 
@@ -65,8 +64,8 @@ def inputs_within(values: list, v_max: float) -> bool:
     Check that every value of a non-empty list of floats is in [0, v_max], none NaN.
 
     The answer of ``all(0.0 <= v <= v_max for v in values)`` in three C loops instead of a
-    generator (100 DETs: ~3 against ~12 us per check, two per command). A NaN makes the sum NaN;
-    without one, min and max are exact.
+    generator, a few times cheaper (docs/development.md). A NaN makes the sum NaN; without one,
+    min and max are exact.
     """
     total = sum(values)
     return total == total and min(values) >= 0.0 and max(values) <= v_max
@@ -225,7 +224,7 @@ class Simulator:
         if values is not None and len(values) == len(self.u) \
                 and set(map(type, values)) == _FLOAT_ONLY and inputs_within(values, v_max):
             # the common case, a list of valid floats (the node's commands): no numpy round
-            # trip (the general path below costs ~8 us, more than a whole control period)
+            # trip (the general path below costs several times more; docs/development.md)
             if values != self.u.tolist():
                 new = np.array(values)
                 if self.command_stage is None:   # else booked when the amplifier applies it
@@ -344,7 +343,8 @@ def simulate(scene, voltage: Callable[[float], float] | np.ndarray, t_end: float
     n_in = sim.model.n_inputs
     if callable(voltage):
         samples = [voltage((sim.k + k) * sim.dt) for k in range(n)]
-        try:   # one conversion for the whole record (a broadcast per sample cost ~3 us each)
+        # one conversion for the whole record, not a broadcast per sample (docs/development.md)
+        try:
             volts = np.broadcast_to(np.asarray(samples, dtype=float).reshape(n, -1), (n, n_in))
         except ValueError:   # ragged: scalars and vectors mixed
             volts = np.array([np.broadcast_to(v, (n_in,)) for v in samples], dtype=float)

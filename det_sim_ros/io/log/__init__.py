@@ -21,8 +21,8 @@ the last flush is not in the file: a SIGKILL loses it. The writer is flushed eve
 ``flush_sim_s`` of log (sim) time (0.05 s) and every ``flush_period_s`` of wall time (0.1 s),
 whichever comes first: a SIGKILL loses at most ~50 ms of sim time, in real-time and free-run
 mode alike (with ``background=True``, the writer thread's queue too: at most ``max_queue``
-items more, which the recording thread writes itself when the writer falls behind) (a
-wall-clock period alone lost 7 s of sim time per 0.1 s in a 70x free run). Every
+items more, which the recording thread writes itself when the writer falls behind; why both
+periods: docs/logging.md). Every
 flush is one write: the new records followed by a provisional end (DataEnd, a Footer without
 summary, the closing magic), written where the next flush continues. So a killed file is a
 valid MCAP up to its last flush, which mcap's reader and rosbags open without a manual step
@@ -49,8 +49,9 @@ Its modules, by job:
   writer on mcap's public record classes, the bytes of ``mcap.writer.Writer``) and
   :mod:`.packing` (Message records packed into its open chunk, runs of samples in C);
 - :mod:`.reader`: reading, finished or not, and :func:`recover`;
-- :mod:`.format`: the bytes the package scans itself, the chunk compressions (one map), the
-  provisional end and the torn-file check.
+- :mod:`.format`: the bytes the package scans itself and the provisional end;
+  :mod:`.compression`: the chunk compressions (one map); :mod:`.tail_stream`: the output file,
+  a complete MCAP between flushes; :mod:`.sniff`: MCAP or not, finished or torn.
 
 The messages' CDR is :mod:`det_sim_ros.io.cdr`'s, their ``.msg`` schemas and QoS metadata
 :mod:`det_sim_ros.io.schemas`'.
@@ -59,10 +60,10 @@ The messages' CDR is :mod:`det_sim_ros.io.cdr`'s, their ``.msg`` schemas and QoS
 from __future__ import annotations
 
 from .file import logged_scene
-from .format import (END_METADATA_NAME, file_kind, is_torn, LIBRARY, METADATA_NAME,
-                     SCENE_ATTACHMENT)
+from .format import END_METADATA_NAME, LIBRARY, METADATA_NAME, SCENE_ATTACHMENT
 from .reader import log_files, LogMessage, LogReader, recover, recover_unfinished
 from .recorder import Recorder
+from .sniff import file_kind, is_torn
 from ..cdr import deserialize, message_class, serialize
 from ..schemas import DELIMITER, message_definition, qos_profiles_yaml, type_name_of
 

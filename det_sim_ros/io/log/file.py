@@ -13,9 +13,10 @@ import os
 import time
 from typing import Mapping
 
-from .format import (compression as compression_kind, END_METADATA_NAME, LIBRARY, METADATA_NAME,
-                     SCENE_ATTACHMENT, TailStream)
+from .compression import compression as compression_kind
+from .format import END_METADATA_NAME, LIBRARY, METADATA_NAME, SCENE_ATTACHMENT
 from .packing import RecordPacker
+from .tail_stream import TailStream
 from .writer import McapWriter
 from ..schemas import message_definition, qos_profiles_yaml
 
@@ -82,7 +83,7 @@ class LogFile:
 
     def add(self, channel_id: int, sequence: int, data: bytes, log_time: int) -> None:
         """Write one message (its publish time is its log time)."""
-        if self.packer is not None:   # the same records, one pack (a marker frame: 26 -> 8 us)
+        if self.packer is not None:   # the same records, one pack (cheaper: docs/performance.md)
             self.packer.add(((channel_id, sequence, data),), log_time)
         else:
             self.writer.add_message(channel_id=channel_id, log_time=log_time, data=data,

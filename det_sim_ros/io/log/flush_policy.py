@@ -3,7 +3,8 @@ When the recorder flushes: after a wall-time period or a log (sim) time period.
 
 Every ``period_s`` of wall time and every ``sim_ns`` of log (sim) time, whichever comes
 first. A flush bounds what a SIGKILL loses; the sim-time bound holds whatever the speed of the
-run (a wall-clock period alone lost 7 s of sim time per 0.1 s in a 70x free run).
+run, where a wall-clock period alone loses more sim time the faster a free run goes
+(docs/logging.md, Why the writer is built this way).
 """
 
 from __future__ import annotations

@@ -2,7 +2,8 @@
 Record packing: McapWriter.add_message for many messages at once.
 
 The same Message records, chunk message index and statistics as ``add_message``, written with
-one struct pack per message (:meth:`RecordPacker.add`, 6.5 -> ~1.5 us per message) or, for the
+one struct pack per message (:meth:`RecordPacker.add`, a fraction of mcap's record classes'
+cost: docs/performance.md) or, for the
 samples of the node's outputs, packed in C (``_ckernel.pack_records``, through
 :mod:`det_sim_ros.core.kernel`) a run of samples at a time (:meth:`RecordPacker.add_run`), into
 the :class:`~det_sim_ros.io.log.writer.McapWriter`'s open chunk.

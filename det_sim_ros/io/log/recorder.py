@@ -7,7 +7,9 @@ counters and its fault, and hands the rest to collaborators: :class:`~.rotation.
 channels), :class:`~.packing.RecordPacker` (the records, packed in C for runs of
 samples), :class:`~.flush_policy.FlushPolicy` (when to flush) and, with ``background=True``,
 :class:`~.writer_thread.WriterThread` (the writer thread and its bounded queue), reached
-through the recording mode (:mod:`~.write_modes`).
+through the recording mode (:mod:`~.write_modes`), which gets the recorder's writing steps as a
+:class:`~.write_modes.WriteSteps` (so the recorder's public API stays ``record``,
+``record_sample`` and ``new_file``: nothing outside can write past the writer thread).
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from .file import file_info, LogFile, package_version, scene_text
 from .flush_policy import FlushPolicy
 from .packing import layout_segments
 from .rotation import LogRotation
-from .write_modes import WriteBehind, WriteNow
+from .write_modes import WriteBehind, WriteNow, WriteSteps
 from ..cdr import serialize
 from ..schemas import type_name_of
 
@@ -53,8 +55,7 @@ class Recorder:
         in all (oldest deleted first; 0: no limit).
     :param max_files: keep at most this many of them (0: no limit).
     :param chunk_size: chunk size limit in bytes (a chunk also ends at every flush: at most
-        50 ms of sim time at the default periods; with mcap's 64 KiB a 100-DET array's log
-        costs a third more).
+        50 ms of sim time at the default periods; why not mcap's 64 KiB: docs/logging.md).
     :param compression: 'zstd', 'lz4' or 'none'.
     :param split_mb: start a new file when the current one exceeds this many MiB (0: never).
     :param split_s: start a new file every this many seconds of log time (0: never).
@@ -115,8 +116,10 @@ class Recorder:
             self._open()
         except Exception as exc:  # noqa: BLE001 - a logging fault must not stop the simulation
             self._set_fault(exc)
-        self._mode = (WriteBehind(self, drain_period_s, max_queue)
-                      if background and self._file is not None else WriteNow(self))
+        steps = WriteSteps(self._write, self._write_sample, self._write_sample_run,
+                           self._new_file_now, self.maybe_flush, self._set_fault)
+        self._mode = (WriteBehind(self, steps, drain_period_s, max_queue)
+                      if background and self._file is not None else WriteNow(self, steps))
         _open_recorders.add(self)
 
     def _resolve(self, topic: str) -> str:
@@ -360,7 +363,8 @@ class Recorder:
 
         The bytes are those _write_sample writes one by one. A run stops before a sample that
         would end the chunk, split the file or come after a due flush, so the lookups, checks and
-        counters are done once per run (10 us per sample one by one; 3.5 us in runs packed in C).
+        counters are done once per run (what that saves: docs/logging.md, mcap's Writer and
+        readers).
         """
         i, n = 0, len(items)
         while i < n:

@@ -5,18 +5,39 @@ How the recorder's records reach the file.
 (``background=True``) queues their bytes for the
 :class:`~det_sim_ros.io.log.writer_thread.WriterThread`.
 
-A mode is given the :class:`~det_sim_ros.io.log.recorder.Recorder` it serves and uses its writing
-steps (``_write``, ``_write_sample``, ``_write_sample_run``, ``_new_file_now``, ``maybe_flush``,
-``_set_fault``) and its counters.
+A mode is given the :class:`~det_sim_ros.io.log.recorder.Recorder` it serves (its public state:
+``active``, ``fault``, ``dropped``, ``type_of``) and the recorder's writing steps as a
+:class:`WriteSteps`: the seam between the two is these callables, not the recorder's insides.
 """
 
 from __future__ import annotations
+
+import dataclasses
+from typing import Callable
 
 from .writer_thread import NEW_FILE, WriterThread
 from ..cdr import serialize
 from ..schemas import type_name_of
 
-__all__ = ['WriteNow', 'WriteBehind']
+__all__ = ['WriteNow', 'WriteBehind', 'WriteSteps']
+
+
+@dataclasses.dataclass(frozen=True)
+class WriteSteps:
+    """
+    The recorder's steps that put records in the file, in the calling thread.
+
+    Given to a mode by the :class:`~det_sim_ros.io.log.recorder.Recorder`; a mode calls them
+    from the recording thread (:class:`WriteNow`) or hands them to the writer thread
+    (:class:`WriteBehind`), never both.
+    """
+
+    message: Callable       # (topic, msg, log_time_ns, type_name) -> bool
+    sample: Callable        # (log_time_ns, topics, data, types) -> bool
+    sample_run: Callable    # (queued samples) -> None: consecutive samples, packed in runs
+    new_file: Callable      # () -> None: finish the file and open the next one now
+    maybe_flush: Callable   # () -> None: flush if the wall-time period has passed
+    fault: Callable         # (exception) -> None: stop recording on an error
 
 
 class WriteNow:
@@ -25,8 +46,9 @@ class WriteNow:
     caught_up = 0
     queued = 0
 
-    def __init__(self, recorder):
+    def __init__(self, recorder, steps: WriteSteps):
         self._recorder = recorder
+        self._steps = steps
 
     def message(self, topic: str, msg, log_time_ns: int, type_name: str | None) -> bool:
         """Write a message: Recorder.record."""
@@ -34,7 +56,7 @@ class WriteNow:
         if not recorder.active:
             recorder.dropped += 1
             return False
-        return recorder._write(topic, msg, log_time_ns, type_name)
+        return self._steps.message(topic, msg, log_time_ns, type_name)
 
     def sample(self, log_time_ns: int, topics, data, types) -> bool:
         """Write a sample: Recorder.record_sample."""
@@ -42,11 +64,11 @@ class WriteNow:
         if not recorder.active:
             recorder.dropped += len(data)
             return False
-        return recorder._write_sample(log_time_ns, topics, data, types)
+        return self._steps.sample(log_time_ns, topics, data, types)
 
     def new_file(self) -> None:
         """Continue in a new file now."""
-        self._recorder._new_file_now()
+        self._steps.new_file()
 
     def stop(self) -> None:
         """Nothing is pending."""
@@ -61,11 +83,12 @@ class WriteBehind:
     only on whether recording has stopped.
     """
 
-    def __init__(self, recorder, period_s: float, max_queue: int):
+    def __init__(self, recorder, steps: WriteSteps, period_s: float, max_queue: int):
         self._recorder = recorder
-        self._thread = WriterThread(recorder._write, recorder._write_sample_run,
-                                    recorder._new_file_now, recorder.maybe_flush,
-                                    recorder._set_fault, period_s=period_s, max_queue=max_queue)
+        self._steps = steps
+        self._thread = WriterThread(steps.message, steps.sample_run, steps.new_file,
+                                    steps.maybe_flush, steps.fault, period_s=period_s,
+                                    max_queue=max_queue)
 
     @property
     def caught_up(self) -> int:
@@ -109,7 +132,7 @@ class WriteBehind:
             self._thread.put(NEW_FILE)
             self._thread.write_queued()   # the caller may report the new file's name
         else:
-            self._recorder._new_file_now()
+            self._steps.new_file()
 
     def stop(self) -> None:
         """Stop the thread after writing what is queued."""

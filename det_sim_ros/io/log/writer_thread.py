@@ -5,9 +5,9 @@ The writer is a thread that writes what the recording thread queued, in order, e
 ``period_s``.
 
 The writer thread gets the GIL only now and then while the node's thread runs flat out, so in a
-free run an unbounded queue grows without bound (measured: 124k samples, 82 % of a 4 s run,
-queued at its end), and memory and the crash guarantee with it. Past ``max_queue`` items the
-recording thread writes the queue itself (:meth:`WriterThread.put`), under the same lock.
+free run an unbounded queue grows without bound, and memory and the crash guarantee with it
+(docs/logging.md, Why the writer is built this way). Past ``max_queue`` items the recording
+thread writes the queue itself (:meth:`WriterThread.put`), under the same lock.
 """
 
 from __future__ import annotations
@@ -89,8 +89,8 @@ class WriterThread:
         Write everything queued, in order.
 
         ``yield_gil``: release the GIL every 16 samples (the writer thread, so the node's thread is
-        not held up; the node's own catch-up must not: each release cost it ~0.3 ms of waiting for
-        the GIL back).
+        not held up; the node's own catch-up must not: each release makes it wait for the GIL
+        back; docs/logging.md).
         """
         queue = self._queue
         written = 0
@@ -110,8 +110,8 @@ class WriterThread:
             written += 1
             if written >= _RUN and yield_gil:
                 # hand the GIL to the node's thread now and then: a waiting publisher is held
-                # up by at most ~16 samples' writes (~0.1 ms), not by the whole queue; a
-                # release per sample costs more CPU than the writes
+                # up by at most 16 samples' writes, not by the whole queue; a release per
+                # sample costs more CPU than the writes
                 written = 0
                 time.sleep(0)
 
