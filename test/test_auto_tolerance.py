@@ -25,12 +25,15 @@ REFERENCE = os.path.join(os.path.dirname(os.path.abspath(__file__)), os.pardir, 
 CASES = (('fixed', 0.15), ('fixed', 0.20), ('simply_supported', 0.20))
 
 
-@pytest.mark.parametrize('fidelity, n_r, expected', [
-    ('paper', 1, 1e-6), ('consistent', 3, 1e-2), ('exact', 3, 1e-2), ('exact', 5, 1e-2),
-    ('exact', 7, 1e-4), ('exact', 8, 1e-4), ('exact', 9, 1e-5), ('exact', 11, 1e-6)])
-def test_auto_resolves_per_level(fidelity, n_r, expected):
-    scene = load_scene('default', {'scene.fidelity': fidelity, 'scene.n_ritz': n_r,
-                                   'integrator.tolerance': 0})
+@pytest.mark.parametrize('fidelity, shapes, n_r, expected', [
+    ('paper', 'polynomial', 1, 1e-6), ('consistent', 'polynomial', 3, 1e-2),
+    ('exact', 'polynomial', 5, 1e-2), ('exact', 'polynomial', 7, 3e-3),
+    ('exact', 'polynomial', 8, 1e-3), ('exact', 'polynomial', 9, 1e-4),
+    ('exact', 'polynomial', 11, 1e-6), ('exact', 'buckling_modes', 3, 1e-2),
+    ('exact', 'buckling_modes', 5, 1e-3), ('exact', 'buckling_modes', 7, 1e-4)])
+def test_auto_resolves_per_level(fidelity, shapes, n_r, expected):
+    scene = load_scene('default', {'scene.fidelity': fidelity, 'scene.shapes': shapes,
+                                   'scene.n_ritz': n_r, 'integrator.tolerance': 0})
     assert scene.tolerance == 0.0
     assert integration_tolerance(scene) == expected
     assert Simulator(scene).tolerance == expected
@@ -38,9 +41,11 @@ def test_auto_resolves_per_level(fidelity, n_r, expected):
 
 def test_every_level_and_term_count_has_an_auto_tolerance():
     for fidelity in ('paper', 'consistent', 'exact'):
-        for n_r in range(1, 13):
-            scene = load_scene('default', {'scene.fidelity': fidelity, 'scene.n_ritz': n_r})
-            assert 0.0 < integration_tolerance(scene) <= 0.1
+        for shapes in ('polynomial', 'buckling_modes', 'auto'):
+            for n_r in range(0, 13):
+                scene = load_scene('default', {'scene.fidelity': fidelity, 'scene.n_ritz': n_r,
+                                               'scene.shapes': shapes})
+                assert 0.0 < integration_tolerance(scene) <= 0.1
     assert {row[0] for row in AUTO_TOLERANCE} == {'paper', 'consistent', 'exact'}
 
 

@@ -40,14 +40,14 @@ SCENES = {
 # internal steps taken in each stretch of PROFILE
 STEPS = {
     'default': [85, 4073, 4931],
-    'default_auto': [51, 324, 366],
+    'default_auto': [51, 379, 429],
     'paper': [85, 2655, 2561],
     'plate_paper': [85, 2787, 2952],
     'exact_n3': [85, 2150, 1480],
     'ideal_dp5_paper': [66, 693, 720],
 }
 # periods the default (at auto) runs again with more steps over PROFILE
-REPEATED_DEFAULT_AUTO = 22.0
+REPEATED_DEFAULT_AUTO = 24.0
 
 
 def step_counts(name):

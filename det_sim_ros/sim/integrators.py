@@ -30,6 +30,7 @@ import numpy as np
 from ..core import kernel
 
 __all__ = ['Method', 'METHODS', 'get_method', 'choose_substeps', 'step_control', 'error_weights',
+           'linear_refresh',
            'transient_settings', 'TransientSettings', 'StepControl', 'make_stepper',
            'advance', 'AUTO_TOLERANCE', 'integration_tolerance']
 
@@ -158,10 +159,18 @@ METHODS = {m.name: m for m in (
 # changed or a q or qdot moved by more than this in the error norm's scale (beam length, length
 # per period) since it was taken: between, the weights phi_k(c h A) of each step size are kept.
 # A stale A only moves part of the linear dynamics into the explicit remainder, whose error the
-# step control sees: on the three exact 'step' cases at n_r 5-7, tolerance 1e-3, 1e-2 took A in
-# half the periods 1e-3 did, cost 0.65-0.9x as much and moved the error against the continuum
-# by at most 1e-4 of the stroke (bench/work_precision_map.py).
-LINEAR_REFRESH = 1e-2
+# step control sees: a loose tolerance tolerates a staler A (10 x the tolerance, from 1e-2 to
+# 3e-2). 3e-2 at the default levels' tolerances (1e-2, 3e-3) is 1.15-1.4x cheaper than 1e-2 on
+# the step and 2 Hz switching cases with the error within their budget (5e-2 moved the simply
+# supported switching case to 0.92 % of its travel); at 1e-6 it took 45 % more steps than 1e-2,
+# which tight tolerances keep. The step-size changes between refreshes cost little since the phi
+# chains are kept (matrix_phi.c). Numbers in docs/numerics.md.
+LINEAR_REFRESH = (1e-2, 3e-2)   # (at most, at least) of 10 x the tolerance
+
+
+def linear_refresh(tolerance: float) -> float:
+    """Return the state move (error-norm scale) past which A is taken anew, see above."""
+    return min(LINEAR_REFRESH[1], max(LINEAR_REFRESH[0], 10.0 * tolerance))
 # ... or when an input moved by more than this times v_max since it was taken (not at every
 # change: a controller's small corrections every period took A, and the weights of each step
 # size, anew every period; with this, 1.3x faster on a switching input with a +-25 V dither per
@@ -169,20 +178,25 @@ LINEAR_REFRESH = 1e-2
 LINEAR_REFRESH_INPUT = 1e-2
 
 
-# integrator.tolerance 0 ('auto'): the tolerance follows the model. Per level, the loosest
-# tolerance of the work-precision map (bench/work_precision_map.py, docs/fidelity.md) whose
-# integration error (against the same level at 1e-8) stays within 10 % of the level's own model
-# error (against the continuum) on each of the three 'step' cases: total error = model error
-# + integration error, and accuracy the model does not have is not worth its cost. Rows:
-# (fidelity, up to n_r, tolerance), first match. 'paper' keeps 1e-6: its runs are compared with
-# the paper's own results, where the model itself is the reference (and its numbers stay).
+# integrator.tolerance 0 ('auto'): the tolerance follows the model. Per level (fidelity, Ritz
+# family, terms), the loosest tolerance of the work-precision map (bench/work_precision_map.py,
+# docs/fidelity.md) at which the level's worst error against the continuum, over the step, 2 Hz
+# switching and controller cases of both beams, stays within 25 % of its error at the map's
+# tightest tolerance (its model error): total error = model error + integration error, and
+# accuracy the model does not have is not worth its cost. Rows: (fidelity, family or '*', up to
+# n_r, tolerance), first match. 'paper' keeps 1e-6: its runs are compared with the paper's own
+# results, where the model itself is the reference (and its numbers stay).
 AUTO_TOLERANCE = (
-    ('paper', 12, 1e-6),
-    ('consistent', 12, 1e-2),   # model error >= 0.26 % of the stroke; 1e-2 adds <= 6 % of it
-    ('exact', 6, 1e-2),         # n_r 5: 0.16-0.73 %, 1e-2 adds 1.4e-4-4.6e-4 (at most 9 %)
-    ('exact', 8, 1e-4),         # n_r 7: 0.03-0.08 %, 1e-4 adds 4e-6-1.2e-5 (1e-3: 17 %)
-    ('exact', 9, 1e-5),         # n_r 9: 2e-5-6e-5, 1e-5 adds 8e-7-1.4e-6 (1e-4: 18 %)
-    ('exact', 12, 1e-6),        # beyond the map: a converged reference's own tolerance
+    ('paper', '*', 12, 1e-6),
+    ('consistent', '*', 12, 1e-2),           # model error >= 14 %; 1e-2 adds 1 % of it
+    ('exact', 'buckling_modes', 3, 1e-2),    # 3 modes: 0.28 %; 1e-2 makes it 0.31 %
+    ('exact', 'buckling_modes', 5, 1e-3),    # 4-5 modes: 0.08-0.14 % (1e-2: +63-109 %)
+    ('exact', 'buckling_modes', 12, 1e-4),   # beyond the map: tighter than its last row
+    ('exact', 'polynomial', 6, 1e-2),        # n_r <= 6: >= 14 %; 1e-2 adds <= 1 % of it
+    ('exact', 'polynomial', 7, 3e-3),        # n_r 7: 0.61 %; 3e-3 makes it 0.73 % (1e-2: 1.14)
+    ('exact', 'polynomial', 8, 1e-3),        # n_r 8: 0.87 %; 1e-3 makes it 0.94 % (1e-2: 1.51)
+    ('exact', 'polynomial', 9, 1e-4),        # n_r 9: 0.08 %; 1e-4 adds 4 % (1e-3: 39 %)
+    ('exact', 'polynomial', 12, 1e-6),       # beyond the map: a converged reference's own
 )
 
 
@@ -190,9 +204,9 @@ def integration_tolerance(scene) -> float:
     """Return the scene's integrator tolerance: its own, or AUTO_TOLERANCE's when it is 0."""
     if scene.tolerance > 0.0:
         return scene.tolerance
-    n_ritz = scene.ritz_level[1]
-    return next(tol for fidelity, n_max, tol in AUTO_TOLERANCE
-                if fidelity == scene.fidelity and n_ritz <= n_max)
+    shapes, n_ritz = scene.ritz_level
+    return next(tol for fidelity, family, n_max, tol in AUTO_TOLERANCE
+                if fidelity == scene.fidelity and family in ('*', shapes) and n_ritz <= n_max)
 
 
 def get_method(name: str) -> Method:
@@ -334,7 +348,8 @@ def make_stepper(model, method: Method, control: StepControl, dt: float,
                           max_substeps=int(control.max_substeps),
                           exponent=float(control.exponent),
                           jump_ref=float(transient.jump_ref),
-                          linearized=method.linearized, lin_refresh=LINEAR_REFRESH,
+                          linearized=method.linearized,
+                          lin_refresh=linear_refresh(integration_tolerance(model.scene)),
                           lin_refresh_input=LINEAR_REFRESH_INPUT * _largest_v_max(model))
 
 
