@@ -171,7 +171,9 @@ LINEAR_REFRESH = (1e-2, 3e-2)   # (at most, at least) of 10 x the tolerance
 def linear_refresh(tolerance: float) -> float:
     """Return the state move (error-norm scale) past which A is taken anew, see above."""
     return min(LINEAR_REFRESH[1], max(LINEAR_REFRESH[0], 10.0 * tolerance))
-# ... or when an input moved by more than this times v_max since it was taken (not at every
+
+
+# A is also taken anew when an input moved by more than this times v_max since it was taken (not at every
 # change: a controller's small corrections every period took A, and the weights of each step
 # size, anew every period; with this, 1.3x faster on a switching input with a +-25 V dither per
 # period at the same error, bench/work_precision_map.py's controller run at tolerance 1e-2).
