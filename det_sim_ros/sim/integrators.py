@@ -173,10 +173,10 @@ def linear_refresh(tolerance: float) -> float:
     return min(LINEAR_REFRESH[1], max(LINEAR_REFRESH[0], 10.0 * tolerance))
 
 
-# A is also taken anew when an input moved by more than this times v_max since it was taken (not at every
-# change: a controller's small corrections every period took A, and the weights of each step
-# size, anew every period; with this, 1.3x faster on a switching input with a +-25 V dither per
-# period at the same error, bench/work_precision_map.py's controller run at tolerance 1e-2).
+# A is also taken anew when an input moved by more than this times v_max since it was taken
+# (not at every change: a controller's small corrections every period took A, and the weights
+# of each step size, anew every period; with this, 1.3x faster on a switching input with a
+# +-25 V dither per period at the same error, bench/work_precision_map.py's controller run).
 LINEAR_REFRESH_INPUT = 1e-2
 
 
