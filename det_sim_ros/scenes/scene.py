@@ -179,7 +179,11 @@ class Scene:
 
     @property
     def fidelity_label(self) -> str:
-        """Return the model level in a few words, e.g. 'exact n_r=5' or 'paper (one term)'."""
+        """
+        Return the model level in a few words.
+
+        E.g. 'exact buckling modes n_r=3', 'exact n_r=7' or 'paper (one term)'.
+        """
         if self.fidelity == 'paper':
             return 'paper (one term)'
         shapes, n_ritz = self.ritz_level
