@@ -232,8 +232,8 @@ def test_cli_linearize(tmp_path, capsys):
 
 
 @pytest.mark.ros
-@pytest.mark.parametrize('voltages', [[], ['--voltage', '1500'], ['--scene', 'plate',
-                                                                 '--voltage', '0,1500']])
+@pytest.mark.parametrize('voltages', [
+    [], ['--voltage', '1500'], ['--scene', 'plate', '--voltage', '0,1500']])
 def test_cli_linearize_writes_its_bode_plot_without_a_warning(tmp_path, voltages):
     """
     Check the verb's stderr, as a user sees it: nothing, also at 0 V (no gain, no line).
