@@ -6,8 +6,8 @@ play`` answer first, naming ``:=``. A dimensionless scene key's message has no u
 node's INFO line shows the rest state's round-off (-4e-8 mm) as 0.000, never -0.000.
 """
 
-from det_sim_ros.cli import ros_rule_error
 from det_sim_ros.cli.det_sim import main as det_sim
+from det_sim_ros.cli.ros_args import ros_rule_error
 from det_sim_ros.cli.sim_node import main as sim_node
 from det_sim_ros.ros.diagnostics import status_line
 from det_sim_ros.scenes.scene import load_scene, SceneError

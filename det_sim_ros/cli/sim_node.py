@@ -19,7 +19,8 @@ import signal
 import sys
 import textwrap
 
-from . import exit_at_once, ros_rule_error
+from . import exit_at_once
+from .ros_args import ros_rule_error
 
 USAGE = 'usage: sim_node [-h] [--ros-args -p NAME:=VALUE ... [-r __ns:=/NAMESPACE]]'
 

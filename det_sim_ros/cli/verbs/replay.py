@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import argparse
 
-from .. import common, log_checks, ros_rule_error
+from .. import common, log_checks
+from ..ros_args import ros_rule_error
 
 HELP = 're-simulate, republish, summarize or recover sim_node MCAP logs'
 DESCRIPTION = 'Re-simulate or republish det_sim_ros MCAP logs.'
