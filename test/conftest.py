@@ -122,6 +122,21 @@ ROS_MARK_HINT = ('mark it @pytest.mark.ros (or its module pytestmark = pytest.ma
                  'pytest -m "not ros" must stay free of rclpy and processes')
 
 
+def pytest_sessionstart(session):
+    """
+    Build matplotlib's font cache (when matplotlib is installed) before any test runs.
+
+    matplotlib lists the system fonts with an ``fc-list`` process the first time it draws text
+    and caches the list in MPLCONFIGDIR. On a fresh machine (an empty cache) the first test that
+    draws would start that process under the ``ros`` mark's guard and fail for it, or pass when an
+    earlier test happened to draw first.
+    """
+    try:
+        from matplotlib import font_manager  # noqa: F401
+    except ImportError:   # no plots extra: the tests that draw skip or check the hint
+        pass
+
+
 def pytest_collection_modifyitems(config, items):
     """Refuse the run when a test uses a ROS fixture without the ``ros`` mark."""
     unmarked = [item.nodeid for item in items

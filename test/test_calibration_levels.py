@@ -7,6 +7,8 @@ true values; the polish at the scene's level must bring them back. bench/fit_spe
 what this saves; here only the numbers are checked, never a time.
 """
 
+import math
+
 import det_sim_ros
 from det_sim_ros.calibration.levels import COARSE_N_RITZ, COARSE_TOLERANCE, fit_levels
 from det_sim_ros.calibration.synthetic import step_and_sine, synthetic_measurement
@@ -76,6 +78,33 @@ def test_the_polish_recovers_the_true_values_the_coarse_level_misses(truth, fitt
         assert estimate.lower95 <= true <= estimate.upper95, (name, estimate, true)
     (mass,) = [e for e in fitted.estimates if e.name == 'm']
     assert before['m'] > 20.0 * mass.relative_se, (before, mass)
+
+
+def _distance(values, fitted, truth) -> float:
+    """Return the distance of ``values`` from the truth in the fit's standard errors."""
+    return math.sqrt(sum(((values[e.name] - getattr(truth.physics, e.name)) / e.se) ** 2
+                         for e in fitted.estimates))
+
+
+def test_the_space_mapping_step_starts_the_polish_nearer_the_truth_than_the_coarse_optimum(
+        truth, fitted):
+    """
+    Check where the polish starts: the space-mapping step's result, against the truth.
+
+    The step moves the coarse optimum by the coarse level's model error (the offset between
+    the two levels' optima, from one run at the scene's level and a coarse fit to it), so it
+    must land nearer the truth than the coarse optimum it came from, by far: the coarse
+    optimum sits 82-86 standard errors from the truth, the mapped start 1.4-3.2 (seeds 2-4);
+    a step of the wrong sign lands twice as far as the coarse optimum. A quarter of the coarse
+    distance bounds it with room for the seed.
+    """
+    coarse, polish = fitted.passes
+    assert coarse.start == pytest.approx({name: getattr(truth.physics, name)
+                                          * (2.0 if i % 2 == 0 else 0.5)
+                                          for i, name in enumerate(NAMES)})
+    assert set(polish.start) == set(NAMES) and 'space-mapping step' in polish.work
+    before, mapped = (_distance(p, fitted, truth) for p in (coarse.values, polish.start))
+    assert mapped < 0.25 * before, (before, mapped)
 
 
 def test_the_report_says_the_level_and_tolerance_of_each_pass(truth, fitted):

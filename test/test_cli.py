@@ -3,9 +3,11 @@
 import csv
 import io
 import os
+import subprocess
 import sys
 import types
 
+from conftest import child_env
 from det_sim_ros.cli import det_sim as cli
 from det_sim_ros.cli.common import Progress
 from det_sim_ros.physics import statics
@@ -314,3 +316,45 @@ def test_the_paper_verbs_run_the_paper_model_unless_a_fidelity_is_set():
     args.overrides.append(('scene.fidelity', 'exact'))
     scene = common.paper_level(common.base_scene(args), args)
     assert (scene.fidelity, scene.n_ritz) == ('exact', 0)    # the shipped default's: auto
+
+
+@pytest.mark.ros
+def test_verbs_asked_for_no_plot_do_not_import_matplotlib(tmp_path):
+    """
+    Check that statics, step, linearize and fit with --no-plots never import matplotlib.
+
+    matplotlib's first import on a fresh machine builds its font cache (a process, seconds): a
+    verb that draws nothing must not pay for it, nor fail where matplotlib cannot start.
+    """
+    code = '\n'.join([
+        'import contextlib, io, sys',
+        'import numpy as np',
+        'from det_sim_ros.calibration.synthetic import step_and_sine, synthetic_measurement',
+        'from det_sim_ros.cli.det_sim import main',
+        'from det_sim_ros.scenes.scene import load_scene',
+        'truth = load_scene("default", {"physics.Y": 1.2e6})',
+        'data = synthetic_measurement(truth, step_and_sine(0.2, truth.dt), noise=0.01, seed=7,',
+        '                             channels=("dy",))',
+        'volts = np.append(data.volts[:, 0], data.volts[-1, 0])',
+        'rows = [f"{k * data.dt:.6f},{v!r},{d!r}" for k, (v, d)',
+        '        in enumerate(zip(volts.tolist(), data.channels["dy"].values[:, 0].tolist()))]',
+        f'csv = {str(tmp_path / "rig.csv")!r}',
+        'open(csv, "w").write("t (s),v (V),dy (m)\\n" + "\\n".join(rows) + "\\n")',
+        f'out = {str(tmp_path)!r}',
+        'runs = {',
+        '    "statics": ["statics", "--eps-range", "0.1:0.2:3", "--eps-b", "0.2", "--n-q", "11"],',
+        '    "step": ["step", "--eps-b", "0.2", "--t-end", "0.05"],',
+        '    "linearize": ["linearize", "--voltage", "1500"],',
+        '    "fit": ["fit", csv, "--params", "Y", "--quiet", "--starts", "1",',
+        '            "--parallel", "serial", "-o", out + "/fitted.yaml"],',
+        '}',
+        'for verb, argv in runs.items():',
+        '    extra = [] if verb == "fit" else ["--out", out]',
+        '    with contextlib.redirect_stdout(io.StringIO()):',
+        '        assert main(argv + extra + ["--no-plots"]) == 0, verb',
+        '    loaded = [m for m in sys.modules if m.split(".")[0] == "matplotlib"]',
+        '    assert not loaded, f"{verb} --no-plots imported {loaded[:3]}"',
+        'print("ok")'])
+    proc = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                          env=child_env(), timeout=300)
+    assert proc.returncode == 0 and proc.stdout.strip() == 'ok', proc.stdout + proc.stderr

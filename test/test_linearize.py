@@ -8,7 +8,10 @@ nonlinear simulation (first order), python-control, and `det_sim linearize`.
 
 import json
 import math
+import subprocess
+import sys
 
+from conftest import child_env
 from det_sim_ros.cli.det_sim import main
 from det_sim_ros.physics.linearize import LinearizationError, linearize
 from det_sim_ros.physics.model import build_model
@@ -226,6 +229,24 @@ def test_cli_linearize(tmp_path, capsys):
                  str(out), '--no-plots']) == 0
     text = capsys.readouterr().out
     assert 'f_n (Hz)' in text and 'dy[right]' in text
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('voltages', [
+    [], ['--voltage', '1500'], ['--scene', 'plate', '--voltage', '0,1500']])
+def test_cli_linearize_writes_its_bode_plot_without_a_warning(tmp_path, voltages):
+    """
+    Check the verb's stderr, as a user sees it: nothing, also at 0 V (no gain, no line).
+
+    matplotlib warned 'No artists with labels found to put in legend' for a plot of DETs all at
+    0 V (the default).
+    """
+    pytest.importorskip('matplotlib')
+    proc = subprocess.run([sys.executable, '-m', 'det_sim_ros.cli', 'linearize', *voltages,
+                           '--out', str(tmp_path)], capture_output=True, text=True,
+                          env=child_env(), timeout=120)
+    assert proc.returncode == 0 and proc.stderr == '', proc.stderr
+    assert (tmp_path / 'bode.png').stat().st_size > 1000
 
 
 @pytest.mark.parametrize('argv, message', [

@@ -322,7 +322,9 @@ def test_readme_example_runs_as_a_plugin(tmp_path):
     Check that the README's example runs as a pytest plugin test.
 
     The README's example, in a file of its own, with the plugin loaded as pytest loads an
-    installed one (the pytest11 entry point, or -p before the package is reinstalled).
+    installed one (the pytest11 entry point, or -p before the package is reinstalled). A
+    DeprecationWarning is an error there, as in a user's strict run: the plugin's own imports
+    (rclpy's type support parser, through lark-parser) must not raise one.
     """
     from importlib.metadata import entry_points
     readme = open(os.path.join(os.path.dirname(__file__), '..', 'README.md')).read()
@@ -330,9 +332,10 @@ def test_readme_example_runs_as_a_plugin(tmp_path):
     (tmp_path / 'test_example.py').write_text(README_EXAMPLE)
     installed = any(e.value == 'det_sim_ros.ros.testing' for e in entry_points(group='pytest11'))
     env = child_env()
-    proc = subprocess.run([sys.executable, '-m', 'pytest', '-q', '-p', 'no:cacheprovider']
+    proc = subprocess.run([sys.executable, '-m', 'pytest', '-q', '-p', 'no:cacheprovider',
+                           '-W', 'error::DeprecationWarning']
                           + ([] if installed else ['-p', 'det_sim_ros.ros.testing'])
                           + [str(tmp_path / 'test_example.py')],
                           capture_output=True, text=True, env=env, cwd=tmp_path, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert '1 passed' in proc.stdout
+    assert '1 passed' in proc.stdout and 'warning' not in proc.stdout, proc.stdout

@@ -5,8 +5,11 @@ The published bytes are the simulator's values, commands that arrive during a ca
 apply from the next period, the lag behind the wall clock is bounded (the node slips instead),
 both executors work.
 
-Real-time pacing is driven by a fake wall clock (``node.wall_clock``): no wall-clock thresholds.
+Real-time pacing is driven by a fake wall clock (``node.wall_clock``): no wall-clock thresholds;
+one test runs a node on the real clock with periods far dearer than real time gives them.
 """
+
+import re
 
 from conftest import WALL_TIMEOUT
 from det_sim_ros.io.contract import decode_joint_state, OUTPUT_FIELDS
@@ -282,3 +285,33 @@ def test_falling_behind_real_time_warns_once_and_says_when_caught_up(harness, tm
     slip(BEHIND_WARN_INTERVAL_S)               # after it: warned, naming the silent episode
     h.spin_until(lambda: len(logged('behind real time')) == 2, 'the second WARN')
     assert '(1 more time(s) since the last warning)' in logged('behind real time')[1]
+
+
+def test_a_node_whose_periods_cost_more_than_real_time_gives_says_so(harness):
+    """
+    Check a real-time node that cannot keep up, on the real clock: a WARN and /diagnostics.
+
+    integrator.substeps 100000 makes every 1 ms period cost far more than 1 ms of CPU (about
+    20 ms here: 0.2 us per internal step of the one-term model), so the node slips behind the
+    wall clock from its first periods. Within a few diagnostics windows (0.5 s each) it must log
+    one 'behind real time' WARN naming the slip and the period's cost (which the WARN measures
+    itself: more than the 1 ms it is given), and /diagnostics must say WARN.
+    """
+    from diagnostic_msgs.msg import DiagnosticStatus
+    from test_lockstep_waiting import listen_to_rosout
+    h = harness(real_time=True, diagnostics_period=0.5, **{'integrator.substeps': 100000})
+    lines = listen_to_rosout(h)
+    h.spin_until(lambda: any(line.startswith('behind real time') for line in lines),
+                 "the 'behind real time' WARN")
+    (warned,) = [line for line in lines if line.startswith('behind real time')]
+    assert 'below real time' in warned or 'lagging' in warned, warned
+    cpu_ms, budget_ms = (float(x) for x in re.search(
+        r'a period cost ([0-9.]+) ms of CPU \(100000\.0 internal steps\) for ([0-9.]+) ms of '
+        r'wall time', warned).groups())
+    assert budget_ms == 1.0 and cpu_ms > budget_ms, warned      # dt 1 ms, real_time_factor 1
+    assert 'take about all the CPU' in warned
+    h.spin_until(lambda: any(m.status[0].level == DiagnosticStatus.WARN for m in h.diagnostics),
+                 '/diagnostics at WARN')
+    (status, *_) = [m.status[0] for m in h.diagnostics
+                    if m.status[0].level == DiagnosticStatus.WARN]
+    assert 'below real time' in status.message or 'lagging' in status.message, status.message

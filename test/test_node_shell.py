@@ -13,7 +13,7 @@ import sys
 import threading
 import time
 
-from conftest import child_env
+from conftest import child_env, ChildProcess
 from det_sim_ros.cli import main
 import pytest
 
@@ -98,6 +98,9 @@ def test_send_out_of_range_says_the_node_clamps_it(node, capsys):
     (['param', 'get', 'no_such_thing'] + NS, 1, "no parameter 'no_such_thing'"),
     (['pause', '--ns', 'nowhere', '--timeout', '0.5'], 1, 'no service /nowhere/sim_node/pause'),
     (['send', '5', '--ns', 'nowhere', '--timeout', '0.5'], 1, 'no service'),
+    # --duration: a safety net for a watch that ignores --timeout
+    (['watch', '--ns', 'nowhere', '--timeout', '0.5', '--duration', '30'], 1,
+     'no sample on /nowhere/displacement within 0.5 s: /nowhere/sim_node does not publish it'),
 ])
 def test_bad_values_and_no_node_are_one_line(node, capsys, argv, code, message):
     assert message in _error(capsys, argv, code)
@@ -133,6 +136,22 @@ def test_watch_csv_and_live_lines(node, capfd):
         assert 'not paused' in capfd.readouterr().err
     finally:
         ok(['pause'])
+
+
+def test_watch_waits_for_a_paused_node_says_so_and_shows_it_once_resumed(node, tmp_path):
+    """Check a paused node's watch: a note after --timeout (5 s), lines after resume, exit 0."""
+    assert main(['pause'] + NS) == 0
+    watch = ChildProcess([sys.executable, '-m', 'det_sim_ros.cli', 'watch', *NS], tmp_path)
+    try:
+        note = watch.wait_for('waiting')
+        assert note == ('det_sim: /arm1/sim_node has published no sample on /arm1/displacement '
+                        'yet (paused?); waiting\n')
+        assert main(['resume'] + NS) == 0
+        assert 'left: dy' in watch.wait_for('t = ')
+    finally:
+        code = watch.stop()
+        main(['pause'] + NS)
+    assert code == 0 and 'error' not in ''.join(watch.lines), watch.lines
 
 
 INTERRUPTED = [['send', 'left=100'], ['watch'], ['watch', '--csv'], ['pause'], ['resume'],
@@ -200,3 +219,18 @@ def test_every_verb_stops_cleanly_on_ctrl_c_at_any_moment(node):
         main(['pause'] + NS)
     assert not problems, '\n'.join(problems)
     assert interrupted >= len(cases) // 3      # most stops came before the verb was done
+
+
+def test_ctrl_c_as_watch_starts_exits_0(node):
+    """
+    Check Ctrl-C at once after det_sim took the signals: watch exits 0, quietly (docs/shell.md).
+
+    The moment falls in det_sim's start (its imports, the arguments), before the shell opens.
+    """
+    assert main(['resume'] + NS) == 0
+    try:
+        for argv in (['watch'], ['watch', '--csv']):
+            code, out, err = _interrupt(argv, 0.0)
+            assert (code, err) == (0, ''), (argv, code, err)
+    finally:
+        main(['pause'] + NS)

@@ -77,7 +77,9 @@ class PassOutcome:
     ``role``: 'coarse' (the search from several starts) or 'scene' (the scene's own level: the
     polish after a coarse pass, else the whole search); ``level``: fidelity, Ritz terms and
     integrator tolerance (:meth:`~.levels.Level.describe`); ``values``: name -> value at the
-    pass's optimum.
+    pass's optimum; ``start``: name -> value where it began (the given start; the polish's: the
+    space-mapping step's result from the coarse optimum, or the coarse optimum itself when no
+    step could be made).
     """
 
     role: str
@@ -87,6 +89,7 @@ class PassOutcome:
     wall_time: float
     parallel: str
     values: dict
+    start: dict = dataclasses.field(default_factory=dict)
 
 
 @dataclasses.dataclass
@@ -338,6 +341,7 @@ def fit(logs, params: Sequence[str] | str, scene=None, *, mapping: Mapping | Non
     problems = [Problem(level.scene, measurements, parameters, sigma) for level in levels]
     z0 = to_z(parameters, [p.start for p in parameters])
     search = _Pass(levels[0], problems[0], parallel, say)
+    search.z_start = z0
     search.time_a_run(z0)
     try:
         say(f'searching at {search.level.describe()}: '
@@ -370,6 +374,7 @@ class _Pass:
         self.run_seconds = 0.0   # wall time of that run
         self.work = ''
         self.z = None
+        self.z_start = None
         self._began = time.monotonic()
         self._wall = None
 
@@ -398,10 +403,13 @@ class _Pass:
         """Return the pass's :class:`PassOutcome`."""
         wall = self._wall if self._wall is not None else time.monotonic() - self._began
         parameters = self.problem.parameters
-        values = {p.name: v for p, v in zip(parameters, from_z(parameters, self.z))}
+
+        def named(z):
+            return {} if z is None else {p.name: v for p, v in zip(parameters,
+                                                                   from_z(parameters, z))}
         return PassOutcome(self.level.role, self.level.describe(), self.work,
                            self.evaluator.calls + self.extra_runs, wall, self.evaluator.kind,
-                           values)
+                           named(self.z), named(self.z_start))
 
     def close(self) -> None:
         """Stop the evaluator's workers."""
@@ -445,6 +453,7 @@ def _polish(polish: _Pass, search: _Pass, coarse, max_evaluations: int):
         coarse_runs = evaluator.calls
         polish.extra_runs += coarse_runs
         z[free] = np.clip(z[free] + (z[free] - mapped.x), lower[free], upper[free])
+    polish.z_start = z.copy()
     f, jacobian = problem.linearize(z, polish.evaluator)
     for steps in range(POLISH_STEPS + 1):
         step, decrease, variance = _gauss_newton(f, jacobian)

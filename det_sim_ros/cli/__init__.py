@@ -7,8 +7,9 @@ Command-line entry points: ``det_sim``, ``det_sim_replay`` and ``sim_node``.
 
 SIGINT and SIGTERM while the command's modules import and its arguments are read end it with
 'interrupted' and exit code 130 (an exception there could come out of a C extension's
-initialisation as an ImportError); the verbs then take the signals over (an offline verb as
-KeyboardInterrupt, the node verbs at their next wait, det_sim_ros.ros.shell).
+initialisation as an ImportError), ``det_sim watch`` quietly with 0 (its usual end is Ctrl-C);
+the verbs then take the signals over (an offline verb as KeyboardInterrupt, the node verbs at
+their next wait, det_sim_ros.ros.shell).
 """
 
 import contextlib
@@ -41,13 +42,17 @@ def _interrupted(signum, frame):
     exit_at_once(130, b'det_sim: interrupted\n')
 
 
+def _stopped_watching(signum, frame):
+    exit_at_once(0)   # watch's usual end is Ctrl-C, also before it has started (docs/shell.md)
+
+
 @contextlib.contextmanager
-def _quiet_start():
+def _quiet_start(handler=_interrupted):
     """Within the block (in the main thread), a stop signal ends the process at once, quietly."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {sig: signal.signal(sig, _interrupted) for sig in SIGNALS}
+    previous = {sig: signal.signal(sig, handler) for sig in SIGNALS}
     try:
         yield
     finally:
@@ -57,7 +62,8 @@ def _quiet_start():
 
 def main(argv=None) -> int:
     """``det_sim``: parse ``argv`` (default: the command line) and run its verb."""
-    with _quiet_start():
+    verb = (sys.argv[1:] if argv is None else list(argv))[:1]
+    with _quiet_start(_stopped_watching if verb == ['watch'] else _interrupted):
         from .det_sim import main as run
         return run(argv)
 

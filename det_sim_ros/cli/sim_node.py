@@ -7,7 +7,7 @@ det_sim_ros.cli.sim_node``.
 ``-h``/``--help`` prints the usage, the modes and the parameters (from the node's parameter
 table) and exits 0 without starting anything; any other argument outside ``--ros-args ...
 [--]`` is refused with one line (exit 1), since rcl would read a stray ``-p name:=value`` as a
-remap rule and ignore the parameter.
+remap rule and ignore the parameter; so is a ``-p`` or ``-r`` rule without ``:=``.
 
 SIGINT and SIGTERM while the node's modules are still importing (rclpy, numpy, the kernel;
 before :func:`det_sim_ros.ros.node.main` takes the signals over) exit quietly with code 0
@@ -20,6 +20,7 @@ import sys
 import textwrap
 
 from . import exit_at_once
+from .ros_args import ros_rule_error
 
 USAGE = 'usage: sim_node [-h] [--ros-args -p NAME:=VALUE ... [-r __ns:=/NAMESPACE]]'
 
@@ -103,7 +104,8 @@ def main(args=None) -> int:
 
     ``args`` is the whole command line, program name first (default ``sys.argv``).
     """
-    stray = stray_arguments((sys.argv if args is None else args)[1:])
+    argv = (sys.argv if args is None else args)[1:]
+    stray = stray_arguments(argv)
     if any(arg in ('-h', '--help') for arg in stray):
         sys.stdout.write(help_text())
         return 0
@@ -111,6 +113,10 @@ def main(args=None) -> int:
         sys.stderr.write(f'sim_node: unknown argument {stray[0]!r}: node parameters go after '
                          '--ros-args (sim_node --ros-args -p NAME:=VALUE); sim_node --help '
                          'lists them\n')
+        return 1
+    rule = ros_rule_error(argv)
+    if rule:   # before rcl reads it: its own error is about lexeme types
+        sys.stderr.write(f'sim_node: {rule}\n')
         return 1
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _quiet_stop)

@@ -151,12 +151,18 @@ def _level_and_message(fault: str, distrust: str, warning: str, wait, paused: bo
     return DiagnosticStatus.OK, 'paused' if paused else 'running'
 
 
+def _fixed(value) -> str:
+    """Return ``value`` with 3 decimals; one that rounds to zero is '0.000', never '-0.000'."""
+    text = f'{value:.3f}'
+    return '0.000' if text == '-0.000' else text   # the rest state's round-off (-4e-8 mm)
+
+
 def _mm(values) -> str:
     if len(values) == 1:
-        return f'{values[0]:.3f}'
+        return _fixed(values[0])
     if len(values) <= 4:
-        return '[' + ', '.join(f'{v:.3f}' for v in values) + ']'
-    return f'{values.min():.3f}..{values.max():.3f}'
+        return '[' + ', '.join(_fixed(v) for v in values) + ']'
+    return f'{_fixed(values.min())}..{_fixed(values.max())}'
 
 
 def status_line(*, t: float, volts, q_mm, dy_mm, rtf: float, window_s: float,

@@ -239,6 +239,11 @@ class NodeShell:
         self._node.create_subscription(JointState, self.topic(topic),
                                        lambda msg: callback(topic, msg), depth)
 
+    def node_publishes(self, topic: str) -> bool:
+        """Return whether the node publishes on its topic ``topic`` (as the graph knows now)."""
+        return any(target_name(info.node_namespace, info.node_name) == self.target
+                   for info in self._node.get_publishers_info_by_topic(self.topic(topic)))
+
     def _wait_for(self, condition: Callable[[], bool], what: str) -> None:
         if not self._until(condition, self.timeout):
             raise ShellError(f'{what} within {self.timeout:g} s (is sim_node running, '

@@ -54,6 +54,24 @@ def pick_domain_id(environ=None, pid=None) -> int:
     return 1 + (os.getpid() if pid is None else pid) % 101
 
 
+def _import_type_support_quietly() -> None:
+    """
+    Import rclpy's message type support with lark-parser's DeprecationWarning ignored.
+
+    A process's first node imports rosidl_generator_py, whose IDL parser imports lark-parser
+    (0.12, which the ROS packages require), which imports the deprecated sre_parse and
+    sre_constants: a warning about a third party's imports that a strict run (``-W
+    error::DeprecationWarning``) would fail the user's first test with.
+    """
+    import warnings
+    with warnings.catch_warnings():
+        warnings.filterwarnings('ignore', category=DeprecationWarning, module='lark')
+        try:
+            import rosidl_generator_py  # noqa: F401
+        except ImportError:   # pragma: no cover - rclpy's own import then fails with the reason
+            pass
+
+
 @dataclasses.dataclass(frozen=True)
 class StepMetrics:
     """Step-response figures of one signal (times in s after the step, ``nan`` if never)."""
@@ -135,6 +153,7 @@ class LockstepSim:
                  params: dict | None = None, domain_id: int | None = None,
                  executor: str = 'events'):
         os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+        _import_type_support_quietly()    # before the first node, yours or sim_node
         import rclpy
         from rclpy.context import Context
         self.domain_id = pick_domain_id() if domain_id is None else domain_id

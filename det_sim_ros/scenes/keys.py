@@ -152,6 +152,11 @@ def _fail(key, value, why):
     raise SceneError(f'scene key {key!r}: {why} (got {value!r})')
 
 
+def _in_unit(unit: str) -> str:
+    """Return ' in UNIT' for a message, '' for a dimensionless key (its unit '-')."""
+    return '' if unit == '-' else f' in {unit}'
+
+
 def check_value(key, value, spec):
     """
     Return ``value`` checked against its key's ``spec`` (an entry of the tables above).
@@ -193,14 +198,15 @@ def check_value(key, value, spec):
                 hint = '; YAML 1.1 reads an exponent without a sign as text: write e.g. 4.0e+9'
             except ValueError:
                 pass
-            _fail(key, value, f'must be a number in {unit}, not a string{hint}')
+            _fail(key, value, f'must be a number{_in_unit(unit)}, not a string{hint}')
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            _fail(key, value, f'must be a number in {unit}')
+            _fail(key, value, f'must be a number{_in_unit(unit)}')
         value = float(value)
     if not math.isfinite(value):
         _fail(key, value, 'must be finite')
     low_ok = value >= lower if inclusive else value > lower
     if not low_ok or value > upper:
         bracket = '[' if inclusive else '('
-        _fail(key, value, f'out of range {bracket}{lower:g}, {upper:g}] {unit}')
+        unit_text = '' if unit == '-' else f' {unit}'
+        _fail(key, value, f'out of range {bracket}{lower:g}, {upper:g}]{unit_text}')
     return value

@@ -95,6 +95,7 @@ def _plot_bode(plt, lin, poles, args, out):
     n = len(lin.input_names)
     fig, (ax_m, ax_p) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
     f = omega / (2 * math.pi)
+    drawn = 0
     for i in range(min(n, 6)):
         for r, style in ((i, '-'), (n + i, '--')):
             g = G[:, r, i]
@@ -103,12 +104,17 @@ def _plot_bode(plt, lin, poles, args, out):
             label = f'{lin.output_names[r]} / V[{lin.input_names[i]}]'
             ax_m.loglog(f, np.abs(g), style, lw=1.2, label=label)
             ax_p.semilogx(f, np.degrees(np.unwrap(np.angle(g))), style, lw=1.2)
+            drawn += 1
     ax_m.set_ylabel('|G| (m/V)')
     ax_p.set_ylabel('phase (deg)')
     ax_p.set_xlabel('frequency (Hz)')
     for ax in (ax_m, ax_p):
         ax.grid(alpha=0.3, which='both')
-    ax_m.legend(fontsize=8)
+    if drawn:
+        ax_m.legend(fontsize=8)
+    else:   # every DET at 0 V: an empty plot says why
+        ax_m.text(0.5, 0.5, 'no gain at 0 V: the force goes as V^2', ha='center',
+                  va='center', transform=ax_m.transAxes)
     ax_m.set_title(f'{args.scene}: linearized at {", ".join(f"{v:g}" for v in lin.u0)} V, '
                    f'{lin.branch}')
     fig.tight_layout()

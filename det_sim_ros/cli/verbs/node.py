@@ -115,19 +115,25 @@ def _watch(args) -> int:
     watcher = Watcher(csv=args.csv, count=args.count, stream=sys.stdout)
 
     def action(shell):
+        from ...ros.shell import ShellError
         watcher.subscribe(shell)
         start = time.monotonic()
         end = math.inf if args.duration is None else start + args.duration
-        warn_at = start + args.timeout
+        check_at = start + args.timeout
         try:
             while not watcher.done() and time.monotonic() < end:
                 shell.spin(0.05)
                 now = time.monotonic()
                 watcher.tick(now)
-                if watcher.waiting() and now > warn_at:
-                    warn_at = math.inf
-                    print(f"det_sim: no sample on {shell.topic('displacement')} yet (is the "
-                          'node paused, or another --ns?)', file=sys.stderr)
+                if watcher.waiting() and now > check_at:
+                    check_at = math.inf
+                    topic = shell.topic('displacement')
+                    if not shell.node_publishes('displacement'):   # no node: nothing will come
+                        raise ShellError(f'no sample on {topic} within {args.timeout:g} s: '
+                                         f'{shell.target} does not publish it (is sim_node '
+                                         'running, with this --ns and --node?)')
+                    print(f'det_sim: {shell.target} has published no sample on {topic} yet '
+                          '(paused?); waiting', file=sys.stderr)
         except KeyboardInterrupt:   # the usual way to stop watching
             pass
         return 0

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import argparse
 
-from .. import log_checks
+from .. import common, log_checks
+from ..ros_args import ros_rule_error
 
 HELP = 're-simulate, republish, summarize or recover sim_node MCAP logs'
 DESCRIPTION = 'Re-simulate or republish det_sim_ros MCAP logs.'
@@ -109,11 +110,14 @@ def _play(args) -> int:
     import rclpy
     from rclpy.executors import ExternalShutdownException
     from ...ros.play import play
+    ros_args = [] if args.ros_args is None else ['--ros-args', *args.ros_args]
+    rule = ros_rule_error(ros_args)
+    if rule:
+        raise common.CliError(rule)
     files = log_checks.open_log(args.log).files
     torn = log_checks.torn_files(files)
     if torn:   # nothing is published from a file that may end anywhere
         raise log_checks.LogFileError(log_checks.torn_note(torn, 'not played'))
-    ros_args = [] if args.ros_args is None else ['--ros-args', *args.ros_args]
     rclpy.init(args=[PROG, *ros_args])
     try:
         stats = play(files, rate=args.rate, start_offset=args.start_offset, loop=args.loop,
