@@ -53,7 +53,7 @@ LEVELS = (('paper', POLY, 1), ('consistent', POLY, 3), ('consistent', POLY, 5),
 SCENES = (('default', 1), ('plate', 1), ('array', 2))   # shipped scenes, stepping threads
 SCENE_RUN = 1.0         # s simulated per shipped-scene run
 LIMIT = 0.01            # of the stroke: the default level must stay within it on every case
-MACHINE = '2-core shared host'
+MACHINE = '2-core x86-64 VM'
 HERE = os.path.dirname(os.path.abspath(__file__))
 DOC = os.path.join(HERE, os.pardir, 'docs', 'fidelity.md')
 BEGIN, END = '<!-- fidelity_choice: begin -->', '<!-- fidelity_choice: end -->'
@@ -172,7 +172,7 @@ def table(rows, reference) -> str:
     peaks = _range_mm([peak_displacement(c['t'], c['dy']) for c in cases])
     names = ', '.join(f'{b.replace("_", " ")} {e:.2f}' for b, e in CASES)
     lines = [f'Measured {datetime.date.today().isoformat()}, commit {_commit()}, {MACHINE} '
-             '(CPU times vary ±30 % with the load; ratios between rows are side by side in one '
+             '(CPU times vary ±30 %; ratios between rows are side by side in one '
              f'run). Cases: {names}; error = max |Δy − Δy_ref| over the 3 kV phase as a '
              'fraction of the stroke (the travel of the beam end over the run, from the released '
              f'start to the buckled rest state: {strokes}) and, in parentheses, of the peak '
