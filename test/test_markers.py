@@ -167,7 +167,7 @@ def test_viewers_get_frames_at_most_twice_per_display_period_of_wall_time():
     import types
     from det_sim_ros.ros.markers import NodeMarkers
     sent, logged, now = [], [], [0.0]
-    publisher = types.SimpleNamespace(handle=types.SimpleNamespace(publish_raw=sent.append),
+    publisher = types.SimpleNamespace(publish=sent.append,
                                       get_subscription_count=lambda: 1)
     node = types.SimpleNamespace(get_namespace=lambda: '/',
                                  create_publisher=lambda *args: publisher)
