@@ -329,7 +329,7 @@ def test_foxglove_layout_uses_the_nodes_topics():
     import json
     import os
     import re
-    from det_sim_ros.ros.node import OUTPUT_TOPICS
+    from det_sim_ros.ros.shell import OUTPUT_TOPICS
     path = os.path.join(os.path.dirname(__file__), '..', 'config', 'foxglove_layout.json')
     with open(path, encoding='utf-8') as stream:
         layout = json.load(stream)

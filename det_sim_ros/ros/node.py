@@ -39,18 +39,18 @@ from .sensing import attach_outputs
 from .spinning import make_executor, spin, spin_until_stopped, StopRequested, StopSignals
 from .waiting import SubscriberGate
 from ..io.contract import (CLOCK_TOPIC, COMMAND_TOPIC, DIAGNOSTICS_TOPIC, encode_clock,
-                           JOINT_COMMAND_TOPIC, OUTPUT_FIELDS, OutputContract, rest_shortenings,
+                           JOINT_COMMAND_TOPIC, OutputContract, rest_shortenings,
                            stamp_ns, structure_channels, STRUCTURE_TOPIC)
 from ..physics.model import ModelDomainError
+from ..scenes.outputs import main_topic
 from ..scenes.scene import SceneError
 from ..sim.simulator import Simulator
 
-__all__ = ['SimNode', 'main', 'OUTPUT_TOPICS', 'STRUCTURE_TOPIC', 'rest_shortenings',
+__all__ = ['SimNode', 'main', 'STRUCTURE_TOPIC', 'rest_shortenings',
            'structure_channels', 'make_executor', 'spin']
 
 NODE_NAME = 'sim_node'
 # (the topic contract: names, types, channels, y0, the bytes on the wire: det_sim_ros.io.contract)
-OUTPUT_TOPICS = {topic: mapping['position'] for topic, mapping in OUTPUT_FIELDS.items()}
 
 
 class SimNode(Node):
@@ -143,8 +143,8 @@ class SimNode(Node):
                if self.structure_names else ''))
 
     def _make_gate(self) -> SubscriberGate:
-        """Hold sample 0 until wait_for_subscribers subscriptions of displacement matched."""
-        publisher = self._output_pubs['displacement']
+        """Hold sample 0 until wait_for_subscribers subscriptions of the main topic matched."""
+        publisher = self._output_pubs[main_topic()]
         gate = SubscriberGate(
             self._p('wait_for_subscribers'), publisher.topic_name,
             publisher.get_subscription_count,
