@@ -83,10 +83,10 @@ def floor(scene_name, topics, samples, n, with_clock):
     clock = node.create_publisher(Clock, '/clock', QoSProfile(depth=10)) if with_clock else None
     _wait_subscribers(pubs, 'floor')
     time.sleep(0.5)
-    # the node's own publish call (the handle's publish_raw) on the same bytes
-    pairs = [(pub.handle.publish_raw, data) for pub, data in zip(pubs, samples)]
+    # the node's own publish call (Publisher.publish of serialized bytes) on the same bytes
+    pairs = [(pub.publish, data) for pub, data in zip(pubs, samples)]
     clock_bytes = encode_clock(0)
-    publish_clock = clock.handle.publish_raw if clock is not None else None
+    publish_clock = clock.publish if clock is not None else None
     for publish, data in pairs:   # warm-up
         publish(data)
     c0 = _cpu()
@@ -113,8 +113,8 @@ def _make_floor_node(context, name, topics, samples, burst):
     node = rclpy.create_node(name, context=context)
     pubs = [node.create_publisher(JointState, t, QoSProfile(depth=10)) for t in topics]
     clock = node.create_publisher(Clock, '/clock', QoSProfile(depth=10))
-    pairs = [(pub.handle.publish_raw, data) for pub, data in zip(pubs, samples)]
-    publish_clock, clock_bytes = clock.handle.publish_raw, encode_clock(0)
+    pairs = [(pub.publish, data) for pub, data in zip(pubs, samples)]
+    publish_clock, clock_bytes = clock.publish, encode_clock(0)
     done = [0]
 
     def tick():

@@ -273,3 +273,13 @@ def test_a_fit_that_does_not_converge_says_so_and_writes_its_report(tmp_path, sy
     assert 'did not converge' in stderr.strip().splitlines()[-1]
     assert 'DID NOT CONVERGE' in (tmp_path / 'f_report.txt').read_text()
     assert load_scene(str(tmp_path / 'f.yaml')).physics.Y > 0
+
+
+@pytest.mark.parametrize('title', ['dy', 'Δy (m)', 'displacement [m]', 'DY'])
+def test_a_csv_column_is_found_by_any_name_of_its_channel(tmp_path, title):
+    """The header names of a channel (the output table's) in any case, a unit after them."""
+    from det_sim_ros.calibration.measurement import read_csv
+    rows = ''.join(f'{k * 1e-3},1000.0,{k * 1e-6}\n' for k in range(5))
+    measured = read_csv(str(_csv(tmp_path, f't,v,{title}\n' + rows, 'named.csv')))
+    assert list(measured.channels) == ['dy']
+    assert measured.channels['dy'].values[:, 0].tolist() == [k * 1e-6 for k in range(5)]

@@ -276,3 +276,13 @@ def test_a_failing_period_leaves_the_last_good_state(overrides):
     assert np.array_equal(sim.x, before)
     assert sim.fault and sim.k == 0
     assert all(np.isfinite(v) for v in sim.outputs().values())   # what a node publishes next
+
+
+def test_an_arena_one_array_past_its_bound_is_a_clear_error():
+    """Every kernel object's arena holds ARENA_SLOTS arrays; one more is refused, not written."""
+    from det_sim_ros.core.kernel import ARENA_SLOTS, keep_owned_probe
+    assert ARENA_SLOTS >= 40   # the Model with the amplifier keeps 38
+    assert keep_owned_probe(ARENA_SLOTS) == ARENA_SLOTS
+    with pytest.raises(RuntimeError, match=f'keeps more than {ARENA_SLOTS} arrays'):
+        keep_owned_probe(ARENA_SLOTS + 1)
+    assert keep_owned_probe(3) == 3   # nothing was left half-kept

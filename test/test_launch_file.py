@@ -1,14 +1,16 @@
 """
 Test launch/sim.launch.py without the launch packages (they are not on PyPI).
 
-The file compiles; run against stand-ins of launch and launch_ros, it declares the arguments
-scene, ns, mode and log_path, starts one sim_node of this package, and every parameter it sets
-is a node parameter (det_sim_ros.ros.params.NODE_PARAMS) or scene_file. setup.py installs it
-to share/det_sim_ros/launch.
+Parsed, it imports launch and launch_ros only (the stand-ins below replace all it uses) and
+names one node by literal package, executable and name; run against the stand-ins, it declares
+the arguments scene, ns, mode and log_path, starts that one sim_node, and every parameter it
+sets is a node parameter (det_sim_ros.ros.params.NODE_PARAMS) or scene_file whose launch
+default the node accepts. setup.py installs the file to share/det_sim_ros/launch and the
+executable where ``ros2 launch`` looks for it (lib/det_sim_ros).
 """
 
+import ast
 import os
-import py_compile
 import runpy
 import sys
 import types
@@ -51,8 +53,57 @@ def description(monkeypatch):
     return classes, namespace['generate_launch_description']()
 
 
-def test_the_launch_file_compiles(tmp_path):
-    py_compile.compile(LAUNCH_FILE, cfile=str(tmp_path / 'sim.launch.pyc'), doraise=True)
+STAND_IN_MODULES = {'launch', 'launch.actions', 'launch.substitutions', 'launch_ros',
+                    'launch_ros.actions', 'launch_ros.parameter_descriptions'}
+
+
+def _parsed():
+    with open(LAUNCH_FILE, encoding='utf-8') as stream:
+        return ast.parse(stream.read(), LAUNCH_FILE)
+
+
+def test_the_parsed_file_imports_launch_only_and_names_one_node_of_this_package():
+    tree = _parsed()
+    imported = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
+    assert imported <= STAND_IN_MODULES
+    assert not [node for node in ast.walk(tree) if isinstance(node, ast.Import)]
+    nodes = [call for call in ast.walk(tree) if isinstance(call, ast.Call)
+             and isinstance(call.func, ast.Name) and call.func.id == 'Node']
+    assert len(nodes) == 1
+    literal = {k.arg: k.value.value for k in nodes[0].keywords
+               if isinstance(k.value, ast.Constant)}
+    assert literal['package'] == 'det_sim_ros'
+    assert literal['executable'] == 'sim_node' and literal['name'] == 'sim_node'
+
+
+def test_the_executable_is_installed_where_ros2_launch_looks(monkeypatch):
+    """``ros2 launch`` runs <prefix>/lib/<package>/<executable>; setup.py puts it there."""
+    import setuptools
+    captured = {}
+    monkeypatch.setattr(setuptools, 'setup', lambda **kwargs: captured.update(kwargs))
+    monkeypatch.chdir(ROOT)
+    runpy.run_path(os.path.join(ROOT, 'setup.py'))
+    installed = dict(captured['data_files'])[os.path.join('lib', 'det_sim_ros')]
+    (script,) = [path for path in installed if os.path.basename(path) == 'sim_node']
+    with open(os.path.join(ROOT, script), encoding='utf-8') as stream:
+        assert 'det_sim_ros.cli.sim_node' in stream.read()   # the node's entry point
+    assert 'sim_node = det_sim_ros.cli.sim_node:main' in \
+        captured['entry_points']['console_scripts']
+
+
+def test_the_launch_defaults_are_values_the_node_accepts(description):
+    from det_sim_ros.ros.params import node_parameter_values
+    from det_sim_ros.scenes.scene import load_scene
+    classes, launch = description
+    (entities,) = launch.args
+    defaults = {e.args[0]: e.kwargs['default_value'] for e in entities
+                if isinstance(e, classes['DeclareLaunchArgument'])}
+    (node,) = [e for e in entities if isinstance(e, classes['Node'])]
+    (parameters,) = node.kwargs['parameters']
+    given = {name: defaults[value.args[0].args[0]] for name, value in parameters.items()}
+    scene = load_scene(given.pop('scene_file'))
+    values = node_parameter_values(scene.node, given)   # raises for one it refuses
+    assert values['log.path'] == defaults['log_path']
 
 
 def test_the_launch_arguments(description):

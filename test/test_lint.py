@@ -106,3 +106,15 @@ def test_the_checks_see_planted_violations(tmp_path, monkeypatch, capsys):
     assert PEP257_PLANTED <= _codes(pep257_errors(['planted.py'], capsys))
     assert flake8_errors(['clean.py']) == []
     assert pep257_errors(['clean.py'], capsys) == []
+
+
+def test_no_test_asserts_inside_a_finally_block():
+    """An assert in ``finally`` replaces the error that got there: the first failure is lost."""
+    import ast
+    found = []
+    for path in sorted((ROOT / 'test').glob('*.py')):
+        for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'), str(path))):
+            if isinstance(node, ast.Try):
+                found += [f'{path.name}:{sub.lineno}' for stmt in node.finalbody
+                          for sub in ast.walk(stmt) if isinstance(sub, ast.Assert)]
+    assert not found, found

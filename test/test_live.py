@@ -344,7 +344,8 @@ def test_view_serves_a_log_from_start_to_end(tmp_path):
             return client, first_pass
         client, first_pass = asyncio.run(watch())
     finally:
-        assert view.stop() == 0, ''.join(view.lines)
+        view_stopped = view.stop()
+    assert view_stopped == 0, ''.join(view.lines)
     for topic, times in logged.items():
         assert [t for t, _ in first_pass[topic]] == times, topic
     displacement = [msg.position[0] for _, msg in first_pass['/displacement']]
@@ -430,7 +431,8 @@ def test_live_rate_serves_every_nth_sample_and_the_log_keeps_all(tmp_path):
             return client
         client = asyncio.run(watch())
     finally:
-        assert node.stop() == 0, ''.join(node.lines)
+        node_stopped = node.stop()
+    assert node_stopped == 0, ''.join(node.lines)
     stamps = [stamp(msg) for _, msg in client.messages['/displacement']]
     assert all(b - a == 10_000_000 for a, b in zip(stamps, stamps[1:])), stamps[:5]
     from mcap.reader import make_reader

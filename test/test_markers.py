@@ -167,7 +167,7 @@ def test_viewers_get_frames_at_most_twice_per_display_period_of_wall_time():
     import types
     from det_sim_ros.ros.markers import NodeMarkers
     sent, logged, now = [], [], [0.0]
-    publisher = types.SimpleNamespace(handle=types.SimpleNamespace(publish_raw=sent.append),
+    publisher = types.SimpleNamespace(publish=sent.append,
                                       get_subscription_count=lambda: 1)
     node = types.SimpleNamespace(get_namespace=lambda: '/',
                                  create_publisher=lambda *args: publisher)
@@ -329,7 +329,7 @@ def test_foxglove_layout_uses_the_nodes_topics():
     import json
     import os
     import re
-    from det_sim_ros.ros.node import OUTPUT_TOPICS
+    from det_sim_ros.ros.shell import OUTPUT_TOPICS
     path = os.path.join(os.path.dirname(__file__), '..', 'config', 'foxglove_layout.json')
     with open(path, encoding='utf-8') as stream:
         layout = json.load(stream)

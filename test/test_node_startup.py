@@ -122,7 +122,8 @@ def test_a_misspelled_parameter_is_named_with_the_closest_known_one(tmp_path):
         assert '[WARN]' in warning and "did you mean 'mode'?" in warning
         node.wait_for(READY)
     finally:
-        assert node.stop() == 0, ''.join(node.lines)
+        node_stopped = node.stop()
+    assert node_stopped == 0, ''.join(node.lines)
 
 
 def test_strict_parameters_makes_a_misspelled_name_fatal(tmp_path):
@@ -147,7 +148,8 @@ def test_a_stop_says_how_far_the_run_went_and_where_its_log_is(tmp_path):
         node.wait_for(READY)
         time.sleep(1.0)   # past the start-up, which a stop unwinds without this line
     finally:
-        assert node.stop() == 0, ''.join(node.lines)
+        node_stopped = node.stop()
+    assert node_stopped == 0, ''.join(node.lines)
     stopped = [line for line in node.lines if 'stopped at t = ' in line]
     assert len(stopped) == 1 and '[INFO]' in stopped[0], ''.join(node.lines)
     logs = sorted((tmp_path / 'logs').glob('*.mcap'))
@@ -194,9 +196,11 @@ def test_duplicate_name_refused_unless_allowed(tmp_path):
             warning = allowed.wait_for('another node named /startup_dup/sim_node')
             assert '[WARN]' in warning
         finally:
-            assert allowed.stop() == 0
+            allowed_stopped = allowed.stop()
+        assert allowed_stopped == 0
     finally:
-        assert first.stop() == 0, ''.join(first.lines)
+        first_stopped = first.stop()
+    assert first_stopped == 0, ''.join(first.lines)
 
 
 def test_of_nodes_started_together_exactly_one_keeps_its_name(tmp_path):

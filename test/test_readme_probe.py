@@ -68,7 +68,8 @@ def test_the_readme_probe_prints_every_tenth_of_a_second_and_stops_on_ctrl_c(tmp
         probe.send_signal(signal.SIGINT)
         _, err = probe.communicate(timeout=TIMEOUT)
     finally:
-        assert node.stop() == 0
+        node_stopped = node.stop()
+    assert node_stopped == 0
     assert probe.returncode == 0 and err == '', err
     values = [LINE.match(line) for line in printed]
     ticks = [round(float(v['t']) * 10) for v in values]

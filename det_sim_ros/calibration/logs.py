@@ -26,11 +26,12 @@ from typing import Mapping
 import numpy as np
 
 from .measurement import CalibrationError, CHANNELS, Measurement, on_grid
+from ..scenes.outputs import fit_channels
 
 __all__ = ['ChannelSource', 'parse_mapping', 'read_log', 'NODE_TOPICS']
 
-# sim_node's output topics per measured channel (position field, one entry per DET)
-NODE_TOPICS = {'displacement': 'dy', 'charge': 'charge', 'current': 'current'}
+# sim_node's output topic -> the measured channel it is (position field, one entry per DET)
+NODE_TOPICS = {row.topic: name for name, row in fit_channels().items()}
 MAPPED = ('voltage', *CHANNELS)
 _SPEC = re.compile(r'^(?P<topic>/?[A-Za-z_~{][\w/{}~]*?)(?:\.(?P<field>[A-Za-z_]\w*))?'
                    r'(?:\[(?P<index>[^\]]+)\])?(?:\*(?P<scale>.+))?$')

@@ -17,13 +17,16 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from ..scenes.outputs import fit_channels
+
 __all__ = ['CalibrationError', 'Channel', 'Measurement', 'CHANNELS', 'on_grid', 'read_csv',
            'noise_level']
 
-# measured channel -> (model output per DET, published relative to the rest state at 0 V)
-CHANNELS = {'dy': ('y', True), 'charge': ('q_p', False), 'current': ('i_DE', False)}
+# measured channel -> (model output per DET, published relative to the rest state at 0 V):
+# the output table's rows with a fit channel (det_sim_ros.scenes.outputs)
+CHANNELS = {name: (row.quantity, row.relative_to_y0) for name, row in fit_channels().items()}
 # smallest noise level per channel (SI units): a noise-free channel still gets a finite weight
-NOISE_FLOOR = {'dy': 1e-12, 'charge': 1e-15, 'current': 1e-12}
+NOISE_FLOOR = {name: row.fit.noise_floor for name, row in fit_channels().items()}
 # a d-th difference of white noise of level sigma has variance binom(2d, d) sigma^2
 _DIFFERENCE_ORDER = 3
 _DIFFERENCE_GAIN = math.sqrt(math.comb(2 * _DIFFERENCE_ORDER, _DIFFERENCE_ORDER))
@@ -115,7 +118,8 @@ def on_grid(source: str, commands: tuple, samples: Mapping[str, tuple], dt: floa
     samples = {name: (np.asarray(t, dtype=float), np.asarray(v, dtype=float).reshape(len(t), -1))
                for name, (t, v) in samples.items() if len(t)}
     if not samples:
-        raise CalibrationError(f'{source}: no measured output (Δy, charge or current) in the log')
+        raise CalibrationError(f'{source}: no measured output ({", ".join(CHANNELS)}) in the '
+                               'log')
     unknown = sorted(set(samples) - set(CHANNELS))
     if unknown:
         raise CalibrationError(f'{source}: unknown channel {unknown[0]!r}; the channels are '
@@ -159,8 +163,10 @@ def noise_level(channel: Channel) -> np.ndarray:
     return np.maximum(_MAD_TO_SIGMA * mad / _DIFFERENCE_GAIN, np.maximum(floor, 1e-9 * peak))
 
 
-_CSV_NAMES = {'t': ('t', 'time'), 'v': ('v', 'voltage'), 'dy': ('dy', 'Δy', 'displacement'),
-              'charge': ('charge', 'q_p'), 'current': ('current', 'i_de')}
+# column -> the header names that mean it (lower case: a header's first word is compared so)
+_CSV_NAMES = {'t': ('t', 'time'), 'v': ('v', 'voltage'),
+              **{name: tuple(alias.lower() for alias in (name, *row.fit.csv_names))
+                 for name, row in fit_channels().items()}}
 
 
 def _csv_columns(path: str, header: Sequence[str]) -> dict:
@@ -173,13 +179,13 @@ def _csv_columns(path: str, header: Sequence[str]) -> dict:
     for need in ('t', 'v'):
         if need not in found:
             raise CalibrationError(f'{path}: no column {need!r} in the header {list(header)} '
-                                   '(t, v and at least one of dy, charge, current)')
+                                   f'(t, v and at least one of {", ".join(CHANNELS)})')
     return found
 
 
 def read_csv(path: str, dt: float | None = None, scene=None) -> Measurement:
     """
-    Read a CSV file with a header: ``t`` (s), ``v`` (V), ``dy`` (m), ``charge`` (C), ``current``.
+    Read a CSV file with a header: ``t`` (s), ``v`` (V) and measured channels (:data:`CHANNELS`).
 
     An empty cell is a value not measured in that row; text that is not a number (``nan``
     included) is refused with one line.

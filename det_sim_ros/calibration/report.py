@@ -14,10 +14,13 @@ import os
 import numpy as np
 
 from .intervals import MAX_CORRELATION, MAX_DIRECTION_SE, RCOND
+from ..scenes.outputs import fit_channels
 
 __all__ = ['report_text', 'write_outputs', 'scene_yaml', 'output_paths']
 
-_UNIT_SCALE = {'dy': (1e6, 'um'), 'charge': (1e6, 'uC'), 'current': (1e3, 'mA')}
+# measured channel -> (scale from SI, unit) of the residuals and plots
+_UNIT_SCALE = {name: (row.fit.report_scale, row.fit.report_unit)
+               for name, row in fit_channels().items()}
 
 
 def _channel_rows(result) -> list:

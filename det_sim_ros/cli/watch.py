@@ -18,7 +18,8 @@ import statistics
 
 from ..io.contract import STRUCTURE_TOPIC
 from ..ros.shell import OUTPUT_TOPICS
-from ..scenes.outputs import csv_fields, line_quantities, structure_line_quantities
+from ..scenes.outputs import (csv_fields, line_quantities, main_topic,
+                              structure_line_quantities)
 
 __all__ = ['Watcher', 'LINE_QUANTITIES']
 
@@ -30,6 +31,7 @@ STRUCTURE_QUANTITIES = structure_line_quantities()
 PREFIXES = ((1e9, 'G'), (1e6, 'M'), (1e3, 'k'), (1.0, ''), (1e-3, 'm'), (1e-6, 'µ'),
             (1e-9, 'n'), (1e-12, 'p'))
 CSV_FIELDS = csv_fields()   # (topic, field) columns, publishing order
+NAMES_TOPIC = main_topic()   # the DET names of a sample: its main topic's
 PER_DET_LIMIT = 4
 
 
@@ -124,7 +126,7 @@ class Watcher:
         self.printed += 1
 
     def _line(self, stamp: int, parts: dict) -> str:
-        names = list(parts['displacement'].name)
+        names = list(parts[NAMES_TOPIC].name)
         values = {key: list(getattr(parts[key[0]], key[1])) for key in LINE_QUANTITIES}
         if len(names) <= PER_DET_LIMIT:
             cells = [f'{name}: ' + ' '.join(
@@ -150,7 +152,7 @@ class Watcher:
         return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
 
     def _csv_row(self, stamp: int, parts: dict) -> None:
-        names = list(parts['displacement'].name)
+        names = list(parts[NAMES_TOPIC].name)
         if not self._header:
             self._header = True
             self.stream.write(','.join(['t'] + [f'{topic}.{field}.{name}'

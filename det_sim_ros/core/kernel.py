@@ -20,13 +20,17 @@ Wire and log (the bytes of det_sim_ros.io.contract and det_sim_ros.io.log):
 - ``FrameMap``: marker frames of one-coordinate cells (det_sim_ros.ros.markers);
 - ``SensorReader``: one sample's sensor readings (det_sim_ros.sim.sensors).
 
+Every kernel object keeps its arrays in an arena of ``ARENA_SLOTS`` places; one more is a
+RuntimeError, never an overflow (``keep_owned_probe(count)`` fills a fresh arena to test it).
+
 det_sim_ros/physics/reference.py is the same physics in readable numpy; the tests hold the
 compiled kernel to it on random states of every scene kind.
 """
 
 try:
-    from ._ckernel import (BAD_SLOPE, BAD_STRETCH, CELL_OUTPUTS, FrameMap, matrix_phis, Model,
-                           NON_FINITE, OK, pack_records, SampleCodec, SensorReader, Stepper)
+    from ._ckernel import (ARENA_SLOTS, BAD_SLOPE, BAD_STRETCH, CELL_OUTPUTS, FrameMap,
+                           keep_owned_probe, matrix_phis, Model, NON_FINITE, OK, pack_records,
+                           SampleCodec, SensorReader, Stepper)
 except ImportError as error:  # pragma: no cover - only a broken install gets here
     raise ImportError(
         'det_sim_ros: the compiled kernel det_sim_ros.core._ckernel is missing or broken '
@@ -34,4 +38,5 @@ except ImportError as error:  # pragma: no cover - only a broken install gets he
         'compiler); in a source checkout, `python setup.py build_ext --inplace`.') from None
 
 __all__ = ['Model', 'Stepper', 'OK', 'BAD_STRETCH', 'NON_FINITE', 'BAD_SLOPE', 'CELL_OUTPUTS',
-           'SampleCodec', 'pack_records', 'FrameMap', 'matrix_phis', 'SensorReader']
+           'SampleCodec', 'pack_records', 'FrameMap', 'matrix_phis', 'SensorReader',
+           'ARENA_SLOTS', 'keep_owned_probe']

@@ -18,6 +18,7 @@ import numpy as np
 
 from .contract import JOINT_STATE, OutputContract, RELATIVE_TO_Y0, SampleWire, TOPIC_TYPES
 from ..core.kernel import SampleCodec
+from ..scenes.outputs import main_topic
 from ..sim.sensors import SensorBank
 
 __all__ = ['TRUTH', 'truth_topic', 'is_truth_topic', 'PlainOutputs', 'SensedOutputs',
@@ -57,7 +58,7 @@ class PlainOutputs:
 
     @staticmethod
     def heard(samples) -> bool:
-        """Return True if the sample's displacement is published (a controller answers it)."""
+        """Return True if the sample's main topic is published (a controller answers it)."""
         return True
 
 
@@ -95,7 +96,7 @@ class SensedOutputs:
         measured = dataclasses.replace(wire, source=source, op=op)
         self._codec = SampleCodec(_with_messages_of(measured, wire, self._truth_index))
         self._sensed_index = [self.topics.index(topic) for topic in self.sensed]
-        self._displacement = self.topics.index('displacement')
+        self._main = self.topics.index(main_topic())
         self._logged = {}   # dropped flags -> (topics, indices) of the logged messages
         self._all_topics = self.topics + self.truth_topics
 
@@ -111,8 +112,8 @@ class SensedOutputs:
         return samples
 
     def heard(self, samples) -> bool:
-        """Return True if the sample's displacement is published (a controller answers it)."""
-        return samples[self._displacement] is not None
+        """Return True if the sample's main topic is published (a controller answers it)."""
+        return samples[self._main] is not None
 
     def record(self, recorder, t_ns: int, samples) -> None:
         """Hand a sample's messages (the published measured ones and the truth) to the log."""

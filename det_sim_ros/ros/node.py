@@ -14,7 +14,6 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 import rclpy
-from rclpy._rclpy_pybind11 import RCLError
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.exceptions import ParameterException
@@ -33,24 +32,25 @@ from .live import open_live_view
 from .markers import attach_markers
 from .name_check import NameClaim
 from .pacing import make_pacing
+from .rclpy_facade import RCLError, take_serialized
 from .recording import open_recorder
 from .reports import NodeReports
 from .sensing import attach_outputs
 from .spinning import make_executor, spin, spin_until_stopped, StopRequested, StopSignals
 from .waiting import SubscriberGate
 from ..io.contract import (CLOCK_TOPIC, COMMAND_TOPIC, DIAGNOSTICS_TOPIC, encode_clock,
-                           JOINT_COMMAND_TOPIC, OUTPUT_FIELDS, OutputContract, rest_shortenings,
+                           JOINT_COMMAND_TOPIC, OutputContract, rest_shortenings,
                            stamp_ns, structure_channels, STRUCTURE_TOPIC)
 from ..physics.model import ModelDomainError
+from ..scenes.outputs import main_topic
 from ..scenes.scene import SceneError
 from ..sim.simulator import Simulator
 
-__all__ = ['SimNode', 'main', 'OUTPUT_TOPICS', 'STRUCTURE_TOPIC', 'rest_shortenings',
+__all__ = ['SimNode', 'main', 'STRUCTURE_TOPIC', 'rest_shortenings',
            'structure_channels', 'make_executor', 'spin']
 
 NODE_NAME = 'sim_node'
 # (the topic contract: names, types, channels, y0, the bytes on the wire: det_sim_ros.io.contract)
-OUTPUT_TOPICS = {topic: mapping['position'] for topic, mapping in OUTPUT_FIELDS.items()}
 
 
 class SimNode(Node):
@@ -71,7 +71,9 @@ class SimNode(Node):
     """
 
     def __init__(self, **kwargs):
-        super().__init__(NODE_NAME, **kwargs)
+        # (what the node is started with is declared as given, then as checked: declaration)
+        super().__init__(NODE_NAME, automatically_declare_parameters_from_overrides=True,
+                         **kwargs)
         self.scene, scene_file = load_node_scene(self)
         self._pacing = make_pacing(self._p)
         started = time.perf_counter()
@@ -141,8 +143,8 @@ class SimNode(Node):
                if self.structure_names else ''))
 
     def _make_gate(self) -> SubscriberGate:
-        """Hold sample 0 until wait_for_subscribers subscriptions of displacement matched."""
-        publisher = self._output_pubs['displacement']
+        """Hold sample 0 until wait_for_subscribers subscriptions of the main topic matched."""
+        publisher = self._output_pubs[main_topic()]
         gate = SubscriberGate(
             self._p('wait_for_subscribers'), publisher.topic_name,
             publisher.get_subscription_count,
@@ -159,11 +161,11 @@ class SimNode(Node):
 
     def _create_endpoints(self, in_qos, out_qos):
         # the sample's messages (measured by the scene's sensors, if any, and their truth)
-        self._outputs, self._output_pubs, self._truth_pubs, self._publish_raw = attach_outputs(
+        self._outputs, self._output_pubs, self._truth_pubs, self._publish_outputs = attach_outputs(
             self, self.contract, out_qos)
         self._clock_pub = (self.create_publisher(ClockMsg, CLOCK_TOPIC, in_qos)
                            if self._pacing.publishes_clock else None)
-        self._publish_clock = self._clock_pub.handle.publish_raw if self._clock_pub else None
+        self._publish_clock = self._clock_pub.publish if self._clock_pub else None
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         self._markers = attach_markers(self, self._sim.model, self._p('markers.rate_hz'),
                                        self._p('markers.frame_id'), out_qos)
@@ -243,8 +245,8 @@ class SimNode(Node):
         # the commands that have arrived since the last period, also in a catch-up burst or a
         # free-run tick (the executor would deliver them only after the whole tick)
         for topic, sub in self._command_subs.items():
-            while (taken := sub.handle.take_message(sub.msg_type, True)) is not None:
-                self._commands.apply(topic, taken[0])
+            while (data := take_serialized(sub)) is not None:
+                self._commands.apply(topic, data)
         try:
             out = self._sim.step()
         except ModelDomainError as exc:
@@ -261,7 +263,7 @@ class SimNode(Node):
         meanwhile.
         """
         try:
-            publish_clock, publishers = self._publish_clock, self._publish_raw
+            publish_clock, publishers = self._publish_clock, self._publish_outputs
             for t_ns, samples, frame in batch:
                 if publish_clock is not None:   # first: a use_sim_time reader is at t_k
                     publish_clock(encode_clock(t_ns))

@@ -13,6 +13,7 @@ import time
 
 from .diagnostics import diagnostics_message, RateWindow, ReportSchedule, status_line
 from .waiting import WaitLog
+from ..scenes.outputs import main_topic
 
 __all__ = ['NodeReports']
 
@@ -94,4 +95,4 @@ class NodeReports:
         node.get_logger().info(status_line(
             t=sim.t, volts=sim.u, rtf=window.rate_hz * sim.dt, window_s=window.wall_s,
             state=state, q_mm=node.contract.values(out, 'deflection', 'position') * 1e3,
-            dy_mm=node.contract.values(out, 'displacement', 'position') * 1e3))
+            dy_mm=node.contract.values(out, main_topic(), 'position') * 1e3))

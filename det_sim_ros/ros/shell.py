@@ -22,11 +22,12 @@ import threading
 import time
 from typing import Callable
 
-from ..io.contract import COMMAND_TOPIC, JOINT_COMMAND_TOPIC, OUTPUT_FIELDS
+from ..io.contract import COMMAND_TOPIC, JOINT_COMMAND_TOPIC
+from ..scenes.outputs import output_topics
 
 __all__ = ['NodeShell', 'ShellError', 'OUTPUT_TOPICS', 'target_name']
 
-OUTPUT_TOPICS = tuple(OUTPUT_FIELDS)   # the per-DET output topics, in publishing order
+OUTPUT_TOPICS = output_topics()   # the per-DET output topics, in publishing order
 
 
 class ShellError(RuntimeError):

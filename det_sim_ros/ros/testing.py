@@ -31,6 +31,8 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from ..scenes.outputs import main_topic
+
 __all__ = ['LockstepSim', 'SimRun', 'StepMetrics', 'det_sim', 'pick_domain_id']
 
 WALL_TIMEOUT = 600.0   # s: a safety net against a controller that never answers
@@ -208,7 +210,7 @@ class LockstepSim:
         contract = node.contract
         self._rows.append((k, node.simulator.u.copy(),
                            contract.values(out, 'deflection', 'position'),
-                           contract.values(out, 'displacement', 'position'),
+                           contract.values(out, main_topic(), 'position'),   # dy
                            contract.values(out, 'charge', 'position'),
                            contract.values(out, 'current', 'position')))
 

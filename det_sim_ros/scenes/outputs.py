@@ -5,10 +5,12 @@ Each row of :data:`OUTPUTS` is one JointState field of one output topic: the mod
 publishes (``Model.channel``: one value per DET), how people read it (the live line's label,
 the plot's title, the display unit and its scale from SI) and, for a topic's ``position``, the
 stream number of its sensor noise. The topic contract (det_sim_ros.io.contract), the scene's
-``sensors`` section (det_sim_ros.scenes.sensors), the node shell and ``det_sim watch``, and
-``det_sim plot`` read this table; adding an output is one row here plus the model output it
-names. The structure topic's outputs (a plate's height and tilt) are the second, smaller table
-:data:`STRUCTURE_OUTPUTS`.
+``sensors`` section (det_sim_ros.scenes.sensors), the node shell and ``det_sim watch``,
+``det_sim plot`` and ``det_sim fit`` (a row's :class:`FitChannel`: the channel a measurement
+names it by) read this table; adding an output is one row here plus the model output it names.
+One row is the main topic (:func:`main_topic`): the one sim_node's start waits for subscribers
+of and ``det_sim watch`` takes the DET names from. The structure topic's outputs (a plate's
+height and tilt) are the second, smaller table :data:`STRUCTURE_OUTPUTS`.
 
 The table lives in the scenes layer, the lowest layer that needs it: the scene's ``sensors``
 section has one subsection per sensed topic. It describes the published channels and imports
@@ -24,10 +26,33 @@ from __future__ import annotations
 
 import dataclasses
 
-__all__ = ['OutputQuantity', 'OUTPUTS', 'output_fields', 'output_units', 'relative_to_y0',
-           'output_topics', 'sensor_topics', 'line_quantities', 'csv_fields', 'plot_panels',
+__all__ = ['FitChannel', 'OutputQuantity', 'OUTPUTS', 'main_topic', 'fit_channels',
+           'output_fields', 'output_units', 'relative_to_y0', 'output_topics', 'sensor_topics',
+           'line_quantities', 'csv_fields', 'plot_panels',
            'StructureQuantity', 'STRUCTURE_OUTPUTS', 'structure_names',
            'structure_line_quantities', 'structure_panels']
+
+
+@dataclasses.dataclass(frozen=True)
+class FitChannel:
+    """
+    How ``det_sim fit`` names and weighs a measured output (a topic's ``position``).
+
+    :param name: the channel's name in a measurement, a mapping (``--map NAME=...``), the
+        ``--sigma`` option and the report.
+    :param csv_names: the CSV header names that mean this channel (besides ``name``; a
+        header's first word, any case).
+    :param noise_floor: the smallest noise level (SI units): a noise-free channel still gets a
+        finite weight.
+    :param report_unit: the unit of the report's residuals and plots; ``report_scale`` takes
+        SI to it.
+    """
+
+    name: str
+    csv_names: tuple[str, ...]
+    noise_floor: float
+    report_unit: str
+    report_scale: float
 
 
 @dataclasses.dataclass(frozen=True)
@@ -43,6 +68,8 @@ class OutputQuantity:
     :param sensor: the sensor noise stream number of a ``position`` field (None: no sensor);
         fixed per topic, never reused.
     :param relative_to_y0: published as y0_i - value (the displacement from rest).
+    :param fit: the channel ``det_sim fit`` measures it as (None: not fitted).
+    :param main: the main topic's row (exactly one).
     """
 
     topic: str
@@ -56,6 +83,8 @@ class OutputQuantity:
     resolution: float
     sensor: int | None = None
     relative_to_y0: bool = False
+    fit: FitChannel | None = None
+    main: bool = False
 
 
 # resolutions: a nanometre of a millimetre stroke, a picocoulomb of ~10 µC, a nanoampere of
@@ -66,11 +95,12 @@ OUTPUTS: tuple[OutputQuantity, ...] = (
     OutputQuantity('deflection', 'velocity', 'q_dot', 'dq/dt', 'deflection rate dq/dt', 'm/s',
                    'm/s', 1.0, 1e-9),
     OutputQuantity('displacement', 'position', 'y', 'dy', 'displacement Δy', 'm', 'mm', 1e3,
-                   1e-9, sensor=0, relative_to_y0=True),
+                   1e-9, sensor=0, relative_to_y0=True, main=True,
+                   fit=FitChannel('dy', ('Δy', 'displacement'), 1e-12, 'um', 1e6)),
     OutputQuantity('charge', 'position', 'q_p', 'q_p', 'charge q_p', 'C', 'µC', 1e6, 1e-12,
-                   sensor=2),
+                   sensor=2, fit=FitChannel('charge', ('q_p',), 1e-15, 'uC', 1e6)),
     OutputQuantity('current', 'position', 'i_DE', 'i', 'current i_DE', 'A', 'mA', 1e3, 1e-9,
-                   sensor=3),
+                   sensor=3, fit=FitChannel('current', ('i_de',), 1e-12, 'mA', 1e3)),
 )
 
 
@@ -81,6 +111,33 @@ def _rows(rows):
 def output_topics(rows=None) -> tuple[str, ...]:
     """Return the output topics in publishing order."""
     return tuple(dict.fromkeys(row.topic for row in _rows(rows)))
+
+
+def main_topic(rows=None) -> str:
+    """Return the main topic: the one row marked ``main``'s."""
+    main = [row.topic for row in _rows(rows) if row.main]
+    if len(main) != 1:
+        raise ValueError(f'output table: exactly one row is the main topic (got {main})')
+    return main[0]
+
+
+# the fit's names of the time and the voltage (a CSV's columns, a mapping's channel)
+_NOT_FIT_NAMES = ('t', 'time', 'v', 'voltage')
+
+
+def fit_channels(rows=None) -> dict[str, OutputQuantity]:
+    """Return fit channel name -> its row (a topic's position), in publishing order."""
+    channels = {}
+    for row in _rows(rows):
+        if row.fit is None:
+            continue
+        if (row.field != 'position' or row.fit.name in channels
+                or row.fit.name in _NOT_FIT_NAMES):
+            raise ValueError(f'output table: a fit channel is a position field, named once and '
+                             f'not {", ".join(_NOT_FIT_NAMES)} (got {row.fit.name!r} on '
+                             f'{row.topic}.{row.field})')
+        channels[row.fit.name] = row
+    return channels
 
 
 def output_fields(rows=None) -> dict[str, dict[str, str]]:

@@ -73,9 +73,40 @@ void release_buffers(buf *b, int count)
 
 void *keep_owned(arena *a, void *p)
 {
-    if (p)
-        a->p[a->n++] = p;
+    if (!p) {
+        PyErr_NoMemory();
+        return NULL;
+    }
+    if (a->n >= ARENA_SLOTS) {
+        free(p);
+        PyErr_Format(PyExc_RuntimeError, "the kernel object keeps more than %d arrays "
+                     "(ARENA_SLOTS in binding.h)", ARENA_SLOTS);
+        return NULL;
+    }
+    a->p[a->n++] = p;
     return p;
+}
+
+/* keep_owned_probe(count): keep count small arrays in a fresh arena, then free them all;
+ * return count. The arena's bound is the one every kernel object has. */
+PyObject *keep_owned_probe(PyObject *module, PyObject *const *args, Py_ssize_t n)
+{
+    (void)module;
+    if (n != 1) {
+        PyErr_SetString(PyExc_TypeError, "keep_owned_probe(count)");
+        return NULL;
+    }
+    const long count = PyLong_AsLong(args[0]);
+    if (count == -1 && PyErr_Occurred())
+        return NULL;
+    arena a = {.n = 0};
+    for (long i = 0; i < count; i++)
+        if (!keep_owned(&a, malloc(8))) {
+            free_arena(&a);
+            return NULL;
+        }
+    free_arena(&a);
+    return PyLong_FromLong(count);
 }
 
 void free_arena(arena *a)
@@ -99,9 +130,7 @@ void *copy_field(arena *mem, PyObject *src, const char *name, char kind, Py_ssiz
     }
     Py_ssize_t len = b.view.len;
     void *p = keep_owned(mem, malloc(len > 0 ? (size_t)len : 8));
-    if (!p) {
-        PyErr_NoMemory();
-    } else {
+    if (p) {
         memcpy(p, b.view.buf, (size_t)len);
         if (got)
             *got = len / 8;

@@ -63,14 +63,19 @@ DS_HIDDEN void release_buffers(buf *b, int count);
 
 /* ---------------------------------------------------------------- owned copies */
 
-/* The memory an object owns (its copies of the named fields), freed with it. */
+/* The memory an object owns (its copies of the named fields), freed with it; a Model keeps
+ * the most (~38 with the amplifier). */
+enum { ARENA_SLOTS = 48 };
 typedef struct {
-    void *p[48];
+    void *p[ARENA_SLOTS];
     int n;
 } arena;
 
+/* Keep p in the arena and return it; NULL with the Python error set when p is NULL (out of
+ * memory) or the arena is full (p is freed). */
 DS_HIDDEN void *keep_owned(arena *a, void *p);
 DS_HIDDEN void free_arena(arena *a);
+DS_HIDDEN PyObject *keep_owned_probe(PyObject *module, PyObject *const *args, Py_ssize_t n);
 DS_HIDDEN void *copy_field(arena *mem, PyObject *src, const char *name, char kind,
                            Py_ssize_t n, Py_ssize_t *got);
 DS_HIDDEN int int_field(PyObject *src, const char *name, int64_t *out);

@@ -60,11 +60,8 @@ static int FrameMap_init(FrameMapObject *self, PyObject *args, PyObject *kwds)
             PyErr_SetString(PyExc_ValueError, "FrameMap: a stamp lies outside the frame");
             return -1;
         }
-    f->values = keep_owned(mem, calloc((size_t)(2 * n), sizeof(double)));
-    if (!f->values) {
-        PyErr_NoMemory();
+    if (!(f->values = keep_owned(mem, calloc((size_t)(2 * n), sizeof(double)))))
         return -1;
-    }
     f->last = f->values + n;
     return 0;
 }
@@ -166,7 +163,6 @@ static int SampleCodec_init(SampleCodecObject *self, PyObject *args, PyObject *k
     self->messages = keep_owned(mem, malloc((size_t)size));
     if (!self->messages) {
         Py_DECREF(template);
-        PyErr_NoMemory();
         return -1;
     }
     memcpy(self->messages, PyBytes_AS_STRING(template), (size_t)size);

@@ -169,12 +169,9 @@ static int build_cells(ds_model *m, arena *mem, PyObject *src, const cell_index 
     for (int i = 0; i < N_DET_FIELDS; i++)
         if (!(det_f[i] = copy_field(mem, src, det_names[i], 'd', nc, NULL)))
             return -1;
-    m->cell = keep_owned(mem, calloc((size_t)nc, sizeof(ds_cell)));
-    m->det = keep_owned(mem, calloc((size_t)nc, sizeof(ds_det)));
-    if (!m->cell || !m->det) {
-        PyErr_NoMemory();
+    if (!(m->cell = keep_owned(mem, calloc((size_t)nc, sizeof(ds_cell))))
+        || !(m->det = keep_owned(mem, calloc((size_t)nc, sizeof(ds_det)))))
         return -1;
-    }
     m->mass_block = 1;
     for (int64_t g = 0; g < m->n_groups; g++)
         if (m->group_q[g + 1] - m->group_q[g] > m->mass_block)
@@ -210,13 +207,11 @@ static int read_interface_mass(const ds_model *m)
 static int derived_tables(ds_model *m, arena *mem)
 {
     const size_t size = (size_t)(m->n_nodes * m->r_max) + 1;
-    double *t1 = keep_owned(mem, calloc(size, sizeof(double)));
-    double *t2 = keep_owned(mem, calloc(size, sizeof(double)));
-    double *inv = keep_owned(mem, malloc(sizeof(double) * (size_t)(m->n_q * m->r_max)));
-    if (!t1 || !t2 || !inv) {
-        PyErr_NoMemory();
+    double *t1, *t2, *inv;
+    if (!(t1 = keep_owned(mem, calloc(size, sizeof(double))))
+        || !(t2 = keep_owned(mem, calloc(size, sizeof(double))))
+        || !(inv = keep_owned(mem, malloc(sizeof(double) * (size_t)(m->n_q * m->r_max)))))
         return -1;
-    }
     ds_transpose_nodes(m, m->B1, t1);
     ds_transpose_nodes(m, m->B2, t2);
     if (ds_mass_inverse(m, inv) < 0) {

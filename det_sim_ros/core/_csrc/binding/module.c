@@ -12,6 +12,9 @@ static PyMethodDef module_functions[] = {
     {"matrix_phis", (PyCFunction)(void (*)(void))matrix_phis, METH_FASTCALL,
      "matrix_phis(Z, scale, full, half): phi_k(scale Z) and phi_k(scale Z / 2) of a small "
      "matrix (see matrix_phi.c)"},
+    {"keep_owned_probe", (PyCFunction)(void (*)(void))keep_owned_probe, METH_FASTCALL,
+     "keep_owned_probe(count) -> count: keep count arrays in a fresh arena and free them; "
+     "RuntimeError beyond ARENA_SLOTS (the bound every kernel object's arena has)"},
     {NULL}
 };
 
@@ -45,7 +48,8 @@ PyMODINIT_FUNC PyInit__ckernel(void)
         || PyModule_AddIntConstant(mod, "BAD_STRETCH", DS_BAD_STRETCH) < 0
         || PyModule_AddIntConstant(mod, "NON_FINITE", DS_NON_FINITE) < 0
         || PyModule_AddIntConstant(mod, "BAD_SLOPE", DS_BAD_SLOPE) < 0
-        || PyModule_AddIntConstant(mod, "CELL_OUTPUTS", DS_CELL_OUTPUTS) < 0) {
+        || PyModule_AddIntConstant(mod, "CELL_OUTPUTS", DS_CELL_OUTPUTS) < 0
+        || PyModule_AddIntConstant(mod, "ARENA_SLOTS", ARENA_SLOTS) < 0) {
         Py_DECREF(mod);
         return NULL;
     }

@@ -55,10 +55,8 @@ static int SensorReader_init(SensorReaderObject *self, PyObject *args, PyObject 
     self->rows = max_delay + 1;
     self->history = keep_owned(mem, calloc((size_t)(self->rows * (n > 0 ? n : 1)),
                                            sizeof(double)));
-    if (!self->history) {
-        PyErr_NoMemory();
+    if (!self->history)
         return -1;
-    }
     self->last = -1;
     self->first = 0;
     return 0;
