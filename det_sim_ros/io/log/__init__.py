@@ -49,6 +49,7 @@ Its modules, by job:
   writer on mcap's public record classes, the bytes of ``mcap.writer.Writer``) and
   :mod:`.packing` (Message records packed into its open chunk, runs of samples in C);
 - :mod:`.reader`: reading, finished or not, and :func:`recover`;
+- :mod:`.runs`: which files are one run (:func:`log_runs`: a split or reset run stays one);
 - :mod:`.format`: the bytes the package scans itself, the chunk compressions (one map), the
   provisional end and the torn-file check.
 
@@ -63,10 +64,12 @@ from .format import (END_METADATA_NAME, file_kind, is_torn, LIBRARY, METADATA_NA
                      SCENE_ATTACHMENT)
 from .reader import log_files, LogMessage, LogReader, recover, recover_unfinished
 from .recorder import Recorder
+from .runs import log_runs, LogRun
 from ..cdr import deserialize, message_class, serialize
 from ..schemas import DELIMITER, message_definition, qos_profiles_yaml, type_name_of
 
 __all__ = ['Recorder', 'LogReader', 'LogMessage', 'message_definition', 'qos_profiles_yaml',
            'type_name_of', 'serialize', 'deserialize', 'recover', 'recover_unfinished',
            'is_torn', 'log_files', 'LIBRARY', 'METADATA_NAME', 'END_METADATA_NAME',
-           'SCENE_ATTACHMENT', 'DELIMITER', 'message_class', 'file_kind', 'logged_scene']
+           'SCENE_ATTACHMENT', 'DELIMITER', 'message_class', 'file_kind', 'logged_scene',
+           'log_runs', 'LogRun']
