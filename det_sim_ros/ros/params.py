@@ -117,7 +117,7 @@ NODE_PARAMS = {
                        None),
     'allow_duplicate_name': Param(False, 'run even if another node of this fully qualified '
                                   'name is running (one warning, no wait at start); false: '
-                                  'the node settles its name before it publishes (0.5 s at '
+                                  'the node settles its name before it publishes (0.75 s at '
                                   'start) and the younger of two stops with one FATAL line',
                                   True, None),
     'strict_parameters': Param(False, 'a parameter name the node does not know (-p, a params '
