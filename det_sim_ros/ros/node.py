@@ -76,6 +76,8 @@ class SimNode(Node):
             self._prepare()
         except Exception as exc:
             exc.logger_name = self.get_logger().name   # the FATAL line names the node as named
+            # its claim must not outlive a start that failed: no later node may hear it
+            super().destroy_node()
             raise
 
     def _prepare(self):
