@@ -80,6 +80,8 @@ def _unwritable_paths(tmp_path):
     yield str(plain / 'run.mcap')
     (tmp_path / 'folder.mcap').mkdir()
     yield str(tmp_path / 'folder.mcap')
+    if os.path.isdir('/sys'):      # not writable, for root neither (sysfs)
+        yield '/sys/det.mcap'
     if os.geteuid() != 0:          # root writes into a directory without write permission
         locked = tmp_path / 'locked'
         locked.mkdir(mode=0o555)
@@ -87,16 +89,23 @@ def _unwritable_paths(tmp_path):
 
 
 def test_unwritable_log_path_refuses_to_start(tmp_path):
-    """Check that a log.path that cannot be written gives one FATAL line and exit 1."""
+    """
+    Check that a log.path that cannot be written gives one FATAL line and exit 1.
+
+    The line names the node as it was named (``-r __node:=``) and the reason; nothing else
+    but INFO lines (no line of the recorder's own).
+    """
     for path in _unwritable_paths(tmp_path):
-        result = run_entry(['--ros-args', '-p', f'log.path:={path}', '-p', 'real_time:=false',
+        result = run_entry(['--ros-args', '-r', '__node:=sim_node_b',
+                            '-p', f'log.path:={path}', '-p', 'real_time:=false',
                             '-p', 'allow_duplicate_name:=true', '-p', 'scene.fidelity:=paper'],
                            cwd=tmp_path)
         assert result.returncode == 1, (path, result.stderr)
         problems = [line for line in result.stderr.splitlines() if '[INFO]' not in line]
         assert len(problems) == 1, (path, result.stderr)
         assert '[FATAL]' in problems[0] and 'cannot start: parameter log.path' in problems[0]
-        assert repr(path) in problems[0]
+        assert '[sim_node_b]: ' in problems[0] and repr(path) in problems[0]
+        assert 'cannot write a log there (' in problems[0]
 
 
 def _params_file(tmp_path):
@@ -172,9 +181,8 @@ def test_duplicate_name_refused_unless_allowed(tmp_path):
     """
     Check a second node of one name: one FATAL line and exit 1, or a WARN when allowed.
 
-    The duplicates publish from their start (the name is settled by the claims the nodes
-    announce, det_sim_ros.ros.name_check) and stop themselves once they hear the running node's
-    older claim; the running node goes on.
+    The duplicates hear the running node's older claim before they publish anything
+    (det_sim_ros.ros.name_check) and stop; the running node goes on.
     """
     args = ['--ros-args', '-r', '__ns:=/startup_dup', '-p', 'log.enabled:=false',
             '-p', 'info_period:=0.0']
@@ -203,28 +211,88 @@ def test_duplicate_name_refused_unless_allowed(tmp_path):
     assert first_stopped == 0, ''.join(first.lines)
 
 
+def test_a_refused_duplicate_reaches_nothing_of_the_running_nodes(tmp_path, ros_context):
+    """
+    Check that a second node of one name publishes nothing on the running node's topics.
+
+    A subscriber watches the running node's displacement (reliable, 10 s deep) while a duplicate
+    starts and is refused: the stamps it receives only go forward, 1 ms apart (a duplicate's
+    samples would start from t = 0 again), and displacement never has a second publisher. The
+    duplicate exits 1 with one FATAL line, under the name it was given (``-r __node:=``), and
+    it stepped no period (no stop line): a duplicate's first ~0.1 s of samples can go out before
+    a subscriber has matched it, so its own account is checked too.
+    """
+    import threading
+    import rclpy
+    from rclpy.qos import QoSProfile
+    from sensor_msgs.msg import JointState
+    args = ['--ros-args', '-r', '__ns:=/startup_quiet', '-r', '__node:=sim_node_b',
+            '-p', 'log.enabled:=false', '-p', 'info_period:=0.0']
+    topic = '/startup_quiet/displacement'
+    watcher = rclpy.create_node('duplicate_watcher', context=ros_context)
+    stamps, publishers, done = [], [], threading.Event()
+    watcher.create_subscription(JointState, topic, lambda msg: stamps.append(
+        msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec), QoSProfile(depth=10000))
+    executor = rclpy.executors.SingleThreadedExecutor(context=ros_context)
+    executor.add_node(watcher)
+
+    def watch():
+        while not done.is_set():
+            executor.spin_once(timeout_sec=0.01)
+            publishers.append(watcher.count_publishers(topic))
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    first = Node(tmp_path, *args)
+    try:
+        first.wait_for(READY)
+        deadline = time.monotonic() + TIMEOUT
+        while not stamps or stamps[-1] < 500_000_000:   # the running node's stamps advanced
+            assert time.monotonic() < deadline, 'no samples of the running node'
+            time.sleep(0.05)
+        duplicate = run_entry(args, cwd=tmp_path)
+        before = len(stamps)
+        while len(stamps) < before + 200:               # 0.2 s more of the running node
+            assert time.monotonic() < deadline, 'the running node stopped publishing'
+            time.sleep(0.05)
+    finally:
+        done.set()
+        thread.join(timeout=10.0)
+        executor.shutdown()
+        watcher.destroy_node()
+        assert first.stop() == 0, ''.join(first.lines)
+    steps = {b - a for a, b in zip(stamps, stamps[1:])}
+    assert steps == {1_000_000}, sorted(steps)[:5]    # forward only, none from a second node
+    assert max(publishers) == 1, max(publishers)
+    assert duplicate.returncode == 1, duplicate.stderr
+    lines = duplicate.stderr.splitlines()
+    fatal = [n for n, line in enumerate(lines) if '[FATAL]' in line]
+    assert len(fatal) == 1, duplicate.stderr
+    # it stepped no period (a stop line says how many) and its FATAL line names it as named
+    assert not any('stopped at' in line for line in lines), duplicate.stderr
+    assert '[startup_quiet.sim_node_b]: ' in lines[fatal[0]]
+    assert 'another node named /startup_quiet/sim_node_b' in lines[fatal[0]]
+
+
 def test_of_nodes_started_together_exactly_one_keeps_its_name(tmp_path):
     """
     Check three nodes of one name started at the same moment: one runs, two are refused.
 
     Each orders the claims the same way (start time, then instance id), so exactly the oldest
-    goes on, whichever claim each hears first; none waits for the others before publishing.
+    goes on, whichever claim each hears first.
     """
     args = ['--ros-args', '-r', '__ns:=/startup_together', '-p', 'log.enabled:=false',
             '-p', 'info_period:=0.0']
     nodes = [Node(tmp_path, *args) for _ in range(3)]
     try:
-        for node in nodes:
-            node.wait_for(READY)
-        refused = []
-        for node in nodes:       # a refused node exits after its FATAL line
-            if node.proc.poll() is None:
-                try:
-                    node.proc.wait(timeout=10.0)
-                except subprocess.TimeoutExpired:
-                    continue
-            refused.append(node)
-        assert len(refused) == 2, [''.join(node.lines) for node in nodes]
+        deadline = time.monotonic() + TIMEOUT   # a refused node exits, before publishing
+        while (len(refused := [node for node in nodes if node.proc.poll() is not None]) < 2
+               and time.monotonic() < deadline):
+            time.sleep(0.05)
+        time.sleep(1.0)                          # (a third refusal would come by now)
+        refused = [node for node in nodes if node.proc.poll() is not None]
+        assert len(refused) == 2, [node.proc.returncode for node in nodes]
+        [running] = [node for node in nodes if node not in refused]
+        running.wait_for(READY)
     finally:
         codes = [node.stop() for node in nodes]
     assert sorted(codes) == [0, 1, 1], codes

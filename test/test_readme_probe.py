@@ -76,3 +76,40 @@ def test_the_readme_probe_prints_every_tenth_of_a_second_and_stops_on_ctrl_c(tmp
     assert ticks == list(range(ticks[0], ticks[0] + len(ticks))), printed   # no print lost
     assert all(float(v['dy']) == 0.0 for v in values[:risen])               # before the command
     assert abs(float(values[-1]['dy']) - settled) <= 0.01, printed          # the README's value
+
+
+def test_with_the_readme_setting_a_subscriber_started_first_gets_every_sample_from_0(
+        tmp_path, ros_context):
+    """
+    Check the README's way to miss no sample: the subscriber first, then the node as it says.
+
+    A subscriber with the probe's QoS (reliable, 1000 deep) exists before the node starts with
+    the setting the README names; its samples start at t = 0 and go on 1 ms apart, none lost.
+    """
+    import rclpy
+    from sensor_msgs.msg import JointState
+    with open(README, encoding='utf-8') as stream:
+        section = stream.read().split(SECTION, 1)[1].split('\n## ', 1)[0]
+    setting = re.search(r'`sim_node --ros-args (-p wait_for_subscribers:=\d+)`', section)
+    assert setting, 'the README names no setting for a subscriber started before the node'
+    probe = rclpy.create_node('probe', context=ros_context)
+    stamps = []
+    probe.create_subscription(JointState, 'displacement', lambda msg: stamps.append(
+        msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec), 1000)
+    executor = rclpy.executors.SingleThreadedExecutor(context=ros_context)
+    executor.add_node(probe)
+    for _ in range(20):                       # the subscriber exists and spins first
+        executor.spin_once(timeout_sec=0.01)
+    node = Node(tmp_path, '--ros-args', *setting.group(1).split(), '-p', 'log.enabled:=false',
+                '-p', 'info_period:=0.0')
+    try:
+        deadline = time.monotonic() + TIMEOUT
+        while len(stamps) < 500:
+            assert time.monotonic() < deadline, f'{len(stamps)} samples: {"".join(node.lines)}'
+            executor.spin_once(timeout_sec=0.01)
+    finally:
+        executor.shutdown()
+        probe.destroy_node()
+        assert node.stop() == 0, ''.join(node.lines)
+    assert stamps[0] == 0, stamps[:5]
+    assert {b - a for a, b in zip(stamps, stamps[1:])} == {1_000_000}   # no gap

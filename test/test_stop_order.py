@@ -136,3 +136,20 @@ def test_leaving_stop_signals_cancels_the_bound(hang):
     """)
     assert result.returncode == (1 if hang else 0), result.stderr
     assert ('went on' in result.stdout) is not hang
+
+
+def test_a_name_refused_while_running_says_fatal_before_its_stop_line(monkeypatch):
+    """Check a claim heard after the start's wait: the FATAL line, then the stop line; code 1."""
+    events = []
+    monkeypatch.setattr(spinning, 'make_executor', lambda context: _Executor(events))
+    node = _Node(events)
+    node.context = types.SimpleNamespace(ok=lambda: True)
+    node.name_claim = types.SimpleNamespace(refusal='another node named /sim_node is running')
+    node.get_logger = lambda: types.SimpleNamespace(
+        info=lambda text: events.append('stop line'),
+        fatal=lambda text: events.append(f'FATAL {text}'))
+    stop = _Stop(events)
+    stop.requested = 0
+    assert spinning.spin_until_stopped(node, stop) == 1
+    assert events == ['log finished', 'FATAL cannot run: another node named /sim_node is running',
+                      'stop line', 'teardown bounded', 'executor teardown', 'executor shutdown']

@@ -198,6 +198,30 @@ def _cell(value):
     return value
 
 
+def log_runs_to_use(paths, verb: str, each: bool | None = None) -> list[list[str]]:
+    """
+    Return the runs of sim_node logs to work on, each as its files: every run with ``each``.
+
+    Else the newest one; when ``paths`` (a log directory) hold several runs, one line says
+    which run is used, how many others there are and how to pick another. ``each`` None: the
+    verb has no option for every run.
+    """
+    from ..io.log import log_runs
+    try:
+        runs = log_runs(paths)
+    except FileNotFoundError as exc:
+        raise CliError(str(exc)) from None
+    if each or len(runs) == 1:
+        return [list(run.files) for run in runs]
+    newest, other = runs[-1], runs[-2]
+    example = other.files[0] + (f' {os.path.dirname(other.files[0]) or os.curdir}'
+                                f'{os.sep}{other.name}_*.mcap' if len(other.files) > 1 else '')
+    print(f'det_sim {verb}: the newest of {len(runs)} runs, {newest.name} '
+          f'({len(newest.files)} file(s)); for another pass its files (e.g. {example})'
+          + (' or --each-run for every run' if each is not None else ''), flush=True)
+    return [list(newest.files)]
+
+
 def write_text(path: str, text: str) -> str:
     """Write a UTF-8 text file; return ``path``."""
     with open(path, 'w', encoding='utf-8') as stream:

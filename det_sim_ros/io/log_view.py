@@ -24,17 +24,21 @@ SETTLE_S = 0.5   # wall s between a client's first subscription and the start of
 
 
 class LogSummary:
-    """A log's topics (-> type), schemas (type -> ros2msg bytes), time range (ns) and size."""
+    """A log's topics (-> type), schemas (-> ros2msg bytes), time range and duration (ns)."""
 
     def __init__(self, paths):
         reader = LogReader(paths)
         self.files = reader.files
         self.start = self.end = None
         self.count = 0
+        self.duration_ns = 0   # sim time run through: a reset's restart at t = 0 adds none
+        last = None
         for message in reader.messages():
             t = message.log_time
             self.start = t if self.start is None else min(self.start, t)
             self.end = t if self.end is None else max(self.end, t)
+            self.duration_ns += max(0, t - last) if last is not None else 0
+            last = t
             self.count += 1
         if not self.count:
             raise ValueError(f'{", ".join(self.files)}: no readable message'

@@ -1,19 +1,23 @@
 """
-One running node per fully qualified name, settled without delaying the start.
+One running node per fully qualified name, settled before the node publishes anything.
 
 Two nodes of one name (a fleet or a node started twice) would publish on the same topics and
-answer the same services, and a controller could not tell them apart. Discovery is not instant
-(det_sim_ros.ros.discovery; how long: docs/topics.md), so a look at the graph before
-publishing would hold the first sample back by that long.
+answer the same services, and a controller could not tell them apart; a duplicate's samples
+(from t = 0 again) would reach a running controller. So the name is settled before the node
+creates any other publisher or steps.
 
-Instead each node claims its name at once and publishes from the start: on the hidden topic
-``~/_name_claim`` (reliable, transient local: a node that comes later still receives it) it
-announces its start time and a random instance id, and it listens there for the others'.
-The older claim wins, by (start time, instance id): every node orders two claims the same way,
-so of two or more nodes of one name exactly one goes on, whichever hears the other first, and a
-running node is never the one refused. The younger stops itself with one FATAL line
-(:attr:`NameClaim.refusal`, read by the spin loop); with ``allow_duplicate_name`` it logs one
-warning and goes on.
+Each node claims its name as soon as it exists, on the hidden topic ``~/_name_claim``
+(reliable, transient local: a node that comes later still receives it): it announces its start
+time and a random instance id, and listens there for the others'. The older claim wins, by
+(start time, instance id): every node orders two claims the same way, so of two or more nodes
+of one name exactly one goes on, whichever hears the other first, and a running node is never
+the one refused. :meth:`NameClaim.settle` then waits for the others' claims while the scene is
+prepared and for at least :data:`SETTLE_S` after the claim (how late a running node's claim
+arrives, in steps of sim_node's announcement period: docs/topics.md), longer while claim
+writers have matched whose claims have not arrived yet. A refused node raises before it
+publishes. A claim heard later still stops the node (:attr:`NameClaim.refusal`, read by the
+spin loop). With ``allow_duplicate_name`` there is no wait: one warning when another claim is
+heard, and the node goes on.
 """
 
 from __future__ import annotations
@@ -25,9 +29,11 @@ import weakref
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-__all__ = ['CLAIM_TOPIC', 'Claim', 'NameClaim', 'younger']
+__all__ = ['CLAIM_TOPIC', 'Claim', 'NameClaim', 'SETTLE_S', 'SETTLE_MAX_S', 'younger']
 
 CLAIM_TOPIC = '~/_name_claim'
+SETTLE_S = 0.75      # s after the claim before the node may publish (see the module doc)
+SETTLE_MAX_S = 3.0   # s at most, while matched claim writers have not been heard yet
 
 
 class Claim(tuple):
@@ -68,12 +74,16 @@ class NameClaim:
     """
     The node's claim on its name: announced at once, compared with every other one heard.
 
-    ``refusal`` is '' while the node may run, else the one line it stops with.
+    ``refusal`` is '' while the node may run, else the one line it stops with. ``allow``:
+    whether a duplicate only warns (None: not known yet, :meth:`settle` says).
     """
 
-    def __init__(self, node, allow: bool):
+    def __init__(self, node, allow: bool | None = None):
         self.claim = Claim(time.time_ns(), int.from_bytes(os.urandom(8), 'little'))
         self.refusal = ''
+        self._claimed_at = time.monotonic()
+        self._heard_claims = set()
+        self._older_heard = False
         # weak: the node's subscription holds this object's callback, and a node whose start
         # failed must be freed at once (it holds its logger's /rosout publisher)
         self._node, self._allow, self._warned = weakref.ref(node), allow, False
@@ -88,11 +98,51 @@ class NameClaim:
         self._publisher = node.create_publisher(String, CLAIM_TOPIC, claim_qos)
         self._publisher.publish(String(data=self.claim.text()))
 
+    def settle(self, allow: bool) -> str:
+        """
+        Wait until the name is settled; return the refusal ('' : the node may go on).
+
+        Without ``allow``: spin the node's callbacks (only its claim subscription and
+        parameter services exist yet) until an older claim is heard, or :data:`SETTLE_S` after
+        the claim has passed and every matched claim writer has been heard (at most
+        :data:`SETTLE_MAX_S`). With ``allow`` it returns at once.
+        """
+        self._allow = allow
+        if self._older_heard:
+            self._answer_older()
+        node = self._node()
+        if allow or node is None or self.refusal:
+            return self.refusal
+        from rclpy.executors import SingleThreadedExecutor
+        executor = SingleThreadedExecutor(context=node.context)
+        executor.add_node(node)
+        try:
+            while not self.refusal:
+                waited = time.monotonic() - self._claimed_at
+                unheard = self._subscription.get_publisher_count() > len(self._heard_claims)
+                if waited >= SETTLE_MAX_S or (waited >= SETTLE_S and not unheard):
+                    break
+                executor.spin_once(timeout_sec=0.02 if waited >= SETTLE_S
+                                   else min(0.02, SETTLE_S - waited))
+        finally:
+            executor.remove_node(node)
+            executor.shutdown(timeout_sec=0.0)
+        return self.refusal
+
     def _heard(self, msg) -> None:
         other = Claim.parse(msg.data)
+        if other is None:
+            return
+        self._heard_claims.add(other)
+        if younger(self.claim, other):
+            self._older_heard = True
+            if self._allow is not None:
+                self._answer_older()
+
+    def _answer_older(self) -> None:
+        """Another node of this name is older: refuse, or warn once when allowed."""
         node = self._node()
-        if (node is None or other is None or not younger(self.claim, other) or self.refusal
-                or self._warned):
+        if node is None or self.refusal or self._warned:
             return
         if self._allow:
             self._warned = True

@@ -74,6 +74,17 @@ class SimNode(Node):
         # (what the node is started with is declared as given, then as checked: declaration)
         super().__init__(NODE_NAME, automatically_declare_parameters_from_overrides=True,
                          **kwargs)
+        try:
+            self._prepare()
+        except Exception as exc:
+            exc.logger_name = self.get_logger().name   # the FATAL line names the node as named
+            # its claim must not outlive a start that failed: no later node may hear it
+            super().destroy_node()
+            raise
+
+    def _prepare(self):
+        # claimed first: the others' claims are heard while the scene is prepared
+        self.name_claim = NameClaim(self)
         self.scene, scene_file = load_node_scene(self)
         self._pacing = make_pacing(self._p)
         started = time.perf_counter()
@@ -103,7 +114,9 @@ class SimNode(Node):
         """Create the endpoints, timers and the recorder; then sample 0 and the start-up line."""
         if self._p('qos_sensor_data') and self._p('qos_keep_all'):
             raise SceneError('parameters qos_sensor_data and qos_keep_all: choose one')
-        self.name_claim = NameClaim(self, self._p('allow_duplicate_name'))   # settled later
+        refusal = self.name_claim.settle(self._p('allow_duplicate_name'))
+        if refusal:   # before any publisher: nothing of a duplicate reaches the running node's
+            raise SceneError(refusal)
         keep_all = QoSProfile(history=HistoryPolicy.KEEP_ALL)
         in_qos = keep_all if self._p('qos_keep_all') else QoSProfile(depth=10)
         out_qos = qos_profile_sensor_data if self._p('qos_sensor_data') else in_qos
@@ -383,13 +396,14 @@ def main(args=None):
             node = SimNode()
             stop.preparing = False
             if not stop.requested:
-                spin_until_stopped(node, stop)
+                code = spin_until_stopped(node, stop)
         except StopRequested:
             pass
         except (SceneError, ParameterException, ModelDomainError, RCLError) as exc:
             stop.end()                   # one line, exit 1: an input that cannot be used
             text = ' '.join(str(exc).split()) or type(exc).__name__
-            rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {text}')
+            rclpy.logging.get_logger(getattr(exc, 'logger_name', NODE_NAME)).fatal(
+                f'cannot start: {text}')
             code = 1
         except (KeyboardInterrupt, ExternalShutdownException):
             pass

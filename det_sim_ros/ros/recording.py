@@ -44,8 +44,10 @@ def open_recorder(get: Callable, scene, qos_by_topic: dict, metadata: dict, name
     recorder = Recorder(
         path, scene, qos_by_topic=qos_by_topic, split_mb=split, max_total_mb=max_mb,
         max_files=max_files, compression=get('log.compression'), namespace=namespace,
-        background=True, metadata=metadata)
-    if not recorder.active:   # a start-up input that cannot be used, not a fault at run time
+        background=True, metadata=metadata, on_fault=lambda fault: None)
+    # a start-up input that cannot be used, not a fault at run time: its fault is this start's
+    # one FATAL line, not a line of the recorder's own
+    if not recorder.active:
         recorder.close()
         raise SceneError(f'parameter log.path {path!r}: cannot write a log there '
                          f"({recorder.fault.split(': ', 1)[-1]})")

@@ -110,34 +110,36 @@ def limit_teardown(seconds: float = TEARDOWN_LIMIT_S) -> None:
     faulthandler.dump_traceback_later(seconds, exit=True)
 
 
-def spin_until_stopped(node, stop) -> None:
+def spin_until_stopped(node, stop) -> int:
     """
-    Run the node's callbacks until a stop signal (checked at least every 0.1 s).
+    Run the node's callbacks until a stop signal (checked at least every 0.1 s); return the code.
 
     Then finish the node's log before anything of the middleware is taken down. What the
     start-up made (modules, the model, rclpy's and DDS's objects) lives as long as the process:
     it is frozen (:func:`gc.freeze`), so the garbage collector's full collections no longer walk
     it. Unfrozen, one such collection a fraction of a second into a run held the node for
-    250 ms beside a busy core: 250 periods late, a slip in real time. A node that
-    finds an older one of its name (``node.name_claim.refusal``) stops the same way, then
-    raises :class:`SceneError` with that line.
+    250 ms beside a busy core: 250 periods late, a slip in real time. A node that hears an
+    older one of its name only now (``node.name_claim.refusal``, after its start-up's wait)
+    stops the same way, with its FATAL line before the stop line, and returns 1; else 0.
     """
     executor = make_executor(node.context)
     executor.add_node(node)
     gc.freeze()
+    refused = False
     try:
         while not stop.requested and node.context.ok() and not node.name_claim.refusal:
             executor.spin_once(timeout_sec=0.1)
     finally:
         if node.recorder is not None:
             node.recorder.close()
+        refused = bool(not stop.requested and node.name_claim.refusal)
+        if refused:
+            node.get_logger().fatal(f'cannot run: {node.name_claim.refusal}')
         _say_stopped(node)
         stop.end()
         executor.remove_node(node)
         executor.shutdown(timeout_sec=0.0)
-    if not stop.requested and node.name_claim.refusal:
-        from ..scenes.scene import SceneError
-        raise SceneError(node.name_claim.refusal)
+    return 1 if refused else 0
 
 
 def _say_stopped(node) -> None:

@@ -16,7 +16,9 @@ HELP = ('serve a sim_node MCAP log (a file or a run directory) to Foxglove or Li
 
 def add_arguments(parser) -> None:
     """Add the log, --host, --port, --speed, --paused."""
-    parser.add_argument('log', nargs='+', help='MCAP file(s) or a directory of split files')
+    parser.add_argument('log', nargs='+',
+                        help='MCAP file(s) or a log directory (its newest run; the files of a '
+                        'run split or reset stay one run)')
     parser.add_argument('--host', default='127.0.0.1',
                         help="address to listen on (default 127.0.0.1; '0.0.0.0': every "
                         'network interface)')
@@ -32,14 +34,15 @@ def main(args) -> int:
     """Serve the log until Ctrl-C; exit 0."""
     from ...io.live_server import LiveUnavailable
     from ...io.log_view import LogPlayer
+    [run] = common.log_runs_to_use(args.log, 'view')
     try:
-        player = LogPlayer(args.log, host=args.host, port=args.port, speed=args.speed,
+        player = LogPlayer(run, host=args.host, port=args.port, speed=args.speed,
                            paused=args.paused)
     except LiveUnavailable as exc:
         raise common.CliError(str(exc)) from None
     log = player.log
     print(f'det_sim view: {len(log.files)} file(s), {log.count} messages, '
-          f'{(log.end - log.start) * 1e-9:.3f} s of sim time, on {player.url}: in Foxglove or '
+          f'{log.duration_ns * 1e-9:.3f} s of sim time, on {player.url}: in Foxglove or '
           f'Lichtblick, Open connection > Foxglove WebSocket > {player.url}; '
           + ('paused' if args.paused else f'plays at x{args.speed:g} once a client subscribes')
           + '; Ctrl-C stops', flush=True)

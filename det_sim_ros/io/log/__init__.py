@@ -49,6 +49,7 @@ Its modules, by job:
   writer on mcap's public record classes, the bytes of ``mcap.writer.Writer``) and
   :mod:`.packing` (Message records packed into its open chunk, runs of samples in C);
 - :mod:`.reader`: reading, finished or not, and :func:`recover`;
+- :mod:`.runs`: which files are one run (:func:`log_runs`: a split or reset run stays one);
 - :mod:`.format`: the bytes the package scans itself and the provisional end;
   :mod:`.compression`: the chunk compressions (one map); :mod:`.tail_stream`: the output file,
   a complete MCAP between flushes; :mod:`.sniff`: MCAP or not, finished or torn.
@@ -63,6 +64,7 @@ from .file import logged_scene
 from .format import END_METADATA_NAME, LIBRARY, METADATA_NAME, SCENE_ATTACHMENT
 from .reader import log_files, LogMessage, LogReader, recover, recover_unfinished
 from .recorder import Recorder
+from .runs import log_runs, LogRun
 from .sniff import file_kind, is_torn
 from ..cdr import deserialize, message_class, serialize
 from ..schemas import DELIMITER, message_definition, qos_profiles_yaml, type_name_of
@@ -70,4 +72,5 @@ from ..schemas import DELIMITER, message_definition, qos_profiles_yaml, type_nam
 __all__ = ['Recorder', 'LogReader', 'LogMessage', 'message_definition', 'qos_profiles_yaml',
            'type_name_of', 'serialize', 'deserialize', 'recover', 'recover_unfinished',
            'is_torn', 'log_files', 'LIBRARY', 'METADATA_NAME', 'END_METADATA_NAME',
-           'SCENE_ATTACHMENT', 'DELIMITER', 'message_class', 'file_kind', 'logged_scene']
+           'SCENE_ATTACHMENT', 'DELIMITER', 'message_class', 'file_kind', 'logged_scene',
+           'log_runs', 'LogRun']

@@ -448,7 +448,8 @@ class Recorder:
             return
         where = f' ({self.paths[-1]})' if self.paths else ''
         self.fault = f'logging stopped{where}: {type(exc).__name__}: {exc}'
-        _logger.error(self.fault)
+        if self.on_fault is None:   # (else the owner reports it, once, in its own words)
+            _logger.error(self.fault)
         file, self._file = self._file, None
         if file is not None:
             file.abandon()
