@@ -110,6 +110,7 @@ def test_with_the_readme_setting_a_subscriber_started_first_gets_every_sample_fr
     finally:
         executor.shutdown()
         probe.destroy_node()
-        assert node.stop() == 0, ''.join(node.lines)
+        stopped = node.stop()
+    assert stopped == 0, ''.join(node.lines)
     assert stamps[0] == 0, stamps[:5]
     assert {b - a for a, b in zip(stamps, stamps[1:])} == {1_000_000}   # no gap
