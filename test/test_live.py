@@ -439,3 +439,70 @@ def test_live_rate_serves_every_nth_sample_and_the_log_keeps_all(tmp_path):
         times = [message.log_time for _, _, message in
                  make_reader(stream).iter_messages(topics=['/displacement'])]
     assert times == [k * 1_000_000 for k in range(len(times))] and times[-1] >= stamps[-1]
+
+
+async def flood_and_disconnect(port, commands: int):
+    """Send ``commands`` voltage commands as fast as the socket takes them, a parameter set and
+    a service call, then close without waiting for the answers (a client gone mid-call)."""
+    client = await Client.connect(port)
+    await client.pump(lambda: '/sim_node/step' in client.services, 'services')
+    await client.advertise(1, '/voltage_command', 'std_msgs/msg/Float64MultiArray')
+    for k in range(commands):
+        await client.publish(1, b'{"data": [%d]}' % (k % 3000))
+    await client.ws.send(json.dumps({'op': 'setParameters', 'id': 'p', 'parameters': [
+        {'name': 'max_lag', 'value': 0.1}]}))
+    await client.ws.send(b'\x02' + struct.pack('<III', client.services['/sim_node/step'], 1, 4)
+                         + b'json{}')
+    await client.ws.close()
+
+
+@pytest.mark.ros
+def test_a_client_that_floods_stalls_and_leaves_mid_call_costs_the_node_no_period(tmp_path):
+    flood = 20_000
+    node, port = live_node(tmp_path, diagnostics_period=0.25,
+                           **{'allow_duplicate_name': 'true'})
+    try:
+        ready, seen = threading.Event(), []
+        stalled = threading.Thread(target=asyncio.run, args=(
+            stalled_client(port, ready, 8.0, seen),), daemon=True)
+        stalled.start()
+        assert ready.wait(TIMEOUT)
+        asyncio.run(flood_and_disconnect(port, flood))
+
+        async def watch():
+            client = await Client.connect(port)
+            await client.pump(lambda: '/diagnostics' in client.topic_channels(), 'channels')
+            await client.subscribe_all()
+
+            def settled():   # every command of the flood applied or refused, none waiting
+                if not client.messages.get('/diagnostics'):
+                    return False
+                values = diagnostic_values(client)
+                return (int(values['commands_received'])
+                        + int(values['live_requests_refused']) >= flood
+                        and values['live_requests_waiting'] == '0')
+            await client.pump(settled, 'every command of the flood accounted for')
+            await client.ws.close()
+            return diagnostic_values(client)
+        values = asyncio.run(watch())
+        stalled.join(TIMEOUT)
+        assert not stalled.is_alive()
+    finally:
+        code = node.stop()
+    assert code == 0, ''.join(node.lines)
+    # every command the client sent is either applied or counted as refused (queue full);
+    # the parameter set and the service call after them are refused too if they found it full
+    accounted = int(values['commands_received']) + int(values['live_requests_refused'])
+    assert flood <= accounted <= flood + 2, values
+    assert int(values['live_requests_refused']) > 0   # the flood did fill the queue
+    # the queues stayed within their bounds, and said so
+    assert int(values['live_requests_most']) <= int(values['live_requests_limit']) == 64
+    assert int(values['live_samples_most']) <= 5000
+    assert values['live_request_errors'] == '0'
+    # the node lost no period: every 1 ms sample is in the log, in sim time
+    from mcap.reader import make_reader
+    [log] = [f for f in os.listdir(tmp_path) if f.endswith('.mcap')]
+    with open(tmp_path / log, 'rb') as stream:
+        times = [message.log_time for _, _, message in
+                 make_reader(stream).iter_messages(topics=['/deflection'])]
+    assert times == [k * 1_000_000 for k in range(len(times))] and len(times) > 1000
