@@ -506,3 +506,82 @@ def test_a_client_that_floods_stalls_and_leaves_mid_call_costs_the_node_no_perio
         times = [message.log_time for _, _, message in
                  make_reader(stream).iter_messages(topics=['/deflection'])]
     assert times == [k * 1_000_000 for k in range(len(times))] and len(times) > 1000
+
+
+def small_log(folder, periods=400):
+    from det_sim_ros.io.log import Recorder
+    from det_sim_ros.io.replay import simulate_to_log
+    from det_sim_ros.scenes.scene import load_scene
+    from det_sim_ros.sim.simulator import Simulator
+    scene = load_scene('default', overrides={'scene.fidelity': 'paper'})
+    recorder = Recorder(str(folder), scene, split_mb=0.0)
+    simulate_to_log(recorder, Simulator(scene), lambda k: [2500.0] if k == 20 else None,
+                    periods)
+    recorder.close()
+    [log] = os.listdir(folder)
+    return folder / log
+
+
+def test_a_seek_starts_at_the_chunk_that_holds_its_time(tmp_path):
+    from det_sim_ros.io.log_view import LogSummary
+    from mcap.reader import make_reader
+    log = small_log(tmp_path / 'run', 3000)
+    with open(log, 'rb') as stream:   # mcap's own index of the file's chunks
+        chunks = sorted(make_reader(stream).get_summary().chunk_indexes,
+                        key=lambda c: c.chunk_start_offset)
+        stream.seek(0)
+        every = [(channel.topic, message.log_time)
+                 for _, channel, message in make_reader(stream).iter_messages(log_time_order=False)]
+    assert len(chunks) > 10
+    summary = LogSummary(log)
+    for t in (0, 1, 1_500_000_000, 2_000_000_001, 2_999_000_000):
+        file, offset = summary.place_before(t)
+        at = [c.chunk_start_offset for c in chunks].index(offset)   # a chunk's start
+        assert file == 0 and (at == 0 or chunks[at].message_start_time < t)
+        assert at + 1 == len(chunks) or chunks[at + 1].message_start_time >= t
+        read = [(m.topic, m.log_time) for m in summary.reader.messages(start=(file, offset))]
+        first = next(k for k, (_, time_) in enumerate(every) if time_ >= t)
+        # from the chunk on, the log's messages in order: those from t on all among them
+        assert read == every[len(every) - len(read):] and len(every) - len(read) <= first
+
+
+def test_a_speed_beyond_what_the_player_serves_is_capped_and_the_client_told(tmp_path):
+    from det_sim_ros.io.log_view import LogPlayer, MAX_MESSAGES_PER_S
+    log = small_log(tmp_path / 'run')
+    player = LogPlayer(log, port=0, speed=1000.0, paused=True)
+    try:
+        span_s = (player.log.end - player.log.start) * 1e-9
+        assert player.max_speed == pytest.approx(MAX_MESSAGES_PER_S * span_s / player.log.count)
+        assert player.speed == player.max_speed < 1000.0
+
+        async def ask():
+            client = await Client.connect(player.server.port)
+            await client.pump(lambda: client.channels, 'channels')
+            await client.playback(1, 1000.0, None, 'fast')
+            await client.pump(lambda: 'fast' in client.playback_states, 'the playback state')
+            await client.ws.close()
+            return client.playback_states['fast']
+        _, _, speed, _ = asyncio.run(ask())
+        assert speed == pytest.approx(player.max_speed, rel=1e-6)   # (sent as a float32)
+    finally:
+        player.stop()
+
+
+@pytest.mark.ros
+def test_view_exits_with_the_reason_when_its_player_dies(tmp_path):
+    log = small_log(tmp_path / 'run')
+    view = ChildProcess(VIEW + [str(log), '--port', '0', '--paused'], tmp_path)
+    port = port_of(view.wait_for('on ws://'))
+    os.remove(log)   # the player cannot read it any more
+
+    async def play():
+        client = await Client.connect(port)
+        await client.pump(lambda: client.channels, 'channels')
+        await client.playback(0, 1.0, 0, 'play')
+        await client.ws.close()
+    asyncio.run(play())
+    view.wait_for('the player stopped')   # by itself: no Ctrl-C
+    code = view.stop()
+    assert code == 1, ''.join(view.lines)
+    assert any('det_sim view: error: the player stopped: FileNotFoundError' in line
+               for line in view.lines), ''.join(view.lines)
