@@ -442,8 +442,12 @@ def test_live_rate_serves_every_nth_sample_and_the_log_keeps_all(tmp_path):
 
 
 async def flood_and_disconnect(port, commands: int):
-    """Send ``commands`` voltage commands as fast as the socket takes them, a parameter set and
-    a service call, then close without waiting for the answers (a client gone mid-call)."""
+    """
+    Flood the node with ``commands`` voltage commands, then leave mid-call.
+
+    The commands go as fast as the socket takes them, then a parameter set and a service call,
+    and the client closes without waiting for their answers.
+    """
     client = await Client.connect(port)
     await client.pump(lambda: '/sim_node/step' in client.services, 'services')
     await client.advertise(1, '/voltage_command', 'std_msgs/msg/Float64MultiArray')
@@ -530,8 +534,8 @@ def test_a_seek_starts_at_the_chunk_that_holds_its_time(tmp_path):
         chunks = sorted(make_reader(stream).get_summary().chunk_indexes,
                         key=lambda c: c.chunk_start_offset)
         stream.seek(0)
-        every = [(channel.topic, message.log_time)
-                 for _, channel, message in make_reader(stream).iter_messages(log_time_order=False)]
+        every = [(channel.topic, message.log_time) for _, channel, message
+                 in make_reader(stream).iter_messages(log_time_order=False)]
     assert len(chunks) > 10
     summary = LogSummary(log)
     for t in (0, 1, 1_500_000_000, 2_000_000_001, 2_999_000_000):

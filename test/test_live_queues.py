@@ -7,9 +7,8 @@ are: the contracts are about what runs, when and how often, counted against what
 
 import threading
 
-import pytest
-
 from det_sim_ros.io.live_queues import Busy, CallQueue, SampleQueue
+import pytest
 
 SAFETY_S = 30.0   # a safety net: a wait that hits it fails the test
 

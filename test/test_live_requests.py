@@ -100,8 +100,8 @@ def test_a_parameter_set_the_client_saw_time_out_never_takes_effect(live_sim):
     ('/voltage_command', 'std_msgs/msg/Float64MultiArray', b'{"data": [1e9]}',
      'command clamped: det0: 1e+09 V clamped to [0, 3000] V (voltage_command)'),
 ])
-def test_a_client_reads_why_its_command_was_refused_or_clamped(live_sim, topic, schema, payload,
-                                                                reason):
+def test_a_client_reads_why_its_command_was_refused_or_clamped(
+        live_sim, topic, schema, payload, reason):
     sim, spinner = live_sim
     spinner.on.set()
 
