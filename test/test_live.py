@@ -441,3 +441,153 @@ def test_live_rate_serves_every_nth_sample_and_the_log_keeps_all(tmp_path):
         times = [message.log_time for _, _, message in
                  make_reader(stream).iter_messages(topics=['/displacement'])]
     assert times == [k * 1_000_000 for k in range(len(times))] and times[-1] >= stamps[-1]
+
+
+async def flood_and_disconnect(port, commands: int):
+    """
+    Flood the node with ``commands`` voltage commands, then leave mid-call.
+
+    The commands go as fast as the socket takes them, then a parameter set and a service call,
+    and the client closes without waiting for their answers.
+    """
+    client = await Client.connect(port)
+    await client.pump(lambda: '/sim_node/step' in client.services, 'services')
+    await client.advertise(1, '/voltage_command', 'std_msgs/msg/Float64MultiArray')
+    for k in range(commands):
+        await client.publish(1, b'{"data": [%d]}' % (k % 3000))
+    await client.ws.send(json.dumps({'op': 'setParameters', 'id': 'p', 'parameters': [
+        {'name': 'max_lag', 'value': 0.1}]}))
+    await client.ws.send(b'\x02' + struct.pack('<III', client.services['/sim_node/step'], 1, 4)
+                         + b'json{}')
+    await client.ws.close()
+
+
+@pytest.mark.ros
+def test_a_client_that_floods_stalls_and_leaves_mid_call_costs_the_node_no_period(tmp_path):
+    flood = 20_000
+    node, port = live_node(tmp_path, diagnostics_period=0.25,
+                           **{'allow_duplicate_name': 'true'})
+    try:
+        ready, seen = threading.Event(), []
+        stalled = threading.Thread(target=asyncio.run, args=(
+            stalled_client(port, ready, 8.0, seen),), daemon=True)
+        stalled.start()
+        assert ready.wait(TIMEOUT)
+        asyncio.run(flood_and_disconnect(port, flood))
+
+        async def watch():
+            client = await Client.connect(port)
+            await client.pump(lambda: '/diagnostics' in client.topic_channels(), 'channels')
+            await client.subscribe_all()
+
+            def settled():   # every command of the flood applied or refused, none waiting
+                if not client.messages.get('/diagnostics'):
+                    return False
+                values = diagnostic_values(client)
+                return (int(values['commands_received'])
+                        + int(values['live_requests_refused']) >= flood
+                        and values['live_requests_waiting'] == '0')
+            await client.pump(settled, 'every command of the flood accounted for')
+            await client.ws.close()
+            return diagnostic_values(client)
+        values = asyncio.run(watch())
+        stalled.join(TIMEOUT)
+        assert not stalled.is_alive()
+    finally:
+        code = node.stop()
+    assert code == 0, ''.join(node.lines)
+    # every command the client sent is either applied or counted as refused (queue full);
+    # the parameter set and the service call after them are refused too if they found it full
+    accounted = int(values['commands_received']) + int(values['live_requests_refused'])
+    assert flood <= accounted <= flood + 2, values
+    assert int(values['live_requests_refused']) > 0   # the flood did fill the queue
+    # the queues stayed within their bounds, and said so
+    assert int(values['live_requests_most']) <= int(values['live_requests_limit']) == 64
+    assert int(values['live_samples_most']) <= 5000
+    assert values['live_request_errors'] == '0'
+    # the node lost no period: every 1 ms sample is in the log, in sim time
+    from mcap.reader import make_reader
+    [log] = [f for f in os.listdir(tmp_path) if f.endswith('.mcap')]
+    with open(tmp_path / log, 'rb') as stream:
+        times = [message.log_time for _, _, message in
+                 make_reader(stream).iter_messages(topics=['/deflection'])]
+    assert times == [k * 1_000_000 for k in range(len(times))] and len(times) > 1000
+
+
+def small_log(folder, periods=400):
+    from det_sim_ros.io.log import Recorder
+    from det_sim_ros.io.replay import simulate_to_log
+    from det_sim_ros.scenes.scene import load_scene
+    from det_sim_ros.sim.simulator import Simulator
+    scene = load_scene('default', overrides={'scene.fidelity': 'paper'})
+    recorder = Recorder(str(folder), scene, split_mb=0.0)
+    simulate_to_log(recorder, Simulator(scene), lambda k: [2500.0] if k == 20 else None,
+                    periods)
+    recorder.close()
+    [log] = os.listdir(folder)
+    return folder / log
+
+
+def test_a_seek_starts_at_the_chunk_that_holds_its_time(tmp_path):
+    from det_sim_ros.io.log_view import LogSummary
+    from mcap.reader import make_reader
+    log = small_log(tmp_path / 'run', 3000)
+    with open(log, 'rb') as stream:   # mcap's own index of the file's chunks
+        chunks = sorted(make_reader(stream).get_summary().chunk_indexes,
+                        key=lambda c: c.chunk_start_offset)
+        stream.seek(0)
+        every = [(channel.topic, message.log_time) for _, channel, message
+                 in make_reader(stream).iter_messages(log_time_order=False)]
+    assert len(chunks) > 10
+    summary = LogSummary(log)
+    for t in (0, 1, 1_500_000_000, 2_000_000_001, 2_999_000_000):
+        file, offset = summary.place_before(t)
+        at = [c.chunk_start_offset for c in chunks].index(offset)   # a chunk's start
+        assert file == 0 and (at == 0 or chunks[at].message_start_time < t)
+        assert at + 1 == len(chunks) or chunks[at + 1].message_start_time >= t
+        read = [(m.topic, m.log_time) for m in summary.reader.messages(start=(file, offset))]
+        first = next(k for k, (_, time_) in enumerate(every) if time_ >= t)
+        # from the chunk on, the log's messages in order: those from t on all among them
+        assert read == every[len(every) - len(read):] and len(every) - len(read) <= first
+
+
+def test_a_speed_beyond_what_the_player_serves_is_capped_and_the_client_told(tmp_path):
+    from det_sim_ros.io.log_view import LogPlayer, MAX_MESSAGES_PER_S
+    log = small_log(tmp_path / 'run')
+    player = LogPlayer(log, port=0, speed=1000.0, paused=True)
+    try:
+        span_s = (player.log.end - player.log.start) * 1e-9
+        assert player.max_speed == pytest.approx(MAX_MESSAGES_PER_S * span_s / player.log.count)
+        assert player.speed == player.max_speed < 1000.0
+
+        async def ask():
+            client = await Client.connect(player.server.port)
+            await client.pump(lambda: client.channels, 'channels')
+            await client.playback(1, 1000.0, None, 'fast')
+            await client.pump(lambda: 'fast' in client.playback_states, 'the playback state')
+            await client.ws.close()
+            return client.playback_states['fast']
+        _, _, speed, _ = asyncio.run(ask())
+        assert speed == pytest.approx(player.max_speed, rel=1e-6)   # (sent as a float32)
+    finally:
+        player.stop()
+
+
+@pytest.mark.ros
+def test_view_exits_with_the_reason_when_its_player_dies(tmp_path):
+    log = small_log(tmp_path / 'run')
+    view = ChildProcess(VIEW + [str(log), '--port', '0', '--paused'], tmp_path)
+    port = port_of(view.wait_for('on ws://'))
+    os.remove(log)   # the player cannot read it any more
+
+    async def play():
+        client = await Client.connect(port)
+        await client.pump(lambda: client.channels, 'channels')
+        await client.playback(0, 1.0, 0, 'play')
+        await client.ws.close()
+    asyncio.run(play())
+    view.wait_for('the player stopped')   # by itself: no Ctrl-C
+    code = view.stop()
+    assert code == 1, ''.join(view.lines)
+    assert any('det_sim view: error: the player stopped: FileNotFoundError' in line
+               for line in view.lines), ''.join(view.lines)

@@ -7,45 +7,78 @@ topics, schemas and time range, then plays its messages in file order on a
 speed. The server offers the protocol's playback control: Foxglove's play, pause, seek and
 speed buttons drive the player. Playing starts when the first client subscribes (after
 ``settle_s``, so that all its subscriptions are in), unless it starts paused.
+
+A seek starts reading at the block (MCAP chunk) that holds the time asked for, found in an
+index of the blocks' places and first times built in the one pass. The speed is capped so
+that at most ``MAX_MESSAGES_PER_S`` messages a wall second are served (:attr:`LogPlayer.
+max_speed`, stated when a speed asked for is capped); the time is sent at most
+``TIME_RATE_HZ`` times a wall second. A player thread that dies sets :attr:`LogPlayer.failed`.
 """
 
 from __future__ import annotations
 
+import bisect
 import os
 import threading
 import time
 
+import numpy as np
+
 from .live_server import LiveServer, require_sdk
 from .log import LogReader
 
-__all__ = ['LogPlayer', 'LogSummary']
+__all__ = ['LogPlayer', 'LogSummary', 'MAX_MESSAGES_PER_S', 'TIME_RATE_HZ']
 
 SETTLE_S = 0.5   # wall s between a client's first subscription and the start of playing
+# messages served per wall second at most: the player and a client on one core keep ~2x this
+# (docs/visualization.md); a 1 kHz node's log (4-6 messages a period) plays at up to ~x10
+MAX_MESSAGES_PER_S = 50_000
+TIME_RATE_HZ = 50      # the time goes to the clients at most this often (wall)
 
 
 class LogSummary:
-    """A log's topics (-> type), schemas (-> ros2msg bytes), time range and duration (ns)."""
+    """
+    A log's topics (-> type), schemas (type -> ros2msg bytes), time range and duration (ns) and size.
+
+    ``reader``: the :class:`LogReader` that read it through (it can start at a block's place);
+    ``places`` and ``first_times``: each block's place and its first log time, in file order.
+    """
 
     def __init__(self, paths):
-        reader = LogReader(paths)
+        self.reader = reader = LogReader(paths)
         self.files = reader.files
         self.start = self.end = None
         self.count = 0
+        self.places, self.first_times = [], []
         self.duration_ns = 0   # sim time run through: a reset's restart at t = 0 adds none
         last = None
-        for message in reader.messages():
-            t = message.log_time
-            self.start = t if self.start is None else min(self.start, t)
-            self.end = t if self.end is None else max(self.end, t)
-            self.duration_ns += max(0, t - last) if last is not None else 0
-            last = t
-            self.count += 1
+        for block in reader.blocks():
+            if not block.positions:
+                continue
+            columns = block.columns()
+            times = columns.log_time[np.isin(columns.channel, list(reader.channels))]
+            if not len(times):
+                continue
+            first, last = int(times.min()), int(times.max())
+            self.places.append(block.place)
+            self.first_times.append(first)
+            self.start = first if self.start is None else min(self.start, first)
+            self.end = last if self.end is None else max(self.end, last)
+            self.count += len(times)
+            steps = np.diff(times if last is None else np.concatenate([[last], times]))
+            self.duration_ns += int(np.sum(np.maximum(steps, 0)))
+            last = int(times[-1])
         if not self.count:
             raise ValueError(f'{", ".join(self.files)}: no readable message'
                              + (f' ({reader.errors[0]})' if reader.errors else ''))
         self.topics = dict(reader.topics)
         self.definitions = dict(reader.definitions)
         self.errors = list(reader.errors)
+
+    def place_before(self, t_ns: int) -> tuple[int, int]:
+        """Return the place of the last block that starts before ``t_ns`` (else the first)."""
+        index = bisect.bisect_left(self.first_times, t_ns) - 1
+        return self.places[max(index, 0)]
 
 
 class LogPlayer:
@@ -55,6 +88,10 @@ class LogPlayer:
     :param paths: the log (a file, files or a directory of split files).
     :param speed: sim seconds per wall second at the start (Foxglove may change it).
     :param paused: wait for a play request instead of playing when a client subscribes.
+
+    :attr:`max_speed`: the fastest it plays (``MAX_MESSAGES_PER_S`` over the log's messages
+    per sim second); a faster speed, asked here or by a client, is capped to it.
+    ``failed``: why the player thread stopped ('' while it runs).
     """
 
     def __init__(self, paths, host: str = '127.0.0.1', port: int = 8765, speed: float = 1.0,
@@ -63,9 +100,13 @@ class LogPlayer:
         from foxglove.websocket import PlaybackStatus
         self._status_kind = PlaybackStatus
         self.log = LogSummary(paths)
-        self._paths = paths
+        span_s = (self.log.end - self.log.start) * 1e-9
+        self.max_speed = (MAX_MESSAGES_PER_S * span_s / self.log.count if span_s > 0
+                          else float('inf'))
+        self.asked_speed = float(speed)
+        self.failed = ''
         self._lock = threading.Condition()
-        self._speed = float(speed)
+        self._speed = self._capped(speed)
         self._status = PlaybackStatus.Paused
         self._autostart = not paused
         self._settle_s = settle_s
@@ -81,8 +122,16 @@ class LogPlayer:
         self._channels = {topic: self.server.channel(topic, type_name,
                                                      self.log.definitions.get(type_name))
                           for topic, type_name in self.log.topics.items()}
-        self._thread = threading.Thread(target=self._play, name='det_sim view', daemon=True)
+        self._thread = threading.Thread(target=self._run, name='det_sim view', daemon=True)
         self._thread.start()
+
+    @property
+    def speed(self) -> float:
+        """Return the speed it plays at now (sim s per wall s)."""
+        return self._speed
+
+    def _capped(self, speed: float) -> float:
+        return min(max(float(speed), 1e-3), self.max_speed)
 
     @property
     def url(self) -> str:
@@ -108,7 +157,7 @@ class LogPlayer:
         from foxglove.websocket import PlaybackCommand
         with self._lock:
             self._autostart = False
-            self._speed = max(float(request.playback_speed), 1e-3)
+            self._speed = self._capped(request.playback_speed)   # the state says which
             if request.seek_time is not None:
                 self._seek_to = min(max(int(request.seek_time), self.log.start), self.log.end)
                 self._position = self._seek_to
@@ -123,31 +172,46 @@ class LogPlayer:
 
     # -- the player thread -----------------------------------------------------------------
     def _messages_from(self, t_ns: int):
-        for message in LogReader(self._paths).messages():
+        """Yield the messages from ``t_ns`` on, read from the block that holds it."""
+        for message in self.log.reader.messages(start=self.log.place_before(t_ns)):
             if message.log_time >= t_ns:
                 yield message
 
+    def _run(self) -> None:
+        try:
+            self._play()
+        except Exception as exc:  # noqa: BLE001 - said by the caller (det_sim view exits)
+            self.failed = f'{type(exc).__name__}: {exc}'
+            self.finished.set()
+
     def _play(self) -> None:
         messages, anchor = None, None   # anchor: (log time, wall time) that pace the messages
-        pending, last_time, seeked = None, None, False
+        pending, last_time, seeked, time_sent, served = None, None, False, 0.0, None
         while True:
-            with self._lock:
+            state = None   # a playback state to send, after the lock is let go: the SDK's
+            with self._lock:   # callbacks take this lock while the SDK holds its own
                 if self._stopping:
                     return
                 if self._autostart and self._first_subscription is not None \
                         and time.monotonic() - self._first_subscription >= self._settle_s:
                     self._autostart = False
                     self._status = self._status_kind.Playing
-                    self.server.playback_state(self._state())
+                    state = self._state()
                 if self._seek_to is not None:
                     messages, anchor, pending = self._messages_from(self._seek_to), None, None
                     self._seek_to, seeked = None, True
                     self.finished.clear()
-                if self._status != self._status_kind.Playing:
-                    self._lock.wait(0.05)
-                    anchor = None
-                    continue
+                playing = self._status == self._status_kind.Playing
                 speed = self._speed
+            if state is not None:
+                self.server.playback_state(state)
+            if not playing:
+                with self._lock:
+                    if self._status != self._status_kind.Playing and self._seek_to is None \
+                            and not self._stopping:
+                        self._lock.wait(0.05)
+                anchor = None
+                continue
             message = pending if pending is not None else next(messages, None)
             pending = None
             if message is None:
@@ -155,8 +219,13 @@ class LogPlayer:
                     if self._seek_to is None:
                         self._status = self._status_kind.Ended
                         self._position = self.log.end
-                        self.server.playback_state(self._state())
-                        self.finished.set()
+                        state = self._state()
+                if state is not None:
+                    if served is not None and served != last_time:   # (the time's last word)
+                        self.server.time(served, new_session_on_jump=False)
+                        last_time = served
+                    self.server.playback_state(state)
+                    self.finished.set()
                 continue
             t = message.log_time
             if anchor is None:
@@ -172,9 +241,11 @@ class LogPlayer:
                 if self._status != self._status_kind.Playing or self._speed != speed:
                     pending, anchor = message, None   # paused or a new speed: pace it anew
                     continue
-            if t != last_time:   # (a seek back is not a new session: the client seeked)
+            now = time.monotonic()
+            if t != last_time and (seeked or now - time_sent >= 1.0 / TIME_RATE_HZ):
+                # (a seek back is not a new session: the client seeked)
                 self.server.time(t, new_session_on_jump=not seeked)
-                last_time, seeked = t, False
+                last_time, seeked, time_sent = t, False, now
             self._channels[message.topic].log(message.data, log_time=t)
-            self._position = t
+            self._position = served = t
             self.served += 1

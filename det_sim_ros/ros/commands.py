@@ -21,7 +21,7 @@ class CommandInput:
     Applies commands to a simulator and counts them.
 
     The counters: ``received``, ``refused``, ``clamped``, ``last_refused`` (the latest
-    refusal's reason).
+    refusal's reason), ``last_clamped`` (the latest clamp's warning).
 
     :param names: the DETs in command order.
     :param v_max: the largest voltage, V (beyond it a command is clamped).
@@ -41,6 +41,7 @@ class CommandInput:
         self.refused = 0
         self.clamped = 0
         self.last_refused = ''
+        self.last_clamped = ''
 
     def counts(self) -> CommandCounts:
         """Return the counters now."""
@@ -63,8 +64,8 @@ class CommandInput:
                 self._refuse(f'{topic}: {check.reason}; holding the previous voltages')
             elif command.clamped:
                 self.clamped += 1
-                self._logger.warning(clamp_message(topic, command.clamped, self._v_max),
-                                     throttle_duration_sec=1.0)
+                self.last_clamped = clamp_message(topic, command.clamped, self._v_max)
+                self._logger.warning(self.last_clamped, throttle_duration_sec=1.0)
         self._on_command(command)
 
     def refuse(self, reason: str) -> None:

@@ -8,30 +8,40 @@ resolved topic names, as the same CDR bytes DDS and the log get, and the sim tim
 client subscribes a period costs one flag test. A client may publish voltage commands (JSON or
 CDR; checked as DDS commands are), call the node's services (JSON requests) and get and set its
 parameters. Everything a client asks runs on the node's executor thread (a short poll timer),
-never on the server's threads; docs/visualization.md has the details.
+never on the server's threads, through a bounded queue (a full queue refuses; a request not
+run within ``ANSWER_TIMEOUT_S`` is cancelled and never runs). Refused, clamped and failed
+requests are told to the clients as status messages; refusals, timeouts, failures and samples
+dropped are counted on /diagnostics (``live_*`` keys). docs/visualization.md has the details.
 """
 
 from __future__ import annotations
 
 from array import array
-from collections import deque
 import json
 import threading
+import time
 
+from diagnostic_msgs.msg import KeyValue
 from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 
 from ..io.contract import COMMAND_TOPICS, DIAGNOSTICS_TOPIC, JOINT_STATE, stamp_ns, TOPIC_TYPES
+from ..io.live_queues import Busy, CallQueue, SampleQueue
 from ..io.live_server import ClientCommands, LiveServer, LiveUnavailable, require_sdk
 from ..io.schemas import type_name_of
 from ..scenes.scene import SceneError
 
-__all__ = ['LiveView', 'open_live_view', 'POLL_S', 'FLUSH_S', 'ANSWER_TIMEOUT_S']
+__all__ = ['LiveView', 'open_live_view', 'POLL_S', 'FLUSH_S', 'ANSWER_TIMEOUT_S',
+           'QUEUE_REQUESTS', 'QUEUE_SAMPLES']
 
 POLL_S = 0.02             # wall s between two looks at what clients asked (commands, calls)
 FLUSH_S = 0.02            # wall s between two bursts of messages to the clients (50 Hz)
 QUEUE_SAMPLES = 5000      # samples waiting for the sender at most (then the oldest go)
 ANSWER_TIMEOUT_S = 5.0    # a service call or parameter request the node has not run by then fails
+# client requests waiting for the executor at most (then refused): a poll runs them all, and
+# at tens of us each 64 cost the node's executor ~2 ms per poll
+QUEUE_REQUESTS = 64
+STATUS_REPEAT_S = 1.0     # wall s: the same status text is sent to the clients once per this
 _HIDDEN_SERVICE_PACKAGES = ('rcl_interfaces',)   # parameters: the Parameters capability
 
 
@@ -57,50 +67,37 @@ def open_live_view(node) -> 'LiveView | None':
     return view
 
 
-class _Calls:
-    """Work the server's threads hand to the node's executor thread, run by its poll timer."""
-
-    def __init__(self):
-        self._pending = deque()
-
-    def post(self, work) -> None:
-        """Run ``work()`` on the executor thread soon; do not wait."""
-        self._pending.append(work)
-
-    def call(self, work):
-        """Run ``work()`` on the executor thread; return its result (its exception raised)."""
-        done, box = threading.Event(), []
-
-        def run():
-            try:
-                box.append((True, work()))
-            except Exception as exc:  # noqa: BLE001 - handed back to the caller's thread
-                box.append((False, exc))
-            done.set()
-        self._pending.append(run)
-        if not done.wait(ANSWER_TIMEOUT_S):
-            raise TimeoutError(f'the node did not answer within {ANSWER_TIMEOUT_S:g} s')
-        ok, value = box[0]
-        if not ok:
-            raise value
-        return value
-
-    def run_pending(self) -> None:
-        """Run what has been posted (on the executor thread)."""
-        pending = self._pending
-        while pending:
-            pending.popleft()()
-
-
 class _DiagnosticsTap:
-    """The /diagnostics publisher, with every message also served live."""
+    """The /diagnostics publisher: the live view's counters added, every message served live."""
 
     def __init__(self, publisher, view: 'LiveView'):
         self._publisher, self._view = publisher, view
 
     def publish(self, msg) -> None:
+        if msg.status:
+            msg.status[0].values.extend(KeyValue(key=key, value=value)
+                                        for key, value in self._view.counters().items())
         self._publisher.publish(msg)
         self._view.diagnostics(msg)
+
+
+class _StatusThrottle:
+    """Lets a status text through once per ``period_s`` (a flood of one refusal is one line)."""
+
+    def __init__(self, period_s: float):
+        self._period_s = period_s
+        self._last: dict[str, float] = {}
+        self._lock = threading.Lock()
+
+    def allows(self, text: str) -> bool:
+        now = time.monotonic()
+        with self._lock:
+            if now - self._last.get(text, -self._period_s) < self._period_s:
+                return False
+            if len(self._last) > 256:   # (old texts: forgotten, not kept forever)
+                self._last.clear()
+            self._last[text] = now
+            return True
 
 
 class LiveView:
@@ -118,7 +115,8 @@ class LiveView:
         self._every_ns = int(round(1e9 / rate_hz)) if rate_hz > 0 else 1
         self._next_ns = 0
         self._last_ns = -1     # the last sample's time seen (a reset goes back)
-        self._calls = _Calls()
+        self._calls = CallQueue(QUEUE_REQUESTS, ANSWER_TIMEOUT_S, on_error=self._failed)
+        self._statuses = _StatusThrottle(STATUS_REPEAT_S)
         outputs = node.outputs
         outs, truth = node.output_publishers, node.truth_publishers
         self._commands = ClientCommands({node.command_subscriptions[t].topic_name: t
@@ -142,7 +140,7 @@ class LiveView:
         node.create_timer(POLL_S, self._calls.run_pending, clock=node.steady_clock)
         # the clients' messages go out from a thread of their own, in bursts: a websocket
         # send costs ~1 us in a burst and tens of us alone (the server's thread wakes for it)
-        self._queue = deque(maxlen=QUEUE_SAMPLES)
+        self._samples = SampleQueue(QUEUE_SAMPLES)
         self._stopping = threading.Event()
         self._sender = threading.Thread(target=self._flush_every, args=(FLUSH_S,),
                                         name='live view', daemon=True)
@@ -165,14 +163,31 @@ class LiveView:
         return self._server.sessions
 
     def tap(self, publisher) -> _DiagnosticsTap:
-        """Return ``publisher`` (/diagnostics) with its messages also served live."""
+        """Return ``publisher`` (/diagnostics) with the live counters, its messages served live."""
         return _DiagnosticsTap(publisher, self)
+
+    def counters(self) -> dict[str, str]:
+        """
+        Return the live view's counters, as /diagnostics shows them (docs/real_time.md).
+
+        Client requests waiting for the node (now, at most so far, the bound), refused for a
+        full queue, timed out (cancelled), failed with an exception; samples waiting for the
+        sender (now, at most so far) and dropped from its full queue.
+        """
+        calls, samples = self._calls, self._samples
+        return {'live_requests_waiting': str(len(calls)), 'live_requests_most': str(calls.most),
+                'live_requests_limit': str(calls.limit),
+                'live_requests_refused': str(calls.refused),
+                'live_requests_timed_out': str(calls.timed_out),
+                'live_request_errors': str(calls.failed),
+                'live_samples_waiting': str(len(samples)), 'live_samples_most': str(samples.most),
+                'live_samples_dropped': str(samples.dropped)}
 
     # -- the node's messages ------------------------------------------------------------------
     def send(self, batch) -> None:
         """Queue a batch of (t_ns, sample messages, marker frame or None) for the clients."""
         if self._server.watched:   # (nobody subscribes: nothing to do)
-            self._queue.extend(batch)
+            self._samples.put(batch)
 
     def _flush_every(self, period_s: float) -> None:
         """Serve what the node queued, every ``period_s`` (the sender thread)."""
@@ -181,7 +196,7 @@ class LiveView:
 
     def _flush(self) -> None:
         """Serve the queued samples, marker frames and the time, in order."""
-        server, queue = self._server, self._queue
+        server, queue = self._server, self._samples.take()
         channels, markers, served = self._sample_channels, self._marker_channel, None
         while queue:
             t_ns, samples, frame = queue.popleft()
@@ -226,17 +241,35 @@ class LiveView:
             topic, cdr = self._commands.command(client.id, client_channel_id, data)
         except ValueError as exc:
             reason = str(exc)
-            self._calls.post(lambda: self._node.commands.refuse(reason))
-            self._server.status(f'command refused: {reason}', error=True)
+            self._post(lambda: self._node.commands.refuse(reason))
+            self._status(f'command refused: {reason}', error=True)
             return
-        self._calls.post(lambda: self._apply(topic, cdr))
+        self._post(lambda: self._apply(topic, cdr))
+
+    def _post(self, work) -> None:
+        try:
+            self._calls.post(work)
+        except Busy as exc:   # counted by the queue (live_requests_refused)
+            self._status(f'command refused: {exc}', error=True)
 
     def _apply(self, topic: str, cdr: bytes) -> None:
         commands = self._node.commands
-        refused = commands.refused
+        refused, clamped = commands.refused, commands.clamped
         commands.apply(topic, cdr)
         if commands.refused != refused:
-            self._server.status(f'command refused: {commands.last_refused}', error=True)
+            self._status(f'command refused: {commands.last_refused}', error=True)
+        elif commands.clamped != clamped:   # as the node warns a DDS sender's clamp
+            self._status(f'command clamped: {commands.last_clamped}')
+
+    def _failed(self, exc: Exception) -> None:
+        """Log a posted work's exception and tell the clients (the executor thread)."""
+        text = f'a client request failed: {type(exc).__name__}: {exc}'
+        self._node.get_logger().error(text, throttle_duration_sec=1.0)
+        self._status(text, error=True)
+
+    def _status(self, text: str, error: bool = False) -> None:
+        if self._statuses.allows(text):
+            self._server.status(text, error=error)
 
     # -- services (server threads; run on the executor thread) ------------------------------
     def _services(self, node) -> list:
@@ -269,14 +302,23 @@ class LiveView:
 
     # -- parameters (server threads; run on the executor thread) ----------------------------
     def on_get_parameters(self, client, param_names, request_id=None) -> list:
-        return self._calls.call(lambda: self._values(param_names))
+        try:
+            return self._calls.call(lambda: self._values(param_names))
+        except (Busy, TimeoutError) as exc:
+            self._status(f'parameters not read: {exc}', error=True)
+            return []
 
     def on_set_parameters(self, client, parameters, request_id=None) -> list:
         names = [p.name for p in parameters]
-        refusals = self._calls.call(lambda: self._set(parameters))
+        try:   # one call: set and read back, so that a timeout leaves nothing half done
+            refusals, values = self._calls.call(
+                lambda: (self._set(parameters), self._values(names)))
+        except (Busy, TimeoutError) as exc:   # cancelled: none of them is set
+            self._status('parameters not set (' + ', '.join(names) + f'): {exc}', error=True)
+            return []
         if refusals:
-            self._server.status('parameters refused: ' + '; '.join(refusals), error=True)
-        return self._calls.call(lambda: self._values(names))
+            self._status('parameters refused: ' + '; '.join(refusals), error=True)
+        return values
 
     def _values(self, names) -> list:
         from foxglove import Parameter as LiveParameter

@@ -6,6 +6,7 @@ det_sim_ros.io.log_view plays it (the ``live`` extra); docs/visualization.md has
 
 from __future__ import annotations
 
+import sys
 import time
 
 from .. import common
@@ -25,15 +26,16 @@ def add_arguments(parser) -> None:
     parser.add_argument('--port', type=int, default=8765,
                         help='TCP port (default 8765; 0: a free port)')
     parser.add_argument('--speed', type=common.positive, default=1.0,
-                        help='sim seconds per wall second (default 1; Foxglove can change it)')
+                        help='sim seconds per wall second (default 1; Foxglove can change it); '
+                        'capped to what the player can serve, said at the start')
     parser.add_argument('--paused', action='store_true',
                         help='wait for play in Foxglove (default: play when a client subscribes)')
 
 
 def main(args) -> int:
-    """Serve the log until Ctrl-C; exit 0."""
+    """Serve the log until Ctrl-C (exit 0) or until the player fails (the reason; exit 1)."""
     from ...io.live_server import LiveUnavailable
-    from ...io.log_view import LogPlayer
+    from ...io.log_view import LogPlayer, MAX_MESSAGES_PER_S
     [run] = common.log_runs_to_use(args.log, 'view')
     try:
         player = LogPlayer(run, host=args.host, port=args.port, speed=args.speed,
@@ -44,15 +46,20 @@ def main(args) -> int:
     print(f'det_sim view: {len(log.files)} file(s), {log.count} messages, '
           f'{log.duration_ns * 1e-9:.3f} s of sim time, on {player.url}: in Foxglove or '
           f'Lichtblick, Open connection > Foxglove WebSocket > {player.url}; '
-          + ('paused' if args.paused else f'plays at x{args.speed:g} once a client subscribes')
+          + ('paused' if args.paused else f'plays at x{player.speed:.3g} once a client subscribes')
           + '; Ctrl-C stops', flush=True)
+    if args.speed > player.max_speed:
+        span_s = (log.end - log.start) * 1e-9
+        print(f'det_sim view: --speed {args.speed:g} capped to x{player.max_speed:.3g}, the '
+              f'fastest this log plays ({log.count / span_s:.0f} messages per sim second; at '
+              f'most {MAX_MESSAGES_PER_S} served per wall second)', flush=True)
     for error in log.errors:
         print(f'det_sim view: warning: {error}', flush=True)
     try:
         reported = False
-        while True:
+        while not player.failed:
             time.sleep(0.2)
-            if player.finished.is_set() != reported:
+            if player.finished.is_set() != reported and not player.failed:
                 reported = player.finished.is_set()
                 if reported:
                     print(f'det_sim view: end of the log ({player.served} messages served); '
@@ -61,4 +68,8 @@ def main(args) -> int:
         pass
     finally:
         player.stop()
+    if player.failed:
+        print(f'det_sim view: error: the player stopped: {player.failed}', file=sys.stderr,
+              flush=True)
+        return 1
     return 0

@@ -70,11 +70,14 @@ class RecordBlock:
     Message records in file order, with the byte offset of each.
 
     ``raw``: the bytes (a chunk's records, or one record); ``positions``: the byte offset of
-    each Message record in it.
+    each Message record in it; ``place``: where its record starts in the log, (index in
+    :attr:`LogReader.files`, byte offset in that file), for :meth:`LogReader.blocks`
+    ``start``.
     """
 
     raw: bytes
     positions: list
+    place: tuple[int, int] = (0, 0)
 
     def columns(self) -> MessageColumns:
         """
@@ -130,30 +133,35 @@ def _stream(body: bytes):
     return ReadDataStream(io.BytesIO(body))
 
 
-def _top_records(stream) -> Iterator[tuple[int, bytes]]:
+def _top_records(stream, start: int = 0) -> Iterator[tuple[int, bytes, int]]:
     """
-    Yield (opcode, the bytes after its length) of each record up to the Footer.
+    Yield (opcode, the bytes after its length, its byte offset) of each record up to the Footer.
 
-    The records are read in turn; the data section's CRC is checked at DataEnd.
+    The records are read in turn from the file's start, or from the record at byte ``start``;
+    the data section's CRC is checked at DataEnd (when read from the start).
 
     :raises ValueError: no magic, a torn record (EOFError), a CRC mismatch.
     """
     if stream.read(len(MAGIC)) != MAGIC:
         raise ValueError('not an MCAP file (no magic)')
     crc, at, size = zlib.crc32(MAGIC), len(MAGIC), os.fstat(stream.fileno()).st_size
+    if start > at:
+        stream.seek(start)
+        crc, at = None, start
     while True:
         head = stream.read(RECORD_HEAD.size)
         op, length = RECORD_HEAD.unpack(head) if len(head) == RECORD_HEAD.size else (0, -1)
         if length < 0 or at + len(head) + length > size:   # (a torn length is not allocated)
             raise EOFError(f'the file ends inside a record (at byte {at} of {size})')
         body = stream.read(length)
-        if op == OP_DATA_END:
+        if op == OP_DATA_END and crc is not None:
             (expected,) = struct.unpack_from('<I', body)
             if expected and crc != expected:
                 raise ValueError('data section CRC mismatch (a damaged file)')
-        crc = zlib.crc32(body, zlib.crc32(head, crc))
+        if crc is not None:
+            crc = zlib.crc32(body, zlib.crc32(head, crc))
+        yield op, body, at
         at += len(head) + length
-        yield op, body
         if op == OP_FOOTER:
             return
 
@@ -188,6 +196,7 @@ class LogReader:
         self.errors: list[str] = []
         self._scanned = False
         self._schemas: dict[int, str] = {}
+        self._file_channels: dict[str, dict] = {}   # path -> its channels, once read through
 
     # -- records ------------------------------------------------------------------------------
     def _schema(self, record) -> None:
@@ -254,38 +263,59 @@ class LogReader:
             return record.summary_start != 0
         return None
 
-    def _file_blocks(self, path: str, stop_at_message: bool = False) -> Iterator[RecordBlock]:
-        """Yield the message blocks of one file; the other records read into the attributes."""
+    def _file_blocks(self, path: str, stop_at_message: bool = False, file: int = 0,
+                     start: int = 0) -> Iterator[RecordBlock]:
+        """
+        Yield the message blocks of one file; the other records read into the attributes.
+
+        From the record at byte ``start`` if this reader has read the file through before
+        (its channels known), else from the file's start.
+        """
         self._schemas, self.channels = {}, {}
+        known = self._file_channels.get(path)
+        if start and known is not None:
+            self.channels = dict(known)
+        else:
+            start = 0
         finished = False
         with open(path, 'rb') as stream:   # a missing or unreadable file is the caller's error
             try:
-                for op, body in _top_records(stream):
+                for op, body, at in _top_records(stream, start):
                     taken = self._record(op, body)
                     if isinstance(taken, RecordBlock):
                         if stop_at_message and taken.positions:
                             return
-                        yield taken
+                        yield dataclasses.replace(taken, place=(file, at))
                     elif taken is not None:
                         finished = taken
                         if not finished and not stop_at_message:
-                            self.errors.append(f'{path}: unfinished (no summary: the writer '
-                                               'stopped without closing the file)')
+                            self._error(f'{path}: unfinished (no summary: the writer '
+                                        'stopped without closing the file)')
                         break
             except Exception as exc:  # noqa: BLE001 - the end of the readable data
-                self.errors.append(f'{path}: {type(exc).__name__}: {exc}')
-        if not finished and not stop_at_message:
-            self.complete = False
+                self._error(f'{path}: {type(exc).__name__}: {exc}')
+        if not stop_at_message:
+            self._file_channels[path] = dict(self.channels)
+            if not finished:
+                self.complete = False
 
-    def blocks(self) -> Iterator[RecordBlock]:
+    def _error(self, text: str) -> None:
+        if text not in self.errors:   # (a file read again says the same)
+            self.errors.append(text)
+
+    def blocks(self, start: tuple[int, int] | None = None) -> Iterator[RecordBlock]:
         """
         Yield the Message records of all files as blocks, in file order.
 
-        :attr:`channels` holds the channels of the block's file when it is yielded.
+        ``start``: a block's :attr:`RecordBlock.place` from an earlier pass of this reader:
+        begin there (a seek), not at the first file's start. :attr:`channels` holds the
+        channels of the block's file when it is yielded.
         """
         self.complete = True
-        for path in self.files:
-            yield from self._file_blocks(path)
+        first, offset = start if start is not None else (0, 0)
+        for file in range(first, len(self.files)):
+            yield from self._file_blocks(self.files[file], file=file,
+                                         start=offset if file == first else 0)
         self._scanned = True
 
     def scan_info(self) -> 'LogReader':
@@ -296,11 +326,16 @@ class LogReader:
             self._scanned = True
         return self
 
-    def messages(self, topics: Iterable[str] | None = None) -> Iterator[LogMessage]:
-        """Yield all readable messages of all files, in file order (= non-decreasing log time)."""
+    def messages(self, topics: Iterable[str] | None = None,
+                 start: tuple[int, int] | None = None) -> Iterator[LogMessage]:
+        """
+        Yield all readable messages of all files, in file order (= non-decreasing log time).
+
+        ``start``: begin at a block's place, as :meth:`blocks` does.
+        """
         wanted = None if topics is None else {_fully_qualified(t) for t in topics}
         unpack = MESSAGE_HEAD.unpack_from
-        for block in self.blocks():
+        for block in self.blocks(start):
             raw, channels = block.raw, self.channels
             for p in block.positions:
                 _, length, channel_id, sequence, log_time, publish_time = unpack(raw, p)
