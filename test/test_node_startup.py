@@ -188,8 +188,9 @@ def test_duplicate_name_refused_unless_allowed(tmp_path):
             '-p', 'info_period:=0.0']
     first = Node(tmp_path, *args)
     try:
-        # the start line names the level: the shipped default is the exact kinematics, 5 terms
-        assert 'fidelity exact n_r=5' in first.wait_for(READY)
+        # the start line names the level: the shipped default is the exact kinematics in 3
+        # buckling modes on its fixed beam
+        assert 'fidelity exact buckling modes n_r=3' in first.wait_for(READY)
         with concurrent.futures.ThreadPoolExecutor(3) as pool:
             seconds = list(pool.map(lambda _: run_entry(args, cwd=tmp_path), range(3)))
         for second in seconds:

@@ -53,7 +53,7 @@ def test_well_formed_rules_pass(argv):
 @pytest.mark.parametrize('key, value, message', [
     ('scene.eps_b', 'abc', "scene key 'scene.eps_b': must be a number, not a string (got 'abc')"),
     ('scene.eps_b', 5.0, "scene key 'scene.eps_b': out of range (-1, 2] (got 5.0)"),
-    ('scene.n_ritz', 99, "scene key 'scene.n_ritz': out of range [1, 12] (got 99)"),
+    ('scene.n_ritz', 99, "scene key 'scene.n_ritz': out of range [0, 12] (got 99)"),
     ('physics.Rs', 'abc', "scene key 'physics.Rs': must be a number in Ohm, not a string "
      "(got 'abc')"),
 ])

@@ -316,17 +316,19 @@ def test_malformed_scene_exits_with_one_line(tmp_path):
 
 
 def test_scene_loads_by_default():
-    """Check the default scene: fixed beam, eps_b = 0.20, exact with 5 terms, full model, 1 kHz."""
+    """Check the default scene: fixed beam, eps_b = 0.20, exact, auto level, full model, 1 kHz."""
     scene = load_scene('default')
     assert scene.beam == 'fixed' and scene.eps_b == 0.20 and scene.rate_hz == 1000.0
     assert scene.creep and scene.source == 'rc'
-    assert scene.fidelity == 'exact' and scene.n_ritz == 5
+    assert scene.fidelity == 'exact' and (scene.shapes, scene.n_ritz) == ('auto', 0)
+    assert scene.ritz_level == ('buckling_modes', 3)
 
 
 def test_diagnostics_and_the_log_name_the_fidelity(harness, tmp_path):
     """Check /diagnostics and the MCAP log's metadata name the scene's model level."""
     from det_sim_ros.io.log import LogReader
-    h = harness(**{'scene.fidelity': 'exact', 'scene.n_ritz': 3, 'diagnostics_period': 0.05,
+    h = harness(**{'scene.fidelity': 'exact', 'scene.n_ritz': 3, 'scene.shapes': 'polynomial',
+                   'diagnostics_period': 0.05,
                    'log.path': str(tmp_path / 'logs')})
     h.spin_until(lambda: h.diagnostics, 'a diagnostics message')
     values = {kv.key: kv.value for kv in h.diagnostics[-1].status[0].values}
