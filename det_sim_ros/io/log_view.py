@@ -38,7 +38,7 @@ TIME_RATE_HZ = 50      # the time goes to the clients at most this often (wall)
 
 class LogSummary:
     """
-    A log's topics (-> type), schemas (type -> ros2msg bytes), time range and duration (ns) and size.
+    A log's topics (-> type), schemas (type -> ros2msg bytes), time range, duration (ns), size.
 
     ``reader``: the :class:`LogReader` that read it through (it can start at a block's place);
     ``places`` and ``first_times``: each block's place and its first log time, in file order.
