@@ -51,7 +51,7 @@ class LogSummary:
         self.count = 0
         self.places, self.first_times = [], []
         self.duration_ns = 0   # sim time run through: a reset's restart at t = 0 adds none
-        last = None
+        previous = None        # the last message's time before this block
         for block in reader.blocks():
             if not block.positions:
                 continue
@@ -65,9 +65,9 @@ class LogSummary:
             self.start = first if self.start is None else min(self.start, first)
             self.end = last if self.end is None else max(self.end, last)
             self.count += len(times)
-            steps = np.diff(times if last is None else np.concatenate([[last], times]))
+            steps = np.diff(times if previous is None else np.concatenate([[previous], times]))
             self.duration_ns += int(np.sum(np.maximum(steps, 0)))
-            last = int(times[-1])
+            previous = int(times[-1])
         if not self.count:
             raise ValueError(f'{", ".join(self.files)}: no readable message'
                              + (f' ({reader.errors[0]})' if reader.errors else ''))
