@@ -1,17 +1,14 @@
 /*
  * The model's equations (physics.c): the right-hand side, the stiff rates the exponential
- * stages take exactly, the kinematics, and the charge's bookkeeping at an input jump; the
- * right-hand side's scratch (ds_work) and each cell's inverted mass block.
+ * stages take exactly, the kinematics, and the charge's bookkeeping at an input jump. Its
+ * scratch is work.h's, its mass solves mass.h's.
  */
 #ifndef DETSIM_PHYSICS_PHYSICS_H
 #define DETSIM_PHYSICS_PHYSICS_H
 
+#include "physics/mass.h"
 #include "physics/model.h"
-
-int ds_work_init(ds_work *w, const ds_model *m);
-int64_t ds_work_size(const ds_model *m);
-void ds_work_attach(ds_work *w, const ds_model *m, double *buf);
-void ds_work_free(ds_work *w);
+#include "physics/work.h"
 
 int ds_rhs(const ds_model *m, const double *x, const double *u, double *dx, ds_work *w,
            int quasi_static);
@@ -21,6 +18,5 @@ void ds_stretches(const ds_model *m, const double *x, ds_work *w, double *lam);
 void ds_shift_charge(const ds_model *m, double *x, const double *u, double sign, ds_work *w);
 void ds_book_input_jump(const ds_model *m, double *x, const double *u_old, const double *u_new,
                         ds_work *w);
-int ds_mass_inverse(const ds_model *m, double *out);   /* once per model */
 
 #endif
