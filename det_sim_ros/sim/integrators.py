@@ -159,12 +159,10 @@ METHODS = {m.name: m for m in (
 # changed or a q or qdot moved by more than this in the error norm's scale (beam length, length
 # per period) since it was taken: between, the weights phi_k(c h A) of each step size are kept.
 # A stale A only moves part of the linear dynamics into the explicit remainder, whose error the
-# step control sees: a loose tolerance tolerates a staler A (10 x the tolerance, from 1e-2 to
-# 3e-2). 3e-2 at the default levels' tolerances (1e-2, 3e-3) is 1.15-1.4x cheaper than 1e-2 on
-# the step and 2 Hz switching cases with the error within their budget (5e-2 moved the simply
-# supported switching case to 0.92 % of its travel); at 1e-6 it took 45 % more steps than 1e-2,
-# which tight tolerances keep. The step-size changes between refreshes cost little since the phi
-# chains are kept (matrix_phi.c). Numbers in docs/numerics.md.
+# step control sees: a loose tolerance tolerates a staler A, so A lasts longer there (10 x the
+# tolerance, within these bounds); tight tolerances keep the old 1e-2, where a staler A costs
+# more steps than it saves. The step-size changes between refreshes cost little since the phi
+# chains are kept (matrix_phi.c). The measurements that chose it: docs/numerics.md.
 LINEAR_REFRESH = (1e-2, 3e-2)   # (at most, at least) of 10 x the tolerance
 
 
@@ -188,16 +186,16 @@ LINEAR_REFRESH_INPUT = 1e-2
 # accuracy the model does not have is not worth its cost. Rows: (fidelity, family or '*', up to
 # n_r, tolerance), first match. 'paper' keeps 1e-6: its runs are compared with the paper's own
 # results, where the model itself is the reference (and its numbers stay).
-AUTO_TOLERANCE = (
+AUTO_TOLERANCE = (   # each row's evidence: docs/fidelity.md, "How to choose"
     ('paper', '*', 12, 1e-6),
-    ('consistent', '*', 12, 1e-2),           # model error >= 14 %; 1e-2 adds 1 % of it
-    ('exact', 'buckling_modes', 3, 1e-2),    # 3 modes: 0.28 %; 1e-2 makes it 0.30 %
-    ('exact', 'buckling_modes', 5, 1e-3),    # 4-5 modes: 0.08-0.14 % (1e-2: +48-103 %)
+    ('consistent', '*', 12, 1e-2),
+    ('exact', 'buckling_modes', 3, 1e-2),
+    ('exact', 'buckling_modes', 5, 1e-3),
     ('exact', 'buckling_modes', 12, 1e-4),   # beyond the map: tighter than its last row
-    ('exact', 'polynomial', 6, 1e-2),        # n_r <= 6: >= 14 %; 1e-2 adds <= 1 % of it
-    ('exact', 'polynomial', 7, 3e-3),        # n_r 7: 0.61 %; 3e-3 makes it 0.78 % (1e-2: 1.40)
-    ('exact', 'polynomial', 8, 1e-3),        # n_r 8: 0.87 %; 1e-3 makes it 0.94 % (1e-2: +56 %)
-    ('exact', 'polynomial', 9, 1e-4),        # n_r 9: 0.08 %; 1e-4 adds 4 % (1e-3: 39 %)
+    ('exact', 'polynomial', 6, 1e-2),
+    ('exact', 'polynomial', 7, 3e-3),
+    ('exact', 'polynomial', 8, 1e-3),
+    ('exact', 'polynomial', 9, 1e-4),
     ('exact', 'polynomial', 12, 1e-6),       # beyond the map: a converged reference's own
 )
 
