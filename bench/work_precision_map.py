@@ -49,6 +49,7 @@ from det_sim_ros.analysis.scenarios import (delta_y, snap_times, STEP_END, step_
                                             step_voltage, SWITCHING_END, switching_error)
 from det_sim_ros.physics.model import ModelDomainError
 from det_sim_ros.scenes.scene import load_scene
+from det_sim_ros.sim.integrators import integration_tolerance
 from det_sim_ros.sim.simulator import simulate, Simulator
 from fidelity_choice import DOC, MACHINE, write_doc
 import numpy as np
@@ -375,7 +376,7 @@ def doc_section(rows) -> str:
             for beam in BEAMS:
                 mine = [r for r in rs if r['beam'] == beam]
                 default = load_scene('default', {'scene.beam': beam})
-                own_key = ('exact', *default.ritz_level, _auto_tolerance(default))
+                own_key = ('exact', *default.ritz_level, integration_tolerance(default))
                 if not mine or own_key not in points or own_key[1:3] != key[1:3]:
                     continue
                 x = min(r['x_real_time'] for r in mine)
@@ -383,11 +384,6 @@ def doc_section(rows) -> str:
                 out.append(f'| {_level(*key[:3])} | {key[3]:g} | {beam.replace("_", " ")} | '
                            f'{max(r["error"] for r in mine):.2%} | {x:.1f} | {ratio:.1f} |')
     return '\n'.join(out)
-
-
-def _auto_tolerance(scene) -> float:
-    from det_sim_ros.sim.integrators import integration_tolerance
-    return integration_tolerance(scene)
 
 
 def read_csv(path=CSV):

@@ -109,8 +109,7 @@ int ds_linear_init(ds_linear *lin, const ds_method *me, const ds_model *m)
     lin->f0 = lin->xq + m->n_state;
     lin->f1 = lin->f0 + m->n_state;
     for (int k = 0; k < DS_LIN_CHAINS; k++)
-        ds_phi_chain_init(&lin->chain[k], lin->f1 + m->n_state + k * per_chain);
-    ds_phi_chains_clear(lin->chain, DS_LIN_CHAINS);
+        ds_phi_chain_init(&lin->chain[k], nd, lin->f1 + m->n_state + k * per_chain);
     return 0;
 }
 

@@ -188,13 +188,11 @@ int64_t ds_phi_chain_doubles(int64_t n, int64_t kmax)
     return n + (DS_CHAIN_LEVELS + 1) * (kmax + 1) * n * n;
 }
 
-void ds_phi_chain_init(ds_phi_chain *c, double *mem)
+void ds_phi_chain_init(ds_phi_chain *c, int64_t n, double *mem)
 {
-    c->base = 0.0;
-    c->top = -1;
-    c->used = 0;
     c->d = mem;
-    c->levels = mem + 0;   /* set by the first build (n known then) */
+    c->levels = mem + n;
+    ds_phi_chains_clear(c, 1);
 }
 
 void ds_phi_chains_clear(ds_phi_chain *chains, int n_chains)
@@ -243,7 +241,6 @@ int ds_matrix_phis_chained(const double *Z, double scale, int64_t n, int64_t kma
             ds_matrix_phis(Z, scale, n, kmax, full, half, work);
             return 1;
         }
-        c->levels = c->d + n;
         chain_base(Z, scale, n, kmax, s, c->d, c->levels, tmp, Y);
         c->base = ldexp(scale, -s);
         c->top = 0;

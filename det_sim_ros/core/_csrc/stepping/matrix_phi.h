@@ -25,7 +25,7 @@ typedef struct {
 } ds_phi_chain;
 
 int64_t ds_phi_chain_doubles(int64_t n, int64_t kmax);
-void ds_phi_chain_init(ds_phi_chain *c, double *mem);
+void ds_phi_chain_init(ds_phi_chain *c, int64_t n, double *mem);
 void ds_phi_chains_clear(ds_phi_chain *chains, int n_chains);
 int ds_matrix_phis_chained(const double *Z, double scale, int64_t n, int64_t kmax,
                            ds_phi_chain *chains, int n_chains, double *full, double *half,
