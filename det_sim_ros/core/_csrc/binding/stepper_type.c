@@ -286,20 +286,22 @@ PyObject *matrix_phis(PyObject *module, PyObject *const *args, Py_ssize_t n)
     Py_RETURN_NONE;
 }
 
-/* linear_counts() -> (Jacobians taken, weight sets computed) summed over the groups. */
+/* linear_counts() -> (Jacobians taken, weight sets computed, phi chains built anew) summed
+ * over the groups. */
 static PyObject *Stepper_linear_counts(StepperObject *self, PyObject *unused)
 {
     (void)unused;
     NEED_READY(self);
-    long long refreshes = 0, fills = 0;
+    long long refreshes = 0, fills = 0, chains = 0;
     for (int64_t gi = 0; gi < self->st.n_groups; gi++) {
         const ds_linear *lin = self->st.group[gi].lin;
         if (lin) {
             refreshes += lin->refreshes;
             fills += lin->fills;
+            chains += lin->chain_builds;
         }
     }
-    return Py_BuildValue("(LL)", refreshes, fills);
+    return Py_BuildValue("(LLL)", refreshes, fills, chains);
 }
 
 static PyObject *Stepper_reset_control(StepperObject *self, PyObject *unused)
@@ -401,7 +403,8 @@ static PyMethodDef Stepper_methods[] = {
     {"linear_part", (PyCFunction)(void (*)(void))Stepper_linear_part, METH_FASTCALL,
      "linear_part(x, u, A) -> status: the dense linear part at (x, u) into A"},
     {"linear_counts", (PyCFunction)Stepper_linear_counts, METH_NOARGS,
-     "linear_counts() -> (Jacobians taken, weight sets computed) of a linearized stepper"},
+     "linear_counts() -> (Jacobians taken, weight sets computed, phi chains built) of a "
+     "linearized stepper"},
     {"reset_control", (PyCFunction)Stepper_reset_control, METH_NOARGS,
      "step counts and error estimates back to their initial values"},
     {"group_substeps", (PyCFunction)Stepper_group_substeps, METH_NOARGS,

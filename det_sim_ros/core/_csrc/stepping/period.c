@@ -62,6 +62,56 @@ static void charge_transient(const ds_stepper *st, ds_group *g, const double *x,
     }
 }
 
+/* Dyadic levels below h a transient may step at: h 2^-30 is far below any charge time. */
+#define DYADIC_LEVELS 30
+/* From this many linearized coordinates (n_r 6) a transient climbs back to h by halvings
+ * rather than taking one step to the grid of h. A new step size costs a phi chain, ~nd^3, a
+ * step ~nd^2. Measured on a 1 kV command dithered +-25 V per period and on the controller
+ * case: the step to the grid is 1.2-2.1x faster at 3 and 5 terms (nd 6, 10); at 7 terms the
+ * climb is 1.2-1.5x faster where the Jacobian is renewed often (the grid's (1 - 2^-k) h
+ * sizes need chains of their own after each) and 1.1x slower on a steady dither; at 9 terms
+ * the climb is 2.2x faster. */
+#define CLIMB_MIN_ND 12
+
+/*
+ * The charge transient under the linearized method. Each new step size costs its weights (a
+ * matrix phi, linear_part.c), and the graded sizes h0 gr^i and the remainder's (dt - T) / n
+ * are new every period (a controller moves its command every period): here the steps are
+ * dyadic, h 2^-k, the largest that starts on its own grid within the graded steps' envelope
+ * h0 + t (gr - 1), so they repeat from period to period and are levels of the phi chain of h.
+ * Past the transient one step reaches the grid of h (or, with ``climb``, halvings climb
+ * back to it), and the period ends in whole steps of h.
+ */
+static int dyadic_transient(const ds_stepper *st, ds_group *g, double *x, const double *u,
+                            double h, int64_t n_sub, double T, double h0, double slope,
+                            int climb)
+{
+    const int64_t per_h = (int64_t)1 << DYADIC_LEVELS, end = n_sub * per_h;
+    int64_t t = 0;   /* in units of h 2^-DYADIC_LEVELS */
+    while (t < end) {
+        const double elapsed = ldexp(h * (double)t, -DYADIC_LEVELS);
+        const int past = elapsed >= T;
+        if (past && t % per_h == 0)
+            return ds_advance(st, g, x, u, h, (end - t) / per_h, 1.0);
+        int64_t step;
+        if (past && !climb) {
+            step = per_h - t % per_h;
+        } else {
+            const double bound = past ? h : h0 + elapsed * slope;
+            int k = 0;
+            while (k < DYADIC_LEVELS && (ldexp(h, -k) > bound || t % (per_h >> k) != 0))
+                k++;
+            step = per_h >> k;
+        }
+        const int status = ds_advance(st, g, x, u, ldexp(h * (double)step, -DYADIC_LEVELS),
+                                      1, 1.0);
+        if (status != DS_OK)
+            return status;
+        t += step;
+    }
+    return DS_OK;
+}
+
 /*
  * One control period dt = n_sub h with the input u held, starting from an input u_old. With
  * z_tol > 0 (exponential methods on an RC scene) a charge transient after an input jump is
@@ -101,6 +151,13 @@ static int fixed_period(const ds_stepper *st, ds_group *g, double *x, const doub
                 n_fine = (int64_t)ceil(T / h0 - 1e-9);
                 h0 = T / (double)n_fine;
                 gr = 1.0;
+            }
+            if (g->lin) {
+                const int status = dyadic_transient(st, g, x, u, h, n_sub, T, h0, gr - 1.0,
+                                                    g->lin->nd >= CLIMB_MIN_ND);
+                if (status != DS_OK)
+                    memcpy(x, g->x0, (size_t)nx * sizeof(double));
+                return status;
             }
             int status = ds_advance(st, g, x, u, h0, n_fine, gr);
             const double rest = dt - T;
