@@ -8,11 +8,10 @@ against what a user meets: the run stays within its tolerance of an independent 
 (scipy's Radau), and the stepper builds few new exponential chains.
 """
 
+from det_sim_ros.analysis.scenarios import reference_solution, step_scene
+from det_sim_ros.sim.simulator import simulate, Simulator
 import numpy as np
 import pytest
-
-from det_sim_ros.analysis.scenarios import reference_solution, step_scene
-from det_sim_ros.sim.simulator import Simulator, simulate
 
 PERIODS = 200
 # Every +-25 V move starts a transient from 3e-3 down (z_tol 9 C0); at 1e-4 the transient's
