@@ -1,0 +1,99 @@
+"""
+What a controller's moving command costs: × real time, steps and φ chains per case and level.
+
+A controller sends a new command every period, and each move starts a charge transient
+(docs/numerics.md, 'Charge transients in dyadic steps'). Cases, fixed or simply supported beam
+at ε_b 0.20, from the map's levels:
+
+- 'dither': from rest, 1.5 kV + a uniform ±25 V per period (seed 1), 2 s;
+- 'controller': the map's controller input (a 2 Hz 0 / 2.5 kV square wave plus the dither);
+- '2 Hz': the map's 2 Hz switching case (few moves: the transient is not its cost).
+
+CPU time (time.process_time) of ``simulate()``, best of two, one process per (tree, case), the
+trees taking turns case by case so that two kernels are compared side by side in one run:
+
+    python bench/controller_cost.py --tree . --tree ../other_checkout   # each built in place
+
+Without --tree, this checkout alone. Run under ``flock bench/.lock`` (one CPU benchmark at a time).
+"""
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+# (beam, Ritz family, n_r, tolerance, drive)
+CASES = (
+    ('fixed', 'buckling_modes', 3, 1e-2, 'dither'),
+    ('fixed', 'buckling_modes', 3, 1e-3, 'dither'),
+    ('fixed', 'polynomial', 5, 3e-3, 'dither'),
+    ('fixed', 'polynomial', 7, 3e-3, 'dither'),
+    ('simply_supported', 'polynomial', 7, 3e-3, 'dither'),
+    ('simply_supported', 'polynomial', 9, 1e-4, 'dither'),
+    ('fixed', 'buckling_modes', 3, 1e-2, 'controller'),
+    ('simply_supported', 'buckling_modes', 3, 1e-2, 'controller'),
+    ('fixed', 'polynomial', 7, 3e-3, 'controller'),
+    ('simply_supported', 'polynomial', 7, 3e-3, 'controller'),
+    ('simply_supported', 'polynomial', 7, 3e-3, 2.0),
+    ('fixed', 'buckling_modes', 3, 1e-2, 2.0),
+)
+
+
+def run_case(case) -> list:
+    """Return [× real time, steps, (Jacobians, weight sets, chains)] of one case, here."""
+    import numpy as np
+    sys.path.insert(0, HERE)
+    from continuum_reference import switching_inputs
+    from det_sim_ros.analysis.scenarios import step_scene
+    from det_sim_ros.sim.simulator import simulate, Simulator
+    beam, shapes, n_r, tolerance, drive = case
+    if drive == 'dither':
+        extra = {'scene.initial_state': 'rest'}
+        volts = 1500.0 + np.random.default_rng(1).uniform(-25.0, 25.0, 2000)
+    else:
+        extra, volts = switching_inputs(beam, 0.20, drive, 1e-3)
+    scene = step_scene(beam, 0.20, **{'scene.fidelity': 'exact', 'scene.shapes': shapes,
+                                      'scene.n_ritz': n_r, 'integrator.tolerance': tolerance},
+                       **extra)
+    seconds = len(volts) * scene.dt
+    best = float('inf')
+    for _ in range(2):
+        sim = Simulator(scene)
+        start = time.process_time()
+        simulate(sim, volts, seconds)
+        best = min(best, time.process_time() - start)
+    return [seconds / best, sim.steps_taken, list(sim.stepper.linear_counts())]
+
+
+def main(argv=None) -> int:
+    """Run every case in every tree, trees taking turns; print one line per case."""
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('--tree', action='append', default=[],
+                    help='a source tree (kernel built in place) to run; repeatable')
+    ap.add_argument('--case', help=argparse.SUPPRESS)   # one case, in this process
+    args = ap.parse_args(argv)
+    if args.case:
+        print(json.dumps(run_case(json.loads(args.case))))
+        return 0
+    trees = args.tree or [os.path.dirname(HERE)]
+    for case in CASES:
+        cells = []
+        for tree in trees:
+            env = dict(os.environ, PYTHONPATH=os.path.abspath(tree))
+            out = subprocess.run([sys.executable, os.path.join(HERE, 'controller_cost.py'),
+                                  '--case', json.dumps(case)], env=env, cwd=tree,
+                                 capture_output=True, text=True, check=True)
+            speed, steps, counts = json.loads(out.stdout.strip().splitlines()[-1])
+            chains = counts[2] if len(counts) > 2 else counts[1]   # older kernels: weight sets
+            cells.append(f'{speed:5.0f}x {steps:6d} steps {chains:5d} chains')
+        beam, shapes, n_r, tolerance, drive = case
+        print(f'{beam:>16} {shapes:>14} {n_r} {tolerance:.0e} {drive!s:>10}: '
+              + ' | '.join(cells), flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
