@@ -28,6 +28,8 @@ __all__ = ['HostNameLock', 'LockState', 'lock_address']
 
 
 class LockState(enum.Enum):
+    """Who holds a name's lock, as seen by the process that tried to take it."""
+
     HELD = 'held by this process'
     HELD_ELSEWHERE = 'held by another process of this host'
     UNAVAILABLE = 'no host lock on this system'

@@ -210,7 +210,7 @@ class NameClaim:
 
 @contextlib.contextmanager
 def _executor(node):
-    """An executor of the node's callbacks alone, for the node's start-up (before its spin)."""
+    """Yield an executor of the node's callbacks alone, for its start-up (before its spin)."""
     from rclpy.executors import SingleThreadedExecutor
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
