@@ -115,7 +115,7 @@ class NameClaim:
 
     @property
     def host_lock_state(self) -> LockState | None:
-        """The host lock's state; None when the node discovers no other node (nothing to lock)."""
+        """Return the host lock's state; None when the node discovers no other node (no lock)."""
         return None if self._host_lock is None else self._host_lock.state
 
     def _announce(self, node) -> None:
