@@ -56,9 +56,10 @@ class ChildProcess:
 
     TIMEOUT = 60.0   # s, a safety net only
 
-    def __init__(self, args, cwd):
+    def __init__(self, args, cwd, environ=None):
+        """``environ``: variables that differ from :func:`child_env`'s (e.g. ROS_DOMAIN_ID)."""
         self.proc = subprocess.Popen(list(args), cwd=cwd, text=True, bufsize=1,
-                                     env=child_env(PYTHONUNBUFFERED='1'),
+                                     env=child_env(PYTHONUNBUFFERED='1', **(environ or {})),
                                      stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
         self.lines = []
         self._queue = queue.Queue()

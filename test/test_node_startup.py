@@ -8,6 +8,7 @@ entry point (``python -m det_sim_ros.cli.sim_node``) on the test domain.
 import concurrent.futures
 import os
 import re
+import signal
 import subprocess
 import sys
 import time
@@ -37,8 +38,8 @@ def run_entry(args, cwd, timeout=TIMEOUT):
 class Node(ChildProcess):
     """A sim_node process whose output is read line by line."""
 
-    def __init__(self, cwd, *args):
-        super().__init__(ENTRY + list(args), cwd)
+    def __init__(self, cwd, *args, environ=None):
+        super().__init__(ENTRY + list(args), cwd, environ)
 
 
 @pytest.mark.parametrize('flag', ['--help', '-h'])
@@ -181,8 +182,9 @@ def test_duplicate_name_refused_unless_allowed(tmp_path):
     """
     Check a second node of one name: one FATAL line and exit 1, or a WARN when allowed.
 
-    The duplicates hear the running node's older claim before they publish anything
-    (det_sim_ros.ros.name_check) and stop; the running node goes on.
+    The duplicates find the name locked on this host before they claim or publish anything
+    (det_sim_ros.ros.name_check) and stop; the running node goes on. An allowed duplicate says
+    so at once, before its start-up line.
     """
     args = ['--ros-args', '-r', '__ns:=/startup_dup', '-p', 'log.enabled:=false',
             '-p', 'info_period:=0.0']
@@ -201,9 +203,9 @@ def test_duplicate_name_refused_unless_allowed(tmp_path):
         assert first.proc.poll() is None           # the running node was not the one refused
         allowed = Node(tmp_path, *args, '-p', 'allow_duplicate_name:=true')
         try:
-            allowed.wait_for(READY)
             warning = allowed.wait_for('another node named /startup_dup/sim_node')
             assert '[WARN]' in warning
+            allowed.wait_for(READY)
         finally:
             allowed_stopped = allowed.stop()
         assert allowed_stopped == 0
@@ -221,7 +223,8 @@ def test_a_refused_duplicate_reaches_nothing_of_the_running_nodes(tmp_path, ros_
     samples would start from t = 0 again), and displacement never has a second publisher. The
     duplicate exits 1 with one FATAL line, under the name it was given (``-r __node:=``), and
     it stepped no period (no stop line): a duplicate's first ~0.1 s of samples can go out before
-    a subscriber has matched it, so its own account is checked too.
+    a subscriber has matched it, so its own account is checked too. Refused by the host's lock,
+    it never claimed the name either: the claim topic never has a second writer.
     """
     import threading
     import rclpy
@@ -229,9 +232,9 @@ def test_a_refused_duplicate_reaches_nothing_of_the_running_nodes(tmp_path, ros_
     from sensor_msgs.msg import JointState
     args = ['--ros-args', '-r', '__ns:=/startup_quiet', '-r', '__node:=sim_node_b',
             '-p', 'log.enabled:=false', '-p', 'info_period:=0.0']
-    topic = '/startup_quiet/displacement'
+    topic, claim_topic = '/startup_quiet/displacement', '/startup_quiet/sim_node_b/_name_claim'
     watcher = rclpy.create_node('duplicate_watcher', context=ros_context)
-    stamps, publishers, done = [], [], threading.Event()
+    stamps, publishers, claimers, done = [], [], [], threading.Event()
     watcher.create_subscription(JointState, topic, lambda msg: stamps.append(
         msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec), QoSProfile(depth=10000))
     executor = rclpy.executors.SingleThreadedExecutor(context=ros_context)
@@ -241,6 +244,7 @@ def test_a_refused_duplicate_reaches_nothing_of_the_running_nodes(tmp_path, ros_
         while not done.is_set():
             executor.spin_once(timeout_sec=0.01)
             publishers.append(watcher.count_publishers(topic))
+            claimers.append(watcher.count_publishers(claim_topic))
     thread = threading.Thread(target=watch, daemon=True)
     thread.start()
     first = Node(tmp_path, *args)
@@ -265,6 +269,7 @@ def test_a_refused_duplicate_reaches_nothing_of_the_running_nodes(tmp_path, ros_
     steps = {b - a for a, b in zip(stamps, stamps[1:])}
     assert steps == {1_000_000}, sorted(steps)[:5]    # forward only, none from a second node
     assert max(publishers) == 1, max(publishers)
+    assert max(claimers) == 1, max(claimers)
     assert duplicate.returncode == 1, duplicate.stderr
     lines = duplicate.stderr.splitlines()
     fatal = [n for n, line in enumerate(lines) if '[FATAL]' in line]
@@ -301,6 +306,134 @@ def test_of_nodes_started_together_exactly_one_keeps_its_name(tmp_path):
     for node in refused:
         fatal = [line for line in node.lines if '[FATAL]' in line]
         assert len(fatal) == 1 and 'another node named /startup_together/sim_node' in fatal[0]
+
+
+def test_the_host_lock_is_one_per_domain_and_name():
+    """Check the host's lock: held once per (domain, name), free again once released."""
+    from det_sim_ros.ros.host_lock import HostNameLock, LockState, lock_address
+    name = f'/host_lock_{os.getpid()}/sim_node'
+    first = HostNameLock(7, name)
+    try:
+        assert first.state is LockState.HELD
+        assert HostNameLock(7, name).state is LockState.HELD_ELSEWHERE   # any other holder
+        others = [HostNameLock(8, name), HostNameLock(7, name + '_b'),
+                  HostNameLock(7, f'/host_lock_{os.getpid()}')]
+        assert [lock.state for lock in others] == [LockState.HELD] * 3
+        for lock in others:
+            lock.release()
+    finally:
+        first.release()
+    again = HostNameLock(7, name)
+    assert again.state is LockState.HELD
+    again.release()
+    # any name gives an address of one length, of hex digits after a fixed prefix
+    addresses = {lock_address(7, n) for n in ('/a', '/ä/' + 'x' * 500, '/a b/\\0')}
+    assert len(addresses) == 3 and len({len(a) for a in addresses}) == 1
+
+
+def test_a_discovery_range_off_takes_no_lock():
+    """Check that only ROS_AUTOMATIC_DISCOVERY_RANGE=OFF means that no other node is found."""
+    from det_sim_ros.ros.name_check import discovers_no_other_node
+    assert discovers_no_other_node({'ROS_AUTOMATIC_DISCOVERY_RANGE': 'off'})
+    for value in ('LOCALHOST', 'SUBNET', 'SYSTEM_DEFAULT', ''):
+        assert not discovers_no_other_node({'ROS_AUTOMATIC_DISCOVERY_RANGE': value})
+    assert not discovers_no_other_node({})
+
+
+def test_a_killed_node_leaves_its_name_free(tmp_path):
+    """Check that a node killed by SIGKILL holds no lock: a new node of its name starts."""
+    args = ['--ros-args', '-r', '__ns:=/startup_killed', '-p', 'log.enabled:=false',
+            '-p', 'info_period:=0.0']
+    killed = Node(tmp_path, *args)
+    try:
+        killed.wait_for(READY)
+    finally:
+        killed.proc.kill()
+        killed.proc.wait()
+    successor = Node(tmp_path, *args)
+    try:
+        successor.wait_for(READY)
+        time.sleep(0.5)
+        assert successor.proc.poll() is None
+    finally:
+        stopped = successor.stop()
+    assert stopped == 0, ''.join(successor.lines)
+    assert not any('another node named' in line for line in successor.lines)
+
+
+def test_other_domains_and_other_names_run_together(tmp_path):
+    """
+    Check that nodes of one name in two ROS domains, and of two names in one, all run.
+
+    The host's lock is per (domain, fully qualified name); the names are as remapped.
+    """
+    from conftest import DOMAIN_ID
+    other_domain = {'ROS_DOMAIN_ID': str(DOMAIN_ID % 232 + 1)}
+    base = ['--ros-args', '-p', 'log.enabled:=false', '-p', 'info_period:=0.0']
+    starts = [(['-r', '__ns:=/startup_apart'], None),
+              (['-r', '__ns:=/startup_apart'], other_domain),
+              (['-r', '__ns:=/startup_apart', '-r', '__node:=sim_node_b'], None),
+              (['-r', '__ns:=/startup_apart/sim_node'], None)]
+    nodes = [Node(tmp_path, *base, *remap, environ=environ) for remap, environ in starts]
+    try:
+        for node in nodes:
+            node.wait_for(READY)
+        time.sleep(0.5)
+        assert [node.proc.poll() for node in nodes] == [None] * len(nodes)
+    finally:
+        codes = [node.stop() for node in nodes]
+    assert codes == [0] * len(nodes), [''.join(node.lines) for node in nodes]
+    assert not any('another node named' in line for node in nodes for line in node.lines)
+
+
+def _wait_for_line(path, text, proc, timeout=TIMEOUT):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if text in path.read_text():
+            return
+        if proc.poll() is not None:
+            break
+        time.sleep(0.05)
+    pytest.fail(f'no {text!r} in {path}: {path.read_text()}')
+
+
+def test_a_duplicate_on_another_host_stops_once_it_hears_the_older_claim(tmp_path):
+    """
+    Check two nodes of one name on two hosts (network namespaces): the younger stops.
+
+    Each holds its own host's lock (a network namespace is a host to the lock as to DDS), so
+    the younger does not wait for the claims of other hosts and stops when DDS brings the older
+    node's claim: one FATAL line, exit code 1; the older node goes on.
+    """
+    from netns_hosts import can_make_namespaces, NetnsHosts
+    why = can_make_namespaces()
+    if why:
+        pytest.skip(f'{why}: the hosts of this test are network namespaces')
+    args = ENTRY + ['--ros-args', '-r', '__ns:=/startup_hosts', '-p', 'log.enabled:=false',
+                    '-p', 'info_period:=0.0']
+    with NetnsHosts(2) as net:
+        env = net.ros_env(child_env(PYTHONUNBUFFERED='1'))
+        outputs = [tmp_path / f'h{host}.out' for host in range(2)]
+        procs = []
+        for host, path in enumerate(outputs):
+            with open(path, 'w') as out:
+                procs.append(net.popen(host, args, stdout=out, stderr=subprocess.STDOUT,
+                                       env=env, cwd=tmp_path))
+            if host == 0:   # (the younger may hear the claim before its start-up line, or after)
+                _wait_for_line(path, READY, procs[-1])
+        older, younger_node = procs
+        try:
+            code = younger_node.wait(timeout=TIMEOUT)
+        except subprocess.TimeoutExpired:
+            code = 'still running'
+        running = older.poll() is None
+        older.send_signal(signal.SIGINT)
+        older_code = older.wait(timeout=TIMEOUT)
+    text = outputs[1].read_text()
+    assert code == 1, text
+    fatal = [line for line in text.splitlines() if '[FATAL]' in line]
+    assert len(fatal) == 1 and 'another node named /startup_hosts/sim_node' in fatal[0], text
+    assert running and older_code == 0, outputs[0].read_text()
 
 
 def test_reset_answer_names_the_new_log_file(harness, tmp_path):

@@ -4,24 +4,40 @@ One running node per fully qualified name, settled before the node publishes any
 Two nodes of one name (a fleet or a node started twice) would publish on the same topics and
 answer the same services, and a controller could not tell them apart; a duplicate's samples
 (from t = 0 again) would reach a running controller. So the name is settled before the node
-creates any other publisher or steps.
+creates any other publisher or steps, in two parts.
 
-Each node claims its name as soon as it exists, on the hidden topic ``~/_name_claim``
-(reliable, transient local: a node that comes later still receives it): it announces its start
-time and a random instance id, and listens there for the others'. The older claim wins, by
-(start time, instance id): every node orders two claims the same way, so of two or more nodes
-of one name exactly one goes on, whichever hears the other first, and a running node is never
-the one refused. :meth:`NameClaim.settle` then waits for the others' claims while the scene is
-prepared and for at least :data:`SETTLE_S` after the claim (how late a running node's claim
-arrives, in steps of sim_node's announcement period: docs/topics.md), longer while claim
-writers have matched whose claims have not arrived yet. A refused node raises before it
-publishes. A claim heard later still stops the node (:attr:`NameClaim.refusal`, read by the
-spin loop). With ``allow_duplicate_name`` there is no wait: one warning when another claim is
-heard, and the node goes on.
+On this host, at once: the node takes the host's lock on (ROS domain id, fully qualified name)
+(:class:`~det_sim_ros.ros.host_lock.HostNameLock`: one network namespace, released when the
+process ends, SIGKILL included). A node that finds it held by another process is a duplicate on
+this host and is refused before it claims or publishes anything. A node that takes it is the
+only one of its name on this host, and it need not wait for DDS to find the others of this
+host: it publishes as soon as it has started.
+
+Across hosts, through DDS: each node that took the lock claims its name on the hidden topic
+``~/_name_claim`` (reliable, transient local: a node that comes later still receives it): it
+announces its start time and a random instance id, and listens there for the others'. The
+older claim wins, by (start time, instance id): every node orders two claims the same way, so
+of two or more nodes of one name exactly one goes on, and a running node is never the one
+refused. Claims that arrived while the scene was prepared are read before the node publishes;
+a claim heard later stops the node (:attr:`NameClaim.refusal`, read by the spin loop). So a
+duplicate on another host is stopped as soon as DDS brings the older claim (0.19-0.70 s after
+its own claim in the measurements of docs/topics.md), and its first samples of that time can
+reach the other host's subscribers. Waiting that long before every start would delay every
+lone node's first sample for a case that is a misconfiguration of several hosts, which ROS
+itself does not check at all; a node on one host, started twice, is caught before it publishes.
+
+Where the host lock is unavailable (not Linux) DDS alone settles the name: :meth:`NameClaim.settle`
+waits for the others' claims while the scene is prepared and for at least :data:`SETTLE_S`
+after the claim (how late a running node's claim arrives, in steps of sim_node's announcement
+period: docs/topics.md), longer while claim writers have matched whose claims have not arrived
+yet. With ``ROS_AUTOMATIC_DISCOVERY_RANGE=OFF`` the node discovers no other node, not even of
+this host: it takes no lock and does not wait. With ``allow_duplicate_name`` there is no wait
+and no refusal: one warning when another node of the name is found, and the node goes on.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 import weakref
@@ -29,10 +45,13 @@ import weakref
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-__all__ = ['CLAIM_TOPIC', 'Claim', 'NameClaim', 'SETTLE_S', 'SETTLE_MAX_S', 'younger']
+from .host_lock import HELD_ELSEWHERE, HostNameLock, LockState, UNAVAILABLE
+
+__all__ = ['CLAIM_TOPIC', 'Claim', 'discovers_no_other_node', 'NameClaim', 'SETTLE_S',
+           'SETTLE_MAX_S', 'younger']
 
 CLAIM_TOPIC = '~/_name_claim'
-SETTLE_S = 0.75      # s after the claim before the node may publish (see the module doc)
+SETTLE_S = 0.75      # s after the claim before the node may publish, without a host lock
 SETTLE_MAX_S = 3.0   # s at most, while matched claim writers have not been heard yet
 
 
@@ -72,21 +91,36 @@ def _refusal(node) -> str:
 
 class NameClaim:
     """
-    The node's claim on its name: announced at once, compared with every other one heard.
+    The node's claim on its name: the host's lock taken, the claim announced, others compared.
 
     ``refusal`` is '' while the node may run, else the one line it stops with. ``allow``:
     whether a duplicate only warns (None: not known yet, :meth:`settle` says).
     """
 
     def __init__(self, node, allow: bool | None = None):
-        self.claim = Claim(time.time_ns(), int.from_bytes(os.urandom(8), 'little'))
         self.refusal = ''
-        self._claimed_at = time.monotonic()
         self._heard_claims = set()
         self._older_heard = False
         # weak: the node's subscription holds this object's callback, and a node whose start
         # failed must be freed at once (it holds its logger's /rosout publisher)
         self._node, self._allow, self._warned = weakref.ref(node), allow, False
+        self._subscription = self._publisher = None
+        # taken before the claim exists: a node of this host refused by the lock never
+        # announces a claim, so no running node of this host can hear itself outranked
+        self._host_lock = (None if discovers_no_other_node() else
+                           HostNameLock(node.context.get_domain_id(),
+                                        node.get_fully_qualified_name()))
+        if self.host_lock_state is not HELD_ELSEWHERE:
+            self._announce(node)
+
+    @property
+    def host_lock_state(self) -> LockState | None:
+        """Return the host lock's state; None when the node discovers no other node (no lock)."""
+        return None if self._host_lock is None else self._host_lock.state
+
+    def _announce(self, node) -> None:
+        self.claim = Claim(time.time_ns(), int.from_bytes(os.urandom(8), 'little'))
+        self._claimed_at = time.monotonic()
         # a writer keeps its one claim for the nodes that come later; the reader's history is
         # shared by all writers of the (keyless) topic, so it keeps many: claims that arrive
         # together must not overwrite the older one before it is read
@@ -100,23 +134,41 @@ class NameClaim:
 
     def settle(self, allow: bool) -> str:
         """
-        Wait until the name is settled; return the refusal ('' : the node may go on).
+        Settle the name; return the refusal ('' : the node may go on).
 
-        Without ``allow``: spin the node's callbacks (only its claim subscription and
-        parameter services exist yet) until an older claim is heard, or :data:`SETTLE_S` after
-        the claim has passed and every matched claim writer has been heard (at most
-        :data:`SETTLE_MAX_S`). With ``allow`` it returns at once.
+        Another node of this host holds the name: the refusal at once (with ``allow``, one
+        warning, and the node claims its name too). This node holds the host's lock (or
+        discovers no other node): the claims that arrived by now are read, and the node goes
+        on. No host lock on this system: the node's callbacks are spun (only its claim
+        subscription and parameter services exist yet) until an older claim is heard, or
+        :data:`SETTLE_S` after the claim has passed and every matched claim writer has been
+        heard (at most :data:`SETTLE_MAX_S`). With ``allow`` there is no wait.
         """
         self._allow = allow
+        node = self._node()
+        if self.host_lock_state is HELD_ELSEWHERE:
+            self._answer_older()
+            if allow and node is not None and self._publisher is None:
+                self._announce(node)
+            return self.refusal
         if self._older_heard:
             self._answer_older()
-        node = self._node()
-        if allow or node is None or self.refusal:
+        if node is None or self.refusal:
             return self.refusal
-        from rclpy.executors import SingleThreadedExecutor
-        executor = SingleThreadedExecutor(context=node.context)
-        executor.add_node(node)
-        try:
+        if self.host_lock_state is UNAVAILABLE and not allow:
+            self._wait_for_claims(node)
+        else:
+            self._read_arrived_claims(node)
+        return self.refusal
+
+    def release(self) -> None:
+        """Let the host's lock on the name go (the node is destroyed)."""
+        if self._host_lock is not None:
+            self._host_lock.release()
+
+    def _wait_for_claims(self, node) -> None:
+        """Spin until an older claim, or until the claims of DDS have settled the name."""
+        with _executor(node) as executor:
             while not self.refusal:
                 waited = time.monotonic() - self._claimed_at
                 unheard = self._subscription.get_publisher_count() > len(self._heard_claims)
@@ -124,10 +176,14 @@ class NameClaim:
                     break
                 executor.spin_once(timeout_sec=0.02 if waited >= SETTLE_S
                                    else min(0.02, SETTLE_S - waited))
-        finally:
-            executor.remove_node(node)
-            executor.shutdown(timeout_sec=0.0)
-        return self.refusal
+
+    def _read_arrived_claims(self, node) -> None:
+        """Run what has arrived (no wait) until a round brings no new claim, or a refusal."""
+        with _executor(node) as executor:
+            heard = -1
+            while not self.refusal and len(self._heard_claims) != heard:
+                heard = len(self._heard_claims)
+                executor.spin_once(timeout_sec=0.0)
 
     def _heard(self, msg) -> None:
         other = Claim.parse(msg.data)
@@ -150,3 +206,21 @@ class NameClaim:
                                       + ' (allow_duplicate_name is true: started anyway)')
         else:
             self.refusal = _refusal(node)
+
+
+@contextlib.contextmanager
+def _executor(node):
+    """Yield an executor of the node's callbacks alone, for its start-up (before its spin)."""
+    from rclpy.executors import SingleThreadedExecutor
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    try:
+        yield executor
+    finally:
+        executor.remove_node(node)
+        executor.shutdown(timeout_sec=0.0)
+
+
+def discovers_no_other_node(environ=os.environ) -> bool:
+    """Return True if ROS_AUTOMATIC_DISCOVERY_RANGE is OFF: no other node, even of this host."""
+    return environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE', '').strip().upper() == 'OFF'

@@ -75,16 +75,23 @@ class SimNode(Node):
         super().__init__(NODE_NAME, automatically_declare_parameters_from_overrides=True,
                          **kwargs)
         try:
+            # claimed first: the others' claims are heard while the scene is prepared
+            self.name_claim = NameClaim(self)
             self._prepare()
         except Exception as exc:
             exc.logger_name = self.get_logger().name   # the FATAL line names the node as named
-            # its claim must not outlive a start that failed: no later node may hear it
+            # its claim must not outlive a start that failed: no later node may hear it, nor
+            # find its name locked on this host
+            self._release_name()
             super().destroy_node()
             raise
 
+    def _release_name(self):
+        claim = getattr(self, 'name_claim', None)   # (None: the claim itself failed)
+        if claim is not None:
+            claim.release()
+
     def _prepare(self):
-        # claimed first: the others' claims are heard while the scene is prepared
-        self.name_claim = NameClaim(self)
         self.scene, scene_file = load_node_scene(self)
         self._pacing = make_pacing(self._p)
         started = time.perf_counter()
@@ -246,6 +253,7 @@ class SimNode(Node):
             self._recorder.close()
         if self._live is not None:
             self._live.close()
+        self._release_name()
         return super().destroy_node()
 
     # -- stepping ---------------------------------------------------------------------------

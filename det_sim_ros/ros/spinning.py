@@ -119,7 +119,7 @@ def spin_until_stopped(node, stop) -> int:
     it is frozen (:func:`gc.freeze`), so the garbage collector's full collections no longer walk
     it. Unfrozen, one such collection a fraction of a second into a run held the node for
     250 ms beside a busy core: 250 periods late, a slip in real time. A node that hears an
-    older one of its name only now (``node.name_claim.refusal``, after its start-up's wait)
+    older one of its name only after its start-up (of another host: ``node.name_claim.refusal``)
     stops the same way, with its FATAL line before the stop line, and returns 1; else 0.
     """
     executor = make_executor(node.context)
