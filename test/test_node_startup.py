@@ -331,6 +331,33 @@ def test_the_host_lock_is_one_per_domain_and_name():
     assert len(addresses) == 3 and len({len(a) for a in addresses}) == 1
 
 
+def test_the_host_lock_alone_refuses_a_node(tmp_path):
+    """
+    Check that a name held on this host refuses a node at once, with no claim on DDS at all.
+
+    This process holds the lock of /startup_locked/sim_node and runs no node: only the lock can
+    refuse the one started. With ROS_AUTOMATIC_DISCOVERY_RANGE=OFF (a node that can meet no
+    other) no lock is taken and it starts.
+    """
+    from det_sim_ros.ros.host_lock import HostNameLock, LockState
+    held = HostNameLock(int(os.environ.get('ROS_DOMAIN_ID', '0')), '/startup_locked/sim_node')
+    assert held.state is LockState.HELD
+    args = ['--ros-args', '-r', '__ns:=/startup_locked', '-p', 'log.enabled:=false']
+    try:
+        refused = run_entry(args, cwd=tmp_path)
+        assert refused.returncode == 1, refused.stderr
+        fatal = [line for line in refused.stderr.splitlines() if '[FATAL]' in line]
+        assert len(fatal) == 1 and 'another node named /startup_locked/sim_node' in fatal[0]
+        alone = Node(tmp_path, *args, environ={'ROS_AUTOMATIC_DISCOVERY_RANGE': 'OFF'})
+        try:
+            alone.wait_for(READY)
+        finally:
+            stopped = alone.stop()
+        assert stopped == 0, ''.join(alone.lines)
+    finally:
+        held.release()
+
+
 def test_a_discovery_range_off_takes_no_lock():
     """Check that only ROS_AUTOMATIC_DISCOVERY_RANGE=OFF means that no other node is found."""
     from det_sim_ros.ros.name_check import discovers_no_other_node
