@@ -586,7 +586,8 @@ def test_view_exits_with_the_reason_when_its_player_dies(tmp_path):
         await client.playback(0, 1.0, 0, 'play')
         await client.ws.close()
     asyncio.run(play())
-    view.wait_for('the player stopped')   # by itself: no Ctrl-C
+    view.wait_for('the player stopped')
+    view.proc.wait(timeout=view.TIMEOUT)   # it exits by itself: a Ctrl-C now would race it
     code = view.stop()
     assert code == 1, ''.join(view.lines)
     assert any('det_sim view: error: the player stopped: FileNotFoundError' in line
