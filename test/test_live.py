@@ -551,6 +551,44 @@ def test_a_seek_starts_at_the_chunk_that_holds_its_time(tmp_path):
         assert read == every[len(every) - len(read):] and len(every) - len(read) <= first
 
 
+def test_the_player_lets_its_lock_go_before_it_calls_the_server(tmp_path):
+    """
+    The SDK runs the player's callbacks on its threads while it holds a lock of its own, and the
+    player calls the SDK (playback state, time): holding the player's lock through such a call
+    deadlocks the two. Here every such call first waits for a callback run from another thread,
+    as the SDK's would be: it must get the player's lock meanwhile.
+    """
+    from det_sim_ros.io.log_view import LogPlayer
+    log = small_log(tmp_path / 'run')
+    player = LogPlayer(log, port=0, paused=True)
+    got_the_lock = []
+
+    def as_the_sdk_runs_it(call):
+        def call_with_a_callback_meanwhile(*args, **kwargs):
+            done = threading.Event()
+
+            def sdk_thread():
+                player.on_subscribe(None, None)   # a callback: it takes the player's lock
+                done.set()
+            threading.Thread(target=sdk_thread, daemon=True).start()
+            got_the_lock.append(done.wait(2.0))
+            return call(*args, **kwargs)
+        return call_with_a_callback_meanwhile
+    player.server.playback_state = as_the_sdk_runs_it(player.server.playback_state)
+    player.server.time = as_the_sdk_runs_it(player.server.time)
+    try:
+        async def play():
+            client = await Client.connect(player.server.port)
+            await client.pump(lambda: client.channels, 'channels')
+            await client.playback(0, 1.0, 0, 'play')
+            await client.ws.close()
+        asyncio.run(play())
+        assert player.finished.wait(30.0) and not player.failed
+    finally:
+        player.stop()
+    assert len(got_the_lock) >= 2 and all(got_the_lock), got_the_lock
+
+
 def test_a_speed_beyond_what_the_player_serves_is_capped_and_the_client_told(tmp_path):
     from det_sim_ros.io.log_view import LogPlayer, MAX_MESSAGES_PER_S
     log = small_log(tmp_path / 'run')
