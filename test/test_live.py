@@ -553,6 +553,8 @@ def test_a_seek_starts_at_the_chunk_that_holds_its_time(tmp_path):
 
 def test_the_player_lets_its_lock_go_before_it_calls_the_server(tmp_path):
     """
+    Check that every call into the SDK lets a callback from another thread take the lock.
+
     The SDK runs the player's callbacks on its threads while it holds a lock of its own, and the
     player calls the SDK (playback state, time): holding the player's lock through such a call
     deadlocks the two. Here every such call first waits for a callback run from another thread,
