@@ -128,3 +128,19 @@ def test_view_of_the_directory_serves_the_newest_run_and_its_duration(log_dir, t
     messages = len(list(LogReader(runs['split']).messages()))
     match = re.search(r'(\d+) file\(s\), (\d+) messages, ([\d.]+) s of sim time', line)
     assert match and match.groups() == ('4', str(messages), f'{STEPS["split"] * 1e-3:.3f}')
+
+
+def test_replay_of_the_directory_is_the_newest_run(log_dir, capsys):
+    """info and resim of a log directory take its newest run whole, and say so in one line."""
+    from det_sim_ros.cli import main_replay
+    folder, runs = log_dir
+    newest = os.path.basename(runs['split'][0])[:-5]
+    assert main_replay(['info', str(folder)]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    [note] = [line for line in printed if line.startswith('det_sim replay info: the newest of')]
+    assert f'the newest of 3 runs, {newest} (4 file(s))' in note
+    assert printed[1] == 'files: ' + ', '.join(runs['split'])
+    assert f'log time: 0.000000 .. {STEPS["split"] * 1e-3:.6f} s' in printed
+    # re-simulated: the newest run's own scene and inputs reproduce it bit for bit
+    assert main_replay(['resim', str(folder)]) == 0
+    assert 'bit-exact' in capsys.readouterr().out

@@ -3,7 +3,8 @@
 
 Re-simulate a logged run and compare (``resim``), republish a log with its recorded timing
 (``play``), summarize a log (``info``), rewrite an unfinished log as a finished file
-(``recover``).
+(``recover``). A log directory means its newest run, as for plot and view (one line says so
+when it holds several; det_sim_ros.io.log.runs): files of unrelated runs are never chained.
 """
 
 from __future__ import annotations
@@ -60,9 +61,20 @@ def main(args) -> int:
     return args.action(args)
 
 
+def _open_run(args):
+    """Return a LogReader of the run ``args.log`` names (a directory: its newest run)."""
+    from ...io.log import log_files
+    try:
+        log_files(args.log)
+    except FileNotFoundError:   # nothing to tell apart: the checks say what is wrong
+        return log_checks.open_log(args.log)
+    [files] = common.log_runs_to_use(args.log, f'replay {args.command}')
+    return log_checks.open_log(files)
+
+
 def _resim(args) -> int:
     from ...io.replay import resimulate
-    reader = log_checks.open_log(args.log)
+    reader = _open_run(args)
     result = resimulate(reader.files, method=args.method, substeps=args.substeps)
     print(result.table())
     ok = result.ok(args.tolerance)
@@ -80,7 +92,7 @@ def _torn_exit(files, code: int) -> int:
 
 
 def _info(args) -> int:
-    reader = log_checks.open_log(args.log)
+    reader = _open_run(args)
     counts: dict[str, int] = {}
     first = last = None
     for message in reader.messages():
@@ -114,7 +126,7 @@ def _play(args) -> int:
     rule = ros_rule_error(ros_args)
     if rule:
         raise common.CliError(rule)
-    files = log_checks.open_log(args.log).files
+    files = _open_run(args).files
     torn = log_checks.torn_files(files)
     if torn:   # nothing is published from a file that may end anywhere
         raise log_checks.LogFileError(log_checks.torn_note(torn, 'not played'))
