@@ -131,7 +131,7 @@ def test_view_of_the_directory_serves_the_newest_run_and_its_duration(log_dir, t
 
 
 def test_replay_of_the_directory_is_the_newest_run(log_dir, capsys):
-    """info and resim of a log directory take its newest run whole, and say so in one line."""
+    """Check that info and resim of a log directory take its newest run whole, said in a line."""
     from det_sim_ros.cli import main_replay
     folder, runs = log_dir
     newest = os.path.basename(runs['split'][0])[:-5]
