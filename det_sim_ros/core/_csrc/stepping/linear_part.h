@@ -14,7 +14,8 @@
 #include "stepping/matrix_phi.h"
 #include "stepping/method.h"
 
-#define DS_LIN_SLOTS 8   /* step sizes whose weights are kept */
+/* step sizes whose weights are kept: a period's own and a charge transient's dyadic ones */
+#define DS_LIN_SLOTS 8
 #define DS_LIN_CHAINS 3  /* phi chains kept per A: the step-count ladder's odd factors 1, 3, 5 */
 
 /* The weights of one step size: phi_0(c_i h A) (rows 0..s) and the table's merged
