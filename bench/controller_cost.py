@@ -45,7 +45,6 @@ CASES = (
 def run_case(case) -> list:
     """Return [× real time, steps, (Jacobians, weight sets, chains)] of one case, here."""
     import numpy as np
-    sys.path.insert(0, HERE)
     from continuum_reference import switching_inputs
     from det_sim_ros.analysis.scenarios import step_scene
     from det_sim_ros.sim.simulator import simulate, Simulator
