@@ -166,7 +166,8 @@ def _acceleration(a, q, u):
 
 def _newton(a, q, u, scale):
     for _ in range(_NEWTON_ITERS):
-        g = _acceleration(a, q, u)
+        with np.errstate(invalid='ignore'):    # an iterate past |w'| = 1 is an answer: None
+            g = _acceleration(a, q, u)
         if not np.all(np.isfinite(g)):
             return None
         J = complex_step_jacobian(lambda c: _acceleration(a, c, u), q)
