@@ -48,15 +48,14 @@ def run_case(case) -> list:
     from continuum_reference import switching_inputs
     from det_sim_ros.analysis.scenarios import step_scene
     from det_sim_ros.sim.simulator import simulate, Simulator
+    from work_precision_map import level_overrides
     beam, shapes, n_r, tolerance, drive = case
     if drive == 'dither':
         extra = {'scene.initial_state': 'rest'}
         volts = 1500.0 + np.random.default_rng(1).uniform(-25.0, 25.0, 2000)
     else:
         extra, volts = switching_inputs(beam, 0.20, drive, 1e-3)
-    scene = step_scene(beam, 0.20, **{'scene.fidelity': 'exact', 'scene.shapes': shapes,
-                                      'scene.n_ritz': n_r, 'integrator.tolerance': tolerance},
-                       **extra)
+    scene = step_scene(beam, 0.20, **level_overrides('exact', shapes, n_r, tolerance), **extra)
     seconds = len(volts) * scene.dt
     best = float('inf')
     for _ in range(2):
