@@ -1,5 +1,7 @@
 """
-What a controller's moving command costs: × real time, steps and φ chains per case and level.
+What a controller's moving command costs: × real time, steps and the method's upkeep.
+
+Per case and level: φ chains of the linearized stages; Jacobians and LU factorizations of BDF.
 
 A controller sends a new command every period, and each move starts a charge transient
 (docs/numerics.md, 'Charge transients in dyadic steps'). Cases, fixed or simply supported beam
@@ -63,7 +65,9 @@ def run_case(case) -> list:
         start = time.process_time()
         simulate(sim, volts, seconds)
         best = min(best, time.process_time() - start)
-    return [seconds / best, sim.steps_taken, list(sim.stepper.linear_counts())]
+    if getattr(sim.method, 'multistep', False):
+        return [seconds / best, sim.steps_taken, list(sim.stepper.bdf_counts()), 'bdf']
+    return [seconds / best, sim.steps_taken, list(sim.stepper.linear_counts()), sim.method.name]
 
 
 def main(argv=None) -> int:
@@ -84,9 +88,12 @@ def main(argv=None) -> int:
             out = subprocess.run([sys.executable, os.path.join(HERE, 'controller_cost.py'),
                                   '--case', json.dumps(case)], env=env, cwd=tree,
                                  capture_output=True, text=True, check=True)
-            speed, steps, counts = json.loads(out.stdout.strip().splitlines()[-1])
-            chains = counts[2] if len(counts) > 2 else counts[1]   # older kernels: weight sets
-            cells.append(f'{speed:5.0f}x {steps:6d} steps {chains:5d} chains')
+            speed, steps, counts, method = json.loads(out.stdout.strip().splitlines()[-1])
+            if method == 'bdf':
+                upkeep = f'{counts[0]:5d} Jacobians {counts[1]:5d} LUs'
+            else:
+                upkeep = f'{counts[2]:5d} chains'
+            cells.append(f'{speed:5.0f}x {steps:6d} steps {method:>17} {upkeep}')
         beam, shapes, n_r, tolerance, drive = case
         print(f'{beam:>16} {shapes:>14} {n_r} {tolerance:.0e} {drive!s:>10}: '
               + ' | '.join(cells), flush=True)

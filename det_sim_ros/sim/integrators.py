@@ -29,7 +29,9 @@ import numpy as np
 
 from ..core import kernel
 
-__all__ = ['Method', 'METHODS', 'get_method', 'choose_substeps', 'step_control', 'error_weights',
+__all__ = ['Method', 'METHODS', 'MULTISTEP', 'BDF', 'BDF_MIN_TERMS', 'BDF_MIN_TOLERANCE',
+           'bdf_weights', 'get_method',
+           'choose_substeps', 'step_control', 'error_weights',
            'linear_refresh',
            'transient_settings', 'TransientSettings', 'StepControl', 'make_stepper',
            'advance', 'AUTO_TOLERANCE', 'integration_tolerance']
@@ -53,6 +55,9 @@ class Method:
     # True: the linear part also holds the Jacobian of the beams' q, qdot (dense, taken at a
     # period's start, see LINEAR_REFRESH), so their stiff modes are integrated exactly too
     linearized: bool = False
+    # True: not a table's stages but the variable-order BDF stepper (core/_csrc/stepping/bdf.c)
+    # with its own step-size and order control; the table is then unused
+    multistep: bool = False
 
     @property
     def n_stages(self) -> int:
@@ -66,8 +71,8 @@ class Method:
 
     @property
     def adaptive(self) -> bool:
-        """Return whether the step count can follow an error estimate (an embedded pair)."""
-        return bool(self.embedded)
+        """Return whether the steps can follow an error estimate (an embedded pair, or BDF's)."""
+        return bool(self.embedded) or self.multistep
 
 
 def _explicit(name, order, a, b, c, description):
@@ -155,6 +160,25 @@ METHODS = {m.name: m for m in (
            'Krogstad ETDRK4-B with the beams linearized: exact charge relaxation and exact '
            'linear beam modes (their Jacobian per control period)', *_RK4_EMBEDDED, True),
 )}
+# The variable-order BDF stepper (numerical differentiation formulas of orders 1-5, the scheme of
+# scipy's BDF; core/_csrc/stepping/bdf.c, physics/reference_bdf.py): implicit in every state,
+# one to three right-hand sides per step and an LU of I - h/alpha J when the step changes,
+# the Jacobian kept while Newton converges. Where the beams have many stiff, heavily damped
+# modes it needs far fewer right-hand sides than the exponential stages and no matrix phi
+# functions (docs/fidelity.md, "Which method").
+BDF = Method('bdf', 5, (0.0,), _ETD_EULER, False,
+             'variable-order BDF (NDF orders 1-5) with its own step and order control',
+             multistep=True)
+MULTISTEP = {BDF.name: BDF}
+# 'auto' steps a single coupled group (no array copies, no amplifier) with BDF from this many
+# Ritz terms in a beam, at a tolerance of at least BDF_MIN_TOLERANCE: the simply supported
+# level (7 polynomials, 3e-3) ran its 2 Hz switching case 3x faster at the same error and its
+# controller case 1.5x (bench/controller_cost.py, docs/fidelity.md "Which method"). Elsewhere
+# the linearized stages stay ahead: at 3 buckling modes (the fixed default) their phi functions
+# are 6 x 6, and at 1e-4 (n_r 9) BDF's orders <= 5 take many steps (a dithered hold 7x against
+# 16x real time).
+BDF_MIN_TERMS = 6
+BDF_MIN_TOLERANCE = 1e-3
 # The dense linear part of 'etdrk4_linearized' is taken anew at a period's start when the input
 # changed or a q or qdot moved by more than this in the error norm's scale (beam length, length
 # per period) since it was taken: between, the weights phi_k(c h A) of each step size are kept.
@@ -212,10 +236,10 @@ def integration_tolerance(scene) -> float:
 def get_method(name: str) -> Method:
     """Look up a method by name with a clear error."""
     try:
-        return METHODS[name]
+        return {**METHODS, **MULTISTEP}[name]
     except KeyError:
         raise ValueError(f'unknown integrator method {name!r}; known: '
-                         + ', '.join(sorted(METHODS)) + ", or 'auto'") from None
+                         + ', '.join(sorted({**METHODS, **MULTISTEP})) + ", or 'auto'") from None
 
 
 # Step size that meets a tolerance: a method of order p reaches a relative Delta-y error of about
@@ -270,6 +294,11 @@ LOCAL_TOLERANCE = {3: 5e-4, 4: 5e-4}
 # on the three exact 'step' scenes (fixed eps_b 0.15, 0.20, simply supported 0.20) at n_r 3, 5, 7
 # and tolerance 1e-6 against etdrk4 at 1e-10: 5e-4 gave up to 3e-6 (n_r 7), this up to ~1e-6.
 LINEARIZED_LOCAL_TOLERANCE = 1.25e-4
+# 'bdf': its local error per step (weighted max norm of bdf_weights) per unit of the scene
+# tolerance, chosen with the work-precision map (bench/work_precision_map.py): at the simply
+# supported level (n_r 7, 3e-3) it keeps the step and switching cases within the model's own
+# error (docs/fidelity.md).
+BDF_LOCAL_TOLERANCE = 3e-4
 # At most MAX_SUBSTEPS_FACTOR x the fixed count of choose_substeps per period: bounds the cost
 # of a period. A single actuator never reaches it at the calibrated settings (a snap-through
 # takes ~30 steps, the bound at 1e-6 is 40), but an array whose copies switch at different
@@ -315,6 +344,8 @@ def step_control(method: Method, model, substeps: int = 0) -> StepControl:
     """
     scene = model.scene
     tolerance = integration_tolerance(scene)
+    if method.multistep:   # its own step control; the counts are unused
+        return StepControl(1, BDF_LOCAL_TOLERANCE * tolerance, 1, 1, 1.0)
     beam_rate = 0.0 if method.linearized else model.fastest_beam_rate()
     n0 = substeps or choose_substeps(method, scene.dt, tolerance, beam_rate)
     if substeps or not method.adaptive:
@@ -350,7 +381,9 @@ def make_stepper(model, method: Method, control: StepControl, dt: float,
                           jump_ref=float(transient.jump_ref),
                           linearized=method.linearized,
                           lin_refresh=linear_refresh(integration_tolerance(model.scene)),
-                          lin_refresh_input=LINEAR_REFRESH_INPUT * _largest_v_max(model))
+                          lin_refresh_input=LINEAR_REFRESH_INPUT * _largest_v_max(model),
+                          bdf=method.multistep, bdf_tolerance=control.tolerance,
+                          bdf_weights=bdf_weights(model))
 
 
 def _largest_v_max(model) -> float:
@@ -371,6 +404,32 @@ def error_weights(model) -> np.ndarray:
         s = a.cell_slice(c)
         w[s] = 1.0 / a.length[c]
         w[a.n_q + s.start:a.n_q + s.stop] = model.scene.dt / a.length[c]
+    return w
+
+
+# The BDF stepper's norm (core/_csrc/stepping/bdf.c, physics/reference_bdf.py) holds every
+# state it integrates implicitly: the beams' as error_weights, the charge on C0 v_max and the
+# creep strain on 1 (strain), both BDF_SLOW_WEIGHT times looser. The charge must be in the norm:
+# left out, nothing resolves the charge transient after a 3 kV jump and the snap times move
+# (1.5 % instead of 0.8 % on the simply supported 2 Hz case at n_r 7); weighted like the
+# beams, a controller's +-25 V steps every period are each resolved (2.5x the steps).
+# Measured on the simply supported step, 2 Hz switching and controller cases at n_r 7 (1e-2 and
+# 1e-4 bracket it: the snap error grows, or the controller's steps). The power monitor's
+# integrals (W_in, W_diss) feed back on nothing and stay out (0).
+BDF_SLOW_WEIGHT = 1e-3
+
+
+def bdf_weights(model) -> np.ndarray:
+    """Return 1 / scale of each state in the BDF stepper's error and Newton norms."""
+    a = model.arrays
+    w = error_weights(model)
+    names = model.state_names
+    for i, name in enumerate(names):
+        if name.startswith('q_p['):
+            cell = int(name[4:-1])
+            w[i] = BDF_SLOW_WEIGHT / (a.C0[cell] * model.scene.cell_physics()[cell].v_max)
+        elif name.startswith(('eps_E[', 'v_a[')):
+            w[i] = BDF_SLOW_WEIGHT
     return w
 
 

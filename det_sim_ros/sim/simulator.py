@@ -24,8 +24,8 @@ from typing import Callable
 import numpy as np
 
 from .amplifier import CommandStage
-from .integrators import (get_method, integration_tolerance, make_stepper, Method, step_control,
-                          transient_settings)
+from .integrators import (BDF_MIN_TERMS, BDF_MIN_TOLERANCE, get_method, integration_tolerance,
+                          make_stepper, Method, step_control, transient_settings)
 from ..core import kernel
 from ..physics.model import build_model, Model, ModelDomainError
 from ..physics.statics import initial_state
@@ -121,16 +121,28 @@ class Simulator:
         self.reset()
 
     def _pick_method(self, name: str) -> Method:
+        a = self.model.arrays
+        one_group = a.n_groups == 1 and not a.amplifier
         if name == 'auto':
             if self.scene.source != 'rc':
                 return get_method('dp5')
-            # beams with more than one Ritz term have stiff, heavily damped modes
-            modes = np.diff(self.model.arrays.cell_q)
+            # beams with more than one Ritz term have stiff, heavily damped modes; from
+            # BDF_MIN_TERMS on, BDF steps them for less than the linearized stages' phi upkeep
+            # (at loose tolerances)
+            modes = np.diff(a.cell_q)
+            tolerance = integration_tolerance(self.scene)
+            if (one_group and np.max(modes) >= BDF_MIN_TERMS
+                    and tolerance >= BDF_MIN_TOLERANCE):
+                return get_method('bdf')
             return get_method('etdrk4_linearized' if np.any(modes > 1) else 'etdrk4')
         try:
-            return get_method(name)
+            method = get_method(name)
         except ValueError as exc:   # a scene value: one line naming the key and the choices
             raise SceneError(f"scene key 'integrator.method': {exc}") from None
+        if method.multistep and not one_group:
+            raise SceneError(f"scene key 'integrator.method': {name!r} steps one coupled group "
+                             'without an amplifier (not an array, nor an amplified supply)')
+        return method
 
     # -- state ----------------------------------------------------------------------------
     def reset(self, x0=None) -> None:
@@ -207,6 +219,8 @@ class Simulator:
         """
         threads = self.stepper.threads
         on = f', {threads} threads' if threads > 1 else ''
+        if self.method.multistep:
+            return f'{self.method.name} adaptive (steps and order){on}'
         if self.adaptive:
             return f'{self.method.name} adaptive (now x{self.substeps}){on}'
         return f'{self.method.name} x{self.substeps}{on}'

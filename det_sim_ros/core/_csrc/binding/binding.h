@@ -26,6 +26,7 @@
 #include "stepping/batch.h"
 #include "stepping/group.h"
 #include "stepping/linear_part.h"
+#include "stepping/bdf.h"
 #include "stepping/matrix_phi.h"
 #include "stepping/method.h"
 #include "stepping/stages.h"

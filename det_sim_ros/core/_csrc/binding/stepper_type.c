@@ -45,16 +45,20 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
     static char *kwlist[] = {"model", "c", "terms", "embedded", "error_weights", "dt",
                              "z_tol", "fine", "substeps", "tolerance", "min_substeps",
                              "max_substeps", "exponent", "jump_ref", "linearized",
-                             "lin_refresh", "lin_refresh_input", NULL};
-    PyObject *model, *c, *terms, *embedded, *weights;
+                             "lin_refresh", "lin_refresh_input", "bdf", "bdf_tolerance",
+                             "bdf_weights", NULL};
+    PyObject *model, *c, *terms, *embedded, *weights, *bdf_weights = NULL;
+    int bdf = 0;
+    double bdf_tol = 0.0;
     double dt, z_tol, fine, tol, exponent, jump_ref = 0.0, lin_refresh = 0.0;
     double lin_refresh_input = 0.0;
     long long n0, n_min, n_max;
     int linearized = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O!OOOOdddLdLLd|dpdd", kwlist, &ModelType,
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O!OOOOdddLdLLd|dpddpdO", kwlist, &ModelType,
                                      &model, &c, &terms, &embedded, &weights, &dt, &z_tol, &fine,
                                      &n0, &tol, &n_min, &n_max, &exponent, &jump_ref,
-                                     &linearized, &lin_refresh, &lin_refresh_input))
+                                     &linearized, &lin_refresh, &lin_refresh_input, &bdf,
+                                     &bdf_tol, &bdf_weights))
         return -1;
     if (self->ready) {
         PyErr_SetString(PyExc_RuntimeError, "Stepper already initialised");
@@ -69,11 +73,17 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
         return -1;
     }
     ModelObject *mo = (ModelObject *)model;
-    PyObject *const tables[] = {c, terms, embedded, weights};
+    if (bdf && (mo->m.n_groups != 1 || mo->m.amp || !(bdf_tol > 0.0) || !bdf_weights)) {
+        PyErr_SetString(PyExc_ValueError, "the BDF stepper steps one coupled group without an "
+                                          "amplifier, with bdf_tolerance > 0 and bdf_weights");
+        return -1;
+    }
+    PyObject *const tables[] = {c, terms, embedded, weights, bdf ? bdf_weights : weights};
     const spec specs[] = {{'d', -1, 0, "c"}, {'d', -1, 0, "terms"}, {'d', -1, 0, "embedded"},
-                          {'d', mo->m.n_state, 0, "error_weights"}};
-    buf b[4];
-    if (get_buffers(tables, specs, 4, b) < 0)
+                          {'d', mo->m.n_state, 0, "error_weights"},
+                          {'d', mo->m.n_state, 0, "bdf_weights"}};
+    buf b[5];
+    if (get_buffers(tables, specs, 5, b) < 0)
         return -1;
     const Py_buffer bc = b[0].view, bt = b[1].view, be = b[2].view, bw = b[3].view;
     const Py_ssize_t s = bc.len / 8;
@@ -91,6 +101,9 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
         self->st.linearized = linearized;
         self->st.lin_refresh = lin_refresh;
         self->st.lin_refresh_input = lin_refresh_input;
+        self->st.bdf = bdf;
+        self->st.bdf_tol = bdf_tol;
+        self->st.bdf_weights = b[4].view.buf;
         const int init = ds_stepper_init(&self->st, &mo->m, dt, z_tol, fine, &ctl, bw.buf);
         if (init < 0 || ds_work_init(&self->out_work, &mo->m) < 0) {
             ds_stepper_free(&self->st);
@@ -106,7 +119,7 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
             rc = 0;
         }
     }
-    release_buffers(b, 4);
+    release_buffers(b, 5);
     return rc;
 }
 
@@ -304,6 +317,23 @@ static PyObject *Stepper_linear_counts(StepperObject *self, PyObject *unused)
     return Py_BuildValue("(LLL)", refreshes, fills, chains);
 }
 
+static PyObject *Stepper_bdf_counts(StepperObject *self, PyObject *unused)
+{
+    (void)unused;
+    NEED_READY(self);
+    double jacobians = 0.0, factorizations = 0.0, rejected = 0.0;
+    for (int64_t gi = 0; gi < self->st.n_groups; gi++) {
+        const ds_bdf *b = self->st.group[gi].bdf;
+        if (b) {
+            jacobians += b->jacobians;
+            factorizations += b->factorizations;
+            rejected += b->rejected;
+        }
+    }
+    return Py_BuildValue("(LLL)", (long long)jacobians, (long long)factorizations,
+                         (long long)rejected);
+}
+
 static PyObject *Stepper_reset_control(StepperObject *self, PyObject *unused)
 {
     NEED_READY(self);
@@ -405,6 +435,8 @@ static PyMethodDef Stepper_methods[] = {
     {"linear_counts", (PyCFunction)Stepper_linear_counts, METH_NOARGS,
      "linear_counts() -> (Jacobians taken, weight sets computed, phi chains built) of a "
      "linearized stepper"},
+    {"bdf_counts", (PyCFunction)Stepper_bdf_counts, METH_NOARGS,
+     "bdf_counts() -> (Jacobians taken, LU factorizations, steps rejected) of a BDF stepper"},
     {"reset_control", (PyCFunction)Stepper_reset_control, METH_NOARGS,
      "step counts and error estimates back to their initial values"},
     {"group_substeps", (PyCFunction)Stepper_group_substeps, METH_NOARGS,

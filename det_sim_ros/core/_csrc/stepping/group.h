@@ -12,6 +12,7 @@
  * amp_period.h  an amplified period, split where a law of the amplifier switches
  * coupling.h    the charge's exact coupling to an amplifier output that follows its command
  * linear_part.h a dense linear part over the beams' q, qdot (with matrix_phi.h)
+ * bdf.h         the variable-order BDF stepper, in place of the table's stages
  * method.h      the method table and the phi functions
  */
 #ifndef DETSIM_STEPPING_GROUP_H
@@ -21,6 +22,7 @@
 #include "stepping/method.h"
 
 struct ds_linear;   /* linear_part.h */
+struct ds_bdf;      /* bdf.h */
 
 /* The transients of one DET in an amplified control period (amp_period.c): the charge's and
  * the output's last transient (start time in the period, s; time constant, s; size, V). */
@@ -52,6 +54,7 @@ typedef struct ds_group {
     int64_t q_first, c_first;           /* first coordinate and cell in the whole model */
     int quasi_static;
     struct ds_linear *lin;              /* dense linear part over q, qdot (NULL: none) */
+    struct ds_bdf *bdf;                 /* the BDF stepper's history (NULL: a table method) */
     double *cpl;                        /* the charge's coupling to v_a (coupling.c; NULL:
                                            none) */
     int status;                         /* of the last period (batch) */
@@ -80,6 +83,9 @@ typedef struct ds_stepper {
     int linearized;                     /* a dense linear part over q, qdot per group */
     double lin_refresh;                 /* weighted state change that renews it */
     double lin_refresh_input;           /* input change (V) that renews it (0: any) */
+    int bdf;                            /* step with the BDF stepper instead of the table */
+    double bdf_tol;                     /* its local error per step (weighted norm) */
+    const double *bdf_weights;          /* its norm's 1 / scale per state (init only) */
 } ds_stepper;
 
 #endif

@@ -12,6 +12,7 @@
 #include "stepping/period.h"
 #include "physics/physics.h"
 #include "stepping/amp_period.h"
+#include "stepping/bdf.h"
 #include "stepping/linear_part.h"
 #include "stepping/stages.h"
 
@@ -202,6 +203,8 @@ static int64_t count_ladder(int64_t n)
 int ds_period_core(const ds_stepper *st, ds_group *g, double *x, const double *u_old,
                    const double *u)
 {
+    if (g->bdf)   /* its own steps and step control (bdf.c) */
+        return ds_bdf_period(st, g, x, u);
     ds_control *ctl = &g->ctl;
     const double dt = st->dt;
     if (g->lin) {   /* the dense linear part, taken anew if the state has moved */

@@ -9,6 +9,7 @@
 #include "physics/physics.h"
 #include "stepping/coupling.h"
 #include "stepping/linear_part.h"
+#include "stepping/bdf.h"
 
 /* Whether a group's charge couples exactly to its amplifier outputs (coupling.c). */
 static int coupled(const ds_group *g, const ds_method *me)
@@ -163,6 +164,9 @@ void ds_stepper_free(ds_stepper *st)
         if (g->lin)
             ds_linear_free(g->lin);
         free(g->lin);
+        if (g->bdf)
+            ds_bdf_free(g->bdf);
+        free(g->bdf);
     }
     free(st->group);
     st->group = NULL;
@@ -226,7 +230,17 @@ int ds_stepper_init(ds_stepper *st, const ds_model *m, double dt, double z_tol, 
                 return rc;
             }
         }
+        if (st->bdf) {   /* one coupled group without an amplifier (checked by the caller) */
+            g->bdf = malloc(sizeof(ds_bdf));
+            if (!g->bdf || ds_bdf_init(g->bdf, g->m->n_state, st->bdf_weights, st->bdf_tol,
+                                       st->dt / 16.0) < 0) {
+                free(g->bdf);
+                g->bdf = NULL;
+                return -1;
+            }
+        }
     }
+    st->bdf_weights = NULL;
     return 0;
 }
 
@@ -237,5 +251,7 @@ void ds_reset_control(ds_stepper *st)
         st->group[gi].est = 0.0;
         if (st->group[gi].lin)
             ds_linear_reset(st->group[gi].lin);
+        if (st->group[gi].bdf)
+            ds_bdf_reset(st->group[gi].bdf);
     }
 }

@@ -1,0 +1,398 @@
+/*
+ * The variable-order BDF stepper (bdf.h): the numerical differentiation formulas of orders 1-5
+ * with a quasi-constant step (Shampine & Reichelt, SIAM J. Sci. Comput. 18, 1997; the scheme
+ * of scipy's integrate/_ivp/bdf.py), the history as backward differences D, a simplified
+ * Newton iteration with the Jacobian kept while it converges. Each period's steps fit it
+ * evenly, so the state at its end is the method's own and an input that changes there starts
+ * the next step from it. det_sim_ros/physics/reference_bdf.py documents the choices.
+ *
+ * Every decision depends only on the states and inputs stepped through: runs from a reset are
+ * bit-identical, and a group's result does not depend on the number of threads.
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "stepping/bdf.h"
+#include "physics/physics.h"
+
+#define NEWTON_MAXITER 4
+#define MIN_FACTOR 0.2
+#define MAX_FACTOR 10.0
+#define FD_RELATIVE 1.4901161193847656e-08   /* sqrt(eps) */
+#define MIN_STEP_FRACTION 1e-10              /* of the period: below it the step fails */
+#define N_ROWS (DS_BDF_MAX_ORDER + 3)
+#define LU_KEEP 0.3   /* the LU serves while c is within this fraction of its own */
+
+static const double KAPPA[DS_BDF_MAX_ORDER + 1] = {0.0, -0.1850, -1.0 / 9.0, -0.0823, -0.0415,
+                                                   0.0};
+
+/* gamma_k = sum_{j=1..k} 1/j, alpha_k = (1 - kappa_k) gamma_k and the error constants
+ * kappa_k gamma_k + 1/(k+1), summed as numpy's cumsum does. */
+static void tables(ds_bdf *b)
+{
+    double g = 0.0;
+    for (int k = 0; k <= DS_BDF_MAX_ORDER; k++) {
+        if (k > 0)
+            g += 1.0 / (double)k;
+        b->gamma[k] = g;
+        b->alpha[k] = (1.0 - KAPPA[k]) * g;
+        b->error_const[k] = KAPPA[k] * g + 1.0 / (double)(k + 1);
+    }
+}
+
+int ds_bdf_init(ds_bdf *b, int64_t n, const double *weights, double tol, double h0)
+{
+    memset(b, 0, sizeof(*b));
+    b->n = n;
+    b->tol = tol;
+    b->h0 = h0;
+    const double eps = 2.220446049250313e-16, root = sqrt(tol);
+    b->newton_tol = fmax(10.0 * eps / tol, fmin(0.03, root));
+    const int64_t total = N_ROWS * n + 3 * n * n + 10 * n;
+    double *mem = calloc((size_t)total, sizeof(double));
+    b->piv = calloc((size_t)n, sizeof(int64_t));
+    if (!mem || !b->piv) {
+        free(mem);
+        free(b->piv);
+        b->piv = NULL;
+        return -1;
+    }
+    b->mem = mem;
+    b->D = mem;
+    b->J = b->D + N_ROWS * n;
+    b->LU = b->J + n * n;
+    b->w = b->LU + n * n;
+    b->y_pred = b->w + n;
+    b->psi = b->y_pred + n;
+    b->y = b->psi + n;
+    b->d = b->y + n;
+    b->dy = b->d + n;
+    b->f = b->dy + n;
+    b->f0 = b->f + n;
+    b->xp = b->f0 + n;
+    b->x_start = b->xp + n;
+    memcpy(b->w, weights, (size_t)n * sizeof(double));
+    tables(b);
+    return 0;
+}
+
+void ds_bdf_free(ds_bdf *b)
+{
+    free(b->mem);
+    free(b->piv);
+    memset(b, 0, sizeof(*b));
+}
+
+void ds_bdf_reset(ds_bdf *b)
+{
+    b->valid = 0;
+}
+
+/* The weighted max norm over the tolerance. */
+static double norm(const ds_bdf *b, const double *v, double scale)
+{
+    double m = 0.0;
+    for (int64_t i = 0; i < b->n; i++) {
+        const double e = fabs(scale * v[i]) * b->w[i];
+        if (e > m)
+            m = e;
+    }
+    return m / b->tol;
+}
+
+/* D[:order + 1] = RU^T D[:order + 1] for a step factor (RU = R(factor) R(1)); h to h_new. */
+static void rescale(ds_bdf *b, double factor, double h_new)
+{
+    const int o = b->order, m = o + 1;
+    double R[DS_BDF_MAX_ORDER + 1][DS_BDF_MAX_ORDER + 1], U[DS_BDF_MAX_ORDER + 1][DS_BDF_MAX_ORDER + 1];
+    double RU[DS_BDF_MAX_ORDER + 1][DS_BDF_MAX_ORDER + 1];
+    for (int pass = 0; pass < 2; pass++) {
+        double (*M)[DS_BDF_MAX_ORDER + 1] = pass ? U : R;
+        const double f = pass ? 1.0 : factor;
+        for (int j = 0; j < m; j++)
+            M[0][j] = 1.0;
+        for (int i = 1; i < m; i++) {   /* cumulative products down the rows */
+            M[i][0] = 0.0;
+            for (int j = 1; j < m; j++)
+                M[i][j] = M[i - 1][j] * (((double)(i - 1) - f * (double)j) / (double)i);
+        }
+    }
+    for (int i = 0; i < m; i++)
+        for (int j = 0; j < m; j++) {
+            double s = 0.0;
+            for (int k = 0; k < m; k++)
+                s += R[i][k] * U[k][j];
+            RU[i][j] = s;
+        }
+    const int64_t n = b->n;
+    double *tmp = b->xp;   /* free outside the Jacobian */
+    for (int64_t c = 0; c < n; c++) {
+        for (int j = 0; j < m; j++) {
+            double s = 0.0;
+            for (int i = 0; i < m; i++)
+                s += RU[i][j] * b->D[i * n + c];
+            tmp[j] = s;
+        }
+        for (int j = 0; j < m; j++)
+            b->D[j * n + c] = tmp[j];
+    }
+    b->h = h_new;
+}
+
+/* LU with partial pivoting of I - c J into b->LU. Returns 0, or -1 when singular. */
+static int factorize(ds_bdf *b, double c)
+{
+    const int64_t n = b->n;
+    double *a = b->LU;
+    for (int64_t i = 0; i < n; i++)
+        for (int64_t j = 0; j < n; j++)
+            a[i * n + j] = (i == j ? 1.0 : 0.0) - c * b->J[i * n + j];
+    for (int64_t k = 0; k < n; k++) {
+        int64_t p = k;
+        for (int64_t i = k + 1; i < n; i++)
+            if (fabs(a[i * n + k]) > fabs(a[p * n + k]))
+                p = i;
+        b->piv[k] = p;
+        if (a[p * n + k] == 0.0)
+            return -1;
+        if (p != k)
+            for (int64_t j = 0; j < n; j++) {
+                const double t = a[k * n + j];
+                a[k * n + j] = a[p * n + j];
+                a[p * n + j] = t;
+            }
+        const double inv = 1.0 / a[k * n + k];
+        for (int64_t i = k + 1; i < n; i++) {
+            const double l = a[i * n + k] * inv;
+            a[i * n + k] = l;
+            for (int64_t j = k + 1; j < n; j++)
+                a[i * n + j] -= l * a[k * n + j];
+        }
+    }
+    b->factorizations += 1.0;
+    b->have_lu = 1;
+    b->lu_c = c;
+    return 0;
+}
+
+/* v = (I - c J)^-1 v with the factors. */
+static void solve(const ds_bdf *b, double *v)
+{
+    const int64_t n = b->n;
+    const double *a = b->LU;
+    for (int64_t k = 0; k < n; k++) {
+        const int64_t p = b->piv[k];
+        if (p != k) {
+            const double t = v[k];
+            v[k] = v[p];
+            v[p] = t;
+        }
+    }
+    for (int64_t i = 0; i < n; i++) {
+        double s = v[i];
+        for (int64_t j = 0; j < i; j++)
+            s -= a[i * n + j] * v[j];
+        v[i] = s;
+    }
+    for (int64_t i = n - 1; i >= 0; i--) {
+        double s = v[i];
+        for (int64_t j = i + 1; j < n; j++)
+            s -= a[i * n + j] * v[j];
+        v[i] = s / a[i * n + i];
+    }
+}
+
+/* J = df/dx at x by forward differences (increments sqrt(eps) max(|x_j|, 1 / w_j)). */
+static int jacobian(ds_bdf *b, ds_group *g, const double *x, const double *u)
+{
+    const int64_t n = b->n;
+    int status = ds_rhs(g->m, x, u, b->f0, &g->w, 0);
+    memcpy(b->xp, x, (size_t)n * sizeof(double));
+    for (int64_t j = 0; j < n && status == DS_OK; j++) {
+        const double scale = b->w[j] > 0.0 ? 1.0 / b->w[j] : 1.0;
+        const double size = fabs(x[j]) > scale ? fabs(x[j]) : scale;
+        b->xp[j] = x[j] + FD_RELATIVE * size;
+        const double step = b->xp[j] - x[j];
+        status = ds_rhs(g->m, b->xp, u, b->f, &g->w, 0);
+        b->xp[j] = x[j];
+        for (int64_t i = 0; i < n; i++)
+            b->J[i * n + j] = (b->f[i] - b->f0[i]) / step;
+    }
+    b->jacobians += 1.0;
+    b->have_jac = 1;
+    b->jac_current = 1;
+    b->have_lu = 0;
+    return status;
+}
+
+/* The simplified Newton iteration of one step: y (from y_pred), d = y - y_pred. Returns 1 when
+ * it converged; *iters the iterations taken. */
+static int newton(ds_bdf *b, ds_group *g, const double *u, double c, int *iters)
+{
+    const int64_t n = b->n;
+    memcpy(b->y, b->y_pred, (size_t)n * sizeof(double));
+    memset(b->d, 0, (size_t)n * sizeof(double));
+    double old = -1.0;
+    int k;
+    for (k = 0; k < NEWTON_MAXITER; k++) {
+        if (ds_rhs(g->m, b->y, u, b->f, &g->w, 0) != DS_OK)
+            break;
+        int finite = 1;
+        for (int64_t i = 0; i < n; i++)
+            finite &= isfinite(b->f[i]);
+        if (!finite)
+            break;
+        for (int64_t i = 0; i < n; i++)
+            b->dy[i] = c * b->f[i] - b->psi[i] - b->d[i];
+        solve(b, b->dy);
+        const double size = norm(b, b->dy, 1.0);
+        const double rate = old < 0.0 ? -1.0 : size / old;
+        if (rate >= 0.0 && (rate >= 1.0 || pow(rate, NEWTON_MAXITER - k) / (1.0 - rate) * size
+                                               > b->newton_tol))
+            break;
+        for (int64_t i = 0; i < n; i++) {
+            b->y[i] += b->dy[i];
+            b->d[i] += b->dy[i];
+        }
+        if (size == 0.0 || (rate >= 0.0 && rate / (1.0 - rate) * size < b->newton_tol)) {
+            *iters = k + 1;
+            return 1;
+        }
+        old = size;
+    }
+    *iters = k + 1 > NEWTON_MAXITER ? NEWTON_MAXITER : k + 1;
+    return 0;
+}
+
+static int restart(ds_bdf *b, ds_group *g, const double *x, const double *u)
+{
+    const int64_t n = b->n;
+    memset(b->D, 0, (size_t)(N_ROWS * n) * sizeof(double));
+    memcpy(b->D, x, (size_t)n * sizeof(double));
+    const int status = ds_rhs(g->m, x, u, b->f, &g->w, 0);
+    for (int64_t i = 0; i < n; i++)
+        b->D[n + i] = b->f[i] * b->h0;
+    b->h = b->h0;
+    b->order = 1;
+    b->equal_steps = 0;
+    b->have_jac = b->have_lu = b->jac_current = 0;
+    b->valid = status == DS_OK;
+    return status;
+}
+
+static int period(const ds_stepper *st, ds_group *g, ds_bdf *b, const double *u)
+{
+    const int64_t n = b->n;
+    const double dt = st->dt;
+    double t = 0.0;
+    while (dt - t > 1e-12 * dt) {
+        const double left = dt - t;
+        double n_left = ceil(left / b->h - 1e-9);
+        if (n_left < 1.0)
+            n_left = 1.0;
+        if (left / n_left != b->h)
+            rescale(b, left / n_left / b->h, left / n_left);
+        const int order = b->order;
+        const double h = b->h;
+        if (!(h > MIN_STEP_FRACTION * dt))
+            return DS_NON_FINITE;
+        const double a_k = b->alpha[order];
+        for (int64_t i = 0; i < n; i++) {
+            double s = 0.0, p = 0.0;
+            for (int k = 0; k <= order; k++)
+                s += b->D[k * n + i];
+            for (int k = 1; k <= order; k++)
+                p += b->D[k * n + i] * b->gamma[k];
+            b->y_pred[i] = s;
+            b->psi[i] = p / a_k;
+        }
+        const double c = h / a_k;
+        int converged, iters;
+        for (;;) {
+            if (!b->have_jac) {
+                const int status = jacobian(b, g, b->y_pred, u);
+                if (status != DS_OK)
+                    return status;
+            }
+            if ((!b->have_lu || fabs(c / b->lu_c - 1.0) > LU_KEEP) && factorize(b, c) < 0)
+                return DS_NON_FINITE;
+            converged = newton(b, g, u, c, &iters);
+            if (converged || b->jac_current)
+                break;
+            b->have_jac = 0;
+        }
+        g->steps += 1.0;
+        if (!converged) {
+            b->rejected += 1.0;
+            rescale(b, 0.5, b->h * 0.5);
+            b->equal_steps = 0;
+            continue;
+        }
+        const double safety = 0.9 * (2 * NEWTON_MAXITER + 1) / (double)(2 * NEWTON_MAXITER + iters);
+        const double error = norm(b, b->d, b->error_const[order]);
+        if (error * b->tol > g->est)
+            g->est = error * b->tol;
+        if (error > 1.0) {
+            b->rejected += 1.0;
+            const double f = fmax(MIN_FACTOR, safety * pow(error, -1.0 / (order + 1)));
+            rescale(b, f, b->h * f);
+            b->equal_steps = 0;
+            continue;
+        }
+        b->jac_current = 0;
+        t += h;
+        b->equal_steps += 1;
+        for (int64_t i = 0; i < n; i++) {
+            b->D[(order + 2) * n + i] = b->d[i] - b->D[(order + 1) * n + i];
+            b->D[(order + 1) * n + i] = b->d[i];
+        }
+        for (int k = order; k >= 0; k--)
+            for (int64_t i = 0; i < n; i++)
+                b->D[k * n + i] += b->D[(k + 1) * n + i];
+        if (b->equal_steps < order + 1)
+            continue;
+        const double lower = order > 1 ? norm(b, b->D + order * n, b->error_const[order - 1])
+                                        : INFINITY;
+        const double higher = order < DS_BDF_MAX_ORDER
+                              ? norm(b, b->D + (order + 2) * n, b->error_const[order + 1])
+                              : INFINITY;
+        const double errs[3] = {lower, error, higher};
+        int best = 0;
+        double best_f = -1.0;
+        for (int k = 0; k < 3; k++) {
+            const double f = errs[k] > 0.0 ? pow(errs[k], -1.0 / (order + k)) : INFINITY;
+            if (f > best_f) {
+                best_f = f;
+                best = k;
+            }
+        }
+        b->order = order + best - 1;
+        const double f = fmin(MAX_FACTOR, safety * best_f);
+        rescale(b, f, b->h * f);
+        b->equal_steps = 0;
+    }
+    return DS_OK;
+}
+
+int ds_bdf_period(const ds_stepper *st, ds_group *g, double *x, const double *u)
+{
+    ds_bdf *b = g->bdf;
+    const int64_t n = b->n;
+    int status = DS_OK;
+    for (int64_t i = 0; i < n; i++)
+        if (!isfinite(x[i]))
+            return DS_NON_FINITE;
+    if (!b->valid || memcmp(b->D, x, (size_t)n * sizeof(double)) != 0)
+        status = restart(b, g, x, u);
+    memcpy(b->x_start, x, (size_t)n * sizeof(double));
+    if (status == DS_OK)
+        status = period(st, g, b, u);
+    if (status != DS_OK) {
+        memcpy(x, b->x_start, (size_t)n * sizeof(double));
+        b->valid = 0;
+        return status;
+    }
+    memcpy(x, b->D, (size_t)n * sizeof(double));
+    return DS_OK;
+}

@@ -1,0 +1,40 @@
+/*
+ * A variable-order BDF stepper for one coupled group (bdf.c): the numerical differentiation
+ * formulas of orders 1-5 with a quasi-constant step, driven one control period at a time.
+ * det_sim_ros/physics/reference_bdf.py is the same in numpy; test/test_bdf.py holds this code
+ * to it.
+ */
+#ifndef DETSIM_STEPPING_BDF_H
+#define DETSIM_STEPPING_BDF_H
+
+#include "stepping/group.h"
+
+#define DS_BDF_MAX_ORDER 5
+
+typedef struct ds_bdf {
+    int64_t n;                  /* states (the whole group's) */
+    double tol, newton_tol, h0; /* local error per step in the weighted norm; first step, s */
+    int valid;                  /* a history to go on from (else the next period restarts) */
+    int order, equal_steps, jac_current, have_jac, have_lu;
+    double h;                   /* the step the differences D are scaled to, s */
+    double lu_c;                /* the c = h / alpha the LU was factored at */
+    double *D;                  /* (DS_BDF_MAX_ORDER + 3) x n backward differences */
+    double *J, *LU, *w;         /* Jacobian, LU of I - c J, the norm's 1 / scale */
+    int64_t *piv;
+    double *y_pred, *psi, *y, *d, *dy, *f, *f0, *xp, *x_start;
+    double gamma[DS_BDF_MAX_ORDER + 1], alpha[DS_BDF_MAX_ORDER + 1];
+    double error_const[DS_BDF_MAX_ORDER + 1];
+    double jacobians, factorizations, rejected;
+    void *mem;
+} ds_bdf;
+
+/* weights: 1 / scale per state of the group (0: not in the norm). Returns -1 without memory. */
+int ds_bdf_init(ds_bdf *b, int64_t n, const double *weights, double tol, double h0);
+void ds_bdf_free(ds_bdf *b);
+/* Forget the history: the next period restarts at order 1 with the first step. */
+void ds_bdf_reset(ds_bdf *b);
+/* One control period st->dt from x (in place) with the input u held. Returns a status; on
+ * failure x holds its start and the history is forgotten. */
+int ds_bdf_period(const ds_stepper *st, ds_group *g, double *x, const double *u);
+
+#endif

@@ -1,0 +1,188 @@
+"""
+The numpy reference of the kernel's variable-order BDF stepper (``core/_csrc/stepping/bdf.c``).
+
+The numerical differentiation formulas of orders 1 to 5 with a quasi-constant step (Shampine &
+Reichelt, "The MATLAB ODE suite", SIAM J. Sci. Comput. 18, 1997; the scheme of scipy's
+``integrate/_ivp/bdf.py``): the history as backward differences D of the interpolating
+polynomial, a step-size change as its rescaling, a simplified Newton iteration with the
+Jacobian kept while it converges, the local error from the last correction, the order raised
+or lowered after order + 1 equal steps. Driven by control periods:
+
+- the steps of a period fit it evenly (the last step never overshoots, no interpolation): the
+  state at a period's end is the method's own, and an input that changes there starts the next
+  step from it (the history runs on: the charge sees the jump as a kink, not a restart);
+- the error norm is the largest weighted component (``weights``: 1 / scale; 0 leaves a state
+  out, as the power monitor's integrals), the tolerance absolute in those units.
+
+The kernel is held to this module by test/test_bdf.py.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ['BdfStepper', 'MAX_ORDER']
+
+MAX_ORDER = 5
+NEWTON_MAXITER = 4
+MIN_FACTOR = 0.2
+MAX_FACTOR = 10.0
+FD_RELATIVE = 1.4901161193847656e-08   # sqrt(eps): forward-difference Jacobian increments
+# The LU of I - c J is kept while c = h / alpha_order stays within this fraction of the c it was
+# factored at (CVODE's rule, dgmax 0.3): Newton then iterates with a slightly wrong matrix but
+# converges to the same solution; a new step size every period would otherwise cost an LU.
+LU_KEEP = 0.3
+# The NDF's kappa (Shampine & Reichelt, Table 1): order 1-4 trade a little stability for a
+# smaller error constant; order 5 is plain BDF.
+KAPPA = np.array([0.0, -0.1850, -1.0 / 9.0, -0.0823, -0.0415, 0.0])
+GAMMA = np.hstack((0.0, np.cumsum(1.0 / np.arange(1, MAX_ORDER + 1))))
+ALPHA = (1.0 - KAPPA) * GAMMA
+ERROR_CONST = KAPPA * GAMMA + 1.0 / np.arange(1, MAX_ORDER + 2)
+
+
+def rescale_matrix(order: int, factor: float) -> np.ndarray:
+    """Return RU: the differences D[:order + 1] of step h become RU.T @ D for step factor h."""
+    def r(f):
+        i = np.arange(1, order + 1)[:, None]
+        j = np.arange(1, order + 1)
+        m = np.zeros((order + 1, order + 1))
+        m[1:, 1:] = (i - 1 - f * j) / i
+        m[0] = 1.0
+        return np.cumprod(m, axis=0)
+    return r(factor) @ r(1.0)
+
+
+class BdfStepper:
+    """
+    One coupled group's BDF history, advanced one control period at a time.
+
+    ``rhs(x, u)`` returns dx/dt; ``weights`` the error norm's 1 / scale per state (0: not in
+    the norm); ``tol`` the local error allowed per step in those units; ``h0`` the first step.
+    """
+
+    def __init__(self, rhs, weights, tol: float, dt: float, h0: float):
+        self.rhs = rhs
+        self.weights = np.asarray(weights, dtype=float)
+        self.tol = float(tol)
+        self.dt = float(dt)
+        self.h0 = float(h0)
+        self.newton_tol = max(10.0 * np.finfo(float).eps / self.tol, min(0.03, self.tol ** 0.5))
+        self.D = None
+        self.steps = self.rejected = self.jacobians = self.factorizations = 0
+
+    def norm(self, v) -> float:
+        """Return the weighted max norm over the tolerance."""
+        return float(np.max(np.abs(v) * self.weights)) / self.tol
+
+    def jacobian(self, x, u) -> np.ndarray:
+        """Return df/dx by forward differences, increments sqrt(eps) max(|x_j|, scale_j)."""
+        f0 = self.rhs(x, u)
+        J = np.empty((len(x), len(x)))
+        for j in range(len(x)):
+            scale = 1.0 / self.weights[j] if self.weights[j] > 0.0 else 1.0
+            xp = x.copy()
+            xp[j] = x[j] + FD_RELATIVE * max(abs(x[j]), scale)
+            J[:, j] = (self.rhs(xp, u) - f0) / (xp[j] - x[j])
+        self.jacobians += 1
+        return J
+
+    def _restart(self, x, u):
+        self.D = np.zeros((MAX_ORDER + 3, len(x)))
+        self.D[0] = x
+        self.D[1] = self.rhs(x, u) * self.h0
+        self.h, self.order, self.equal_steps = self.h0, 1, 0
+        self.J = self.lu = None
+        self.lu_c = 0.0
+        self.jacobian_current = False
+
+    def _rescale(self, factor, h=None):
+        self.D[:self.order + 1] = rescale_matrix(self.order, factor).T @ self.D[:self.order + 1]
+        self.h = self.h * factor if h is None else h
+
+    def period(self, x, u) -> np.ndarray:
+        """Return the state one control period after x with the input u held."""
+        import scipy.linalg   # the reference only: the kernel has its own LU
+
+        x = np.asarray(x, dtype=float)
+        if self.D is None or not np.array_equal(self.D[0], x):
+            self._restart(x, u)
+        t = 0.0
+        while self.dt - t > 1e-12 * self.dt:
+            left = self.dt - t
+            n_left = max(1, math.ceil(left / self.h - 1e-9))
+            if left / n_left != self.h:
+                self._rescale(left / n_left / self.h, left / n_left)
+            D, order, h = self.D, self.order, self.h
+            y_predict = D[:order + 1].sum(axis=0)
+            psi = D[1:order + 1].T @ GAMMA[1:order + 1] / ALPHA[order]
+            c = h / ALPHA[order]
+            while True:
+                if self.J is None:
+                    self.J = self.jacobian(y_predict, u)
+                    self.jacobian_current = True
+                    self.lu = None
+                if self.lu is None or abs(c / self.lu_c - 1.0) > LU_KEEP:
+                    self.lu = scipy.linalg.lu_factor(np.eye(len(x)) - c * self.J)
+                    self.lu_c = c
+                    self.factorizations += 1
+                converged, n_iter, y_new, d = self._newton(y_predict, u, c, psi)
+                if converged or self.jacobian_current:
+                    break
+                self.J = None
+            self.steps += 1
+            if not converged:
+                self.rejected += 1
+                self._rescale(0.5)
+                self.equal_steps = 0
+                continue
+            safety = 0.9 * (2 * NEWTON_MAXITER + 1) / (2 * NEWTON_MAXITER + n_iter)
+            error = self.norm(ERROR_CONST[order] * d)
+            if error > 1.0:
+                self.rejected += 1
+                self._rescale(max(MIN_FACTOR, safety * error ** (-1.0 / (order + 1))))
+                self.equal_steps = 0
+                continue
+            self.jacobian_current = False
+            t += h
+            self.equal_steps += 1
+            D[order + 2] = d - D[order + 1]
+            D[order + 1] = d
+            for i in reversed(range(order + 1)):
+                D[i] += D[i + 1]
+            if self.equal_steps < order + 1:
+                continue
+            lower = self.norm(ERROR_CONST[order - 1] * D[order]) if order > 1 else math.inf
+            higher = (self.norm(ERROR_CONST[order + 1] * D[order + 2])
+                      if order < MAX_ORDER else math.inf)
+            factors = [e ** (-1.0 / (order + k)) if e > 0.0 else math.inf
+                       for k, e in enumerate((lower, error, higher))]
+            best = int(np.argmax(factors))
+            self.order = order + best - 1
+            self._rescale(min(MAX_FACTOR, safety * factors[best]))
+            self.equal_steps = 0
+        return self.D[0].copy()
+
+    def _newton(self, y_predict, u, c, psi):
+        import scipy.linalg
+
+        d = np.zeros_like(y_predict)
+        y = y_predict.copy()
+        old = None
+        for k in range(NEWTON_MAXITER):
+            f = self.rhs(y, u)
+            if not np.all(np.isfinite(f)):
+                break
+            dy = scipy.linalg.lu_solve(self.lu, c * f - psi - d)
+            size = self.norm(dy)
+            rate = None if old is None else size / old
+            if rate is not None and (rate >= 1.0 or rate ** (NEWTON_MAXITER - k) / (1.0 - rate)
+                                     * size > self.newton_tol):
+                break
+            y = y + dy
+            d = d + dy
+            if size == 0.0 or (rate is not None and rate / (1.0 - rate) * size < self.newton_tol):
+                return True, k + 1, y, d
+            old = size
+        return False, k + 1, y, d
