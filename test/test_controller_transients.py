@@ -1,7 +1,9 @@
 """
 A controller moves its command a little every period, and every move starts a charge transient.
 
-Under the linearized method the transient's steps are dyadic fractions of the period's step
+Under the linearized method (set here: 'auto' steps 7 polynomials at 3e-3 with BDF, whose
+own steps follow the transient, test/test_bdf.py) the transient's steps are dyadic fractions
+of the period's step
 (core/_csrc/stepping/period.c, dyadic_transient), so their sizes, and the matrix exponentials
 their weights need, repeat from period to period instead of being new in every period. Checked
 against what a user meets: the run stays within its tolerance of an independent solver
@@ -27,10 +29,11 @@ LEVELS = {   # the two ways back to the step grid: one step (3 modes), halvings 
 CHAINS_PER_PERIOD = {'modes_3': 1.0, 'polynomial_7': 0.25}
 
 
-def dithered_run(level, tolerance=TOLERANCE):
+def dithered_run(level, tolerance=TOLERANCE, method='etdrk4_linearized'):
     """Return (scene, commands, run, simulator): 1.5 kV +-25 V per period, from rest."""
     scene = step_scene('fixed', 0.20, **{'scene.fidelity': 'exact', 'scene.initial_state': 'rest',
-                                         'integrator.tolerance': tolerance, **LEVELS[level]})
+                                         'integrator.tolerance': tolerance,
+                                         'integrator.method': method, **LEVELS[level]})
     volts = 1500.0 + np.random.default_rng(1).uniform(-25.0, 25.0, PERIODS)
     sim = Simulator(scene)
     return scene, volts, simulate(sim, volts, PERIODS * scene.dt), sim

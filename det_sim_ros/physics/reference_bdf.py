@@ -27,6 +27,10 @@ __all__ = ['BdfStepper', 'MAX_ORDER']
 
 MAX_ORDER = 5
 NEWTON_MAXITER = 4
+# Newton stops when its remaining error is below this fraction of the local tolerance: scipy's
+# min(0.03, sqrt(rtol)) for a relative tolerance, CVODE's 0.1; the tolerance here is absolute in
+# the weighted norm, where sqrt(tol) (~1e-3) would only buy iterations.
+NEWTON_TOL = 0.03
 MIN_FACTOR = 0.2
 MAX_FACTOR = 10.0
 FD_RELATIVE = 1.4901161193847656e-08   # sqrt(eps): forward-difference Jacobian increments
@@ -68,7 +72,7 @@ class BdfStepper:
         self.tol = float(tol)
         self.dt = float(dt)
         self.h0 = float(h0)
-        self.newton_tol = max(10.0 * np.finfo(float).eps / self.tol, min(0.03, self.tol ** 0.5))
+        self.newton_tol = NEWTON_TOL
         self.D = None
         self.steps = self.rejected = self.jacobians = self.factorizations = 0
 

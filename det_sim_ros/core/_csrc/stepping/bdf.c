@@ -17,6 +17,7 @@
 #include "physics/physics.h"
 
 #define NEWTON_MAXITER 4
+#define NEWTON_TOL 0.03   /* Newton's remaining error, in units of the local tolerance */
 #define MIN_FACTOR 0.2
 #define MAX_FACTOR 10.0
 #define FD_RELATIVE 1.4901161193847656e-08   /* sqrt(eps) */
@@ -47,8 +48,7 @@ int ds_bdf_init(ds_bdf *b, int64_t n, const double *weights, double tol, double 
     b->n = n;
     b->tol = tol;
     b->h0 = h0;
-    const double eps = 2.220446049250313e-16, root = sqrt(tol);
-    b->newton_tol = fmax(10.0 * eps / tol, fmin(0.03, root));
+    b->newton_tol = NEWTON_TOL;
     const int64_t total = N_ROWS * n + 3 * n * n + 10 * n;
     double *mem = calloc((size_t)total, sizeof(double));
     b->piv = calloc((size_t)n, sizeof(int64_t));
