@@ -143,3 +143,17 @@ def test_a_dithered_command_stays_within_its_tolerance_of_radau():
     q_ref = X[:, :7] @ sim.model.bases[0].reference_row()
     assert np.allclose(run.t, t)
     assert np.max(np.abs(run['q'] - q_ref)) / np.max(np.abs(q_ref)) <= tolerance
+
+
+def test_fixed_steps_are_refused_and_a_bad_state_fails_the_period_cleanly():
+    """advance() is for table methods; a non-finite state fails its period, x kept."""
+    sim = simulator()
+    u = np.array([1000.0])
+    with pytest.raises(ValueError, match='BDF stepper steps whole periods'):
+        sim.stepper.advance(sim.x.copy(), u, 1e-4, 1)
+    x = sim.x.copy()
+    x[0] = np.nan
+    keep = x.copy()
+    out = np.empty(len(sim.output_names))
+    assert sim.stepper.period(x, u, u, out) != 0
+    assert np.array_equal(x, keep, equal_nan=True)

@@ -32,6 +32,8 @@ NEWTON_MAXITER = 4
 # the weighted norm, where sqrt(tol) (~1e-3) would only buy iterations.
 NEWTON_TOL = 0.03
 MIN_FACTOR = 0.2
+MIN_STEP_FRACTION = 1e-10   # of the period: below it the period fails
+MAX_ATTEMPTS = 100000       # steps tried per period before it fails
 MAX_FACTOR = 10.0
 FD_RELATIVE = 1.4901161193847656e-08   # sqrt(eps): forward-difference Jacobian increments
 # The LU of I - c J is kept while c = h / alpha_order stays within this fraction of the c it was
@@ -113,12 +115,18 @@ class BdfStepper:
         if self.D is None or not np.array_equal(self.D[0], x):
             self._restart(x, u)
         t = 0.0
+        attempts = 0
         while self.dt - t > 1e-12 * self.dt:
+            if attempts == MAX_ATTEMPTS:
+                raise ArithmeticError('BDF: no progress in this period')
+            attempts += 1
             left = self.dt - t
             n_left = max(1, math.ceil(left / self.h - 1e-9))
             if left / n_left != self.h:
                 self._rescale(left / n_left / self.h, left / n_left)
             D, order, h = self.D, self.order, self.h
+            if not h > MIN_STEP_FRACTION * self.dt:
+                raise ArithmeticError('BDF: the step size underflowed')
             y_predict = D[:order + 1].sum(axis=0)
             psi = D[1:order + 1].T @ GAMMA[1:order + 1] / ALPHA[order]
             c = h / ALPHA[order]

@@ -141,6 +141,11 @@ static PyObject *Stepper_advance(StepperObject *self, PyObject *const *args, Py_
                                           "use period() for independent groups");
         return NULL;
     }
+    if (self->st.bdf) {
+        PyErr_SetString(PyExc_ValueError, "advance() steps a table method; the BDF stepper "
+                                          "steps whole periods (period(), run())");
+        return NULL;
+    }
     double h = PyFloat_AsDouble(args[2]);
     long long steps = PyLong_AsLongLong(args[3]);
     double growth = n == 5 ? PyFloat_AsDouble(args[4]) : 1.0;

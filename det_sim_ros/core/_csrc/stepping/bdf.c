@@ -22,6 +22,7 @@
 #define MAX_FACTOR 10.0
 #define FD_RELATIVE 1.4901161193847656e-08   /* sqrt(eps) */
 #define MIN_STEP_FRACTION 1e-10              /* of the period: below it the step fails */
+#define MAX_ATTEMPTS 100000                  /* steps tried per period before it fails */
 #define N_ROWS (DS_BDF_MAX_ORDER + 3)
 #define LU_KEEP 0.3   /* the LU serves while c is within this fraction of its own */
 
@@ -49,7 +50,7 @@ int ds_bdf_init(ds_bdf *b, int64_t n, const double *weights, double tol, double 
     b->tol = tol;
     b->h0 = h0;
     b->newton_tol = NEWTON_TOL;
-    const int64_t total = N_ROWS * n + 3 * n * n + 10 * n;
+    const int64_t total = N_ROWS * n + 4 * n * n + 10 * n;
     double *mem = calloc((size_t)total, sizeof(double));
     b->piv = calloc((size_t)n, sizeof(int64_t));
     if (!mem || !b->piv) {
@@ -62,7 +63,8 @@ int ds_bdf_init(ds_bdf *b, int64_t n, const double *weights, double tol, double 
     b->D = mem;
     b->J = b->D + N_ROWS * n;
     b->LU = b->J + n * n;
-    b->w = b->LU + n * n;
+    b->LT = b->LU + n * n;
+    b->w = b->LT + n * n;
     b->y_pred = b->w + n;
     b->psi = b->y_pred + n;
     b->y = b->psi + n;
@@ -170,17 +172,21 @@ static int factorize(ds_bdf *b, double c)
                 a[i * n + j] -= l * a[k * n + j];
         }
     }
+    for (int64_t i = 0; i < n; i++)   /* the transpose the solves read by columns */
+        for (int64_t j = 0; j < n; j++)
+            b->LT[j * n + i] = a[i * n + j];
     b->factorizations += 1.0;
     b->have_lu = 1;
     b->lu_c = c;
     return 0;
 }
 
-/* v = (I - c J)^-1 v with the factors. */
+/* v = (I - c J)^-1 v with the factors, column by column from their transpose LT: each
+ * column's update is independent across rows (no chain of dependent sums per row). */
 static void solve(const ds_bdf *b, double *v)
 {
     const int64_t n = b->n;
-    const double *a = b->LU;
+    const double *lt = b->LT;
     for (int64_t k = 0; k < n; k++) {
         const int64_t p = b->piv[k];
         if (p != k) {
@@ -189,17 +195,18 @@ static void solve(const ds_bdf *b, double *v)
             v[p] = t;
         }
     }
-    for (int64_t i = 0; i < n; i++) {
-        double s = v[i];
-        for (int64_t j = 0; j < i; j++)
-            s -= a[i * n + j] * v[j];
-        v[i] = s;
+    for (int64_t j = 0; j < n; j++) {   /* L, unit diagonal */
+        const double t = v[j];
+        const double *col = lt + j * n;
+        for (int64_t i = j + 1; i < n; i++)
+            v[i] -= col[i] * t;
     }
-    for (int64_t i = n - 1; i >= 0; i--) {
-        double s = v[i];
-        for (int64_t j = i + 1; j < n; j++)
-            s -= a[i * n + j] * v[j];
-        v[i] = s / a[i * n + i];
+    for (int64_t j = n - 1; j >= 0; j--) {   /* U */
+        const double *col = lt + j * n;
+        v[j] /= col[j];
+        const double t = v[j];
+        for (int64_t i = 0; i < j; i++)
+            v[i] -= col[i] * t;
     }
 }
 
@@ -286,7 +293,9 @@ static int period(const ds_stepper *st, ds_group *g, ds_bdf *b, const double *u)
     const int64_t n = b->n;
     const double dt = st->dt;
     double t = 0.0;
-    while (dt - t > 1e-12 * dt) {
+    for (int64_t attempts = 0; dt - t > 1e-12 * dt; attempts++) {
+        if (attempts == MAX_ATTEMPTS)   /* a state running away: fail, do not hang */
+            return DS_NON_FINITE;
         const double left = dt - t;
         double n_left = ceil(left / b->h - 1e-9);
         if (n_left < 1.0)

@@ -19,7 +19,8 @@ typedef struct ds_bdf {
     double h;                   /* the step the differences D are scaled to, s */
     double lu_c;                /* the c = h / alpha the LU was factored at */
     double *D;                  /* (DS_BDF_MAX_ORDER + 3) x n backward differences */
-    double *J, *LU, *w;         /* Jacobian, LU of I - c J, the norm's 1 / scale */
+    double *J, *LU, *LT, *w;    /* Jacobian, LU of I - c J and its transpose, the norm's
+                                   1 / scale */
     int64_t *piv;
     double *y_pred, *psi, *y, *d, *dy, *f, *f0, *xp, *x_start;
     double gamma[DS_BDF_MAX_ORDER + 1], alpha[DS_BDF_MAX_ORDER + 1];
