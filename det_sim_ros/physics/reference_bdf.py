@@ -189,12 +189,16 @@ class BdfStepper:
             dy = scipy.linalg.lu_solve(self.lu, c * f - psi - d)
             size = self.norm(dy)
             rate = None if old is None else size / old
-            if rate is not None and (rate >= 1.0 or rate ** (NEWTON_MAXITER - k) / (1.0 - rate)
-                                     * size > self.newton_tol):
+            # a correction already within Newton's tolerance ends it: its rate, from two such
+            # corrections, would be round-off (at rest it is noise around 1)
+            small = size <= self.newton_tol
+            if not small and rate is not None and (
+                    rate >= 1.0 or rate ** (NEWTON_MAXITER - k) / (1.0 - rate) * size
+                    > self.newton_tol):
                 break
             y = y + dy
             d = d + dy
-            if size == 0.0 or (rate is not None and rate / (1.0 - rate) * size < self.newton_tol):
+            if small or (rate is not None and rate / (1.0 - rate) * size < self.newton_tol):
                 return True, k + 1, y, d
             old = size
         return False, k + 1, y, d

@@ -255,14 +255,17 @@ static int newton(ds_bdf *b, ds_group *g, const double *u, double c, int *iters)
         solve(b, b->dy);
         const double size = norm(b, b->dy, 1.0);
         const double rate = old < 0.0 ? -1.0 : size / old;
-        if (rate >= 0.0 && (rate >= 1.0 || pow(rate, NEWTON_MAXITER - k) / (1.0 - rate) * size
-                                               > b->newton_tol))
+        /* a correction already within Newton's tolerance ends it: its rate, from two such
+         * corrections, would be round-off (at rest it is noise around 1) */
+        const int small = size <= b->newton_tol;
+        if (!small && rate >= 0.0 && (rate >= 1.0 || pow(rate, NEWTON_MAXITER - k)
+                                      / (1.0 - rate) * size > b->newton_tol))
             break;
         for (int64_t i = 0; i < n; i++) {
             b->y[i] += b->dy[i];
             b->d[i] += b->dy[i];
         }
-        if (size == 0.0 || (rate >= 0.0 && rate / (1.0 - rate) * size < b->newton_tol)) {
+        if (small || (rate >= 0.0 && rate / (1.0 - rate) * size < b->newton_tol)) {
             *iters = k + 1;
             return 1;
         }
