@@ -16,8 +16,8 @@
 #include "stepping/bdf.h"
 #include "physics/physics.h"
 
-#define NEWTON_MAXITER 4
-#define NEWTON_TOL 0.03   /* Newton's remaining error, in units of the local tolerance */
+#define NEWTON_MAXITER 6   /* corrections before Newton gives up (reference_bdf.py: why) */
+#define NEWTON_TOL 0.1     /* Newton's remaining error, in units of the local tolerance */
 #define MIN_FACTOR 0.2
 #define MAX_FACTOR 10.0
 #define FD_RELATIVE 1.4901161193847656e-08   /* sqrt(eps) */
