@@ -383,7 +383,7 @@ def make_stepper(model, method: Method, control: StepControl, dt: float,
                           lin_refresh=linear_refresh(integration_tolerance(model.scene)),
                           lin_refresh_input=LINEAR_REFRESH_INPUT * _largest_v_max(model),
                           bdf=method.multistep, bdf_tolerance=control.tolerance,
-                          bdf_weights=bdf_weights(model))
+                          bdf_weights=bdf_weights(model) if method.multistep else None)
 
 
 def _largest_v_max(model) -> float:
@@ -423,11 +423,11 @@ def bdf_weights(model) -> np.ndarray:
     """Return 1 / scale of each state in the BDF stepper's error and Newton norms."""
     a = model.arrays
     w = error_weights(model)
-    names = model.state_names
-    for i, name in enumerate(names):
+    v_max = [cell.v_max for cell in model.scene.cell_physics()]
+    for i, name in enumerate(model.state_names):
         if name.startswith('q_p['):
             cell = int(name[4:-1])
-            w[i] = BDF_SLOW_WEIGHT / (a.C0[cell] * model.scene.cell_physics()[cell].v_max)
+            w[i] = BDF_SLOW_WEIGHT / (a.C0[cell] * v_max[cell])
         elif name.startswith(('eps_E[', 'v_a[')):
             w[i] = BDF_SLOW_WEIGHT
     return w

@@ -49,8 +49,7 @@ int ds_bdf_init(ds_bdf *b, int64_t n, const double *weights, double tol, double 
     b->n = n;
     b->tol = tol;
     b->h0 = h0;
-    b->newton_tol = NEWTON_TOL;
-    const int64_t total = N_ROWS * n + 4 * n * n + 10 * n;
+    const int64_t total = N_ROWS * n + 4 * n * n + 9 * n;
     double *mem = calloc((size_t)total, sizeof(double));
     b->piv = calloc((size_t)n, sizeof(int64_t));
     if (!mem || !b->piv) {
@@ -73,7 +72,6 @@ int ds_bdf_init(ds_bdf *b, int64_t n, const double *weights, double tol, double 
     b->f = b->dy + n;
     b->f0 = b->f + n;
     b->xp = b->f0 + n;
-    b->x_start = b->xp + n;
     memcpy(b->w, weights, (size_t)n * sizeof(double));
     tables(b);
     return 0;
@@ -176,7 +174,6 @@ static int factorize(ds_bdf *b, double c)
         for (int64_t j = 0; j < n; j++)
             b->LT[j * n + i] = a[i * n + j];
     b->factorizations += 1.0;
-    b->have_lu = 1;
     b->lu_c = c;
     return 0;
 }
@@ -229,20 +226,19 @@ static int jacobian(ds_bdf *b, ds_group *g, const double *x, const double *u)
     b->jacobians += 1.0;
     b->have_jac = 1;
     b->jac_current = 1;
-    b->have_lu = 0;
+    b->lu_c = 0.0;   /* the LU is of the old J */
     return status;
 }
 
 /* The simplified Newton iteration of one step: y (from y_pred), d = y - y_pred. Returns 1 when
- * it converged; *iters the iterations taken. */
+ * it converged, with *iters the iterations it took. */
 static int newton(ds_bdf *b, ds_group *g, const double *u, double c, int *iters)
 {
     const int64_t n = b->n;
     memcpy(b->y, b->y_pred, (size_t)n * sizeof(double));
     memset(b->d, 0, (size_t)n * sizeof(double));
     double old = -1.0;
-    int k;
-    for (k = 0; k < NEWTON_MAXITER; k++) {
+    for (int k = 0; k < NEWTON_MAXITER; k++) {
         if (ds_rhs(g->m, b->y, u, b->f, &g->w, 0) != DS_OK)
             break;
         int finite = 1;
@@ -257,21 +253,20 @@ static int newton(ds_bdf *b, ds_group *g, const double *u, double c, int *iters)
         const double rate = old < 0.0 ? -1.0 : size / old;
         /* a correction already within Newton's tolerance ends it: its rate, from two such
          * corrections, would be round-off (at rest it is noise around 1) */
-        const int small = size <= b->newton_tol;
+        const int small = size <= NEWTON_TOL;
         if (!small && rate >= 0.0 && (rate >= 1.0 || pow(rate, NEWTON_MAXITER - k)
-                                      / (1.0 - rate) * size > b->newton_tol))
+                                      / (1.0 - rate) * size > NEWTON_TOL))
             break;
         for (int64_t i = 0; i < n; i++) {
             b->y[i] += b->dy[i];
             b->d[i] += b->dy[i];
         }
-        if (small || (rate >= 0.0 && rate / (1.0 - rate) * size < b->newton_tol)) {
+        if (small || (rate >= 0.0 && rate / (1.0 - rate) * size < NEWTON_TOL)) {
             *iters = k + 1;
             return 1;
         }
         old = size;
     }
-    *iters = k + 1 > NEWTON_MAXITER ? NEWTON_MAXITER : k + 1;
     return 0;
 }
 
@@ -286,7 +281,8 @@ static int restart(ds_bdf *b, ds_group *g, const double *x, const double *u)
     b->h = b->h0;
     b->order = 1;
     b->equal_steps = 0;
-    b->have_jac = b->have_lu = b->jac_current = 0;
+    b->have_jac = b->jac_current = 0;
+    b->lu_c = 0.0;
     b->valid = status == DS_OK;
     return status;
 }
@@ -320,14 +316,15 @@ static int period(const ds_stepper *st, ds_group *g, ds_bdf *b, const double *u)
             b->psi[i] = p / a_k;
         }
         const double c = h / a_k;
-        int converged, iters;
+        int converged, iters = NEWTON_MAXITER;
         for (;;) {
             if (!b->have_jac) {
                 const int status = jacobian(b, g, b->y_pred, u);
                 if (status != DS_OK)
                     return status;
             }
-            if ((!b->have_lu || fabs(c / b->lu_c - 1.0) > LU_KEEP) && factorize(b, c) < 0)
+            /* no LU yet (lu_c 0: c / 0 is inf), or one of a c too far off */
+            if (fabs(c / b->lu_c - 1.0) > LU_KEEP && factorize(b, c) < 0)
                 return DS_NON_FINITE;
             converged = newton(b, g, u, c, &iters);
             if (converged || b->jac_current)
@@ -397,11 +394,9 @@ int ds_bdf_period(const ds_stepper *st, ds_group *g, double *x, const double *u)
             return DS_NON_FINITE;
     if (!b->valid || memcmp(b->D, x, (size_t)n * sizeof(double)) != 0)
         status = restart(b, g, x, u);
-    memcpy(b->x_start, x, (size_t)n * sizeof(double));
     if (status == DS_OK)
         status = period(st, g, b, u);
-    if (status != DS_OK) {
-        memcpy(x, b->x_start, (size_t)n * sizeof(double));
+    if (status != DS_OK) {   /* x is untouched: the steps run on the history D */
         b->valid = 0;
         return status;
     }

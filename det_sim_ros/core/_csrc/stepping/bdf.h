@@ -13,16 +13,16 @@
 
 typedef struct ds_bdf {
     int64_t n;                  /* states (the whole group's) */
-    double tol, newton_tol, h0; /* local error per step in the weighted norm; first step, s */
+    double tol, h0;             /* local error per step in the weighted norm; first step, s */
     int valid;                  /* a history to go on from (else the next period restarts) */
-    int order, equal_steps, jac_current, have_jac, have_lu;
+    int order, equal_steps, jac_current, have_jac;
     double h;                   /* the step the differences D are scaled to, s */
-    double lu_c;                /* the c = h / alpha the LU was factored at */
+    double lu_c;                /* the c = h / alpha the LU was factored at (0: no LU) */
     double *D;                  /* (DS_BDF_MAX_ORDER + 3) x n backward differences */
     double *J, *LU, *LT, *w;    /* Jacobian, LU of I - c J and its transpose, the norm's
                                    1 / scale */
     int64_t *piv;
-    double *y_pred, *psi, *y, *d, *dy, *f, *f0, *xp, *x_start;
+    double *y_pred, *psi, *y, *d, *dy, *f, *f0, *xp;
     double gamma[DS_BDF_MAX_ORDER + 1], alpha[DS_BDF_MAX_ORDER + 1];
     double error_const[DS_BDF_MAX_ORDER + 1];
     double jacobians, factorizations, rejected;
