@@ -10,6 +10,11 @@ switch (zero-order hold, no interpolation of inputs).
 v_max and 0 V (v_max first) to 2.5 s, at 2 Hz (or faster). Scored by the snaps (sign changes
 of q after 0.5 s: how many, and when) and max |y - y_ref| over 0.5-2.5 s divided by the
 reference's travel there (max y_ref - min y_ref).
+
+'pwm': a bang-bang controller. Released at q0 at 0 V; from 0.5 s a 10 Hz PWM at v_max with duty
+30 %, 50 %, 70 %, 50 % for 0.5 s each, to 2.5 s. Its path can depend on rounding: score it
+through det_sim_ros.analysis.predictability first (robust stretches as 'switching', the rest
+as statistics over an ensemble of perturbed runs).
 """
 
 from __future__ import annotations
@@ -23,12 +28,16 @@ from ..scenes.scene import load_scene
 
 __all__ = ['STEP_SWITCH_TIMES', 'step_voltage', 'step_scene', 'delta_y', 'reference_solution',
            'step_error', 'SWITCHING_START', 'SWITCHING_END', 'switching_voltage',
-           'switching_scene', 'snap_times', 'switching_error']
+           'switching_scene', 'snap_times', 'switching_error', 'PWM_HZ', 'PWM_DUTIES',
+           'pwm_voltage']
 
 STEP_SWITCH_TIMES = (1.5, 3.0)   # s
 STEP_END = 4.5                   # s
 SWITCHING_START = 0.5            # s: the square wave starts here, the score from here
 SWITCHING_END = 2.5              # s
+PWM_HZ = 10.0                    # Hz: the 'pwm' carrier
+PWM_DUTIES = (0.3, 0.5, 0.7, 0.5)   # the duty of each 0.5 s block from SWITCHING_START on
+PWM_BLOCK = 0.5                  # s
 
 
 def step_voltage(v_max: float):
@@ -62,6 +71,23 @@ def switching_voltage(v_max: float, hz: float = 2.0):
         if t + 1e-12 < SWITCHING_START:
             return 0.0
         return v_max if int((t + 1e-12 - SWITCHING_START) / half) % 2 == 0 else 0.0
+    return voltage
+
+
+def pwm_voltage(v_max: float, hz: float = PWM_HZ, duties=PWM_DUTIES, block: float = PWM_BLOCK):
+    """
+    Return the 'pwm' profile v(t) (V) as a function.
+
+    0 V to SWITCHING_START, then a PWM at ``hz`` between v_max (first in each carrier period)
+    and 0 V, its duty ``duties[i]`` in the i-th ``block`` of seconds (the last duty held after
+    the last block). Exact at its edges on the 1 ms grid.
+    """
+    def voltage(t):
+        since = t + 1e-12 - SWITCHING_START
+        if since < 0.0:
+            return 0.0
+        duty = duties[min(int(since / block), len(duties) - 1)]
+        return v_max if (since * hz) % 1.0 < duty else 0.0
     return voltage
 
 
