@@ -86,7 +86,7 @@ class Perturbation:
                              'the run itself')
 
     def overrides(self, scene: Scene) -> dict:
-        """Return the twin's scene overrides ({'physics.m': ..., 'integrator.tolerance': ...})."""
+        """Return the twin's scene overrides: the perturbed parameter and tolerance."""
         if self.parameter not in PHYSICS_SPEC:
             raise SceneError(f'perturbation parameter {self.parameter!r}: not a physics key '
                              f'(one of {", ".join(PHYSICS_SPEC)})')
@@ -177,7 +177,7 @@ class Stretches:
         self._within = 0         # samples in a row back within limit / 2 in an open stretch
 
     @property
-    def open(self) -> bool:
+    def open(self) -> bool:  # noqa: A003 - a stretch is open (not ended)
         """Return True while the path is not robust (a stretch has started and not ended)."""
         return bool(self.spans) and self.spans[-1][1] is None
 

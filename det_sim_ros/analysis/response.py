@@ -1,8 +1,8 @@
 """
 A run as arrays, and the step-response figures of a sampled signal.
 
-Rise time, overshoot, settling time and final error. Shared by the lockstep plugin's runs (det_sim_ros.ros.testing) and offline ensembles
-(det_sim_ros.analysis.ensemble).
+Rise time, overshoot, settling time and final error. Shared by the lockstep plugin's runs
+(det_sim_ros.ros.testing) and offline ensembles (det_sim_ros.analysis.ensemble).
 """
 
 from __future__ import annotations

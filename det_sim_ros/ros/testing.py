@@ -30,10 +30,12 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from ..analysis.ensemble import Ensemble, ensemble_overrides
 from ..analysis.response import SimRun, StepMetrics
 from ..scenes.outputs import main_topic
 
-__all__ = ['LockstepSim', 'SimRun', 'StepMetrics', 'det_sim', 'pick_domain_id']
+__all__ = ['LockstepSim', 'SimRun', 'StepMetrics', 'det_sim', 'pick_domain_id',
+           'lockstep_ensemble', 'Ensemble']
 
 WALL_TIMEOUT = 600.0   # s: a safety net against a controller that never answers
 MAX_DOMAIN_ID = 232    # the largest ROS domain id (ports must fit below 65536)
@@ -195,6 +197,31 @@ class LockstepSim:
         rclpy.try_shutdown(context=self.context)
 
 
+def lockstep_ensemble(make_controllers, until: float, scene: str = 'default',
+                      overrides: dict | None = None, params: dict | None = None,
+                      copies: int = 20, perturbation=None, seed: int = 0,
+                      domain_id: int | None = None) -> Ensemble:
+    """
+    Run your controller in lockstep against ``copies`` perturbed copies of a plant.
+
+    Each copy is its own sim_node (copy 0 the scene as given, copy i > 0 perturbed as
+    :func:`~det_sim_ros.analysis.ensemble.ensemble_overrides` draws it) with fresh controller
+    nodes: ``make_controllers(sim)`` returns them, created in ``sim.context``. Returns the
+    :class:`~det_sim_ros.analysis.ensemble.Ensemble` of the runs to ``until`` (s); its
+    ``shared()`` states what every copy agrees on.
+    """
+    from ..scenes.scene import load_scene
+    base = load_scene(scene, overrides or {})
+    runs, changes = [], ensemble_overrides(base, copies, perturbation, seed)
+    for change in changes:
+        sim = LockstepSim(scene, {**(overrides or {}), **change}, params, domain_id)
+        try:
+            runs.append(sim.run(until, nodes=list(make_controllers(sim))))
+        finally:
+            sim.close()
+    return Ensemble(runs, changes)
+
+
 def _fixture():
     import pytest
 
@@ -203,7 +230,9 @@ def _fixture():
         """
         Make :class:`LockstepSim` objects, closed after the test.
 
-        Call it as ``det_sim(scene, overrides, params)``.
+        Call it as ``det_sim(scene, overrides, params)``; ``det_sim.ensemble(make_controllers,
+        until, scene, ...)`` runs your controller against perturbed copies
+        (:func:`lockstep_ensemble`).
         """
         made = []
 
@@ -211,6 +240,7 @@ def _fixture():
             sim = LockstepSim(scene, overrides, params, **kwargs)
             made.append(sim)
             return sim
+        make.ensemble = lockstep_ensemble
         yield make
         for sim in made:
             sim.close()
