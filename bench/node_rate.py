@@ -37,7 +37,7 @@ sample, command-to-effect p99 <= 2 ms with no sample lost and the lag not growin
 Usage: python bench/node_rate.py [--scenes default,array] [--rt-seconds 60]
        [--free-seconds 3] [--rounds 7] [--realtime-priority 0] [--controller-priority 0]
        [--paired N [--paired-no-log]] [--log-compression zstd|lz4|none]
-       [--paired-sensors N]
+       [--paired-sensors N] [--paired-predictability N] [--rt-no-predictability]
        [--json out.json]
 """
 
@@ -373,6 +373,8 @@ def _real_time_run(scene_name, n_det, dt, args, folder):
         result, log_path = run_node(args.rt_seconds, 'events', folder, ['displacement'],
                                     scene_file=scene_name, real_time=True,
                                     realtime_priority=args.realtime_priority,
+                                    **({'predictability.enabled': False}
+                                       if args.rt_no_predictability else {}),
                                     **({'log.enabled': False} if args.rt_no_log else
                                        {'log.compression': args.log_compression}))
     finally:
@@ -409,6 +411,11 @@ def bench_scene(scene_name, args, folder):
     finally:
         if listener is not None:
             stop(listener)
+    if args.paired_predictability > 0:   # the twin on (the default) against off
+        from sensor_cost import paired_sensors
+        report['paired_predictability_on_and_off'] = paired_sensors(
+            scene_name, args.paired_predictability, args.paired_block_s, folder,
+            args.log_compression, topics=(), off_overrides={'predictability.enabled': False})
     if args.paired_sensors > 0:   # every sensor knob on against off (bench/sensor_cost.py)
         from sensor_cost import paired_sensors
         report['paired_sensors_on_and_off'] = paired_sensors(
@@ -448,6 +455,11 @@ def main():
     parser.add_argument('--paired-sensors', type=int, default=0,
                         help='the node with every sensor knob on and off in this many '
                         'interleaved pairs of blocks (bench/sensor_cost.py; 0 = off)')
+    parser.add_argument('--rt-no-predictability', action='store_true',
+                        help='real-time run without the predictability twin')
+    parser.add_argument('--paired-predictability', type=int, default=0,
+                        help='N pairs: the node with the predictability twin (the default) '
+                             'against the node without it, paired blocks in one process')
     parser.add_argument('--json', help='write the numbers to this file')
     args = parser.parse_args()
     report = {'cpus': os.cpu_count(), 'load_avg_at_start': os.getloadavg()}

@@ -76,8 +76,14 @@ def _spin_block(executor, block_s):
 
 
 def paired_sensors(scene_name, pairs, block_s, folder, compression='zstd', seed=1,
-                   truth_subscribed=False, topics=TOPICS, amplifier=None):
-    """Measure the nodes without and with sensors in ``pairs`` random-order pairs of blocks."""
+                   truth_subscribed=False, topics=TOPICS, amplifier=None, off_overrides=None,
+                   on_overrides=None):
+    """
+    Measure the nodes without and with sensors in ``pairs`` random-order pairs of blocks.
+
+    ``off_overrides``, ``on_overrides``: more node parameters of each (e.g. another feature
+    off and on: bench/node_rate.py --paired-predictability).
+    """
     names = [f'/{ns}/{topic}' for ns in ('off', 'on') for topic in TOPICS]
     if truth_subscribed:
         names += [f'/on/sim_node/truth/{topic}' for topic in topics]
@@ -86,8 +92,9 @@ def paired_sensors(scene_name, pairs, block_s, folder, compression='zstd', seed=
     for context in contexts:
         rclpy.init(context=context)
     try:
-        knobs = {**every_knob_on(topics), **(amplifier_of(amplifier) if amplifier else {})}
-        nodes = [_node(contexts[0], scene_name, 'off', folder, compression, {}),
+        knobs = {**(every_knob_on(topics) if topics else {}),
+                 **(amplifier_of(amplifier) if amplifier else {}), **(on_overrides or {})}
+        nodes = [_node(contexts[0], scene_name, 'off', folder, compression, off_overrides or {}),
                  _node(contexts[1], scene_name, 'on', folder, compression, knobs)]
         executors = [make_executor(context) for context in contexts]
         for executor, node in zip(executors, nodes):

@@ -213,3 +213,29 @@ def test_a_closed_loop_ensemble_gives_each_copy_its_own_controller():
     first = runs.runs[0]
     assert all(np.allclose(run.voltage, first.voltage, rtol=1e-3, atol=1.0)
                for run in runs.runs[1:])
+
+
+def test_the_shell_verb_says_where_and_exits_1_with_check(tmp_path, capsys):
+    """
+    Check that det_sim predictability prints the verdict, writes its CSV and obeys --check.
+
+    The 10 Hz PWM on the fixed beam at 0.15 is not robust (exit 1 with --check, its first
+    stretch in the line as the offline function finds it); 2 Hz switching is (exit 0). The CSV's
+    distance column is the function's, sample for sample.
+    """
+    import csv
+    from det_sim_ros.cli import det_sim as cli
+    out = tmp_path / 'pwm'
+    code = cli.main(['predictability', '--set', 'scene.eps_b=0.15', '--no-plots', '--check',
+                     '--out', str(out)])
+    line = capsys.readouterr().out
+    expected = predictability(switching_scene('fixed', 0.15), pwm_voltage(3000.0), 2.5)
+    assert code == 1 and f'not robust from t = {expected.robust_until:.3f} s' in line
+    with open(out / 'predictability.csv', newline='') as stream:
+        rows = list(csv.DictReader(stream))
+    assert len(rows) == expected.t.size
+    assert np.allclose([float(r['twin_distance']) for r in rows], expected.distance,
+                       rtol=1e-9, atol=0)   # the CSV's 10 significant digits
+    assert cli.main(['predictability', '--input', 'switching', '--no-plots', '--check',
+                     '--out', str(tmp_path / 'sw')]) == 0
+    assert 'robust: a twin' in capsys.readouterr().out

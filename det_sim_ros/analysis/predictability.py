@@ -140,18 +140,29 @@ class Stroke:
         self.q_gap = 2.0 * np.abs(out[self.q_index])   # m, between the two rest states
         if np.any(self.y0 <= 0.0) or np.any(self.q_gap <= 0.0):
             raise SceneError(NO_STROKE)
+        self._per_det = [(int(iy), int(iq), 1.0 / y0, 1.0 / gap) for iy, iq, y0, gap in
+                         zip(self.y_index, self.q_index, self.y0.tolist(), self.q_gap.tolist())]
 
     def distance(self, out, twin_out) -> float:
         """Return the twin's distance from the run at one sample, a fraction of the stroke."""
-        y, q = self.y_index, self.q_index
-        return float(max(np.max(np.abs(out[y] - twin_out[y]) / self.y0),
-                         np.max(np.abs(out[q] - twin_out[q]) / self.q_gap)))
+        # (per DET in plain floats: numpy's per-call cost on a few values is several times the
+        # arithmetic, and a node pays this every period)
+        largest = 0.0
+        for iy, iq, per_y, per_q in self._per_det:
+            d_y = abs(out[iy] - twin_out[iy]) * per_y
+            d_q = abs(out[iq] - twin_out[iq]) * per_q
+            if d_y != d_y or d_q != d_q:
+                return math.nan
+            largest = max(largest, d_y, d_q)
+        return float(largest)
 
     def distances(self, outs, twin_outs) -> np.ndarray:
         """Return the distance at every sample of two (samples x outputs) arrays."""
         y, q = self.y_index, self.q_index
-        return np.maximum(np.max(np.abs(outs[:, y] - twin_outs[:, y]) / self.y0, axis=1),
-                          np.max(np.abs(outs[:, q] - twin_outs[:, q]) / self.q_gap, axis=1))
+        # (times the reciprocals, as distance() does: the same bits per sample)
+        per_y, per_q = 1.0 / self.y0, 1.0 / self.q_gap
+        return np.maximum(np.max(np.abs(outs[:, y] - twin_outs[:, y]) * per_y, axis=1),
+                          np.max(np.abs(outs[:, q] - twin_outs[:, q]) * per_q, axis=1))
 
 
 class Stretches:

@@ -144,6 +144,8 @@ class SimNode(Node):
             'y0': repr(self.y0[0]) if len(self.y0) == 1 else repr(self.y0),
             'initial_state': self._initial_text,
             'x0': repr(self._sim.x0.tolist()),   # what ~/reset returns to
+            'predictability_limit': (repr(self._p('predictability.limit'))
+                                     if self._p('predictability.enabled') else ''),
             'node': self.get_fully_qualified_name()}, self.get_namespace(), self.get_logger())
         self._predictability = attach_predictability(self, self._p, self._recorder, out_qos)
         self._commands = CommandInput(self._sim, self.det_names, self.scene.physics.v_max,
