@@ -373,7 +373,7 @@ def _real_time_run(scene_name, n_det, dt, args, folder):
         result, log_path = run_node(args.rt_seconds, 'events', folder, ['displacement'],
                                     scene_file=scene_name, real_time=True,
                                     realtime_priority=args.realtime_priority,
-                                    **({'predictability.enabled': False}
+                                    **({'predictability.mode': 'off'}
                                        if args.rt_no_predictability else {}),
                                     **({'log.enabled': False} if args.rt_no_log else
                                        {'log.compression': args.log_compression}))
@@ -415,7 +415,7 @@ def bench_scene(scene_name, args, folder):
         from sensor_cost import paired_sensors
         report['paired_predictability_on_and_off'] = paired_sensors(
             scene_name, args.paired_predictability, args.paired_block_s, folder,
-            args.log_compression, topics=(), off_overrides={'predictability.enabled': False})
+            args.log_compression, topics=(), off_overrides={'predictability.mode': 'off'})
     if args.paired_sensors > 0:   # every sensor knob on against off (bench/sensor_cost.py)
         from sensor_cost import paired_sensors
         report['paired_sensors_on_and_off'] = paired_sensors(

@@ -52,6 +52,7 @@ ROBUST_LIMIT = 0.05   # fraction of the stroke: a twin further away means a diff
 # s: how long a twin must stay back within half the limit for a stretch to end (~9 periods of
 # the beam's lowest mode: paths apart ring out of phase and cross each other meanwhile)
 HOLD_S = 0.1
+MANY_DETS = 8   # from this many DETs on, one sample's distance is taken with numpy
 NO_STROKE = 'the beams are straight at rest (no snap through): no stroke to measure against'
 
 
@@ -145,6 +146,8 @@ class Stroke:
 
     def distance(self, out, twin_out) -> float:
         """Return the twin's distance from the run at one sample, a fraction of the stroke."""
+        if len(self._per_det) > MANY_DETS:
+            return float(self.distances(out[None, :], twin_out[None, :])[0])
         # (per DET in plain floats: numpy's per-call cost on a few values is several times the
         # arithmetic, and a node pays this every period)
         largest = 0.0

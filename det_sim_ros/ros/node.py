@@ -138,6 +138,8 @@ class SimNode(Node):
         qos = {topic: out_qos for topic in self._outputs.topics + self._outputs.truth_topics}
         qos.update({COMMAND_TOPIC: in_qos, JOINT_COMMAND_TOPIC: in_qos,
                     PREDICTABILITY_TOPIC: out_qos})
+        # (before the recorder: the log's metadata says whether the measure runs)
+        self._predictability = attach_predictability(self, self._p, out_qos)
         self._recorder = open_recorder(self._p, self.scene, qos, {
             'method': self._sim.method.name, 'substeps': self._sim.substeps_setting,
             'fidelity': self.scene.fidelity_label,
@@ -145,9 +147,9 @@ class SimNode(Node):
             'initial_state': self._initial_text,
             'x0': repr(self._sim.x0.tolist()),   # what ~/reset returns to
             'predictability_limit': (repr(self._p('predictability.limit'))
-                                     if self._p('predictability.enabled') else ''),
+                                     if self._predictability.enabled else ''),
             'node': self.get_fully_qualified_name()}, self.get_namespace(), self.get_logger())
-        self._predictability = attach_predictability(self, self._p, self._recorder, out_qos)
+        self._predictability.log_to(self._recorder)
         self._commands = CommandInput(self._sim, self.det_names, self.scene.physics.v_max,
                                       self._recorder, self.get_logger(),
                                       self._pacing.command_received)

@@ -117,10 +117,11 @@ NODE_PARAMS = {
                        'network interface; anyone who reaches it can command the node)', True,
                        None),
     # the predictability measure (det_sim_ros.ros.predictability): docs/predictability.md
-    'predictability.enabled': Param(True, 'step a perturbed twin beside the run and report '
-                                    'how far it drifts (/diagnostics, the predictability topic, '
-                                    'the log; a WARN where the path stops being robust)', True,
-                                    None),
+    'predictability.mode': Param('auto', "'on': step a perturbed twin beside the run and report "
+                                 'how far it drifts (/diagnostics, the predictability topic, the '
+                                 "log; a WARN where the path stops being robust); 'auto': on "
+                                 "unless the scene is an array (a twin doubles its physics); "
+                                 "'off'", True, ('auto', 'on', 'off')),
     'predictability.parameter': Param('m', "the twin's perturbed physics parameter", True,
                                       tuple(k for k in PHYSICS_SPEC if k != 'n')),
     'predictability.relative': Param(1.0e-6, "the twin's parameter is value * (1 + this) (1e-6: "
