@@ -120,7 +120,7 @@ NODE_PARAMS = {
     'predictability.mode': Param('auto', "'on': step a perturbed twin beside the run and report "
                                  'how far it drifts (/diagnostics, the predictability topic, the '
                                  "log; a WARN where the path stops being robust); 'auto': on "
-                                 "unless the scene is an array (a twin doubles its physics); "
+                                 'unless the scene is an array (a twin doubles its physics); '
                                  "'off'", True, ('auto', 'on', 'off')),
     'predictability.parameter': Param('m', "the twin's perturbed physics parameter", True,
                                       tuple(k for k in PHYSICS_SPEC if k != 'n')),

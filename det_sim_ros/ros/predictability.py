@@ -141,7 +141,7 @@ def attach_predictability(node, get, qos):
         return NoMeasure()
     if mode == 'auto' and node.simulator.model.arrays.n_groups > 1:
         node.get_logger().info('predictability measure off for an array scene (a twin doubles '
-                               "the physics of every copy): -p predictability.mode:=on to step "
+                               'the physics of every copy): -p predictability.mode:=on to step '
                                'one (docs/predictability.md)')
         return NoMeasure()
     try:
