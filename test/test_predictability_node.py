@@ -7,7 +7,7 @@ bit for bit, so the node's first stretch starts where det_sim_ros.analysis.predi
 does (an independent path: one compiled run of the scene and one of its twin, no ROS).
 """
 
-from det_sim_ros.analysis.predictability import predictability
+from det_sim_ros.analysis.predictability import PathNotRobustWarning, predictability
 from det_sim_ros.analysis.scenarios import pwm_voltage, switching_scene
 from det_sim_ros.io.log import LogReader
 from det_sim_ros.io.messages import decode_joint_state
@@ -60,7 +60,9 @@ def test_the_node_says_where_its_path_stops_being_robust(det_sim, tmp_path):  # 
     listener.create_subscription(
         DiagnosticArray, '/diagnostics',
         lambda m: statuses.append({kv.key: kv.value for kv in m.status[0].values}), 10)
-    sim.run(until=2.5, nodes=[make_open_loop(sim.context, volts), listener])
+    with pytest.warns(PathNotRobustWarning, match='ensemble'):   # the plugin says so too
+        run = sim.run(until=2.5, nodes=[make_open_loop(sim.context, volts), listener])
+    assert run.robust_until == pytest.approx(offline.robust_until)
     sim.node.publish_diagnostics()
     sim.spin_until(lambda: statuses and statuses[-1]['sim_time_s'] == '2.500000',
                    '/diagnostics at 2.5 s')
@@ -117,6 +119,7 @@ def test_a_lockstep_ensemble_states_what_every_perturbed_copy_shares(det_sim):  
         node.create_subscription(JointState, 'displacement', on_dy, 10)
         return [node]
     runs = det_sim.ensemble(make_controllers, until=1.2, copies=4)
+    assert all(run.robust_until is None for run in runs.runs)   # a settling PI is robust
     shared = runs.shared(start=0.6, target=2e-3, t_step=0.6)
     assert len(runs) == 4 and shared.final_branch == 'buckled+', shared
     assert shared.settling[1] <= 0.5, shared

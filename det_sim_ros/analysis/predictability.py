@@ -45,7 +45,7 @@ from ..scenes.scene import load_scene, Scene, SceneError
 from ..sim.integrators import integration_tolerance
 from ..sim.simulator import simulate, Simulator
 
-__all__ = ['ROBUST_LIMIT', 'HOLD_S', 'Perturbation', 'Stroke', 'Stretches', 'hold_samples',
+__all__ = ['PathNotRobustWarning', 'ROBUST_LIMIT', 'HOLD_S', 'Perturbation', 'Stroke', 'Stretches', 'hold_samples',
            'Predictability', 'predictability', 'TwinMonitor', 'NO_STROKE']
 
 ROBUST_LIMIT = 0.05   # fraction of the stroke: a twin further away means a different path
@@ -54,6 +54,10 @@ ROBUST_LIMIT = 0.05   # fraction of the stroke: a twin further away means a diff
 HOLD_S = 0.1
 MANY_DETS = 8   # from this many DETs on, one sample's distance is taken with numpy
 NO_STROKE = 'the beams are straight at rest (no snap through): no stroke to measure against'
+
+
+class PathNotRobustWarning(UserWarning):
+    """A run whose path is not robust was used as one (the pytest plugin warns with it)."""
 
 
 @dataclasses.dataclass(frozen=True)

@@ -39,6 +39,9 @@ class NoMeasure:
     def log_to(self, recorder) -> None:
         """Do nothing (the measure is off)."""
 
+    def first_not_robust(self) -> None:
+        """Return None: nothing is known (the measure is off)."""
+
     def reset(self) -> None:
         """Do nothing (the measure is off)."""
 
@@ -88,6 +91,11 @@ class NodePredictability:
     def log_to(self, recorder) -> None:
         """Record the measure with ``recorder`` (the node's MCAP recorder, or None)."""
         self._recorder = recorder
+
+    def first_not_robust(self) -> float | None:
+        """Return the sim time (s) the path first stopped being robust, None if never."""
+        first = self.monitor.stretches.first
+        return None if first is None else first * self.monitor.twin.dt
 
     def _tell(self, event: str, t: float) -> None:
         monitor = self.monitor
