@@ -45,8 +45,9 @@ from ..scenes.scene import load_scene, Scene, SceneError
 from ..sim.integrators import integration_tolerance
 from ..sim.simulator import simulate, Simulator
 
-__all__ = ['PathNotRobustWarning', 'ROBUST_LIMIT', 'HOLD_S', 'Perturbation', 'Stroke', 'Stretches', 'hold_samples',
-           'Predictability', 'predictability', 'TwinMonitor', 'NO_STROKE']
+__all__ = ['PathNotRobustWarning', 'ROBUST_LIMIT', 'HOLD_S', 'Perturbation', 'Stroke',
+           'Stretches', 'hold_samples', 'Predictability', 'predictability', 'TwinMonitor',
+           'NO_STROKE', 'MANY_DETS']
 
 ROBUST_LIMIT = 0.05   # fraction of the stroke: a twin further away means a different path
 # s: how long a twin must stay back within half the limit for a stretch to end (~9 periods of

@@ -26,8 +26,8 @@ from __future__ import annotations
 
 import os
 import time
-import warnings
 from typing import Iterable, Sequence
+import warnings
 
 import numpy as np
 
@@ -181,7 +181,7 @@ class LockstepSim:
             self._warned = True   # (once per sim: a later run() of it says nothing new)
             warnings.warn(PathNotRobustWarning(
                 f'this lockstep run is not robust from t = {run.robust_until:.3f} s (a twin '
-                'differing by a parameter\'s 7th digit took another path): assert on what '
+                "differing by a parameter's 7th digit took another path): assert on what "
                 'det_sim.ensemble(...).shared() states, not on this run (docs/predictability.md)'),
                 stacklevel=2)
         return run
