@@ -13,10 +13,9 @@ Usage: python bench/predictability_twins.py [--quick] [--repeats 5]
 """
 
 import argparse
-import statistics
 import sys
-import time
 
+from batch import _cpu as cpu   # median process time of repeated calls, s
 from det_sim_ros.analysis.predictability import predictability
 from det_sim_ros.analysis.scenarios import (pwm_voltage, step_scene, step_voltage,
                                             switching_scene, switching_voltage)
@@ -60,16 +59,6 @@ def hand_twin(scene, volts, t_end, change):
     gap = np.abs(run['y'] - twin['y'])[after] / np.ptp(run['y'][after])
     beyond = np.nonzero(gap > 0.05)[0]
     return (float(run.t[after][beyond[0]]) if beyond.size else None), float(gap.max())
-
-
-def cpu(fn, repeats):
-    """Return the median process time of ``repeats`` calls, s."""
-    times = []
-    for _ in range(repeats):
-        start = time.process_time()
-        fn()
-        times.append(time.process_time() - start)
-    return statistics.median(times)
 
 
 def main(argv=None):
