@@ -38,7 +38,10 @@ Usage: python bench/node_rate.py [--scenes default,array] [--rt-seconds 60]
        [--free-seconds 3] [--rounds 7] [--realtime-priority 0] [--controller-priority 0]
        [--paired N [--paired-no-log]] [--log-compression zstd|lz4|none]
        [--paired-sensors N]
-       [--json out.json]
+       [--json out.json] [--quick]
+
+``--quick``: the default scene, two free-run rounds of 0.1 s, 0.2 s of lockstep and 0.5 s of
+real time (a smoke run).
 """
 
 import argparse
@@ -449,7 +452,12 @@ def main():
                         help='the node with every sensor knob on and off in this many '
                         'interleaved pairs of blocks (bench/sensor_cost.py; 0 = off)')
     parser.add_argument('--json', help='write the numbers to this file')
+    parser.add_argument('--quick', action='store_true',
+                        help='the default scene, every part for a fraction of a second')
     args = parser.parse_args()
+    if args.quick:
+        args.scenes, args.rt_seconds, args.free_seconds, args.rounds = 'default', 0.5, 0.1, 2
+        args.floor_periods, args.lockstep_seconds = 500, 0.2
     report = {'cpus': os.cpu_count(), 'load_avg_at_start': os.getloadavg()}
     with tempfile.TemporaryDirectory() as folder:
         for scene_name in args.scenes.split(','):
