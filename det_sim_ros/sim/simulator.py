@@ -79,7 +79,7 @@ class Simulator:
     :param method: stepper name (default: the scene's ``integrator.method``; 'auto' picks
         'etdrk4' when the scene has a stiff charge state, 'etdrk4_linearized' when its beams
         also have more than one Ritz term (stiff beam modes), and 'dp5' otherwise: the
-        cheapest per accuracy in bench/work_precision.py and bench/stiff_speed.py).
+        cheapest per accuracy in ``det_sim bench`` and bench/stiff_speed.py).
     :param substeps: internal steps per control period (default: the scene's; 0 = adaptive
         from the scene's tolerance when the method has an embedded estimate, else a fixed count
         from the tolerance).
