@@ -26,7 +26,7 @@ Usage (root for hosts):
     flock bench/.lock python bench/fleet.py lockstep --nodes 1,2,4,8 --seconds 10
     flock bench/.lock python bench/fleet.py hosts --cases direct,lossy_keep_all_profile
 Add --json FILE to append the numbers (one JSON object per line). ``--quick`` (no part: capacity
-and lockstep) runs one node for 0.5 s after the settling time (a smoke run).
+and lockstep) runs one node for 0.5 s after 0.5 s of settling (a smoke run).
 """
 
 import argparse
@@ -288,7 +288,8 @@ def main():
                         help='capacity and lockstep (or the part named), one node, 0.5 s')
     args = parser.parse_args()
     if args.quick:
-        args.nodes, args.seconds = '1', 0.5
+        global SETTLE
+        args.nodes, args.seconds, SETTLE = '1', 0.5, 0.5
     elif args.part is None:
         parser.error('name a part: capacity, lockstep or hosts')
     parts = [args.part] if args.part else ['capacity', 'lockstep']
