@@ -11,10 +11,9 @@ tasks; the README and the development guide link the page.
 import os
 import re
 
-import det_sim_ros
-
-PACKAGE = os.path.dirname(os.path.abspath(det_sim_ros.__file__))
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# the source tree, not the installed package: an install holds no C sources
+PACKAGE = os.path.join(ROOT, 'det_sim_ros')
 PAGE = os.path.join(ROOT, 'docs', 'architecture.md')
 REPO_TOPS = ('bench/', 'test/', 'docs/', 'config/')
 # what a path looks like on the page: a file with an extension, or a folder ending in '/'
