@@ -38,7 +38,10 @@ Usage: python bench/node_rate.py [--scenes default,array] [--rt-seconds 60]
        [--free-seconds 3] [--rounds 7] [--realtime-priority 0] [--controller-priority 0]
        [--paired N [--paired-no-log]] [--log-compression zstd|lz4|none]
        [--paired-sensors N] [--paired-predictability N] [--rt-no-predictability]
-       [--json out.json]
+       [--json out.json] [--quick]
+
+``--quick``: the default scene, one free-run round of 0.1 s, 0.2 s of lockstep and 0.5 s of
+real time (a smoke run).
 """
 
 import argparse
@@ -369,7 +372,7 @@ def _real_time_run(scene_name, n_det, dt, args, folder):
         os.sched_setscheduler(controller.pid, os.SCHED_FIFO,
                               os.sched_param(args.controller_priority))
     try:
-        time.sleep(2.0)
+        time.sleep(0.2 if args.quick else 2.0)   # the controller up (the node waits for it too)
         result, log_path = run_node(args.rt_seconds, 'events', folder, ['displacement'],
                                     scene_file=scene_name, real_time=True,
                                     realtime_priority=args.realtime_priority,
@@ -461,7 +464,12 @@ def main():
                         help='N pairs: the node with the predictability twin (the default) '
                              'against the node without it, paired blocks in one process')
     parser.add_argument('--json', help='write the numbers to this file')
+    parser.add_argument('--quick', action='store_true',
+                        help='the default scene, every part for a fraction of a second')
     args = parser.parse_args()
+    if args.quick:
+        args.scenes, args.rt_seconds, args.free_seconds, args.rounds = 'default', 0.5, 0.1, 1
+        args.floor_periods, args.lockstep_seconds = 500, 0.2
     report = {'cpus': os.cpu_count(), 'load_avg_at_start': os.getloadavg()}
     with tempfile.TemporaryDirectory() as folder:
         for scene_name in args.scenes.split(','):

@@ -538,3 +538,16 @@ def test_implausible_physics_is_flagged_on_diagnostics(harness):
     h.diagnostics.clear()
     h.spin_until(lambda: h.diagnostics, 'diagnostics after the reset')
     assert h.diagnostics[-1].status[0].level == DiagnosticStatus.OK
+
+
+def test_diagnostics_name_a_namespaced_node_fully(ros_context):
+    node = SimNode(context=ros_context, namespace='arm1', parameter_overrides=[
+        Parameter('real_time', value=False), Parameter('start_paused', value=True),
+        Parameter('log.enabled', value=False)])
+    try:
+        sent = [node.publish_diagnostics()]
+    finally:
+        node.destroy_node()
+    status = sent[-1].status[0]
+    assert status.name == '/arm1/sim_node: simulation'
+    assert status.hardware_id == '/arm1/sim_node'
