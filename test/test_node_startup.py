@@ -6,6 +6,7 @@ entry point (``python -m det_sim_ros.cli.sim_node``) on the test domain.
 """
 
 import concurrent.futures
+import contextlib
 import os
 import re
 import signal
@@ -331,6 +332,70 @@ def test_the_host_lock_is_one_per_domain_and_name():
     assert len(addresses) == 3 and len({len(a) for a in addresses}) == 1
 
 
+# Holds the lock of (7, argv[1]) in a process that forks a child (multiprocessing's fork, as a
+# ProcessPoolExecutor on Linux does), prints the child's pid and waits to be killed.
+FORKING_HOLDER = """
+import multiprocessing, sys, time
+from det_sim_ros.ros.host_lock import HostNameLock, LockState
+lock = HostNameLock(7, sys.argv[1])
+assert lock.state is LockState.HELD
+child = multiprocessing.get_context('fork').Process(target=time.sleep, args=(120,))
+child.start()
+print(child.pid, flush=True)
+time.sleep(120)
+"""
+
+
+def test_a_forked_child_keeps_no_lock():
+    """
+    Check that the lock dies with the process that took it, not with its last forked child.
+
+    A process takes the lock and forks a child (which shares its descriptors); the parent is
+    SIGKILLed while the child lives on: the name is free at once, and to the child it is held
+    by another process.
+    """
+    from det_sim_ros.ros.host_lock import HostNameLock, LockState
+    name = f'/host_lock_fork_{os.getpid()}/sim_node'
+    parent = subprocess.Popen([sys.executable, '-c', FORKING_HOLDER, name], env=child_env(),
+                              stdout=subprocess.PIPE, text=True)
+    child_pid = int(parent.stdout.readline())
+    try:
+        assert HostNameLock(7, name).state is LockState.HELD_ELSEWHERE
+        parent.kill()
+        parent.wait()
+        os.kill(child_pid, 0)                      # the child still runs
+        successor = HostNameLock(7, name)
+        assert successor.state is LockState.HELD
+        successor.release()
+    finally:
+        parent.kill()
+        parent.wait()
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(child_pid, signal.SIGKILL)
+
+
+def test_a_refusal_names_the_holder(tmp_path):
+    """Check that a process refused the lock reads the holder's pid and command line."""
+    from det_sim_ros.ros.host_lock import HostNameLock, LockState
+    name = f'/host_lock_holder_{os.getpid()}/sim_node'
+    marker = f'holder-marker-{os.getpid()}'
+    script = tmp_path / 'holder.py'
+    script.write_text('import sys, time\nfrom det_sim_ros.ros.host_lock import HostNameLock\n'
+                      'lock = HostNameLock(7, sys.argv[1])\nprint(lock.state.name, flush=True)\n'
+                      'time.sleep(120)\n')
+    holder = subprocess.Popen([sys.executable, str(script), name, marker], env=child_env(),
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == 'HELD'
+        refused = HostNameLock(7, name)
+        assert refused.state is LockState.HELD_ELSEWHERE
+        said = refused.holder()
+        assert said == f'pid {holder.pid}: {sys.executable} {script} {name} {marker}', said
+    finally:
+        holder.kill()
+        holder.wait()
+
+
 def test_the_host_lock_alone_refuses_a_node(tmp_path):
     """
     Check that a name held on this host refuses a node at once, with no claim on DDS at all.
@@ -348,6 +413,7 @@ def test_the_host_lock_alone_refuses_a_node(tmp_path):
         assert refused.returncode == 1, refused.stderr
         fatal = [line for line in refused.stderr.splitlines() if '[FATAL]' in line]
         assert len(fatal) == 1 and 'another node named /startup_locked/sim_node' in fatal[0]
+        assert f'(on this host, pid {os.getpid()}: ' in fatal[0]   # the holder: this process
         alone = Node(tmp_path, *args, environ={'ROS_AUTOMATIC_DISCOVERY_RANGE': 'OFF'})
         try:
             alone.wait_for(READY)

@@ -82,9 +82,10 @@ def younger(mine: Claim, other: Claim) -> bool:
     return other != mine and other < mine
 
 
-def _refusal(node) -> str:
+def _refusal(node, holder: str = '') -> str:
+    where = f' (on this host, {holder})' if holder else ''
     return (f'another node named {node.get_fully_qualified_name()} is running on this ROS '
-            'domain (started twice?); stop it, give this one another name or namespace '
+            f'domain{where} (started twice?); stop it, give this one another name or namespace '
             '(--ros-args -r __node:=NAME or -r __ns:=/NAMESPACE), or set '
             'allow_duplicate_name:=true')
 
@@ -200,12 +201,14 @@ class NameClaim:
         node = self._node()
         if node is None or self.refusal or self._warned:
             return
+        holder = (self._host_lock.holder() if self.host_lock_state is HELD_ELSEWHERE
+                  else '')
         if self._allow:
             self._warned = True
-            node.get_logger().warning(_refusal(node).split(';')[0]
+            node.get_logger().warning(_refusal(node, holder).partition('; stop it')[0]
                                       + ' (allow_duplicate_name is true: started anyway)')
         else:
-            self.refusal = _refusal(node)
+            self.refusal = _refusal(node, holder)
 
 
 @contextlib.contextmanager
