@@ -136,6 +136,9 @@ def _watch(args) -> int:
                           '(paused?); waiting', file=sys.stderr)
         except KeyboardInterrupt:   # the usual way to stop watching
             pass
+        loss = watcher.loss_line() if args.csv else ''
+        if loss:
+            print(f'det_sim: watch: {loss}', file=sys.stderr)
         return 0
     try:
         return _run(args, action)
