@@ -15,7 +15,7 @@ import sys
 import time
 
 from conftest import child_env, ChildProcess
-from det_sim_ros.ros.name_check import Claim, younger
+from det_sim_ros.ros.name_check import Claim, ESTABLISHED_S, yields
 from det_sim_ros.ros.params import NODE_PARAMS
 import pytest
 
@@ -171,12 +171,15 @@ def test_a_stop_says_how_far_the_run_went_and_where_its_log_is(tmp_path):
 
 
 def test_claims_are_ordered_the_same_way_by_every_node():
-    """Check the claims' order: the earlier start wins, a tie goes to the smaller id."""
-    old, new, tie = Claim(100, 7), Claim(200, 1), Claim(100, 9)
-    assert younger(new, old) and not younger(old, new)
-    assert younger(tie, old) and not younger(old, tie)
-    assert not younger(old, old)                    # its own claim, heard back
-    assert Claim.parse(new.text()) == new and Claim.parse('not a claim') is None
+    """Check the claims' order: established first, then the smaller id; no clock in it."""
+    running, new, other = Claim(True, 9), Claim(False, 1), Claim(False, 7)
+    assert yields(new, running) and not yields(running, new)      # whatever the ids
+    assert yields(other, new) and not yields(new, other)          # alike: the smaller id
+    assert yields(Claim(True, 9), Claim(True, 7))
+    assert not yields(new, Claim(True, 1))          # its own claim, heard back established
+    for claim in (running, new):
+        assert Claim.parse(claim.text()) == claim
+    assert Claim.parse('not a claim') is None and Claim.parse('1796570663 00ff') is None
 
 
 def test_duplicate_name_refused_unless_allowed(tmp_path):
@@ -285,8 +288,8 @@ def test_of_nodes_started_together_exactly_one_keeps_its_name(tmp_path):
     """
     Check three nodes of one name started at the same moment: one runs, two are refused.
 
-    Each orders the claims the same way (start time, then instance id), so exactly the oldest
-    goes on, whichever claim each hears first.
+    Each orders the claims the same way (none established yet: the instance id), so exactly
+    one goes on, whichever claim each hears first.
     """
     args = ['--ros-args', '-r', '__ns:=/startup_together', '-p', 'log.enabled:=false',
             '-p', 'info_period:=0.0']
@@ -490,13 +493,13 @@ def _wait_for_line(path, text, proc, timeout=TIMEOUT):
     pytest.fail(f'no {text!r} in {path}: {path.read_text()}')
 
 
-def test_a_duplicate_on_another_host_stops_once_it_hears_the_older_claim(tmp_path):
+def test_a_duplicate_on_another_host_stops_once_it_hears_the_established_claim(tmp_path):
     """
-    Check two nodes of one name on two hosts (network namespaces): the younger stops.
+    Check two nodes of one name on two hosts (network namespaces): the newcomer stops.
 
     Each holds its own host's lock (a network namespace is a host to the lock as to DDS), so
-    the younger does not wait for the claims of other hosts and stops when DDS brings the older
-    node's claim: one FATAL line, exit code 1; the older node goes on.
+    the newcomer does not wait for the claims of other hosts and stops when DDS brings the
+    established node's claim: one FATAL line, exit code 1; the established node goes on.
     """
     from netns_hosts import can_make_namespaces, NetnsHosts
     why = can_make_namespaces()
@@ -512,21 +515,22 @@ def test_a_duplicate_on_another_host_stops_once_it_hears_the_older_claim(tmp_pat
             with open(path, 'w') as out:
                 procs.append(net.popen(host, args, stdout=out, stderr=subprocess.STDOUT,
                                        env=env, cwd=tmp_path))
-            if host == 0:   # (the younger may hear the claim before its start-up line, or after)
+            if host == 0:   # running, established: its claim wins over a newcomer's
                 _wait_for_line(path, READY, procs[-1])
-        older, younger_node = procs
+                time.sleep(ESTABLISHED_S + 0.5)
+        established, newcomer = procs
         try:
-            code = younger_node.wait(timeout=TIMEOUT)
+            code = newcomer.wait(timeout=TIMEOUT)
         except subprocess.TimeoutExpired:
             code = 'still running'
-        running = older.poll() is None
-        older.send_signal(signal.SIGINT)
-        older_code = older.wait(timeout=TIMEOUT)
+        running = established.poll() is None
+        established.send_signal(signal.SIGINT)
+        established_code = established.wait(timeout=TIMEOUT)
     text = outputs[1].read_text()
     assert code == 1, text
     fatal = [line for line in text.splitlines() if '[FATAL]' in line]
     assert len(fatal) == 1 and 'another node named /startup_hosts/sim_node' in fatal[0], text
-    assert running and older_code == 0, outputs[0].read_text()
+    assert running and established_code == 0, outputs[0].read_text()
 
 
 def test_reset_answer_names_the_new_log_file(harness, tmp_path):
@@ -539,3 +543,61 @@ def test_reset_answer_names_the_new_log_file(harness, tmp_path):
     assert recorder.path != old and len(recorder.paths) == 2
     assert answer.message.endswith(f'the log continues in {recorder.path}')
     assert old not in answer.message
+
+
+# sim_node with this process's wall clock an hour behind (Python's time.time_ns and time.time):
+# a node whose start time were compared would look an hour older than any other
+SKEWED_ENTRY = [sys.executable, '-c', (
+    'import runpy, sys, time\n'
+    'real_ns, real_s = time.time_ns, time.time\n'
+    'time.time_ns = lambda: real_ns() - 3600 * 10**9\n'
+    'time.time = lambda: real_s() - 3600.0\n'
+    'sys.argv[0] = "sim_node"\n'
+    'runpy.run_module("det_sim_ros.cli.sim_node", run_name="__main__")\n')]
+
+
+def test_across_hosts_a_newcomer_with_a_skewed_clock_publishes_nothing(tmp_path):
+    """
+    Check the path across hosts on one host: DET_SIM_HOST_LOCK=off, DDS alone settles the name.
+
+    A node runs until established; a newcomer of its name whose wall clock is an hour behind
+    starts: it waits for the claims of DDS, hears the established one and stops before it
+    publishes (one FATAL line, exit 1). A watch of the name's samples from before the newcomer
+    to after its end sees one run only: the running node's samples, one period apart, none
+    from t = 0 again.
+    """
+    environ = {'DET_SIM_HOST_LOCK': 'off'}
+    args = ['--ros-args', '-r', '__ns:=/startup_skew', '-p', 'log.enabled:=false',
+            '-p', 'info_period:=0.0']
+    running = Node(tmp_path, *args, environ=environ)
+    try:
+        running.wait_for(READY)
+        time.sleep(ESTABLISHED_S + 0.5)
+        watch = subprocess.Popen([sys.executable, '-m', 'det_sim_ros.cli', 'watch', '--csv',
+                                  '--ns', 'startup_skew', '--duration', '8'], cwd=tmp_path,
+                                 env=child_env(), text=True, stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE)
+        try:
+            assert watch.stdout.readline().startswith('t,')      # it has samples
+            newcomer = subprocess.Popen(SKEWED_ENTRY + args, cwd=tmp_path, text=True,
+                                        env=child_env(**environ), stdout=subprocess.PIPE,
+                                        stderr=subprocess.PIPE)
+            try:   # (it ends within its claim's settling, SETTLE_MAX_S after its start-up)
+                _, newcomer_err = newcomer.communicate(timeout=20.0)
+            except subprocess.TimeoutExpired:
+                newcomer.kill()
+                _, newcomer_err = newcomer.communicate()
+            rows, _ = watch.communicate(timeout=TIMEOUT)
+        finally:
+            watch.kill()
+            watch.wait()
+        still_running = running.proc.poll() is None
+    finally:
+        stopped = running.stop()
+    assert newcomer.returncode == 1, newcomer_err
+    fatal = [line for line in newcomer_err.splitlines() if '[FATAL]' in line]
+    assert len(fatal) == 1 and 'another node named /startup_skew/sim_node' in fatal[0]
+    assert still_running and stopped == 0, ''.join(running.lines)
+    steps = [round(float(row.split(',')[0]) * 1000) for row in rows.splitlines()]
+    assert len(steps) > 1000 and steps[0] > 1000    # (the running node's: seconds in)
+    assert all(b == a + 1 for a, b in zip(steps, steps[1:]))   # none from the newcomer

@@ -84,10 +84,11 @@ class HostNameLock:
     another process does.
     """
 
-    def __init__(self, domain_id: int, name: str):
+    def __init__(self, domain_id: int, name: str, enabled: bool = True):
+        """Take the lock (``enabled`` False: take nothing, the lock is :data:`UNAVAILABLE`)."""
         self._socket = None
         self._address = lock_address(domain_id, name)
-        self.state = self._take(self._address)
+        self.state = self._take(self._address) if enabled else UNAVAILABLE
         if self.state is HELD:
             _HELD_LOCKS.add(self)
 
