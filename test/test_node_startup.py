@@ -195,8 +195,13 @@ def test_duplicate_name_refused_unless_allowed(tmp_path):
     first = Node(tmp_path, *args)
     try:
         # the start line names the level: the shipped default is the exact kinematics in 3
-        # buckling modes on its fixed beam
-        assert 'fidelity exact buckling modes n_r=3' in first.wait_for(READY)
+        # buckling modes on its fixed beam; and the tolerance in effect, its level's
+        from det_sim_ros.scenes.scene import load_scene
+        from det_sim_ros.sim.integrators import integration_tolerance
+        line = first.wait_for(READY)
+        assert 'fidelity exact buckling modes n_r=3' in line
+        tolerance = integration_tolerance(load_scene('default'))
+        assert f', tolerance {tolerance:g} (auto: its level); ' in line, line
         with concurrent.futures.ThreadPoolExecutor(3) as pool:
             seconds = list(pool.map(lambda _: run_entry(args, cwd=tmp_path), range(3)))
         for second in seconds:
@@ -205,11 +210,15 @@ def test_duplicate_name_refused_unless_allowed(tmp_path):
             assert len(fatal) == 1 and 'another node named /startup_dup/sim_node' in fatal[0]
             assert 'Traceback' not in second.stderr
         assert first.proc.poll() is None           # the running node was not the one refused
-        allowed = Node(tmp_path, *args, '-p', 'allow_duplicate_name:=true')
+        # a scene of its own tolerance (an allowed duplicate): the start line says it
+        scene = tmp_path / 'tolerance.yaml'
+        scene.write_text('base: default\nintegrator:\n  tolerance: 2.5e-05\n')
+        allowed = Node(tmp_path, *args, '-p', 'allow_duplicate_name:=true',
+                       '-p', f'scene_file:={scene}')
         try:
             warning = allowed.wait_for('another node named /startup_dup/sim_node')
             assert '[WARN]' in warning
-            allowed.wait_for(READY)
+            assert ', tolerance 2.5e-05; ' in allowed.wait_for(READY)
         finally:
             allowed_stopped = allowed.stop()
         assert allowed_stopped == 0
