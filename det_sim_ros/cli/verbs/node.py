@@ -79,7 +79,9 @@ def _send(args) -> int:
     names, volts = _parse_voltages(args.voltages)
 
     def action(shell):
-        dets = shell.det_names()
+        # one call for both: a send costs one parameter round trip, clamped or not
+        dets, v_max = shell.get_parameters(['structure.dets', 'physics.v_max'])
+        dets, v_max = list(dets), float(v_max)
         if names is None and len(volts) != len(dets):
             raise common.CliError(f'{len(volts)} voltage(s) for {len(dets)} DET(s): give one per '
                                   f"DET in command order [{', '.join(dets)}]")
@@ -90,7 +92,6 @@ def _send(args) -> int:
         topic = shell.send(volts, names)
         pairs = list(zip(names or dets, volts))
         print(f"sent {', '.join(f'{n}={v:g}' for n, v in pairs)} V on {topic}")
-        v_max = float(shell.get_parameter('physics.v_max'))
         clamped = [f'{n}: {v:g} V' for n, v in pairs if not 0.0 <= v <= v_max]
         if clamped:   # the node clamps them (and warns): say so here too
             from ...io.contract import clamp_message
