@@ -61,7 +61,9 @@ __all__ = ['CLAIM_TOPIC', 'Claim', 'discovers_no_other_node', 'ESTABLISHED_S',
 CLAIM_TOPIC = '~/_name_claim'
 SETTLE_S = 0.75      # s after the claim before the node may publish, without a host lock
 SETTLE_MAX_S = 3.0   # s at most, while matched claim writers have not been heard yet
-ESTABLISHED_S = SETTLE_MAX_S   # s after its claim before a node's claim wins over newcomers'
+# s after its claim before a node's claim wins over newcomers': longer than any wait for the
+# claims of DDS, so a node never establishes before it has settled its own name
+ESTABLISHED_S = SETTLE_MAX_S + 2.0
 
 
 class Claim(tuple):
