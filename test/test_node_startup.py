@@ -587,7 +587,10 @@ def test_across_hosts_a_newcomer_with_a_skewed_clock_publishes_nothing(tmp_path)
                                  env=child_env(), text=True, stdout=subprocess.PIPE,
                                  stderr=subprocess.PIPE)
         try:
-            assert watch.stdout.readline().startswith('t,')      # it has samples
+            header = b''   # (byte by byte: communicate() would miss what a readline buffered)
+            while not header.endswith(b'\n') and (byte := os.read(watch.stdout.fileno(), 1)):
+                header += byte
+            assert header.startswith(b't,'), header                 # it has samples
             newcomer = subprocess.Popen(SKEWED_ENTRY + args, cwd=tmp_path, text=True,
                                         env=child_env(**environ), stdout=subprocess.PIPE,
                                         stderr=subprocess.PIPE)
