@@ -221,3 +221,11 @@ def test_relative_links_point_at_files(path):
     missing = [t for t in targets if not re.match(r'[a-z]+:', t)
                and not os.path.exists(os.path.join(base, t.split('#')[0]))]
     assert not missing, f'{os.path.basename(path)}: links to missing files {missing}'
+
+
+def test_the_shell_page_covers_every_verb():
+    """Check that docs/shell.md shows every verb of det_sim's parser as `det_sim VERB`."""
+    from det_sim_ros.cli.det_sim import VERBS
+    text = _read(os.path.join(DOCS, 'shell.md'))
+    missing = [verb for verb in VERBS if not re.search(rf'`det_sim {verb}\b', text)]
+    assert not missing, f'docs/shell.md does not cover: {missing}'

@@ -163,7 +163,8 @@ class SimNode(Node):
         self.get_logger().info(
             f'scene {scene_file!r}: {self.scene.beam} beam, eps_b = {self.scene.eps_b:g}, '
             f'fidelity {self.scene.fidelity_label}, {self.scene.rate_hz:g} Hz, '
-            f'{self._sim.describe_stepper()}; '
+            f'{self._sim.describe_stepper()}, tolerance {self._sim.tolerance:g}'
+            f'{" (auto: its level)" if self.scene.tolerance <= 0.0 else ""}; '
             f'{self._pacing.label()}{", paused" if self.paused else ""}{gate_text}; initial state '
             f'{self._initial_text}; {len(self.det_names)} DET(s), '
             f'voltage command order: [{", ".join(self.det_names)}]'

@@ -133,10 +133,10 @@ NODE_PARAMS = {
     'predictability.limit': Param(0.05, 'the twin distance (a fraction of the stroke) beyond '
                                   'which the path is not robust', True, (1.0e-6, 10.0)),
     'allow_duplicate_name': Param(False, 'run even if another node of this fully qualified '
-                                  'name is running (one warning); false: the younger of two '
+                                  'name is running (one warning); false: the newcomer of two '
                                   'stops with one FATAL line, on one host before it publishes '
                                   '(a host lock on the name), across hosts once it hears the '
-                                  'older (docs/topics.md)',
+                                  'established node (docs/topics.md)',
                                   True, None),
     'strict_parameters': Param(False, 'a parameter name the node does not know (-p, a params '
                                'file) stops the start with one FATAL line; false: one warning '
