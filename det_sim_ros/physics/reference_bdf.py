@@ -83,7 +83,7 @@ class BdfStepper:
         self.steps = self.rejected = self.jacobians = self.factorizations = 0
 
     def norm(self, v) -> float:
-        """Return the weighted max norm over the tolerance."""
+        """Return the weighted max norm over the tolerance (NaN if a component is NaN)."""
         return float(np.max(np.abs(v) * self.weights)) / self.tol
 
     def jacobian(self, x, u) -> np.ndarray:
@@ -116,6 +116,8 @@ class BdfStepper:
         import scipy.linalg   # the reference only: the kernel has its own LU
 
         x = np.asarray(x, dtype=float)
+        if not np.all(np.isfinite(x)):
+            raise ArithmeticError('BDF: non-finite state')
         if self.D is None or not np.array_equal(self.D[0], x):
             self._restart(x, u)
         t = 0.0
@@ -139,6 +141,10 @@ class BdfStepper:
                     self.J = self.jacobian(y_predict, u)
                     self.jacobian_current = True
                     self.lu = None
+                    if not np.all(np.isfinite(self.J)):   # never kept: a smaller step
+                        self.J = None
+                        converged = False
+                        break
                 if self.lu is None or abs(c / self.lu_c - 1.0) > LU_KEEP:
                     self.lu = scipy.linalg.lu_factor(np.eye(len(x)) - c * self.J)
                     self.lu_c = c
@@ -178,6 +184,8 @@ class BdfStepper:
             self.order = order + best - 1
             self._rescale(min(MAX_FACTOR, safety * factors[best]))
             self.equal_steps = 0
+        if not np.all(np.isfinite(self.D[0])):
+            raise ArithmeticError('BDF: non-finite state')
         return self.D[0].copy()
 
     def _newton(self, y_predict, u, c, psi):
@@ -192,6 +200,8 @@ class BdfStepper:
                 break
             dy = scipy.linalg.lu_solve(self.lu, c * f - psi - d)
             size = self.norm(dy)
+            if not size < math.inf:   # NaN or inf: an update that must not be taken
+                break
             rate = None if old is None else size / old
             # a correction already within Newton's tolerance ends it: its rate, from two such
             # corrections, would be round-off (at rest it is noise around 1)

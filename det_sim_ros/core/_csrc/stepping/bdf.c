@@ -89,14 +89,17 @@ void ds_bdf_reset(ds_bdf *b)
     b->valid = 0;
 }
 
-/* The weighted max norm over the tolerance. */
+/* The weighted max norm over the tolerance; NaN if any component is NaN (numpy's max): a
+ * NaN must fail every test it enters, never be skipped by a comparison. */
 static double norm(const ds_bdf *b, const double *v, double scale)
 {
     double m = 0.0;
     for (int64_t i = 0; i < b->n; i++) {
         const double e = fabs(scale * v[i]) * b->w[i];
-        if (e > m)
+        if (e > m || e != e)
             m = e;
+        if (m != m)
+            return m;
     }
     return m / b->tol;
 }
@@ -173,7 +176,7 @@ static int factorize(ds_bdf *b, double c)
     for (int64_t i = 0; i < n; i++)   /* the transpose the solves read by columns */
         for (int64_t j = 0; j < n; j++)
             b->LT[j * n + i] = a[i * n + j];
-    b->factorizations += 1.0;
+    b->factorizations += 1;
     b->lu_c = c;
     return 0;
 }
@@ -223,10 +226,19 @@ static int jacobian(ds_bdf *b, ds_group *g, const double *x, const double *u)
         for (int64_t i = 0; i < n; i++)
             b->J[i * n + j] = (b->f[i] - b->f0[i]) / step;
     }
-    b->jacobians += 1.0;
-    b->have_jac = 1;
-    b->jac_current = 1;
+    b->jacobians += 1;
+    if (b->nan_after > 0 && --b->nan_after == 0) {   /* a planted fault (tests only) */
+        b->J[0] = NAN;
+        b->nan_after = b->nan_lasting;
+    }
     b->lu_c = 0.0;   /* the LU is of the old J */
+    int finite = 1;
+    for (int64_t k = 0; k < n * n; k++)
+        finite &= isfinite(b->J[k]);
+    b->have_jac = finite;   /* a non-finite J is never kept */
+    b->jac_current = 1;
+    if (status == DS_OK && !finite)
+        status = DS_NON_FINITE;
     return status;
 }
 
@@ -244,12 +256,18 @@ static int newton(ds_bdf *b, ds_group *g, const double *u, double c, int *iters)
         int finite = 1;
         for (int64_t i = 0; i < n; i++)
             finite &= isfinite(b->f[i]);
-        if (!finite)
+        if (!finite) {
+            b->failed_non_finite = 1;
             break;
+        }
         for (int64_t i = 0; i < n; i++)
             b->dy[i] = c * b->f[i] - b->psi[i] - b->d[i];
         solve(b, b->dy);
         const double size = norm(b, b->dy, 1.0);
+        if (!(size < INFINITY)) {   /* NaN or inf: an update that must not be taken */
+            b->failed_non_finite = 1;
+            break;
+        }
         const double rate = old < 0.0 ? -1.0 : size / old;
         /* a correction already within Newton's tolerance ends it: its rate, from two such
          * corrections, would be round-off (at rest it is noise around 1) */
@@ -275,9 +293,12 @@ static int restart(ds_bdf *b, ds_group *g, const double *x, const double *u)
     const int64_t n = b->n;
     memset(b->D, 0, (size_t)(N_ROWS * n) * sizeof(double));
     memcpy(b->D, x, (size_t)n * sizeof(double));
-    const int status = ds_rhs(g->m, x, u, b->f, &g->w, 0);
-    for (int64_t i = 0; i < n; i++)
+    int status = ds_rhs(g->m, x, u, b->f, &g->w, 0);
+    for (int64_t i = 0; i < n; i++) {
         b->D[n + i] = b->f[i] * b->h0;
+        if (status == DS_OK && !isfinite(b->f[i]))
+            status = DS_NON_FINITE;
+    }
     b->h = b->h0;
     b->order = 1;
     b->equal_steps = 0;
@@ -294,7 +315,7 @@ static int period(const ds_stepper *st, ds_group *g, ds_bdf *b, const double *u)
     double t = 0.0;
     for (int64_t attempts = 0; dt - t > 1e-12 * dt; attempts++) {
         if (attempts == MAX_ATTEMPTS)   /* a state running away: fail, do not hang */
-            return DS_NON_FINITE;
+            return DS_NO_PROGRESS;
         const double left = dt - t;
         double n_left = ceil(left / b->h - 1e-9);
         if (n_left < 1.0)
@@ -304,7 +325,7 @@ static int period(const ds_stepper *st, ds_group *g, ds_bdf *b, const double *u)
         const int order = b->order;
         const double h = b->h;
         if (!(h > MIN_STEP_FRACTION * dt))
-            return DS_NON_FINITE;
+            return b->failed_non_finite ? DS_NON_FINITE : DS_STEP_UNDERFLOW;
         const double a_k = b->alpha[order];
         for (int64_t i = 0; i < n; i++) {
             double s = 0.0, p = 0.0;
@@ -316,16 +337,21 @@ static int period(const ds_stepper *st, ds_group *g, ds_bdf *b, const double *u)
             b->psi[i] = p / a_k;
         }
         const double c = h / a_k;
-        int converged, iters = NEWTON_MAXITER;
+        int converged = 0, iters = NEWTON_MAXITER;
+        b->failed_non_finite = 0;
         for (;;) {
             if (!b->have_jac) {
                 const int status = jacobian(b, g, b->y_pred, u);
+                if (status == DS_NON_FINITE) {   /* a smaller step may avoid it */
+                    b->failed_non_finite = 1;
+                    break;
+                }
                 if (status != DS_OK)
                     return status;
             }
             /* no LU yet (lu_c 0: c / 0 is inf), or one of a c too far off */
             if (fabs(c / b->lu_c - 1.0) > LU_KEEP && factorize(b, c) < 0)
-                return DS_NON_FINITE;
+                return DS_SINGULAR;
             converged = newton(b, g, u, c, &iters);
             if (converged || b->jac_current)
                 break;
@@ -333,7 +359,7 @@ static int period(const ds_stepper *st, ds_group *g, ds_bdf *b, const double *u)
         }
         g->steps += 1.0;
         if (!converged) {
-            b->rejected += 1.0;
+            b->rejected += 1;
             rescale(b, 0.5, b->h * 0.5);
             b->equal_steps = 0;
             continue;
@@ -343,7 +369,7 @@ static int period(const ds_stepper *st, ds_group *g, ds_bdf *b, const double *u)
         if (error * b->tol > g->est)
             g->est = error * b->tol;
         if (error > 1.0) {
-            b->rejected += 1.0;
+            b->rejected += 1;
             const double f = fmax(MIN_FACTOR, safety * pow(error, -1.0 / (order + 1)));
             rescale(b, f, b->h * f);
             b->equal_steps = 0;
@@ -396,6 +422,9 @@ int ds_bdf_period(const ds_stepper *st, ds_group *g, double *x, const double *u)
         status = restart(b, g, x, u);
     if (status == DS_OK)
         status = period(st, g, b, u);
+    for (int64_t i = 0; i < n && status == DS_OK; i++)   /* states outside the norm too */
+        if (!isfinite(b->D[i]))
+            status = DS_NON_FINITE;
     if (status != DS_OK) {   /* x is untouched: the steps run on the history D */
         b->valid = 0;
         return status;

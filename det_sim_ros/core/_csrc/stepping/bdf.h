@@ -25,7 +25,12 @@ typedef struct ds_bdf {
     double *y_pred, *psi, *y, *d, *dy, *f, *f0, *xp;
     double gamma[DS_BDF_MAX_ORDER + 1], alpha[DS_BDF_MAX_ORDER + 1];
     double error_const[DS_BDF_MAX_ORDER + 1];
-    double jacobians, factorizations, rejected;
+    int64_t jacobians, factorizations, rejected;
+    int failed_non_finite;      /* the last failed attempt met a NaN or inf (its status if
+                                   the step then underflows) */
+    int64_t nan_after;          /* a test's planted fault: the nan_after-th Jacobian from now
+                                   gets a NaN (0: none; Stepper.plant_nan) */
+    int nan_lasting;            /* ... and every Jacobian after it */
     void *mem;
 } ds_bdf;
 
@@ -34,8 +39,10 @@ int ds_bdf_init(ds_bdf *b, int64_t n, const double *weights, double tol, double 
 void ds_bdf_free(ds_bdf *b);
 /* Forget the history: the next period restarts at order 1 with the first step. */
 void ds_bdf_reset(ds_bdf *b);
-/* One control period st->dt from x (in place) with the input u held. Returns a status; on
- * failure x holds its start and the history is forgotten. */
+/* One control period st->dt from x (in place) with the input u held. Returns a status that
+ * names the failure (DS_NON_FINITE: a NaN or inf in the state, its rate or the Jacobian that
+ * no smaller step avoided; DS_STEP_UNDERFLOW, DS_NO_PROGRESS, DS_SINGULAR; a domain status of
+ * the right-hand side); on failure x holds its start and the history is forgotten. */
 int ds_bdf_period(const ds_stepper *st, ds_group *g, double *x, const double *u);
 
 #endif
