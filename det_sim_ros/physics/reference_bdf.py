@@ -11,8 +11,12 @@ or lowered after order + 1 equal steps. Driven by control periods:
 - the steps of a period fit it evenly (the last step never overshoots, no interpolation): the
   state at a period's end is the method's own, and an input that changes there starts the next
   step from it (the history runs on: the charge sees the jump as a kink, not a restart);
-- the error norm is the largest weighted component (``weights``: 1 / scale; 0 leaves a state
-  out, as the power monitor's integrals), the tolerance absolute in those units.
+- the error norm is the largest weighted component (``weights``: 1 / scale) of the first
+  ``n_core`` states, the tolerance absolute in those units;
+- the states past ``n_core`` are bookkeeping integrals no rate reads (the power monitor's W_in,
+  W_diss): the same formula steps them outside the iteration matrix and the norm, and a value
+  written into them from outside (a recharge booked at an input jump) shifts their history
+  instead of restarting it, so they never steer the steps.
 
 The kernel is held to this module by test/test_bdf.py.
 """
@@ -68,13 +72,16 @@ class BdfStepper:
     """
     One coupled group's BDF history, advanced one control period at a time.
 
-    ``rhs(x, u)`` returns dx/dt; ``weights`` the error norm's 1 / scale per state (0: not in
-    the norm); ``tol`` the local error allowed per step in those units; ``h0`` the first step.
+    ``rhs(x, u)`` returns dx/dt; ``weights`` the error norm's 1 / scale per state; ``tol`` the
+    local error allowed per step in those units; ``h0`` the first step; ``n_core`` the states
+    the iteration and the norm hold (None: all; the rest are bookkeeping).
     """
 
-    def __init__(self, rhs, weights, tol: float, dt: float, h0: float):
+    def __init__(self, rhs, weights, tol: float, dt: float, h0: float,
+                 n_core: int | None = None):
         self.rhs = rhs
         self.weights = np.asarray(weights, dtype=float)
+        self.n_core = len(self.weights) if n_core is None else int(n_core)
         self.tol = float(tol)
         self.dt = float(dt)
         self.h0 = float(h0)
@@ -84,13 +91,19 @@ class BdfStepper:
 
     def norm(self, v) -> float:
         """Return the weighted max norm over the tolerance (NaN if a component is NaN)."""
-        return float(np.max(np.abs(v) * self.weights)) / self.tol
+        nc = self.n_core
+        return float(np.max(np.abs(v[:nc]) * self.weights[:nc])) / self.tol
 
     def jacobian(self, x, u) -> np.ndarray:
-        """Return df/dx by forward differences, increments sqrt(eps) max(|x_j|, scale_j)."""
+        """
+        Return df/dx_core by forward differences, increments sqrt(eps) max(|x_j|, scale_j).
+
+        Every state's row, the core states' columns (no rate reads the bookkeeping states).
+        """
+        nc = self.n_core
         f0 = self.rhs(x, u)
-        J = np.empty((len(x), len(x)))
-        for j in range(len(x)):
+        J = np.empty((len(x), nc))
+        for j in range(nc):
             scale = 1.0 / self.weights[j] if self.weights[j] > 0.0 else 1.0
             xp = x.copy()
             xp[j] = x[j] + FD_RELATIVE * max(abs(x[j]), scale)
@@ -118,8 +131,11 @@ class BdfStepper:
         x = np.asarray(x, dtype=float)
         if not np.all(np.isfinite(x)):
             raise ArithmeticError('BDF: non-finite state')
-        if self.D is None or not np.array_equal(self.D[0], x):
+        nc = self.n_core
+        if self.D is None or not np.array_equal(self.D[0, :nc], x[:nc]):
             self._restart(x, u)
+        else:   # bookkeeping written from outside: a shift of its integral
+            self.D[0, nc:] = x[nc:]
         t = 0.0
         attempts = 0
         while self.dt - t > 1e-12 * self.dt:
@@ -146,7 +162,7 @@ class BdfStepper:
                         converged = False
                         break
                 if self.lu is None or abs(c / self.lu_c - 1.0) > LU_KEEP:
-                    self.lu = scipy.linalg.lu_factor(np.eye(len(x)) - c * self.J)
+                    self.lu = scipy.linalg.lu_factor(np.eye(nc) - c * self.J[:nc])
                     self.lu_c = c
                     self.factorizations += 1
                 converged, n_iter, y_new, d = self._newton(y_predict, u, c, psi)
@@ -198,7 +214,12 @@ class BdfStepper:
             f = self.rhs(y, u)
             if not np.all(np.isfinite(f)):
                 break
-            dy = scipy.linalg.lu_solve(self.lu, c * f - psi - d)
+            # I - c J is block lower triangular: the core's block alone, the bookkeeping rows
+            # by substitution after it
+            dy = c * f - psi - d
+            nc = self.n_core
+            dy[:nc] = scipy.linalg.lu_solve(self.lu, dy[:nc])
+            dy[nc:] += self.lu_c * (self.J[nc:] @ dy[:nc])
             size = self.norm(dy)
             if not size < math.inf:   # NaN or inf: an update that must not be taken
                 break

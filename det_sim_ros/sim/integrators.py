@@ -415,7 +415,8 @@ def error_weights(model) -> np.ndarray:
 # 18x, dither 17x real time); 1e-3 41x / 44x; 1e-4 43x / 51x at 0.15-0.59 % error; 1e-5 and
 # less (0: the charge out of the norm, and out of Newton's test) no faster and less accurate
 # (controller 29-37x, up to 0.78 %). The power monitor's integrals (W_in, W_diss) feed back on
-# nothing and stay out (0).
+# nothing: the stepper keeps them out of its norm and its iteration matrix whatever their
+# weight (bdf.h, n_core).
 BDF_SLOW_WEIGHT = 1e-4
 
 

@@ -43,10 +43,12 @@ static void tables(ds_bdf *b)
     }
 }
 
-int ds_bdf_init(ds_bdf *b, int64_t n, const double *weights, double tol, double h0)
+int ds_bdf_init(ds_bdf *b, int64_t n, int64_t n_core, const double *weights, double tol,
+                double h0)
 {
     memset(b, 0, sizeof(*b));
     b->n = n;
+    b->n_core = n_core;
     b->tol = tol;
     b->h0 = h0;
     const int64_t total = N_ROWS * n + 4 * n * n + 9 * n;
@@ -94,7 +96,7 @@ void ds_bdf_reset(ds_bdf *b)
 static double norm(const ds_bdf *b, const double *v, double scale)
 {
     double m = 0.0;
-    for (int64_t i = 0; i < b->n; i++) {
+    for (int64_t i = 0; i < b->n_core; i++) {
         const double e = fabs(scale * v[i]) * b->w[i];
         if (e > m || e != e)
             m = e;
@@ -146,7 +148,7 @@ static void rescale(ds_bdf *b, double factor, double h_new)
 /* LU with partial pivoting of I - c J into b->LU. Returns 0, or -1 when singular. */
 static int factorize(ds_bdf *b, double c)
 {
-    const int64_t n = b->n;
+    const int64_t n = b->n_core;
     double *a = b->LU;
     for (int64_t i = 0; i < n; i++)
         for (int64_t j = 0; j < n; j++)
@@ -185,7 +187,7 @@ static int factorize(ds_bdf *b, double c)
  * column's update is independent across rows (no chain of dependent sums per row). */
 static void solve(const ds_bdf *b, double *v)
 {
-    const int64_t n = b->n;
+    const int64_t n = b->n_core;
     const double *lt = b->LT;
     for (int64_t k = 0; k < n; k++) {
         const int64_t p = b->piv[k];
@@ -210,12 +212,14 @@ static void solve(const ds_bdf *b, double *v)
     }
 }
 
-/* J = df/dx at x by forward differences (increments sqrt(eps) max(|x_j|, 1 / w_j)). */
+/* J = df/dx at x by forward differences (increments sqrt(eps) max(|x_j|, 1 / w_j)): the
+ * columns of the n_core states, their rows as an n_core square (the iteration matrix's) and
+ * the bookkeeping states' rows after it. */
 static int jacobian(ds_bdf *b, ds_group *g, const double *x, const double *u)
 {
-    const int64_t n = b->n;
+    const int64_t n = b->n_core;
     int status = ds_rhs(g->m, x, u, b->f0, &g->w, 0);
-    memcpy(b->xp, x, (size_t)n * sizeof(double));
+    memcpy(b->xp, x, (size_t)b->n * sizeof(double));
     for (int64_t j = 0; j < n && status == DS_OK; j++) {
         const double scale = b->w[j] > 0.0 ? 1.0 / b->w[j] : 1.0;
         const double size = fabs(x[j]) > scale ? fabs(x[j]) : scale;
@@ -223,8 +227,8 @@ static int jacobian(ds_bdf *b, ds_group *g, const double *x, const double *u)
         const double step = b->xp[j] - x[j];
         status = ds_rhs(g->m, b->xp, u, b->f, &g->w, 0);
         b->xp[j] = x[j];
-        for (int64_t i = 0; i < n; i++)
-            b->J[i * n + j] = (b->f[i] - b->f0[i]) / step;
+        for (int64_t i = 0; i < b->n; i++)   /* the bookkeeping rows after the core block */
+            b->J[i < n ? i * n + j : n * n + (i - n) * n + j] = (b->f[i] - b->f0[i]) / step;
     }
     b->jacobians += 1;
     if (b->nan_after > 0 && --b->nan_after == 0) {   /* a planted fault (tests only) */
@@ -233,7 +237,7 @@ static int jacobian(ds_bdf *b, ds_group *g, const double *x, const double *u)
     }
     b->lu_c = 0.0;   /* the LU is of the old J */
     int finite = 1;
-    for (int64_t k = 0; k < n * n; k++)
+    for (int64_t k = 0; k < b->n * n; k++)
         finite &= isfinite(b->J[k]);
     b->have_jac = finite;   /* a non-finite J is never kept */
     b->jac_current = 1;
@@ -243,7 +247,9 @@ static int jacobian(ds_bdf *b, ds_group *g, const double *x, const double *u)
 }
 
 /* The simplified Newton iteration of one step: y (from y_pred), d = y - y_pred. Returns 1 when
- * it converged, with *iters the iterations it took. */
+ * it converged, with *iters the iterations it took. The bookkeeping states (past n_core) no
+ * rate reads make I - c J block lower triangular: the core's block is solved alone (the same
+ * arithmetic with or without them) and their rows by substitution after it. */
 static int newton(ds_bdf *b, ds_group *g, const double *u, double c, int *iters)
 {
     const int64_t n = b->n;
@@ -263,6 +269,14 @@ static int newton(ds_bdf *b, ds_group *g, const double *u, double c, int *iters)
         for (int64_t i = 0; i < n; i++)
             b->dy[i] = c * b->f[i] - b->psi[i] - b->d[i];
         solve(b, b->dy);
+        const int64_t nc = b->n_core;
+        for (int64_t i = nc; i < n; i++) {   /* the bookkeeping rows: -c J_bc dy_c + dy_b */
+            const double *row = b->J + nc * nc + (i - nc) * nc;
+            double s = 0.0;
+            for (int64_t j = 0; j < nc; j++)
+                s += row[j] * b->dy[j];
+            b->dy[i] += b->lu_c * s;
+        }
         const double size = norm(b, b->dy, 1.0);
         if (!(size < INFINITY)) {   /* NaN or inf: an update that must not be taken */
             b->failed_non_finite = 1;
@@ -418,8 +432,12 @@ int ds_bdf_period(const ds_stepper *st, ds_group *g, double *x, const double *u)
     for (int64_t i = 0; i < n; i++)
         if (!isfinite(x[i]))
             return DS_NON_FINITE;
-    if (!b->valid || memcmp(b->D, x, (size_t)n * sizeof(double)) != 0)
+    /* the bookkeeping states may have been written from outside (an ideal source's recharge
+     * booked at an input jump): a constant shift of their integral, not a new history */
+    if (!b->valid || memcmp(b->D, x, (size_t)b->n_core * sizeof(double)) != 0)
         status = restart(b, g, x, u);
+    else
+        memcpy(b->D + b->n_core, x + b->n_core, (size_t)(n - b->n_core) * sizeof(double));
     if (status == DS_OK)
         status = period(st, g, b, u);
     for (int64_t i = 0; i < n && status == DS_OK; i++)   /* states outside the norm too */

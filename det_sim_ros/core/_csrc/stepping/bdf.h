@@ -13,6 +13,11 @@
 
 typedef struct ds_bdf {
     int64_t n;                  /* states (the whole group's) */
+    int64_t n_core;             /* the leading states the Newton iteration, the norm and the
+                                   restart test hold; the rest are bookkeeping integrals (the
+                                   power monitor's W_in, W_diss) no rate reads: stepped with
+                                   the same formula, outside the iteration matrix, so they
+                                   never steer the steps */
     double tol, h0;             /* local error per step in the weighted norm; first step, s */
     int valid;                  /* a history to go on from (else the next period restarts) */
     int order, equal_steps, jac_current, have_jac;
@@ -34,8 +39,10 @@ typedef struct ds_bdf {
     void *mem;
 } ds_bdf;
 
-/* weights: 1 / scale per state of the group (0: not in the norm). Returns -1 without memory. */
-int ds_bdf_init(ds_bdf *b, int64_t n, const double *weights, double tol, double h0);
+/* weights: 1 / scale per state of the group (n_core of them in the norm). Returns -1 without
+ * memory. */
+int ds_bdf_init(ds_bdf *b, int64_t n, int64_t n_core, const double *weights, double tol,
+                double h0);
 void ds_bdf_free(ds_bdf *b);
 /* Forget the history: the next period restarts at order 1 with the first step. */
 void ds_bdf_reset(ds_bdf *b);
