@@ -26,6 +26,7 @@
 #define MAX_ATTEMPTS 100000                  /* steps tried per period before it fails */
 #define N_ROWS (DS_BDF_MAX_ORDER + 3)
 #define LU_KEEP 0.3   /* the LU serves while c is within this fraction of its own */
+#define FIT_ROUND_OFF 1e-9   /* a fit to the period moving the step less: round-off, no change */
 
 /* What one attempted step came to (try_step). */
 enum { STEP_ACCEPTED, STEP_NEWTON_FAILED, STEP_ERROR_FAILED };
@@ -47,14 +48,12 @@ static void tables(ds_bdf *bdf)
     }
 }
 
-int ds_bdf_init(ds_bdf *bdf, int64_t n, int64_t n_core, const double *weights, double tol,
-                double first_step)
+int ds_bdf_init(ds_bdf *bdf, int64_t n, int64_t n_core, const double *weights, double tol)
 {
     memset(bdf, 0, sizeof(*bdf));
     bdf->n = n;
     bdf->n_core = n_core;
     bdf->tol = tol;
-    bdf->first_step = first_step;
     const int64_t total = N_ROWS * n + 4 * n * n + 9 * n;
     double *mem = calloc((size_t)total, sizeof(double));
     bdf->piv = calloc((size_t)n, sizeof(int64_t));
@@ -316,25 +315,56 @@ static int newton(ds_bdf *bdf, ds_group *group, const double *u, double c, int *
     return 0;
 }
 
-/* A new history at x: order 1, the first step, no Jacobian. */
-static int restart(ds_bdf *bdf, ds_group *group, const double *x, const double *u)
+/*
+ * The first step of a new history at x with rates f (Hairer & Wanner's starting step, as
+ * scipy's select_initial_step for an order-1 estimate): its scale the tolerance's (norm), its
+ * interval the control period dt. Uses y, f0 and dy as scratch.
+ */
+static double first_step(ds_bdf *bdf, ds_group *group, const double *x, const double *f,
+                         const double *u, double dt)
 {
     const int64_t n = bdf->n;
+    const double d0 = norm(bdf, x, 1.0), d1 = norm(bdf, f, 1.0);
+    double h0 = d0 < 1e-5 || d1 < 1e-5 ? 1e-6 : 0.01 * d0 / d1;
+    if (h0 > dt)
+        h0 = dt;
+    for (int64_t i = 0; i < n; i++)
+        bdf->y[i] = x[i] + h0 * f[i];
+    if (ds_rhs(group->m, bdf->y, u, bdf->f0, &group->w, 0) != DS_OK)
+        return h0;
+    for (int64_t i = 0; i < n; i++)
+        bdf->dy[i] = bdf->f0[i] - f[i];
+    const double d2 = norm(bdf, bdf->dy, 1.0) / h0;
+    if (!isfinite(d2))   /* the rate at the trial point is not usable: its step */
+        return h0;
+    const double h1 = d1 <= 1e-15 && d2 <= 1e-15 ? fmax(1e-6, h0 * 1e-3)
+                                                 : pow(0.01 / fmax(d1, d2), 0.5);
+    return fmin(fmin(100.0 * h0, h1), dt);
+}
+
+/* A new history at x: order 1, the first step from the problem, no Jacobian. */
+static int restart(ds_bdf *bdf, ds_group *group, const double *x, const double *u, double dt)
+{
+    const int64_t n = bdf->n;
+    int status = ds_rhs(group->m, x, u, bdf->f, &group->w, 0);
+    for (int64_t i = 0; i < n && status == DS_OK; i++)
+        if (!isfinite(bdf->f[i]))
+            status = DS_NON_FINITE;
+    bdf->has_history = 0;
+    if (status != DS_OK)
+        return status;
+    const double h_abs = first_step(bdf, group, x, bdf->f, u, dt);
     memset(bdf->D, 0, (size_t)(N_ROWS * n) * sizeof(double));
     memcpy(bdf->D, x, (size_t)n * sizeof(double));
-    int status = ds_rhs(group->m, x, u, bdf->f, &group->w, 0);
-    for (int64_t i = 0; i < n; i++) {
-        bdf->D[n + i] = bdf->f[i] * bdf->first_step;
-        if (status == DS_OK && !isfinite(bdf->f[i]))
-            status = DS_NON_FINITE;
-    }
-    bdf->h_abs = bdf->first_step;
+    for (int64_t i = 0; i < n; i++)
+        bdf->D[n + i] = bdf->f[i] * h_abs;
+    bdf->h_abs = h_abs;
     bdf->order = 1;
     bdf->n_equal_steps = 0;
     bdf->has_jac = bdf->jac_is_current = 0;
     bdf->lu_c = 0.0;
-    bdf->has_history = status == DS_OK;
-    return status;
+    bdf->has_history = 1;
+    return DS_OK;
 }
 
 /* The step's prediction y_predict = sum D[:order + 1] and psi, the history's part of the
@@ -442,6 +472,24 @@ static void accept_step(ds_bdf *bdf, double error_norm, int n_iter)
     change_step(bdf, factor, bdf->h_abs * factor);
 }
 
+/* Fit the step to whole steps of equal size in what is ``left`` of the period. A change
+ * beyond round-off is a step-size change (the equal steps start anew, as at every change: the
+ * differences past the order then hold one step size); the round-off of the steps after a fit
+ * is not. */
+static void fit_to_period(ds_bdf *bdf, double left)
+{
+    double n_left = ceil(left / bdf->h_abs - 1e-9);
+    if (n_left < 1.0)
+        n_left = 1.0;
+    const double h_fit = left / n_left;
+    if (h_fit == bdf->h_abs)
+        return;
+    const double factor = h_fit / bdf->h_abs;
+    rescale(bdf, factor, h_fit);
+    if (fabs(factor - 1.0) > FIT_ROUND_OFF)
+        bdf->n_equal_steps = 0;
+}
+
 /* The steps of one control period: each fitted to what is left of it (whole steps of equal
  * size), tried, and on a failure retried smaller. */
 static int period(const ds_stepper *stepper, ds_group *group, ds_bdf *bdf, const double *u)
@@ -451,12 +499,7 @@ static int period(const ds_stepper *stepper, ds_group *group, ds_bdf *bdf, const
     for (int64_t attempts = 0; dt - t > 1e-12 * dt; attempts++) {
         if (attempts == MAX_ATTEMPTS)   /* a state running away: fail, do not hang */
             return DS_NO_PROGRESS;
-        const double left = dt - t;
-        double n_left = ceil(left / bdf->h_abs - 1e-9);
-        if (n_left < 1.0)
-            n_left = 1.0;
-        if (left / n_left != bdf->h_abs)
-            rescale(bdf, left / n_left / bdf->h_abs, left / n_left);
+        fit_to_period(bdf, dt - t);
         const double h_abs = bdf->h_abs;
         if (!(h_abs > MIN_STEP_FRACTION * dt))
             return bdf->failed_non_finite ? DS_NON_FINITE : DS_STEP_UNDERFLOW;
@@ -466,8 +509,6 @@ static int period(const ds_stepper *stepper, ds_group *group, ds_bdf *bdf, const
         if (status != DS_OK)
             return status;
         group->steps += 1.0;
-        if (outcome != STEP_NEWTON_FAILED && error_norm * bdf->tol > group->est)
-            group->est = error_norm * bdf->tol;
         if (outcome == STEP_NEWTON_FAILED) {
             bdf->rejected += 1;
             change_step(bdf, 0.5, bdf->h_abs * 0.5);
@@ -478,6 +519,8 @@ static int period(const ds_stepper *stepper, ds_group *group, ds_bdf *bdf, const
             change_step(bdf, factor, bdf->h_abs * factor);
         } else {
             t += h_abs;
+            if (error_norm * bdf->tol > group->est)   /* the estimate of what was accepted */
+                group->est = error_norm * bdf->tol;
             accept_step(bdf, error_norm, n_iter);
         }
     }
@@ -495,7 +538,7 @@ int ds_bdf_period(const ds_stepper *stepper, ds_group *group, double *x, const d
     /* the bookkeeping states may have been written from outside (an ideal source's recharge
      * booked at an input jump): a constant shift of their integral, not a new history */
     if (!bdf->has_history || memcmp(bdf->D, x, (size_t)bdf->n_core * sizeof(double)) != 0)
-        status = restart(bdf, group, x, u);
+        status = restart(bdf, group, x, u, stepper->dt);
     else
         memcpy(bdf->D + bdf->n_core, x + bdf->n_core,
                (size_t)(n - bdf->n_core) * sizeof(double));

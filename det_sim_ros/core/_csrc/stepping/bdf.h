@@ -19,7 +19,6 @@ typedef struct ds_bdf {
                                    the same formula, outside the iteration matrix, so they
                                    never steer the steps */
     double tol;                 /* local error per step in the weighted norm */
-    double first_step;          /* the step a restart starts with, s */
     int has_history;            /* a history to go on from (else the next period restarts) */
     int order;                  /* of the formula the next step takes, 1..DS_BDF_MAX_ORDER */
     int n_equal_steps;          /* steps accepted since the step size last changed */
@@ -50,10 +49,10 @@ typedef struct ds_bdf {
 
 /* weights: 1 / scale per state of the group (n_core of them in the norm). Returns -1 without
  * memory. */
-int ds_bdf_init(ds_bdf *bdf, int64_t n, int64_t n_core, const double *weights, double tol,
-                double first_step);
+int ds_bdf_init(ds_bdf *bdf, int64_t n, int64_t n_core, const double *weights, double tol);
 void ds_bdf_free(ds_bdf *bdf);
-/* Forget the history: the next period restarts at order 1 with the first step. */
+/* Forget the history: the next period restarts at order 1 with a first step chosen from the
+ * problem (Hairer & Wanner's starting step, as scipy's select_initial_step). */
 void ds_bdf_reset(ds_bdf *bdf);
 /* One control period st->dt from x (in place) with the input u held. Returns a status that
  * names the failure (DS_NON_FINITE: a NaN or inf in the state, its rate or the Jacobian that
