@@ -29,7 +29,7 @@ import numpy as np
 
 from ..core import kernel
 
-__all__ = ['Method', 'METHODS', 'MULTISTEP', 'BDF', 'BDF_MIN_TERMS', 'BDF_MIN_TOLERANCE',
+__all__ = ['Method', 'METHODS', 'MULTISTEP', 'BDF', 'BDF_MIN_COORDINATES', 'BDF_MIN_TOLERANCE',
            'bdf_weights', 'get_method',
            'choose_substeps', 'step_control', 'error_weights',
            'linear_refresh',
@@ -171,13 +171,14 @@ BDF = Method('bdf', 5, (0.0,), _ETD_EULER, False,
              multistep=True)
 MULTISTEP = {BDF.name: BDF}
 # 'auto' steps a single coupled group (no array copies, no amplifier) with BDF from this many
-# Ritz terms in a beam, at a tolerance of at least BDF_MIN_TOLERANCE: the simply supported
+# Ritz coordinates in a beam (its n_ritz, whatever family: the states the stiff beam modes
+# cost; det_sim_ros.scenes.levels), at a tolerance of at least BDF_MIN_TOLERANCE: the simply supported
 # level (7 polynomials, 3e-3) ran its 2 Hz switching case 3x faster at the same error and its
 # controller case 1.5x (bench/controller_cost.py, docs/fidelity.md "Which method"). Elsewhere
 # the linearized stages stay ahead: at 3 buckling modes (the fixed default) their phi functions
 # are 6 x 6, and at 1e-4 (n_r 9) BDF's orders <= 5 take many steps (a dithered hold 7x against
 # 16x real time).
-BDF_MIN_TERMS = 6
+BDF_MIN_COORDINATES = 6
 BDF_MIN_TOLERANCE = 1e-3
 # The dense linear part of 'etdrk4_linearized' is taken anew at a period's start when the input
 # changed or a q or qdot moved by more than this in the error norm's scale (beam length, length
