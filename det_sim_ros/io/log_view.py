@@ -30,8 +30,9 @@ from .log import LogReader
 __all__ = ['LogPlayer', 'LogSummary', 'MAX_MESSAGES_PER_S', 'TIME_RATE_HZ']
 
 SETTLE_S = 0.5   # wall s between a client's first subscription and the start of playing
-# messages served per wall second at most: the player and a client on one core keep ~2x this
-# (docs/visualization.md); a 1 kHz node's log (4-6 messages a period) plays at up to ~x10
+# messages served per wall second at most: below what the player and a client on one core keep
+# up with (docs/visualization.md has the rate measured); a 1 kHz node's log, a handful of
+# messages a period, plays several times faster than real time
 MAX_MESSAGES_PER_S = 50_000
 TIME_RATE_HZ = 50      # the time goes to the clients at most this often (wall)
 

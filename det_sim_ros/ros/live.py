@@ -40,8 +40,8 @@ POLL_S = 0.02             # wall s between two looks at what clients asked (comm
 FLUSH_S = 0.02            # wall s between two bursts of messages to the clients (50 Hz)
 QUEUE_SAMPLES = 5000      # samples waiting for the sender at most (then the oldest go)
 ANSWER_TIMEOUT_S = 5.0    # a service call or parameter request the node has not run by then fails
-# client requests waiting for the executor at most (then refused): a poll runs them all, and
-# at tens of us each 64 cost the node's executor ~2 ms per poll
+# client requests waiting for the executor at most (then refused): a poll runs them all on the
+# node's executor, so the bound caps what one poll takes from the stepping (bench/live_cost.py)
 QUEUE_REQUESTS = 64
 STATUS_REPEAT_S = 1.0     # wall s: the same status text is sent to the clients once per this
 _HIDDEN_SERVICE_PACKAGES = ('rcl_interfaces',)   # parameters: the Parameters capability
@@ -140,8 +140,8 @@ class LiveView:
         self._diagnostics_channel = server.channel(DIAGNOSTICS_TOPIC,
                                                    TOPIC_TYPES[DIAGNOSTICS_TOPIC])
         node.create_timer(POLL_S, self._calls.run_pending, clock=node.steady_clock)
-        # the clients' messages go out from a thread of their own, in bursts: a websocket
-        # send costs ~1 us in a burst and tens of us alone (the server's thread wakes for it)
+        # the clients' messages go out from a thread of their own, in bursts: a websocket send
+        # alone wakes the server's thread for it, a burst wakes it once (bench/live_cost.py)
         self._samples = SampleQueue(QUEUE_SAMPLES)
         self._stopping = threading.Event()
         self._sender = threading.Thread(target=self._flush_every, args=(FLUSH_S,),

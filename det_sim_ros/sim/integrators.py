@@ -8,9 +8,10 @@ diagonal L of the charge equation (dq_p/dt = -q_p / (C0 lam^2 Rs||Rp) + v/Rs, li
 frozen q) exactly and everything else explicitly; for states with L = 0 every exponential method
 reduces to the classical Runge-Kutta method with the same table (phi_k(0) = 1/k!).
 
-Why exponential: the electrical time constant Rs C ~ 30 us is 300 times shorter than the beam's
-period, so explicit RK4 at a 1 ms step diverges; an exponential update keeps every step size
-stable (tested from Rs = 1 Ohm to 1 MOhm) at the cost of one exp per step and charge state.
+Why exponential: the electrical time constant Rs C is hundreds of times shorter than the beam's
+period at the shipped values, so explicit RK4 at the control period's step diverges; an
+exponential update keeps every step size stable (tested from Rs = 1 Ohm to 1 MOhm) at the cost
+of one exp per step and charge state.
 
 How many steps: within a control period the steps are equal; their number is either fixed
 (``integrator.substeps`` > 0, or a method without an embedded pair) or adapts per period to the
@@ -197,8 +198,8 @@ def linear_refresh(tolerance: float) -> float:
 
 # A is also taken anew when an input moved by more than this times v_max since it was taken
 # (not at every change: a controller's small corrections every period took A, and the weights
-# of each step size, anew every period; with this, 1.3x faster on a switching input with a
-# +-25 V dither per period at the same error, bench/work_precision_map.py's controller run).
+# of each step size, anew every period; with this a dithered switching input runs faster at
+# the same error: bench/work_precision_map.py's controller case, docs/numerics.md).
 LINEAR_REFRESH_INPUT = 1e-2
 
 
@@ -302,9 +303,9 @@ BDF_LOCAL_TOLERANCE = 3e-4
 # At most MAX_SUBSTEPS_FACTOR x the fixed count of choose_substeps per period: bounds the cost
 # of a period. A single actuator never reaches it at the calibrated settings (a snap-through
 # takes ~30 steps, the bound at 1e-6 is 40), but an array whose copies switch at different
-# times shares one count (bench/batch.py: 100 staggered copies, 155 us per actuator and period
-# unbounded, 35 with this bound, 15 with a bound of 1x, which let the error exceed 1e-3 at
-# tolerance 1e-3).
+# times shares one count: unbounded, the slowest copy's count made every copy pay for it; a
+# bound of the fixed count itself let the error exceed the tolerance (bench/batch.py, staggered
+# copies; docs/performance.md's array table).
 MAX_SUBSTEPS_FACTOR = 2
 # A linearized method takes few steps while the beam is settled or slow, but the violent
 # ringing right after a release or a snap-through (qdot ~ 5 m/s) can ask for more than twice
