@@ -99,8 +99,9 @@ setup(
         'control': ['control>=0.10'],   # LinearModel.to_statespace()
         # the live view: sim_node and its logs in Foxglove / Lichtblick (Foxglove WebSocket)
         'live': ['foxglove-sdk>=0.30,<1'],
-        # det_sim bench: sympy for the analytic Jacobian, the python-control runs, the diagram
-        'bench': ['sympy>=1.12', 'control>=0.10', 'matplotlib>=3.7'],
+        # det_sim bench: sympy for the analytic Jacobian, the python-control runs, the diagram;
+        # SUNDIALS CVODE beside the kernel (bench/cvode_compare.py)
+        'bench': ['sympy>=1.12', 'control>=0.10', 'matplotlib>=3.7', 'scikit-sundae>=1.1'],
     },
     zip_safe=False,
     maintainer='det_sim_ros maintainers',
