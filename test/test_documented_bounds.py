@@ -51,6 +51,9 @@ NODE_BOUNDS = {
     'live.port': (0, 65535),
     'live.rate_hz': (0.0, 1.0e6),
     'wait_for_subscribers': (0, 10000),
+    'predictability.relative': (-0.5, 0.5),
+    'predictability.tolerance_factor': (0.01, 100.0),
+    'predictability.limit': (1.0e-6, 10.0),
 }
 PAPER = {'scene.fidelity': 'paper'}
 
