@@ -140,9 +140,9 @@ def tables(rows, command: str, level: str = 'default', refined=None) -> str:
     freqs = sorted({r['hz'] for r in rows})
     out = [f'Measured {datetime.date.today().isoformat()}, commit {_commit()}, {MACHINE}, by '
            f'`{command}`. The {level} level; released at 0 V, from 0.5 s to 2.5 s a 3 kV / 0 V '
-           'square wave (50 %) or the \'pwm\' scenario\'s PWM (duty 30, 50, 70, 50 % for 0.5 s '
+           "square wave (50 %) or the 'pwm' scenario's PWM (duty 30, 50, 70, 50 % for 0.5 s "
            'each) at each frequency. A cell: the time the path first stopped being robust '
-           '(`predictability()`\'s twin, interface mass × (1 + 1e-6) and tolerance × 0.9, '
+           "(`predictability()`'s twin, interface mass × (1 + 1e-6) and tolerance × 0.9, "
            'beyond 5 % of the stroke), "robust" if never over the 2.5 s; the snaps of the run '
            'in parentheses'
            + ('; † where a second twin (mass × (1 − 1e-6), tolerance left) gives the other '

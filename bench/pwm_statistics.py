@@ -208,8 +208,14 @@ def study(cases, levels_of, copies: int, seed: int = SEED, cache: str = '') -> l
                          'path': (robust_stretch(runs[0], ref_runs[0], measured.robust_until)
                                   if name != NULL else None)})
         results.append({'beam': beam, 'eps_b': eps_b, 'robust_until': measured.robust_until,
-                        'split': split, 'reference': reference, 'rows': rows})
+                        'split': split, 'reference': reference, 'rows': rows,
+                        'reference_cpu': ensembles[reference][1] / copies})
     return results
+
+
+def _sd(mean: float, sd: float) -> str:
+    """Return a standard deviation for a cell: 0 where it is rounding of a constant."""
+    return '0' if sd <= 1e-12 * max(1.0, abs(mean)) else f'{sd:.2g}'
 
 
 def tables(results, copies: int, command: str) -> str:
@@ -240,10 +246,15 @@ def tables(results, copies: int, command: str) -> str:
                 '| level | robust stretch: error, snaps | ' + ' | '.join(STATISTICS)
                 + ' | y mean | CPU s per run | statistics all ✓ |',
                 '|---|---|' + '---|' * (len(STATISTICS) + 3)]
+        first = result['rows'][0]
+        out.append(f'| {result["reference"]} (the reference) | – | '
+                   + ' | '.join(f'{c[2]:.3g} ± {_sd(c[2], c[3])}' for c in first['compare'])
+                   + f' | – | {result["reference_cpu"]:.2f} | – |')
         for row in result['rows']:
             cells = []
             for mean, sd, _, _, within, p in row['compare']:
-                cells.append(f'{mean:.3g} ± {sd:.2g} {"✓" if within else "✗"} (p {p:.2g})')
+                cells.append(f'{mean:.3g} ± {_sd(mean, sd)} {"✓" if within else "✗"} '
+                             f'(p {p:.2g})')
             if row['path'] is None:
                 path_cell = '–'
             else:
