@@ -85,21 +85,25 @@ class Perturbation:
             raise ValueError('perturbation: relative 0 and tolerance_factor 1 make the twin '
                              'the run itself')
 
-    def twin_scene(self, scene: Scene) -> Scene:
-        """Return the twin's scene: ``scene`` with the parameter and tolerance perturbed."""
+    def overrides(self, scene: Scene) -> dict:
+        """Return the twin's scene overrides: the perturbed parameter and tolerance."""
         if self.parameter not in PHYSICS_SPEC:
             raise SceneError(f'perturbation parameter {self.parameter!r}: not a physics key '
                              f'(one of {", ".join(PHYSICS_SPEC)})')
         value = getattr(scene.physics, self.parameter)
-        changes = {f'physics.{self.parameter}': type(value)(value * (1.0 + self.relative))}
+        perturbed = type(value)(value * (1.0 + self.relative))
+        if self.relative != 0.0 and perturbed == value:
+            raise SceneError(f'perturbation parameter {self.parameter!r}: {self.relative:g} of '
+                             f'{value!r} changes nothing (an integer, or below its precision)')
+        changes = {f'physics.{self.parameter}': perturbed}
         if self.tolerance_factor != 1.0:
             changes['integrator.tolerance'] = (integration_tolerance(scene)
                                                * self.tolerance_factor)
-        twin = scene.replace(**changes)
-        if self.relative != 0.0 and getattr(twin.physics, self.parameter) == value:
-            raise SceneError(f'perturbation parameter {self.parameter!r}: {self.relative:g} of '
-                             f'{value!r} changes nothing (an integer, or below its precision)')
-        return twin
+        return changes
+
+    def twin_scene(self, scene: Scene) -> Scene:
+        """Return the twin's scene: ``scene`` with the parameter and tolerance perturbed."""
+        return scene.replace(**self.overrides(scene))
 
     def describe(self) -> str:
         """Say what the twin changes, in a phrase ('m x (1 + 1e-06), tolerance x 0.9')."""
@@ -173,7 +177,7 @@ class Stretches:
         self._within = 0         # samples in a row back within limit / 2 in an open stretch
 
     @property
-    def open(self) -> bool:
+    def open(self) -> bool:  # noqa: A003 - a stretch is open (not ended)
         """Return True while the path is not robust (a stretch has started and not ended)."""
         return bool(self.spans) and self.spans[-1][1] is None
 

@@ -25,14 +25,16 @@ from .messages import (decode_float64_multi_array, decode_joint_state, encode_cl
 from .sample_encoding import OutputContract, SampleEncoder, SampleWire, structure_channels
 from .topics import (basename, CLOCK, CLOCK_TOPIC, COMMAND_TOPIC, COMMAND_TOPICS,
                      DIAGNOSTICS_TOPIC, FLOAT64_MULTI_ARRAY, JOINT_COMMAND_TOPIC, JOINT_STATE,
-                     MODES, OUTPUT_FIELDS, OUTPUT_UNITS, RELATIVE_TO_Y0, stamp_ns,
-                     STRUCTURE_NAMES, STRUCTURE_TOPIC, TOPIC_TYPES)
+                     MODES, OUTPUT_FIELDS, OUTPUT_UNITS, PREDICTABILITY_RATE_HZ,
+                     PREDICTABILITY_TOPIC, RELATIVE_TO_Y0, stamp_ns, STRUCTURE_NAMES,
+                     STRUCTURE_TOPIC, TOPIC_TYPES)
 from ..physics.statics import rest_shortening, rest_shortenings
 
 __all__ = [
     'OUTPUT_FIELDS', 'OUTPUT_UNITS', 'RELATIVE_TO_Y0', 'STRUCTURE_TOPIC', 'STRUCTURE_NAMES',
     'COMMAND_TOPIC', 'JOINT_COMMAND_TOPIC', 'COMMAND_TOPICS', 'CLOCK_TOPIC',
-    'DIAGNOSTICS_TOPIC', 'TOPIC_TYPES', 'JOINT_STATE', 'FLOAT64_MULTI_ARRAY', 'CLOCK',
+    'DIAGNOSTICS_TOPIC', 'PREDICTABILITY_TOPIC', 'PREDICTABILITY_RATE_HZ', 'TOPIC_TYPES',
+    'JOINT_STATE', 'FLOAT64_MULTI_ARRAY', 'CLOCK',
     'rest_shortening', 'rest_shortenings', 'structure_channels', 'OutputContract',
     'SampleEncoder', 'SampleWire', 'Command', 'CommandDecoder', 'CdrError', 'JointStateData',
     'encode_joint_state', 'decode_joint_state', 'encode_float64_multi_array',

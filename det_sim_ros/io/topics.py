@@ -12,7 +12,8 @@ from ..scenes.outputs import output_fields, output_units, relative_to_y0, struct
 __all__ = [
     'OUTPUT_FIELDS', 'OUTPUT_UNITS', 'RELATIVE_TO_Y0', 'STRUCTURE_TOPIC', 'STRUCTURE_NAMES',
     'COMMAND_TOPIC', 'JOINT_COMMAND_TOPIC', 'COMMAND_TOPICS', 'CLOCK_TOPIC',
-    'DIAGNOSTICS_TOPIC', 'TOPIC_TYPES', 'JOINT_STATE', 'FLOAT64_MULTI_ARRAY', 'CLOCK',
+    'DIAGNOSTICS_TOPIC', 'PREDICTABILITY_TOPIC', 'PREDICTABILITY_RATE_HZ', 'TOPIC_TYPES',
+    'JOINT_STATE', 'FLOAT64_MULTI_ARRAY', 'CLOCK',
     'stamp_ns', 'MODES', 'basename',
 ]
 
@@ -38,9 +39,15 @@ CLOCK_TOPIC = '/clock'
 # sim_node's modes: /clock is published in free_run and lockstep; lockstep waits for commands
 MODES = ('real_time', 'free_run', 'lockstep')
 DIAGNOSTICS_TOPIC = '/diagnostics'
+# JointState, one channel 'twin_distance': how far the perturbed twin is from the run, a
+# fraction of the stroke (det_sim_ros.analysis.predictability), at PREDICTABILITY_RATE_HZ of sim
+# time and at every stretch's start and end
+PREDICTABILITY_TOPIC = 'predictability'
+PREDICTABILITY_RATE_HZ = 100.0
 TOPIC_TYPES = {**{topic: JOINT_STATE for topic in OUTPUT_FIELDS}, STRUCTURE_TOPIC: JOINT_STATE,
                COMMAND_TOPIC: FLOAT64_MULTI_ARRAY, JOINT_COMMAND_TOPIC: JOINT_STATE,
-               CLOCK_TOPIC: CLOCK, DIAGNOSTICS_TOPIC: 'diagnostic_msgs/msg/DiagnosticArray'}
+               CLOCK_TOPIC: CLOCK, DIAGNOSTICS_TOPIC: 'diagnostic_msgs/msg/DiagnosticArray',
+               PREDICTABILITY_TOPIC: JOINT_STATE}
 
 
 def basename(topic: str) -> str:

@@ -82,7 +82,7 @@ class CommandCounts(NamedTuple):
 def diagnostics_message(*, node_name: str, stamp, mode: str, paused: bool, simulator,
                         window: Window, achieved_rtf: float, pacing, late_ticks: int,
                         slipped_s: float, commands: CommandCounts, distrust: str,
-                        recorder, wait=None) -> DiagnosticArray:
+                        recorder, wait=None, predictability=None) -> DiagnosticArray:
     """
     Build one /diagnostics message with the node's one status ``<node_name>: simulation``.
 
@@ -93,6 +93,7 @@ def diagnostics_message(*, node_name: str, stamp, mode: str, paused: bool, simul
     :param late_ticks, slipped_s: the pacing's totals.
     :param distrust: why the results are not to be trusted ('' if they are).
     :param recorder: the MCAP :class:`~det_sim_ros.io.log.Recorder`, or None.
+    :param predictability: the measure's keys (ros.predictability), or None.
     :param wait: what the node waits for (:class:`~det_sim_ros.ros.waiting.Wait`), or None;
         once it is shown it is the message of an OK status.
     """
@@ -128,6 +129,7 @@ def diagnostics_message(*, node_name: str, stamp, mode: str, paused: bool, simul
         'waiting_for': wait.text() if wait is not None else '',
         'waiting_s': f'{wait.seconds:.3f}' if wait is not None else '0.000',
         'internal_steps': str(simulator.steps_taken),
+        **(predictability or {}),
     }
     if recorder is not None:
         values.update({'log_file': recorder.path, 'log_messages': str(recorder.messages),

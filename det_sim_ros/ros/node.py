@@ -32,6 +32,7 @@ from .live import open_live_view
 from .markers import attach_markers
 from .name_check import NameClaim
 from .pacing import make_pacing
+from .predictability import attach_predictability
 from .rclpy_facade import RCLError, take_serialized
 from .recording import open_recorder
 from .reports import NodeReports
@@ -39,7 +40,8 @@ from .sensing import attach_outputs
 from .spinning import make_executor, spin, spin_until_stopped, StopRequested, StopSignals
 from .waiting import SubscriberGate
 from ..io.contract import (CLOCK_TOPIC, COMMAND_TOPIC, DIAGNOSTICS_TOPIC, encode_clock,
-                           JOINT_COMMAND_TOPIC, OutputContract, rest_shortenings,
+                           JOINT_COMMAND_TOPIC, OutputContract, PREDICTABILITY_TOPIC,
+                           rest_shortenings,
                            stamp_ns, structure_channels, STRUCTURE_TOPIC)
 from ..physics.model import ModelDomainError
 from ..scenes.outputs import main_topic
@@ -134,7 +136,8 @@ class SimNode(Node):
                                     self._p('info_period'),
                                     self.mode == 'lockstep' or not self._gate.open)
         qos = {topic: out_qos for topic in self._outputs.topics + self._outputs.truth_topics}
-        qos.update({COMMAND_TOPIC: in_qos, JOINT_COMMAND_TOPIC: in_qos})
+        qos.update({COMMAND_TOPIC: in_qos, JOINT_COMMAND_TOPIC: in_qos,
+                    PREDICTABILITY_TOPIC: out_qos})
         self._recorder = open_recorder(self._p, self.scene, qos, {
             'method': self._sim.method.name, 'substeps': self._sim.substeps_setting,
             'fidelity': self.scene.fidelity_label,
@@ -142,6 +145,7 @@ class SimNode(Node):
             'initial_state': self._initial_text,
             'x0': repr(self._sim.x0.tolist()),   # what ~/reset returns to
             'node': self.get_fully_qualified_name()}, self.get_namespace(), self.get_logger())
+        self._predictability = attach_predictability(self, self._p, self._recorder, out_qos)
         self._commands = CommandInput(self._sim, self.det_names, self.scene.physics.v_max,
                                       self._recorder, self.get_logger(),
                                       self._pacing.command_received)
@@ -211,6 +215,8 @@ class SimNode(Node):
     recorder = property(lambda self: self._recorder, doc='The MCAP Recorder, or None.')
     markers = property(lambda self: self._markers, doc='The NodeMarkers, or None (off).')
     live = property(lambda self: self._live, doc='The LiveView (ros.live), or None (off).')
+    predictability = property(lambda self: self._predictability,
+                              doc='The predictability measure (ros.predictability).')
     dt = property(lambda self: self._sim.dt, doc='The control period, s.')
     mode = property(lambda self: self._pacing.mode, doc='real_time, free_run or lockstep.')
     pacing = property(lambda self: self._pacing, doc='The Pacing of this mode (ros.pacing).')
@@ -274,7 +280,9 @@ class SimNode(Node):
             self._enter_fault(str(exc))
             return False
         self.steps_total += 1
-        return self._publish_sample(out, batch)
+        published = self._publish_sample(out, batch)
+        self._predictability.follow(self._sim, out)   # after: no delay to the sample
+        return published
 
     def send(self, batch) -> bool:
         """
@@ -358,6 +366,7 @@ class SimNode(Node):
 
     def _srv_reset(self, request, response):
         self._sim.reset()
+        self._predictability.reset()
         self._pacing.reset()
         log = ''
         if self._recorder is not None:

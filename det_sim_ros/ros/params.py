@@ -17,6 +17,7 @@ import math
 from typing import Any, Iterator, NamedTuple
 
 from ..io.log.compression import COMPRESSIONS
+from ..scenes.keys import PHYSICS_SPEC
 from ..scenes.scene import scene_to_dict, SceneError
 from ..scenes.sensors import sensors_to_dict
 
@@ -115,6 +116,21 @@ NODE_PARAMS = {
     'live.host': Param('127.0.0.1', "live view: address to listen on ('0.0.0.0': every "
                        'network interface; anyone who reaches it can command the node)', True,
                        None),
+    # the predictability measure (det_sim_ros.ros.predictability): docs/predictability.md
+    'predictability.enabled': Param(True, 'step a perturbed twin beside the run and report '
+                                    'how far it drifts (/diagnostics, the predictability topic, '
+                                    'the log; a WARN where the path stops being robust)', True,
+                                    None),
+    'predictability.parameter': Param('m', "the twin's perturbed physics parameter", True,
+                                      tuple(k for k in PHYSICS_SPEC if k != 'n')),
+    'predictability.relative': Param(1.0e-6, "the twin's parameter is value * (1 + this) (1e-6: "
+                                     "a seventh digit; a fitted parameter's relative "
+                                     'uncertainty asks whether it decides the path)', True,
+                                     (-0.5, 0.5)),
+    'predictability.tolerance_factor': Param(0.9, "the twin's integrator tolerance relative to "
+                                             "the run's (1: the same)", True, (0.01, 100.0)),
+    'predictability.limit': Param(0.05, 'the twin distance (a fraction of the stroke) beyond '
+                                  'which the path is not robust', True, (1.0e-6, 10.0)),
     'allow_duplicate_name': Param(False, 'run even if another node of this fully qualified '
                                   'name is running (one warning); false: the younger of two '
                                   'stops with one FATAL line, on one host before it publishes '

@@ -79,7 +79,8 @@ class NodeReports:
             mode=pacing.mode, paused=node.paused, simulator=sim, window=window,
             achieved_rtf=node.achieved_rtf, pacing=report, late_ticks=pacing.late_ticks,
             slipped_s=pacing.slipped_s, distrust=distrust, recorder=node.recorder,
-            commands=node.commands.counts(), wait=node.waiting())
+            commands=node.commands.counts(), wait=node.waiting(),
+            predictability=node.predictability.values())
         self._publisher.publish(msg)
         return msg
 

@@ -24,16 +24,18 @@ so a run gives the same numbers whatever the host load::
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import time
 from typing import Iterable, Sequence
 
 import numpy as np
 
+from ..analysis.ensemble import Ensemble, ensemble_overrides
+from ..analysis.response import SimRun, StepMetrics
 from ..scenes.outputs import main_topic
 
-__all__ = ['LockstepSim', 'SimRun', 'StepMetrics', 'det_sim', 'pick_domain_id']
+__all__ = ['LockstepSim', 'SimRun', 'StepMetrics', 'det_sim', 'pick_domain_id',
+           'lockstep_ensemble', 'Ensemble']
 
 WALL_TIMEOUT = 600.0   # s: a safety net against a controller that never answers
 MAX_DOMAIN_ID = 232    # the largest ROS domain id (ports must fit below 65536)
@@ -72,71 +74,6 @@ def _import_type_support_quietly() -> None:
             import rosidl_generator_py  # noqa: F401
         except ImportError:   # pragma: no cover - rclpy's own import then fails with the reason
             pass
-
-
-@dataclasses.dataclass(frozen=True)
-class StepMetrics:
-    """Step-response figures of one signal (times in s after the step, ``nan`` if never)."""
-
-    rise_time: float           # from 10 % to 90 % of the step
-    overshoot: float           # max beyond the target, relative to the step size (0.05 = 5 %)
-    settling_time: float       # last entry into the band target +- band * |step|
-    steady_state_error: float  # target - final value (same unit as the signal)
-
-
-@dataclasses.dataclass
-class SimRun:
-    """A lockstep run as arrays (rows: samples t = k dt; columns: DETs in command order)."""
-
-    det_names: list
-    t: np.ndarray
-    voltage: np.ndarray
-    q: np.ndarray
-    dy: np.ndarray
-    charge: np.ndarray
-    current: np.ndarray
-
-    def signal(self, name: str, det: int | str = 0) -> np.ndarray:
-        """Return one column: ``name`` in voltage, q, dy, charge, current; ``det``: index, name."""
-        column = self.det_names.index(det) if isinstance(det, str) else det
-        return getattr(self, name)[:, column]
-
-    def at(self, t: float, name: str, det: int | str = 0) -> float:
-        """Return the value of a signal at the sample nearest sim time t."""
-        return float(self.signal(name, det)[int(np.argmin(np.abs(self.t - t)))])
-
-    def step_metrics(self, name: str = 'dy', target: float = 0.0, t_step: float = 0.0,
-                     det: int | str = 0, band: float = 0.05) -> StepMetrics:
-        """
-        Return the step-response figures of a set-point step to ``target`` at ``t_step``.
-
-        Rise time (10-90 %), overshoot, settling time (into ``band`` of the step size) and
-        steady-state error of the response.
-        """
-        x = self.signal(name, det)
-        after = self.t >= t_step - 1e-12
-        t, x = self.t[after] - t_step, x[after]
-        if x.size == 0:
-            raise ValueError(f'no samples after t_step = {t_step} s')
-        start = x[0]
-        size = target - start
-        if size == 0.0:
-            raise ValueError('the step has size 0 (the signal starts at the target)')
-        progress = (x - start) / size
-
-        def first(condition):
-            hits = np.nonzero(condition)[0]
-            return float(t[hits[0]]) if hits.size else float('nan')
-        rise = first(progress >= 0.9) - first(progress >= 0.1)
-        overshoot = max(0.0, float(progress.max()) - 1.0)
-        outside = np.nonzero(np.abs(x - target) > band * abs(size))[0]
-        if outside.size == 0:
-            settling = 0.0
-        elif outside[-1] + 1 < x.size:
-            settling = float(t[outside[-1] + 1])
-        else:
-            settling = float('nan')
-        return StepMetrics(rise, overshoot, settling, float(target - x[-1]))
 
 
 class LockstepSim:
@@ -260,6 +197,31 @@ class LockstepSim:
         rclpy.try_shutdown(context=self.context)
 
 
+def lockstep_ensemble(make_controllers, until: float, scene: str = 'default',
+                      overrides: dict | None = None, params: dict | None = None,
+                      copies: int = 20, perturbation=None, seed: int = 0,
+                      domain_id: int | None = None) -> Ensemble:
+    """
+    Run your controller in lockstep against ``copies`` perturbed copies of a plant.
+
+    Each copy is its own sim_node (copy 0 the scene as given, copy i > 0 perturbed as
+    :func:`~det_sim_ros.analysis.ensemble.ensemble_overrides` draws it) with fresh controller
+    nodes: ``make_controllers(sim)`` returns them, created in ``sim.context``. Returns the
+    :class:`~det_sim_ros.analysis.ensemble.Ensemble` of the runs to ``until`` (s); its
+    ``shared()`` states what every copy agrees on.
+    """
+    from ..scenes.scene import load_scene
+    base = load_scene(scene, overrides or {})
+    runs, changes = [], ensemble_overrides(base, copies, perturbation, seed)
+    for change in changes:
+        sim = LockstepSim(scene, {**(overrides or {}), **change}, params, domain_id)
+        try:
+            runs.append(sim.run(until, nodes=list(make_controllers(sim))))
+        finally:
+            sim.close()
+    return Ensemble(runs, changes)
+
+
 def _fixture():
     import pytest
 
@@ -268,7 +230,9 @@ def _fixture():
         """
         Make :class:`LockstepSim` objects, closed after the test.
 
-        Call it as ``det_sim(scene, overrides, params)``.
+        Call it as ``det_sim(scene, overrides, params)``; ``det_sim.ensemble(make_controllers,
+        until, scene, ...)`` runs your controller against perturbed copies
+        (:func:`lockstep_ensemble`).
         """
         made = []
 
@@ -276,6 +240,7 @@ def _fixture():
             sim = LockstepSim(scene, overrides, params, **kwargs)
             made.append(sim)
             return sim
+        make.ensemble = lockstep_ensemble
         yield make
         for sim in made:
             sim.close()
