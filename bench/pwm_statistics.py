@@ -6,19 +6,24 @@ The 'pwm' scenario (released at 0 V; from 0.5 s to 2.5 s a 10 Hz PWM at 3 kV, du
 ``analysis.predictability.predictability()`` at the default level; where its path is not robust
 no level can be held to one run of it, and the level is scored on statistics instead.
 
-Per case and level, an ensemble of COPIES perturbed runs (copy i: the interface mass
-x (1 + 1e-6 z_i), z_i standard normal from one seed: the measure's perturbation size, so the
-copies differ in what rounding decides) and per copy over 0.5-2.5 s:
+Per case and level, an ensemble of COPIES perturbed runs (``analysis.ensemble.ensemble()``:
+copy 0 the scene, copy i the interface mass x (1 + 1e-6 z_i) and the tolerance x (1 - 0.1 u_i),
+the measure's perturbation sizes, so the copies differ in what rounding decides). Until the
+default run stops being robust its stretch is scored as switching (copy 0 against the converged
+level's copy 0: max |y - y_ref| over the travel, the snaps each within 2 ms, and the time the two
+paths are first 5 % of the travel apart); from then to 2.5 s (the whole 0.5-2.5 s where it is
+robust) per copy:
 
 - the snap rate (sign changes of q per s);
-- the fraction of the time on the released start's branch (q > 0) and the branch at the end;
-- the y envelope: y's time mean and its range (max y - min y), over the rest shortening y0.
+- the fraction of the time on q > 0 (the released start's branch) and the branch at the end;
+- Δy over the rest shortening y0: its time mean and its range (max - min).
 
 A level is within the converged level's spread on a statistic when its ensemble mean lies within
-two standard errors of the difference of the means (sqrt(s1²/n1 + s2²/n2)); Mann-Whitney's U
-test (scipy, two-sided) gives a p-value beside it. Per sample, the y envelope: the largest
-distance of the level's ensemble mean y from the converged ensemble's, over y0, and the fraction
-of samples where the level's mean lies inside the converged copies' [min, max].
+two standard errors of the difference of the means (sqrt(s1²/n1 + s2²/n2)) plus ALLOWANCE (the
+map's 1 % target on fractions and on Δy / y0; none on the snap rate: every snap); Mann-Whitney's
+U test (scipy, two-sided) gives a p-value beside it. Per sample: the fraction of samples where
+the two ensembles' mean Δy agree within the same bound. The converged level with another seed
+(its copy 0 shared) is the test's own false-alarm baseline.
 
 Levels (LEVELS): the default; candidates (exact kinematics at more Ritz terms); the converged
 level (exact kinematics, polynomial n_r 11 at tolerance 1e-6: the continuum reference's terms,
@@ -41,10 +46,13 @@ import os
 import sys
 import time
 
+from det_sim_ros.analysis.ensemble import Ensemble, ensemble
 from det_sim_ros.analysis.predictability import predictability, Stroke
+from det_sim_ros.analysis.response import SimRun
 from det_sim_ros.analysis.scenarios import (pwm_voltage, snap_times, SWITCHING_END,
                                             switching_scene, SWITCHING_START)
-from det_sim_ros.sim.simulator import simulate, Simulator
+from det_sim_ros.physics.statics import rest_shortenings
+from det_sim_ros.sim.simulator import Simulator
 from fidelity_choice import _commit, MACHINE, write_doc
 import numpy as np
 from scipy.stats import mannwhitneyu
@@ -54,7 +62,6 @@ CASES = (('fixed', 0.15), ('fixed', 0.20), ('simply_supported', 0.15),
 V_HIGH = 3000.0    # V
 COPIES = 20
 SEED = 0
-RELATIVE = 1e-6    # the copies' interface mass spread (standard deviation, relative)
 
 
 def _level(shapes, n_r, tolerance):
@@ -74,19 +81,19 @@ LEVELS = {
 QUICK = {'case': ('simply_supported', 0.20), 'copies': 3,
          'levels': (('default', {}), ('stand-in: poly n_r 9, 1e-3',
                                       _level('polynomial', 9, 1e-3)))}
-STATISTICS = ('snap rate', 'time on q > 0', 'q > 0 at the end', 'mean y / y0',
-              'y range / y0')
+STATISTICS = ('snap rate', 'time on q > 0', 'q > 0 at the end', 'mean Δy / y0',
+              'Δy range / y0')
 # per statistic: the difference allowed beyond two standard errors (the map's 1 % target on
-# fractions and on y / y0; every snap: none on the snap rate)
+# fractions and on Δy / y0; every snap: none on the snap rate)
 ALLOWANCE = (0.0, 0.01, 0.01, 0.01, 0.01)
 NULL = 'converged, seed 1 (baseline)'
 BEGIN, END = '<!-- pwm_statistics: begin -->', '<!-- pwm_statistics: end -->'
 
 
-def ensemble(scene, volts, t_end: float, copies: int, seed: int = SEED, cache: str = '',
-             key: str = ''):
+def run_ensemble(scene, volts, t_end: float, copies: int, seed: int = SEED, cache: str = '',
+                 key: str = '') -> tuple:
     """
-    Return ([(t, q, y) per copy], CPU s): copy i's interface mass x (1 + RELATIVE z_i).
+    Return (the :class:`Ensemble` of ``analysis.ensemble.ensemble()``, its CPU s).
 
     ``cache``: a folder where the runs are kept under ``key`` (a rerun of the tables reads them
     back, with the CPU they took).
@@ -94,33 +101,26 @@ def ensemble(scene, volts, t_end: float, copies: int, seed: int = SEED, cache: s
     path = os.path.join(cache, f'{key}-{copies}-{seed}.npz') if cache else ''
     if path and os.path.exists(path):
         with np.load(path) as data:
-            return ([(data['t'], q, y) for q, y in zip(data['q'], data['y'])],
-                    float(data['cpu']))
-    z = np.random.default_rng(seed).standard_normal(copies)
-    runs = []
+            t, nan = data['t'], np.full((len(data['t']), 1), np.nan)
+            return (Ensemble([SimRun(['det'], t, nan, q[:, None], dy[:, None], nan, nan)
+                              for q, dy in zip(data['q'], data['dy'])]), float(data['cpu']))
     start = time.process_time()
-    for zi in z:
-        run = simulate(scene.replace(**{'physics.m': scene.physics.m * (1.0 + RELATIVE * zi)}),
-                       volts, t_end)
-        runs.append((run.t, run['q'], run['y']))
+    runs = ensemble(scene, t_end, volts=volts, copies=copies, seed=seed)
     cpu = time.process_time() - start
     if path:
         os.makedirs(cache, exist_ok=True)
-        np.savez_compressed(path, t=runs[0][0], q=np.array([q for _, q, _ in runs]),
-                            y=np.array([y for _, _, y in runs]), cpu=cpu)
+        np.savez_compressed(path, t=runs.runs[0].t, q=np.array([r.q[:, 0] for r in runs.runs]),
+                            dy=np.array([r.dy[:, 0] for r in runs.runs]), cpu=cpu)
     return runs, cpu
 
 
-def copy_statistics(runs, y0: float, start: float) -> np.ndarray:
+def copy_statistics(runs: Ensemble, y0: float, start: float) -> np.ndarray:
     """Return (copies x STATISTICS): each copy's statistics from ``start`` s to the end."""
-    out = []
-    for t, q, y in runs:
-        window = t >= start - 1e-9
-        yw = y[window] / y0
-        out.append((len(snap_times(t, q, start)) / (t[-1] - start),
-                    float(np.mean(q[window] > 0.0)), float(q[-1] > 0.0), float(np.mean(yw)),
-                    float(np.ptp(yw))))
-    return np.array(out)
+    span = runs.runs[0].t[-1] - start
+    dy = [run.dy[run.t >= start - 1e-9, 0] / y0 for run in runs.runs]
+    return np.column_stack([runs.snap_counts(start) / span, runs.time_on_plus(start),
+                            [b == 'buckled+' for b in runs.final_branches()],
+                            [np.mean(d) for d in dy], [np.ptp(d) for d in dy]]).astype(float)
 
 
 def compare(level: np.ndarray, converged: np.ndarray) -> list:
@@ -143,16 +143,15 @@ def compare(level: np.ndarray, converged: np.ndarray) -> list:
     return out
 
 
-def envelope(runs, converged_runs, y0: float, start: float) -> float:
+def envelope(runs: Ensemble, converged: Ensemble, y0: float, start: float) -> float:
     """
-    Return the fraction of samples from ``start`` where the two ensembles' mean y agree.
+    Return the fraction of samples from ``start`` where the two ensembles' mean Δy agree.
 
     Agree: within 2 standard errors of the difference plus ALLOWANCE of y0.
     """
-    t = runs[0][0]
-    window = t >= start - 1e-9
-    mine = np.array([y for _, _, y in runs])[:, window] / y0
-    ref = np.array([y for _, _, y in converged_runs])[:, window] / y0
+    window = runs.runs[0].t >= start - 1e-9
+    mine = np.array([run.dy[window, 0] for run in runs.runs]) / y0
+    ref = np.array([run.dy[window, 0] for run in converged.runs]) / y0
     se = np.sqrt(mine.var(axis=0, ddof=1) / len(mine) + ref.var(axis=0, ddof=1) / len(ref))
     gap = np.abs(mine.mean(axis=0) - ref.mean(axis=0))
     return float(np.mean(gap <= 2.0 * se + ALLOWANCE[3] + 1e-12))
@@ -160,7 +159,7 @@ def envelope(runs, converged_runs, y0: float, start: float) -> float:
 
 def robust_stretch(run, converged_run, end: float | None) -> tuple:
     """
-    Return (error, snaps right, parted) of one run against the converged one.
+    Return (error, snaps right, parted) of one run (t, q, y) against the converged one.
 
     Over [0.5 s, ``end``), scored as switching: max |y - y_ref| over the converged run's travel
     from 0.5 s to the end of the run; the snaps as many, each within 2 ms. ``parted``: the
@@ -179,6 +178,22 @@ def robust_stretch(run, converged_run, end: float | None) -> tuple:
     return error, right, float(t[beyond[0]]) if beyond.size else None
 
 
+def pinned(scene):
+    """
+    Return ``scene`` with its stepper named, as 'auto' resolves it at its own tolerance.
+
+    'auto' picks BDF from a tolerance of 1e-3 up (integrators.BDF_MIN_TOLERANCE): a copy whose
+    tolerance is drawn below a level's 1e-3 would otherwise run another method.
+    """
+    return scene.replace(**{'integrator.method': Simulator(scene).method.name})
+
+
+def _path(runs: Ensemble, scene) -> tuple:
+    """Return copy 0 (the scene itself) as (t, q, y): y from Δy and the level's rest y0."""
+    run = runs.runs[0]
+    return run.t, run.q[:, 0], rest_shortenings(scene)[0] - run.dy[:, 0]
+
+
 def study(cases, levels_of, copies: int, seed: int = SEED, cache: str = '') -> list:
     """Return one result per case: its robustness and each level's ensemble and comparison."""
     results = []
@@ -193,19 +208,21 @@ def study(cases, levels_of, copies: int, seed: int = SEED, cache: str = '') -> l
         reference = levels[-1][0]
         ensembles = {}
         for name, overrides in levels + ((NULL, levels[-1][1]),):
-            runs, cpu = ensemble(scene.replace(**overrides), volts, SWITCHING_END, copies,
-                                 seed + (name == NULL), cache,
-                                 f'{beam}_{eps_b:.2f}-{name.split(":")[-1].strip()}')
-            ensembles[name] = (runs, cpu, copy_statistics(runs, y0, split))
+            level_scene = pinned(scene.replace(**overrides))
+            runs, cpu = run_ensemble(level_scene, volts, SWITCHING_END, copies,
+                                     seed + (name == NULL), cache,
+                                     f'{beam}_{eps_b:.2f}-{name.split(":")[-1].strip()}')
+            ensembles[name] = (runs, cpu, copy_statistics(runs, y0, split),
+                               _path(runs, level_scene))
             print(f'  {name}: {copies} copies, {cpu:.1f} s CPU', flush=True)
-        ref_runs, _, ref_stats = ensembles[reference]
+        ref_runs, _, ref_stats, ref_path = ensembles[reference]
         rows = []
         for name in [n for n, _ in levels[:-1]] + [NULL]:
-            runs, cpu, stats = ensembles[name]
+            runs, cpu, stats, path = ensembles[name]
             rows.append({'level': name, 'cpu_per_run': cpu / copies,
                          'compare': compare(stats, ref_stats),
                          'envelope': envelope(runs, ref_runs, y0, split),
-                         'path': (robust_stretch(runs[0], ref_runs[0], measured.robust_until)
+                         'path': (robust_stretch(path, ref_path, measured.robust_until)
                                   if name != NULL else None)})
         results.append({'beam': beam, 'eps_b': eps_b, 'robust_until': measured.robust_until,
                         'split': split, 'reference': reference, 'rows': rows,
@@ -223,19 +240,20 @@ def tables(results, copies: int, command: str) -> str:
     reference = results[0]['reference'] if results else ''
     out = [f'Measured {datetime.date.today().isoformat()}, commit {_commit()}, {MACHINE}, by '
            f"`{command}`. The 'pwm' scenario at 3 kV. Per level an ensemble of {copies} "
-           f'copies (copy i: interface mass × (1 + 1e-6 z_i), z_i standard normal, seed '
-           f'{SEED}). Until the default run stops being robust (`predictability()`) the copies '
-           "agree and the stretch is scored as switching (copy 0 against the converged level's "
-           'copy 0: max |y − y_ref| over the travel, ✓ every snap within 2 ms; over the whole '
-           'run, the time the two are first 5 % of the travel apart); from then to '
-           "2.5 s each copy's statistics: its snap rate (1/s), time on q > 0, q > 0 at the end, "
-           'and y over y0 (mean, range). A cell: the ensemble mean ± standard deviation, ✓ '
-           'where its mean lies within two standard errors of the difference from the '
-           f'mean of the converged level ({reference}) plus an allowance (1 % on fractions '
-           'and on y / y0, 0 on the snap rate: the 1 % target and every snap of the map), ✗ '
-           "where not, and Mann-Whitney's two-sided p beside it; 'y mean': the fraction of "
-           'samples where the ensemble mean y is within the same bound of the converged '
-           'mean. The last row, the converged level again with another seed, is the '
+           f'copies (`analysis.ensemble.ensemble()`, seed {SEED}: copy 0 the scene, copy i the '
+           'interface mass × (1 + 1e-6 z_i) and the tolerance × (1 − 0.1 u_i)). Until the '
+           'default run stops being robust (`predictability()`) the copies agree and the '
+           "stretch is scored as switching (copy 0 against the converged level's copy 0: "
+           'max |y − y_ref| over the travel, ✓ every snap within 2 ms; and the time the two '
+           'paths are first 5 % of the travel apart, over the whole run); from then to 2.5 s '
+           "each copy's statistics: its snap rate (1/s), time on q > 0, q > 0 at the end, and "
+           'Δy over y0 (mean, range). A cell: the ensemble mean ± standard deviation, ✓ where '
+           'its mean lies within two standard errors of the difference from the mean of the '
+           f'converged level ({reference}) plus an allowance (1 % on fractions and on Δy / y0, '
+           '0 on the snap rate: the 1 % target and every snap of the map), ✗ where not, and '
+           "Mann-Whitney's two-sided p beside it; 'Δy mean': the fraction of samples where the "
+           'ensemble mean Δy is within the same bound of the converged mean. The last row, the '
+           'converged level again with another seed (its copy 0 shared), is the '
            "test's own false-alarm baseline. CPU: per run, one core.", '']
     for result in results:
         until = ('robust' if result['robust_until'] is None
@@ -244,7 +262,7 @@ def tables(results, copies: int, command: str) -> str:
         out += [f'**{result["beam"].replace("_", " ")}, ε_b {result["eps_b"]:.2f}** (the '
                 f'default: {until}; statistics over {window})', '',
                 '| level | robust stretch: error, snaps | ' + ' | '.join(STATISTICS)
-                + ' | y mean | CPU s per run | statistics all ✓ |',
+                + ' | Δy mean | CPU s per run | statistics all ✓ |',
                 '|---|---|' + '---|' * (len(STATISTICS) + 3)]
         first = result['rows'][0]
         out.append(f'| {result["reference"]} (the reference) | – | '
