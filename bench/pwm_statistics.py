@@ -74,6 +74,7 @@ CONVERGED = ('converged: poly n_r 11, 1e-6', _level('polynomial', 11, 1e-6))
 LEVELS = {
     'fixed': (('default', {}), ('modes n_r 4, 1e-3', _level('buckling_modes', 4, 1e-3)),
               ('modes n_r 5, 1e-3', _level('buckling_modes', 5, 1e-3)),
+              ('poly n_r 9, 1e-3', _level('polynomial', 9, 1e-3)),
               ('poly n_r 9, 1e-4', _level('polynomial', 9, 1e-4)), CONVERGED),
     'simply_supported': (('default', {}), ('poly n_r 9, 1e-3', _level('polynomial', 9, 1e-3)),
                          ('poly n_r 9, 1e-4', _level('polynomial', 9, 1e-4)), CONVERGED),
