@@ -1,12 +1,14 @@
 """
 The amplifier's cost: CPU time per control period through simulate(), each knob against off.
 
-The default scene (1 kHz, etdrk4 adaptive at tolerance 1e-6) runs 1 s under two drives: 'steps'
+The default scene as shipped (1 kHz, its level and its integrator: 'auto' at the level's own
+tolerance; a preset row is that preset as shipped) runs 1 s under two drives: 'steps'
 (0 V, 3 kV at 0.1 s, 1.5 kV at 0.55 s) and 'new voltage every period' (1.5 kV + 1 kV sin(2 pi
 5 Hz t), a controller's command). Every configuration is timed in every round, in turn, and the
 table gives the least process CPU time per period over the rounds, its ratio to the amplifier
 off, and the internal steps per period. A shared host only adds time; compare the ratios.
-Run: python bench/amplifier_cost.py [--rounds 7] (~1 min).
+Run: python bench/amplifier_cost.py [--rounds 7] (~1 min); ``--quick``: 0.1 s, one round,
+the amplifier off and every knob on (a smoke run).
 """
 
 import argparse
@@ -50,19 +52,24 @@ def time_one(scene, profile) -> tuple:
     """Return (CPU seconds per period, steps per period) of one run."""
     sim = Simulator(scene)
     start = time.process_time()
-    simulate(sim, profile, N * 1e-3)
-    return (time.process_time() - start) / N, sim.steps_taken / N
+    simulate(sim, profile, len(profile) * 1e-3)
+    return (time.process_time() - start) / len(profile), sim.steps_taken / len(profile)
 
 
 def main(argv=None) -> None:
     """Time every configuration under both drives and print the table."""
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     parser.add_argument('--rounds', type=int, default=7)
+    parser.add_argument('--quick', action='store_true', help='0.1 s, one round, two rows')
     args = parser.parse_args(argv)
-    scenes = {name: scene_of(config) for name, config in CONFIGS.items()}
+    configs, periods = CONFIGS, N
+    if args.quick:
+        configs, periods, args.rounds = {k: CONFIGS[k] for k in ('off', 'every knob')}, 100, 1
+    scenes = {name: scene_of(config) for name, config in configs.items()}
     best = {}
     steps = {}
     for drive, profile in drives().items():
+        profile = profile[:periods]
         for name, scene in scenes.items():   # warm: statics solved and cached
             steps[(drive, name)] = time_one(scene, profile)[1]
         for _ in range(args.rounds):
@@ -77,7 +84,7 @@ def main(argv=None) -> None:
         off = best[(drive, 'off')]
         print(f'\n{drive}\n| amplifier | us per period | ratio to off | steps per period |')
         print('| --- | --- | --- | --- |')
-        for name in CONFIGS:
+        for name in configs:
             cost = best[(drive, name)]
             print(f'| {name} | {cost * 1e6:.1f} | {cost / off:.2f} | '
                   f'{steps[(drive, name)]:.1f} |')

@@ -19,7 +19,8 @@ them; results are identical). Cost: process CPU seconds per simulated second, me
 RTF = wall-clock real-time factor (for threads > 1, wall time is what a user waits); the figure of
 merit is CPU us per actuator and period (1000 actuators at 1x real time on two cores need <= 2 us
 with perfect scaling). The simulators are built outside the timing (reset() between runs): building
-a 1000-copy array takes ~5 s, mostly its copies' rest-state solves. Run: ``python bench/batch.py``.
+a 1000-copy array takes ~5 s, mostly its copies' rest-state solves. Run: ``python bench/batch.py``;
+``--quick``: 1 and 2 copies, 0.05 s, one repeat, the square wave (a smoke run).
 """
 
 import argparse
@@ -82,7 +83,12 @@ def _parse(argv):
     parser.add_argument('--initial-state', default='rest', choices=('rest', 'released'),
                         help="the scene's start: 'rest' (config/array.yaml's) or 'released' "
                              '(every copy buckles from q0 first)')
-    return parser.parse_args(argv)
+    parser.add_argument('--quick', action='store_true',
+                        help='1 and 2 copies, 0.05 s, one repeat, the square wave')
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.sizes, args.sim_time, args.repeats, args.commands = '1,2', 0.05, 1, 'square'
+    return args
 
 
 def _row(scene, sim, n, kind, synchronized, threads, args):

@@ -8,8 +8,9 @@ re-simulation. A change that should not alter results must leave every hash as i
     python bench/behaviour_hashes.py > before.json          # before the change
     python bench/behaviour_hashes.py | diff before.json -   # after it: no output
 
-Uses only the public entry points (``load_scene``, ``Simulator``, ``simulate``, ``Recorder``,
-``LogReader``, ``resimulate``), so the same script runs on both sides of a refactor.
+``--quick`` is accepted for bench/'s smoke test (test/test_bench_scripts.py); the script is already
+quick (seconds). Uses only the public entry points (``load_scene``, ``Simulator``, ``simulate``,
+``Recorder``, ``LogReader``, ``resimulate``), so the same script runs on both sides of a refactor.
 """
 
 from __future__ import annotations
@@ -117,6 +118,8 @@ def log_hashes() -> dict:
 
 
 if __name__ == '__main__':
+    if sys.argv[1:] not in ([], ['--quick']):
+        raise SystemExit('usage: python bench/behaviour_hashes.py [--quick]')
     json.dump({'scenes': scene_hashes(), 'log': log_hashes()}, sys.stdout, indent=1,
               sort_keys=True)
     print()

@@ -16,15 +16,17 @@ trees taking turns case by case so that two kernels are compared side by side in
 
     python bench/controller_cost.py --tree . --tree ../other_checkout   # each built in place
 
-Without --tree, this checkout alone. Run under ``flock bench/.lock`` (one CPU benchmark at a time).
+Without --tree, this checkout alone (trees run through bench/checkouts.py). ``--quick``: one
+dither case of 0.2 s (a smoke run). Run under ``flock bench/.lock`` (one CPU benchmark at a time).
 """
 
 import argparse
 import json
 import os
-import subprocess
 import sys
 import time
+
+from checkouts import run_in_tree, THIS_TREE
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 # (beam, Ritz family, n_r, tolerance, drive)
@@ -42,6 +44,7 @@ CASES = (
     ('simply_supported', 'polynomial', 7, 3e-3, 2.0),
     ('fixed', 'buckling_modes', 3, 1e-2, 2.0),
 )
+QUICK_CASES = (('fixed', 'buckling_modes', 3, 1e-2, 'dither', 200),)   # + periods of dither
 
 
 def run_case(case) -> list:
@@ -51,10 +54,10 @@ def run_case(case) -> list:
     from det_sim_ros.analysis.scenarios import step_scene
     from det_sim_ros.sim.simulator import simulate, Simulator
     from work_precision_map import level_overrides
-    beam, shapes, n_r, tolerance, drive = case
+    beam, shapes, n_r, tolerance, drive, *periods = case
     if drive == 'dither':
         extra = {'scene.initial_state': 'rest'}
-        volts = 1500.0 + np.random.default_rng(1).uniform(-25.0, 25.0, 2000)
+        volts = 1500.0 + np.random.default_rng(1).uniform(-25.0, 25.0, (periods or [2000])[0])
     else:
         extra, volts = switching_inputs(beam, 0.20, drive, 1e-3)
     scene = step_scene(beam, 0.20, **level_overrides('exact', shapes, n_r, tolerance), **extra)
@@ -76,25 +79,24 @@ def main(argv=None) -> int:
     ap.add_argument('--tree', action='append', default=[],
                     help='a source tree (kernel built in place) to run; repeatable')
     ap.add_argument('--case', help=argparse.SUPPRESS)   # one case, in this process
+    ap.add_argument('--quick', action='store_true', help='one dither case of 0.2 s')
     args = ap.parse_args(argv)
     if args.case:
         print(json.dumps(run_case(json.loads(args.case))))
         return 0
-    trees = args.tree or [os.path.dirname(HERE)]
-    for case in CASES:
+    trees = args.tree or [THIS_TREE]
+    for case in QUICK_CASES if args.quick else CASES:
         cells = []
         for tree in trees:
-            env = dict(os.environ, PYTHONPATH=os.path.abspath(tree))
-            out = subprocess.run([sys.executable, os.path.join(HERE, 'controller_cost.py'),
-                                  '--case', json.dumps(case)], env=env, cwd=tree,
-                                 capture_output=True, text=True, check=True)
-            speed, steps, counts, method = json.loads(out.stdout.strip().splitlines()[-1])
+            out = run_in_tree(tree, [sys.executable, os.path.join(HERE, 'controller_cost.py'),
+                                     '--case', json.dumps(case)])
+            speed, steps, counts, method = json.loads(out.strip().splitlines()[-1])
             if method == 'bdf':
                 upkeep = f'{counts[0]:5d} Jacobians {counts[1]:5d} LUs'
             else:
                 upkeep = f'{counts[2]:5d} chains'
             cells.append(f'{speed:5.0f}x {steps:6d} steps {method:>17} {upkeep}')
-        beam, shapes, n_r, tolerance, drive = case
+        beam, shapes, n_r, tolerance, drive = case[:5]
         print(f'{beam:>16} {shapes:>14} {n_r} {tolerance:.0e} {drive!s:>10}: '
               + ' | '.join(cells), flush=True)
     return 0

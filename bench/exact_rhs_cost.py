@@ -13,9 +13,12 @@ method 'auto') at fidelity exact with n_r 3, 5, 7:
   interleaved, best of --repeats): CPU time per 1 ms period, steps per period, and
   max |Delta-y - Delta-y_baseline| over the run relative to the stroke.
 
-~3 min on a shared 2-core host:
+The checkouts run through bench/checkouts.py. ~3 min on a shared 2-core host:
 
     flock bench/.lock python bench/exact_rhs_cost.py --baseline DIR [--levels 5,7]
+
+``--quick``: the fixed beam at 0.15, n_r 3, one run and two rounds each, against this checkout
+itself unless --baseline names another (a smoke run).
 """
 
 from __future__ import annotations
@@ -25,10 +28,11 @@ import glob
 import importlib.util
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
+
+from checkouts import run_in_tree, THIS_TREE
 
 from det_sim_ros.analysis.scenarios import step_scene
 from det_sim_ros.core import kernel
@@ -61,11 +65,8 @@ print(json.dumps({'us_period': cpu / 4500 * 1e6, 'steps': sim.steps_taken / 4500
 
 def measure(root, beam, eps_b, n_ritz, out):
     """Return one checkout's numbers (its Delta-y saved to ``out``)."""
-    env = {**os.environ, 'PYTHONPATH': root}
-    # in the checkout: 'python -c' puts the working directory ahead of PYTHONPATH
-    text = subprocess.run([sys.executable, '-c', _SNIPPET, beam, str(eps_b), str(n_ritz), out],
-                          env=env, cwd=root, capture_output=True, text=True,
-                          check=True).stdout
+    text = run_in_tree(root, [sys.executable, '-c', _SNIPPET, beam, str(eps_b), str(n_ritz),
+                              out])
     return json.loads(text.splitlines()[-1])
 
 
@@ -108,19 +109,26 @@ def _line(cells):
 def main(argv=None) -> int:
     """Run the comparison and print its table (markdown)."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[1])
-    p.add_argument('--baseline', required=True, help='the other checkout (built in place)')
+    p.add_argument('--baseline', help='the other checkout (built in place)')
     p.add_argument('--levels', default='3,5,7')
     p.add_argument('--repeats', type=int, default=2, help='runs of each checkout')
     p.add_argument('--rounds', type=int, default=40, help='rhs timing rounds')
+    p.add_argument('--quick', action='store_true', help='fixed 0.15, n_r 3, one run')
     args = p.parse_args(argv)
-    roots = (os.getcwd(), os.path.abspath(args.baseline))
+    cases = CASES
+    if args.quick:
+        cases, args.levels, args.repeats, args.rounds = CASES[:1], '3', 1, 2
+        args.baseline = args.baseline or THIS_TREE
+    if not args.baseline:
+        p.error('--baseline DIR is required (the other checkout)')
+    roots = (THIS_TREE, os.path.abspath(args.baseline))
     baseline = load_kernel(roots[1])
     print(_line(['case', 'n_r', 'rhs us/call (this / baseline)', 'ratio',
                  'us/period (this / baseline)', 'ratio', 'steps/period (this / baseline)',
                  'max |dDelta-y| / stroke']))
     print(_line(['---'] * 8))
     with tempfile.TemporaryDirectory() as tmp:
-        for beam, eps_b in CASES:
+        for beam, eps_b in cases:
             for n_ritz in (int(v) for v in args.levels.split(',')):
                 best = [None, None]
                 for _ in range(args.repeats):

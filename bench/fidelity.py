@@ -15,6 +15,9 @@ Model fidelity benchmark: what each fidelity level gets right and what it costs.
 Writes fidelity_*.csv, fidelity.md and (with matplotlib) fidelity.png to --out.
 
     PYTHONPATH=. python bench/fidelity.py [--quick] [--out bench/out]
+
+``--quick``: three levels (paper, consistent and exact n_r 3), 0.2 s timing runs, 2 path points
+(y/l 0.01, 0.02), eps_b 0.20 only; without --out, into a temporary folder (a smoke run).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import math
 import os
 import statistics
 import sys
+import tempfile
 import time
 
 from det_sim_ros.analysis import elastica as E
@@ -75,12 +79,12 @@ def cpu_per_second(beam, fidelity, n, t_end, reps):
     return statistics.median(times), sim.substeps
 
 
-def error_vs_cpu(ys, t_end, reps):
+def error_vs_cpu(ys, t_end, reps, levels=LEVELS):
     rows = []
     for beam in BEAMS:
         el = E.elastica(beam, ys)
         simulate(_sim(beam, 'paper', 1, 0.2, 0.01)[1], step_voltage(0.0), 0.01)   # compile
-        for fidelity, n in LEVELS:
+        for fidelity, n in levels:
             path = F.beam_ritz(beam, fidelity, n)[0].path(ys)
             e_p = np.max(np.abs(path.load / el.load - 1.0))
             e_q = np.max(np.abs(path.q_ref / el.q_ref - 1.0))
@@ -196,25 +200,30 @@ def plot(err, runs, args, path):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    ap.add_argument('--out', default=os.path.join('bench', 'out'))
+    ap.add_argument('--out', default=None, help='default: bench/out (--quick: a temp folder)')
     ap.add_argument('--quick', action='store_true',
-                    help='1 timing run of 1 simulated s, 8 path points, eps_b = 0.20 only')
+                    help='3 levels, one 0.2 s timing run, 2 path points, eps_b 0.20')
     args = ap.parse_args(argv)
+    if args.out is None:
+        args.out = (tempfile.mkdtemp(prefix='fidelity_') if args.quick
+                    else os.path.join('bench', 'out'))
     os.makedirs(args.out, exist_ok=True)
-    args.ys = np.linspace(0.01, 0.15, 8 if args.quick else 15)
-    args.reps, args.t_end = (1, 1.0) if args.quick else (3, 4.5)
+    args.ys = np.array([0.01, 0.02]) if args.quick else np.linspace(0.01, 0.15, 15)
+    args.reps, args.t_end = (1, 0.2) if args.quick else (3, 4.5)
     args.eps = [0.20] if args.quick else [0.15, 0.20, 0.25]
+    levels = [('paper', 1), ('consistent', 3), ('exact', 3)] if args.quick else LEVELS
+    n_cons = 3 if args.quick else 5
     print('critical loads ...', flush=True)
-    crit = critical_loads(9)
+    crit = critical_loads(3 if args.quick else 9)
     _write_csv(os.path.join(args.out, 'fidelity_critical_load.csv'),
                ['beam', 'n_ritz', 'P_cr_l2_EI', 'euler', 'rel_error'], crit)
     print('error vs CPU ...', flush=True)
-    err = error_vs_cpu(args.ys, args.t_end, args.reps)
+    err = error_vs_cpu(args.ys, args.t_end, args.reps, levels)
     _write_csv(os.path.join(args.out, 'fidelity_error_cpu.csv'),
                ['beam', 'fidelity', 'n_ritz', 'load_error', 'q_ref_error', 'q_max_error',
                 'cpu_s_per_sim_s', 'substeps'], err)
     print('step scenario ...', flush=True)
-    step, runs = step_comparison(args.eps, 5)
+    step, runs = step_comparison(args.eps, n_cons)
     _write_csv(os.path.join(args.out, 'fidelity_step.csv'),
                ['beam', 'eps_b', 'fidelity', 'n_ritz', 'eps_y_on_end', 'switched', 'q_on_start',
                 'q_on_end', 'q_final'], step)

@@ -25,6 +25,9 @@ Prints the smallest 'exact' n_r within 1 % on all three cases (by either scale) 
 Run it under the bench lock on a quiet host:
 
     flock bench/.lock env PYTHONPATH=. python bench/fidelity_choice.py [--no-docs]
+
+``--quick``: the shipped default level only, one run per case, the default scene only, docs/
+left alone (a smoke run).
 """
 
 from __future__ import annotations
@@ -81,10 +84,10 @@ def run_level(beam, eps_b, fidelity, n_r, repeats=3, shapes=POLY, **overrides):
     return run, statistics.median(times), sim.steps_taken / periods
 
 
-def study(reference):
+def study(reference, levels=LEVELS, repeats=3):
     """Return one row per level: errors, switching and cost per case."""
     rows = []
-    for fidelity, shapes, n_r in LEVELS:
+    for fidelity, shapes, n_r in levels:
         level = {'scene.fidelity': fidelity, 'scene.n_ritz': n_r, 'scene.shapes': shapes}
         row = {'fidelity': fidelity, 'n_r': n_r, 'shapes': shapes, 'error': [],
                'error_peak': [], 'switch_ok': [], 'cpu': [], 'steps': [], 'labels': [],
@@ -92,7 +95,7 @@ def study(reference):
                              for beam, eps_b in CASES]}
         for beam, eps_b in CASES:
             ref = reference[case_name(beam, eps_b)]
-            run, cpu, steps = run_level(beam, eps_b, fidelity, n_r, shapes=shapes)
+            run, cpu, steps = run_level(beam, eps_b, fidelity, n_r, repeats, shapes=shapes)
             row['labels'].append(run.scene.fidelity_label)
             dy, _ = delta_y(run.t, run['y'], run.scene.beam_length)
             row['error'].append(stroke_error(run.t, dy, ref['dy'], stroke(ref['y'])))
@@ -121,11 +124,11 @@ def _scene_run(name, overrides, volts, threads):
     return wall, sim.steps_taken / len(profile) / sim.model.arrays.n_groups
 
 
-def scene_costs():
+def scene_costs(scenes=SCENES):
     """Return markdown rows: each shipped scene at rest and through a 3 kV step, both levels."""
     profiles = (lambda t: 0.0, lambda t: 3000.0 * (0.2 <= t < 0.6))   # at rest; a 3 kV step
     lines = []
-    for name, threads in SCENES:
+    for name, threads in scenes:
         for level, overrides in (('paper', {'scene.fidelity': 'paper'}), ('shipped', {})):
             cells = []
             for volts in profiles:
@@ -228,11 +231,16 @@ def main(argv=None) -> int:
     """Run the study, print the table and the choice, and write the docs section."""
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--no-docs', action='store_true', help='print only; leave docs/ alone')
+    ap.add_argument('--quick', action='store_true',
+                    help='the default level, one run per case, the default scene; no docs')
     args = ap.parse_args(argv)
+    levels, repeats, scenes = LEVELS, 3, SCENES
+    if args.quick:
+        levels, repeats, scenes, args.no_docs = LEVELS[-1:], 1, SCENES[:1], True
     reference = load_reference()
     simulate(Simulator(step_scene('fixed', 0.20)), np.zeros(10), 0.01)   # warm up
-    rows = study(reference)
-    text = (table(rows, reference) + '\n' + scene_costs() + '\n\n'
+    rows = study(reference, levels, repeats)
+    text = (table(rows, reference) + '\n' + scene_costs(scenes) + '\n\n'
             + convergence_table(reference['meta']))
     print(text)
     print(f'smallest exact n_r within {LIMIT:.0%} of the stroke on all cases: '

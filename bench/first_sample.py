@@ -19,7 +19,8 @@ Run from the repository with a venv that has rclpy: python bench/first_sample.py
 ``--tree DIR`` (repeatable) skips the install and starts ``python -m det_sim_ros.cli.sim_node``
 from each source tree DIR (its kernel built in place, its modules compiled to bytecode first as
 pip does at an install), the trees taking turns start by start, and prints each tree's median
-and maximum: two versions side by side in one run.
+and maximum: two versions side by side in one run (the trees run through bench/checkouts.py).
+``--quick``: one start from this tree, no install, a 100 ms announcement period (a smoke run).
 """
 
 import argparse
@@ -31,7 +32,9 @@ import sys
 import tempfile
 import time
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from checkouts import THIS_TREE, tree_env
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))   # what `pip install .` takes
 PROBE_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
 <profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
   <participant profile_name="probe" is_default_profile="true">
@@ -106,7 +109,12 @@ def main(argv=None) -> int:
     parser.add_argument('--tree', action='append', default=[],
                         help='a source tree to start sim_node from, without an install '
                              '(repeatable: the trees take turns)')
+    parser.add_argument('--quick', action='store_true',
+                        help='one start from this tree, no install, 100 ms announcements')
     args = parser.parse_args(argv)
+    if args.quick:
+        args.starts, args.tree = 1, args.tree or [THIS_TREE]
+        args.probe_announce_ms = args.probe_announce_ms or 100
     env = _env()
     env.pop('FASTRTPS_DEFAULT_PROFILES_FILE', None)   # the node keeps the defaults
     if args.probe_announce_ms:
@@ -169,10 +177,9 @@ def _compare_trees(trees, starts, env) -> int:
     seconds = {tree: [] for tree in trees}
     for k in range(starts):
         for tree in trees:
-            tree_env = dict(env, PYTHONPATH=os.path.abspath(tree))
             took, _ = time_to_first_sample(
                 [sys.executable, '-m', 'det_sim_ros.cli.sim_node', '--ros-args',
-                 '-p', 'log.enabled:=false'], tree_env, cwd=tree)   # -m: the tree first
+                 '-p', 'log.enabled:=false'], tree_env(tree, env), cwd=tree)   # -m: the tree first
             seconds[tree].append(took)
             print(f'{tree} start {k + 1}: first displacement sample after {took:.2f} s',
                   flush=True)

@@ -8,7 +8,7 @@ per start, then: how many starts got sample 0, and how many got their first samp
 
 Run from the repository (own ROS_DOMAIN_ID; localhost discovery unless --range SUBNET)::
 
-    python bench/first_sample_race.py [--starts 10] [--wait-for-subscribers 1]
+    python bench/first_sample_race.py [--starts 10] [--wait-for-subscribers 1] [--quick]
 """
 
 import argparse
@@ -83,7 +83,10 @@ def main(argv=None) -> int:
                         help='s the subscriber sleeps before rclpy (a heavier process)')
     parser.add_argument('--subscriber-announces-early', action='store_true',
                         help='the subscriber process uses det_sim_ros.ros.discovery too')
+    parser.add_argument('--quick', action='store_true', help='one start (a smoke run)')
     args = parser.parse_args(argv)
+    if args.quick:
+        args.starts = 1
     # PYTHONSAFEPATH: the children import det_sim_ros from PYTHONPATH or the installed package,
     # never from the working directory
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE=args.range, PYTHONSAFEPATH='1')

@@ -13,7 +13,8 @@ identify it, and it must be flagged).
 The fit runs as ``det_sim fit`` does: the search at the coarse level, the polish at the default
 scene's (docs/calibration.md, Two levels). Run: ``flock bench/.lock python
 bench/fit_accuracy.py --seeds 0:5`` (each fit of four parameters takes ~20-60 s on a shared
-2-core host; split the seeds over runs of <= 3 min).
+2-core host; split the seeds over runs of <= 3 min). ``--quick``: one seed, a 0.5 s log, m only (a
+smoke run).
 """
 
 import argparse
@@ -47,7 +48,10 @@ def main():
     parser.add_argument('--seeds', default='0:10', help='START:STOP (default: 0:10)')
     parser.add_argument('--t-end', type=float, default=10.0)
     parser.add_argument('--params', default=','.join(PARAMS))
+    parser.add_argument('--quick', action='store_true', help='one seed, a 0.5 s log, m only')
     args = parser.parse_args()
+    if args.quick:
+        args.seeds, args.t_end, args.params = '0:1', 0.5, 'm'
     params = args.params.split(',')
     first, last = (int(v) for v in args.seeds.split(':'))
     scene = load_scene('default')

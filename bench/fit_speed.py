@@ -18,6 +18,7 @@ bench/fit_speed.py``):
 
 The Jacobian timings (--jacobians) and the paper fits are the evaluator's measurements: what
 'auto' picks. Keep each locked run short: a scene-only fit of three parameters takes ~3 min.
+``--quick``: a 1 s log, one call each, one parameter fitted at paper (a smoke run).
 """
 
 import argparse
@@ -102,7 +103,11 @@ def main():
                         help='N:MODE,... with MODE two-level, scene-only or paper')
     parser.add_argument('--jacobians', action='store_true',
                         help='also time one Jacobian serially, on threads and in processes')
+    parser.add_argument('--quick', action='store_true',
+                        help='a 1 s log, one call each, one parameter fitted at paper')
     args = parser.parse_args()
+    if args.quick:
+        args.repeats, args.t_end, args.fits = 1, 1.0, '1:paper'
     default = load_scene('default')
     volts = step_and_sine(args.t_end, default.dt)
     calls = call_times(volts, args.repeats)

@@ -25,7 +25,8 @@ Usage (root for hosts):
     flock bench/.lock python bench/fleet.py capacity --nodes 1,2,4 --seconds 15
     flock bench/.lock python bench/fleet.py lockstep --nodes 1,2,4,8 --seconds 10
     flock bench/.lock python bench/fleet.py hosts --cases direct,lossy_keep_all_profile
-Add --json FILE to append the numbers (one JSON object per line).
+Add --json FILE to append the numbers (one JSON object per line). ``--quick`` (no part: capacity
+and lockstep) runs one node for 0.5 s after 0.5 s of settling (a smoke run).
 """
 
 import argparse
@@ -277,17 +278,26 @@ def hosts(case, seconds):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
-    parser.add_argument('part', choices=('capacity', 'lockstep', 'hosts'))
+    parser.add_argument('part', nargs='?', choices=('capacity', 'lockstep', 'hosts'))
     parser.add_argument('--nodes', default='1,2,4,8', help='node counts (capacity, lockstep)')
     parser.add_argument('--cases', default=','.join(CASES), help='hosts cases: '
                         + ', '.join(CASES))
     parser.add_argument('--seconds', type=float, default=15.0, help='measured window, s')
     parser.add_argument('--json', help='append each result as a JSON line to this file')
+    parser.add_argument('--quick', action='store_true',
+                        help='capacity and lockstep (or the part named), one node, 0.5 s')
     args = parser.parse_args()
-    points = (args.cases.split(',') if args.part == 'hosts'
-              else [int(n) for n in args.nodes.split(',')])
-    for point in points:
-        result = {'capacity': capacity, 'lockstep': lockstep, 'hosts': hosts}[args.part](
+    if args.quick:
+        global SETTLE
+        args.nodes, args.seconds, SETTLE = '1', 0.5, 0.5
+    elif args.part is None:
+        parser.error('name a part: capacity, lockstep or hosts')
+    parts = [args.part] if args.part else ['capacity', 'lockstep']
+    runs = [(part, point) for part in parts
+            for point in (args.cases.split(',') if part == 'hosts'
+                          else [int(n) for n in args.nodes.split(',')])]
+    for part, point in runs:
+        result = {'capacity': capacity, 'lockstep': lockstep, 'hosts': hosts}[part](
             point, args.seconds)
         result['cpus'] = os.cpu_count()
         line = json.dumps(result)

@@ -15,7 +15,7 @@ over rounds of its ratio to ``off`` in the same round, with the quartiles, the C
 of ``off`` and the executor thread's share (a server's threads may still send a backlog during
 the next block, of any state, which pulls the ratios towards 1).
 
-    python bench/live_cost.py [--rounds 20] [--block-s 0.5] [--real-time]
+    python bench/live_cost.py [--rounds 20] [--block-s 0.5] [--real-time] [--quick]
 """
 
 import argparse
@@ -103,7 +103,12 @@ def main():
     parser.add_argument('--real-time', action='store_true',
                         help='the nodes in real time at 1 kHz (as a user watching runs them) '
                         'instead of free run')
+    parser.add_argument('--quick', action='store_true',
+                        help='two rounds of 0.05 s blocks, a 0.05 s warm-up (a smoke run)')
     args = parser.parse_args()
+    warm_up = 0.5
+    if args.quick:
+        args.rounds, args.block_s, warm_up = 2, 0.05, 0.05
     os.environ.setdefault('ROS_DOMAIN_ID', str(150 + os.getpid() % 50))
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     states = ('off', 'off2', 'idle', 'watched', 'watched_100Hz')
@@ -122,7 +127,7 @@ def main():
                 and time.monotonic() < deadline:
             time.sleep(0.05)
         for node, executor in nodes.values():     # warm up each
-            spin_block(node, executor, 0.5)
+            spin_block(node, executor, warm_up)
         rng = random.Random(1)
         per_period = {state: [] for state in states}
         periods = dict.fromkeys(states, 0)

@@ -5,7 +5,7 @@ The node's per-step work: encode the output bytes (det_sim_ros.io.contract), rec
 command every 10 steps), synchronously or with the writer thread. Prints CPU microseconds per
 step (all threads); run on a shared host, compare the rows of one run.
 
-Run: PYTHONPATH=. python bench/log_cost.py [n_steps]
+Run: PYTHONPATH=. python bench/log_cost.py [n_steps]; ``--quick``: 500 steps (a smoke run).
 """
 
 import os
@@ -62,4 +62,5 @@ def main(n_steps=20000):
 
 
 if __name__ == '__main__':
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 20000)
+    main(500 if sys.argv[1:] == ['--quick'] else int(sys.argv[1]) if len(sys.argv) > 1
+         else 20000)

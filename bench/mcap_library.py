@@ -15,7 +15,8 @@ seeking one, which uses the summary; ``NonSeekingReader``: a scan) and by LogRea
 columns (LogReader.blocks, which mcap has no counterpart of); then the file cut inside a chunk
 (a torn file): what each reader returns.
 
-Run: python bench/mcap_library.py [samples]   (under the shared lock: flock ... python ...)
+Run: python bench/mcap_library.py [samples]   (under the shared lock: flock ... python ...);
+``--quick``: 500 samples (a smoke run).
 """
 
 from __future__ import annotations
@@ -224,4 +225,4 @@ def main(n: int = 20000) -> None:
 
 
 if __name__ == '__main__':
-    main(*(int(a) for a in sys.argv[1:]))
+    main(*((500,) if sys.argv[1:] == ['--quick'] else (int(a) for a in sys.argv[1:])))

@@ -37,8 +37,11 @@ sample, command-to-effect p99 <= 2 ms with no sample lost and the lag not growin
 Usage: python bench/node_rate.py [--scenes default,array] [--rt-seconds 60]
        [--free-seconds 3] [--rounds 7] [--realtime-priority 0] [--controller-priority 0]
        [--paired N [--paired-no-log]] [--log-compression zstd|lz4|none]
-       [--paired-sensors N]
-       [--json out.json]
+       [--paired-sensors N] [--paired-predictability N] [--rt-no-predictability]
+       [--json out.json] [--quick]
+
+``--quick``: the default scene, one free-run round of 0.1 s, 0.2 s of lockstep and 0.5 s of
+real time (a smoke run).
 """
 
 import argparse
@@ -369,10 +372,12 @@ def _real_time_run(scene_name, n_det, dt, args, folder):
         os.sched_setscheduler(controller.pid, os.SCHED_FIFO,
                               os.sched_param(args.controller_priority))
     try:
-        time.sleep(2.0)
+        time.sleep(0.2 if args.quick else 2.0)   # the controller up (the node waits for it too)
         result, log_path = run_node(args.rt_seconds, 'events', folder, ['displacement'],
                                     scene_file=scene_name, real_time=True,
                                     realtime_priority=args.realtime_priority,
+                                    **({'predictability.mode': 'off'}
+                                       if args.rt_no_predictability else {}),
                                     **({'log.enabled': False} if args.rt_no_log else
                                        {'log.compression': args.log_compression}))
     finally:
@@ -409,6 +414,11 @@ def bench_scene(scene_name, args, folder):
     finally:
         if listener is not None:
             stop(listener)
+    if args.paired_predictability > 0:   # the twin on (the default) against off
+        from sensor_cost import paired_sensors
+        report['paired_predictability_on_and_off'] = paired_sensors(
+            scene_name, args.paired_predictability, args.paired_block_s, folder,
+            args.log_compression, topics=(), off_overrides={'predictability.mode': 'off'})
     if args.paired_sensors > 0:   # every sensor knob on against off (bench/sensor_cost.py)
         from sensor_cost import paired_sensors
         report['paired_sensors_on_and_off'] = paired_sensors(
@@ -448,8 +458,18 @@ def main():
     parser.add_argument('--paired-sensors', type=int, default=0,
                         help='the node with every sensor knob on and off in this many '
                         'interleaved pairs of blocks (bench/sensor_cost.py; 0 = off)')
+    parser.add_argument('--rt-no-predictability', action='store_true',
+                        help='real-time run without the predictability twin')
+    parser.add_argument('--paired-predictability', type=int, default=0,
+                        help='N pairs: the node with the predictability twin (the default) '
+                             'against the node without it, paired blocks in one process')
     parser.add_argument('--json', help='write the numbers to this file')
+    parser.add_argument('--quick', action='store_true',
+                        help='the default scene, every part for a fraction of a second')
     args = parser.parse_args()
+    if args.quick:
+        args.scenes, args.rt_seconds, args.free_seconds, args.rounds = 'default', 0.5, 0.1, 1
+        args.floor_periods, args.lockstep_seconds = 500, 0.2
     report = {'cpus': os.cpu_count(), 'load_avg_at_start': os.getloadavg()}
     with tempfile.TemporaryDirectory() as folder:
         for scene_name in args.scenes.split(','):

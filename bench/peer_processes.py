@@ -12,6 +12,7 @@ import os
 import subprocess
 import sys
 
+from checkouts import THIS_TREE
 from det_sim_ros.io.contract import decode_float64_multi_array
 from det_sim_ros.io.log import LogReader
 import numpy as np
@@ -70,9 +71,8 @@ BUSY = 'while True: pass'
 
 
 def spawn(code, *args):
-    """Start ``code`` in a Python process that imports this repository's package."""
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [os.path.dirname(os.path.dirname(os.path.abspath(__file__)))] + sys.path))
+    """Start ``code`` in a Python process that imports the package this process imports."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([THIS_TREE] + sys.path))
     return subprocess.Popen([sys.executable, '-c', code, *args], env=env)
 
 

@@ -1,70 +1,48 @@
 """
 Time ``det_sim plot`` on a long log (target: a 10-minute 1 kHz log in <= 10 s).
 
-Writes a log as sim_node would (a square wave 0 / 3 kV every 0.5 s, commands at 100 Hz, all
-four output topics at 1 kHz) with the simulator's offline run and pre-serialized messages,
-then times read + summary + PNG.
+Writes a log as sim_node would (a square wave 0 / 3 kV every 0.5 s, commands at 100 Hz, every
+output topic at 1 kHz, encoded by the node's own sample encoder) from the simulator's offline
+run, then times read + summary + PNG.
 
     python bench/plot_log.py [--minutes 10] [--scene default] [--out bench/out]
+
+``--quick``: a 0.6 s log in a temporary folder (a smoke run).
 """
 
 import argparse
 import os
-import struct
+import tempfile
 import time
 
 from det_sim_ros.io import logplot
-from det_sim_ros.io.log import Recorder, serialize
-from det_sim_ros.io.replay import OutputContract
+from det_sim_ros.io.contract import encode_float64_multi_array, OutputContract, TOPIC_TYPES
+from det_sim_ros.io.log import Recorder
 from det_sim_ros.scenes.scene import load_scene
-from det_sim_ros.sim.simulator import simulate
+from det_sim_ros.sim.simulator import simulate, Simulator
 import numpy as np
 
 
 def write_log(path, scene_name, minutes):
-    from std_msgs.msg import Float64MultiArray
+    """Write the log of the square wave as sim_node would; return its number of samples."""
     scene = load_scene(scene_name)
     t_end = 60.0 * minutes
     n = int(round(t_end * scene.rate_hz))
-    n_det = scene.n_dets
     period = int(round(0.01 * scene.rate_hz))          # commands every 10 ms
     k = np.arange(n)
-    volts = np.where((k * scene.dt) % 1.0 < 0.5, 0.0, 3000.0)[:, None] * np.ones(n_det)
-    run = simulate(scene, volts, t_end)
-    contract = OutputContract(run_model(scene))
-    names = run_model(scene).output_names
-    out = np.column_stack([run[name] for name in names])
-    templates = contract.messages(out[0], 0)
-    raw = {topic: bytearray(serialize(msg)) for topic, msg in templates.items()}
-    # every value of these messages sits at a fixed offset: patch them per sample
-    layout = {topic: logplot._joint_state_layout(bytes(data)) for topic, data in raw.items()}
+    volts = np.where((k * scene.dt) % 1.0 < 0.5, 0.0, 3000.0)[:, None] * np.ones(scene.n_dets)
+    sim = Simulator(scene)
+    run = simulate(sim, volts, t_end)
+    encoder = OutputContract(sim.model).encoder()   # sim_node's encoder: the same bytes
+    out = np.column_stack([run[name] for name in sim.output_names])
     with Recorder(path, scene, flush_period_s=1.0) as rec:
         for i in range(n + 1):
             t_ns = int(round(i * scene.dt * 1e9))
             if i < n and i % period == 0:
-                rec.record('voltage_command', Float64MultiArray(data=volts[i].tolist()), t_ns)
-            sec, nsec = divmod(t_ns, 1_000_000_000)
-            for topic, data in raw.items():
-                lay = layout[topic]
-                struct.pack_into('<iI', data, lay['stamp'], sec, nsec)
-                for field, (at, count) in lay['arrays'].items():
-                    if count:
-                        values = contract.values(out[i], topic, field) if topic != \
-                            contract.structure_topic else contract.structure(out[i])
-                        data[at:at + 8 * count] = np.asarray(values, '<f8').tobytes()
-                rec.record(topic, bytes(data), t_ns, type_name='sensor_msgs/msg/JointState')
+                rec.record('voltage_command', encode_float64_multi_array(volts[i].tolist()),
+                           t_ns, TOPIC_TYPES['voltage_command'])
+            rec.record_sample(t_ns, encoder.topics, encoder.encode(out[i], t_ns), TOPIC_TYPES)
     return n
-
-
-_MODELS = {}
-
-
-def run_model(scene):
-    from det_sim_ros.physics.model import build_model
-    key = id(scene)
-    if key not in _MODELS:
-        _MODELS[key] = build_model(scene)
-    return _MODELS[key]
 
 
 def main():
@@ -72,7 +50,10 @@ def main():
     parser.add_argument('--minutes', type=float, default=10.0)
     parser.add_argument('--scene', default='default')
     parser.add_argument('--out', default='bench/out')
+    parser.add_argument('--quick', action='store_true', help='a 0.6 s log, in a temp dir')
     args = parser.parse_args()
+    if args.quick:
+        args.minutes, args.out = 0.01, tempfile.mkdtemp(prefix='plot_log_')
     os.makedirs(args.out, exist_ok=True)
     path = os.path.join(args.out, f'plot_bench_{args.scene}_{args.minutes:g}min.mcap')
     if not os.path.exists(path):

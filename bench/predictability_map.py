@@ -23,7 +23,8 @@ with ``--docs`` rewrites their section of docs/fidelity.md. Under the bench lock
 
     flock bench/.lock env PYTHONPATH=. python bench/predictability_map.py [--quick] [--docs]
 
---quick: 2 and 10 Hz, eps_b 0.20, one pair per case (seconds; the file is written to --out).
+--quick: 2 and 10 Hz, eps_b 0.20, one pair per case (seconds; the CSV into a temporary file
+unless --out names one; --docs is ignored).
 --level refined: the same map at a refined level (exact kinematics, polynomial n_r 9 at
 tolerance 1e-4, within 0.11 % of the converged beam on the step and 2 Hz cases; the predictability
 only, no cost pairs; bench/data/predictability_map_refined.csv): whether a verdict is the
@@ -38,6 +39,7 @@ import datetime
 import os
 import statistics
 import sys
+import tempfile
 import time
 
 from det_sim_ros.analysis.predictability import Perturbation, predictability
@@ -218,8 +220,10 @@ def main(argv=None) -> int:
                     help='refined: polynomial n_r 9 at 1e-4, no cost pairs')
     ap.add_argument('--out', default=None)
     args = ap.parse_args(argv)
-    if args.out is None:
-        args.out = CSV if args.level == 'default' else CSV.replace('.csv', f'_{args.level}.csv')
+    if args.out is None:   # a quick run writes nothing into the repository
+        args.out = (os.path.join(tempfile.mkdtemp(prefix='predictability_map_'), 'quick.csv')
+                    if args.quick else CSV if args.level == 'default'
+                    else CSV.replace('.csv', f'_{args.level}.csv'))
     if args.level != 'default':
         args.docs = False   # the docs quote the refined level's verdicts beside the default's
     command = 'flock bench/.lock env PYTHONPATH=. python bench/predictability_map.py --docs'
@@ -252,7 +256,7 @@ def main(argv=None) -> int:
         text = tables([{k: str(v) for k, v in r.items()} for r in rows], command, args.level,
                       refined)
     print(text)
-    if args.docs:
+    if args.docs and not args.quick:
         write_doc(text, begin=BEGIN, end=END)
     return 0
 

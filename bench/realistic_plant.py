@@ -12,10 +12,13 @@ sample k -> command -> period k + 1, as in sim_node's lockstep mode: a controlle
 each sample it receives (a dropped one is not answered and the voltage holds), the same run
 bit for bit as through sim_node (test/test_sensors_node.py).
 
-Usage: python bench/realistic_plant.py [--png docs/figures/realistic_plant.png]
+Usage: python bench/realistic_plant.py [--png docs/figures/realistic_plant.png]; ``--quick``:
+0.2 s, the figure into a temporary folder (a smoke run).
 """
 
 import argparse
+import os
+import tempfile
 
 from det_sim_ros.io.sensing import MeasuredOutputs
 from det_sim_ros.scenes.scene import load_scene
@@ -27,11 +30,11 @@ KP, KI = 2.0e4, 6.0e6            # V/m, V/(m s): stable against the ideal plant
 TARGET, T_STEP, T_END = 2.0e-3, 0.1, 1.0   # m, s, s
 
 
-def closed_loop(scene):
+def closed_loop(scene, end=T_END):
     """Run the PI loop; return t, the true Δy, the measured Δy (NaN: dropped), the voltage."""
     sim = Simulator(scene)
     outputs = MeasuredOutputs(sim)
-    n = int(round(T_END / sim.dt))
+    n = int(round(end / sim.dt))
     t = np.arange(n + 1) * sim.dt
     true_dy, seen_dy, volts = np.empty(n + 1), np.full(n + 1, np.nan), np.zeros(n + 1)
     out = np.array(list(sim.outputs().values()))
@@ -79,10 +82,15 @@ def plot(runs, path):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--png', default='docs/figures/realistic_plant.png')
+    parser.add_argument('--quick', action='store_true', help='0.2 s, the figure to a temp dir')
     args = parser.parse_args()
-    runs = [closed_loop(load_scene('default')), closed_loop(load_scene(REALISTIC))]
+    end = T_END
+    if args.quick:
+        end = 0.2
+        args.png = os.path.join(tempfile.mkdtemp(prefix='realistic_plant_'), 'quick.png')
+    runs = [closed_loop(load_scene('default'), end), closed_loop(load_scene(REALISTIC), end)]
     for name, (t, true_dy, seen_dy, volts) in zip(('ideal', 'realistic'), runs):
-        late = t >= T_END - 0.1
+        late = t >= end - 0.1
         print(f'{name:9s}: true Δy over the last 0.1 s {true_dy[late].mean() * 1e3:.4f} mm '
               f'(std {true_dy[late].std() * 1e6:.2f} um), command std {volts[late].std():.1f} V,'
               f' max Δy {true_dy.max() * 1e3:.3f} mm, {int(np.isnan(seen_dy).sum())} samples'

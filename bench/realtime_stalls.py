@@ -11,7 +11,7 @@ periods' own cost, the gaps of more than 5 ms between two publications and the c
 inside them, and where the node slipped. ``--freeze`` freezes the start-up's objects before
 spinning, as ``sim_node`` does (``gc.freeze()``).
 
-Usage: python bench/realtime_stalls.py [--seconds 10] [--freeze] [-p NAME:=VALUE ...]
+Usage: python bench/realtime_stalls.py [--seconds 10] [--freeze] [-p NAME:=VALUE ...] [--quick]
 """
 
 import argparse
@@ -146,7 +146,10 @@ def main(argv=None):
     parser.add_argument('--freeze', action='store_true', help='gc.freeze() before spinning')
     parser.add_argument('-p', action='append', default=[], metavar='NAME:=VALUE',
                         help='a node parameter, e.g. -p realtime_priority:=50')
+    parser.add_argument('--quick', action='store_true', help='0.5 s (a smoke run)')
     args = parser.parse_args(argv)
+    if args.quick:
+        args.seconds = 0.5
     params = {name: _value(value) for name, value in
               (item.split(':=', 1) for item in args.p)}
     trace, controller = run(args.seconds, params, args.freeze)

@@ -27,7 +27,7 @@ before a change), so a before/after is measured in one run on the same host; eac
 the busy process for its whole duration. The host is shared, so compare within a run.
 
 Usage: python bench/realtime_switching.py [--seconds 30] [--pairs 1]
-       [--a 'realtime_priority:=0'] [--b 'realtime_priority:=50'] [--a-repo CHECKOUT]
+       [--a 'realtime_priority:=0'] [--b 'realtime_priority:=50'] [--a-repo CHECKOUT] [--quick]
        [--controller-depth 10] [--controller-priority 0] [--json out.json]
 """
 
@@ -43,9 +43,10 @@ import time
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
+from checkouts import THIS_TREE, tree_env  # noqa: E402
 from peer_processes import BUSY, spawn, stop  # noqa: E402
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+REPO = THIS_TREE
 
 # Answers every displacement sample at once; records (stamp, arrival) per sample. Exits by
 # itself after its run (SIGINT also ends it), writing what it saw.
@@ -150,7 +151,7 @@ def run_once(extra, seconds, depth, folder, label, repo=REPO, controller_priorit
     node = subprocess.Popen([sys.executable, '-m', 'det_sim_ros.cli.sim_node', '--ros-args',
                              *params], cwd=folder, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True,
-                            env=dict(os.environ, PYTHONPATH=repo))
+                            env=tree_env(repo))
     controller = spawn(SWITCHING_CONTROLLER, '1', out, str(seconds), str(depth))
     if controller_priority:   # as `chrt -f N` would (its threads, started later, inherit it)
         os.sched_setscheduler(controller.pid, os.SCHED_FIFO,
@@ -185,7 +186,10 @@ def main(argv=None):
                         help="the controller process's SCHED_FIFO priority (0 = ordinary)")
     parser.add_argument('--seed', type=int, default=1)
     parser.add_argument('--json')
+    parser.add_argument('--quick', action='store_true', help='one run of 0.5 s (a smoke run)')
     args = parser.parse_args(argv)
+    if args.quick:
+        args.seconds, args.pairs = 0.5, 1
     configs = {'a': args.a}
     if args.b is not None or os.path.abspath(args.a_repo) != os.path.abspath(args.b_repo):
         configs['b'] = args.b or ''
@@ -204,7 +208,7 @@ def main(argv=None):
                 results[name].append(result)
                 print(json.dumps({name: configs[name], 'repo': repos[name], **result}),
                       flush=True)
-                time.sleep(1.0)
+                time.sleep(0.0 if args.quick else 1.0)
     report['results'] = results
     report['load_avg_at_end'] = os.getloadavg()
     if args.json:

@@ -14,7 +14,7 @@ With ``--amplifier PRESET`` the /on node also takes that preset's amplifier sect
 ``amplifier_lab``: DAC, delay, offset, bandwidth, slew rate, current limit): every knob of both
 models on; with ``--topics ''`` as well, the amplifier alone.
 
-Usage: python bench/sensor_cost.py [--scene default] [--pairs 60] [--block-s 0.5]
+Usage: python bench/sensor_cost.py [--scene default] [--pairs 60] [--block-s 0.5] [--quick]
        [--topics displacement,...] [--truth-subscribed] [--amplifier amplifier_lab]
        (``bench/node_rate.py --paired-sensors N`` runs the same with every topic sensed)
 """
@@ -76,8 +76,14 @@ def _spin_block(executor, block_s):
 
 
 def paired_sensors(scene_name, pairs, block_s, folder, compression='zstd', seed=1,
-                   truth_subscribed=False, topics=TOPICS, amplifier=None):
-    """Measure the nodes without and with sensors in ``pairs`` random-order pairs of blocks."""
+                   truth_subscribed=False, topics=TOPICS, amplifier=None, warm_s=0.5,
+                   off_overrides=None, on_overrides=None):
+    """
+    Measure the nodes without and with sensors in ``pairs`` random-order pairs of blocks.
+
+    ``off_overrides``, ``on_overrides``: more node parameters of each (e.g. another feature
+    off and on: bench/node_rate.py --paired-predictability).
+    """
     names = [f'/{ns}/{topic}' for ns in ('off', 'on') for topic in TOPICS]
     if truth_subscribed:
         names += [f'/on/sim_node/truth/{topic}' for topic in topics]
@@ -86,8 +92,9 @@ def paired_sensors(scene_name, pairs, block_s, folder, compression='zstd', seed=
     for context in contexts:
         rclpy.init(context=context)
     try:
-        knobs = {**every_knob_on(topics), **(amplifier_of(amplifier) if amplifier else {})}
-        nodes = [_node(contexts[0], scene_name, 'off', folder, compression, {}),
+        knobs = {**(every_knob_on(topics) if topics else {}),
+                 **(amplifier_of(amplifier) if amplifier else {}), **(on_overrides or {})}
+        nodes = [_node(contexts[0], scene_name, 'off', folder, compression, off_overrides or {}),
                  _node(contexts[1], scene_name, 'on', folder, compression, knobs)]
         executors = [make_executor(context) for context in contexts]
         for executor, node in zip(executors, nodes):
@@ -99,7 +106,7 @@ def paired_sensors(scene_name, pairs, block_s, folder, compression='zstd', seed=
                 raise RuntimeError('subscribers not discovered')
             time.sleep(0.05)
         for executor in executors:   # warm both
-            _spin_block(executor, 0.5)
+            _spin_block(executor, warm_s)
         rng = random.Random(seed)
         totals, ratios = [[0.0, 0], [0.0, 0]], []
         for _ in range(pairs):
@@ -144,12 +151,17 @@ def main():
                         help='the subscriber process takes the truth topics too')
     parser.add_argument('--amplifier', default=None,
                         help='a preset whose amplifier section the /on node takes too')
+    parser.add_argument('--quick', action='store_true',
+                        help='two pairs of 0.05 s blocks after a 0.05 s warm-up (a smoke run)')
     args = parser.parse_args()
+    warm_s = 0.5
+    if args.quick:
+        args.pairs, args.block_s, warm_s = 2, 0.05, 0.05
     with tempfile.TemporaryDirectory() as folder:
         result = paired_sensors(args.scene, args.pairs, args.block_s, folder,
                                 args.log_compression, truth_subscribed=args.truth_subscribed,
                                 topics=tuple(t for t in args.topics.split(',') if t),
-                                amplifier=args.amplifier)
+                                amplifier=args.amplifier, warm_s=warm_s)
     result.update(cpus=os.cpu_count(), load_avg=os.getloadavg())
     print(json.dumps(result, indent=2))
 

@@ -10,8 +10,9 @@ runs with 'auto' ('etdrk4_linearized') and with 'etdrk4' (the beams' stiff modes
 stages) for a measured ratio; scipy's Radau on the kernel's rhs at rtol 1e-6 (restarted every
 sample, as the project's reference solutions) gives the scipy column (--scipy: all rows, the
 worst case only, or none). --baseline DIR times the paper level through another checkout's
-kernel in a subprocess, interleaved with this one, for a same-host ratio. One case takes ~2 min
-on a shared 2-core host:
+kernel in a subprocess (bench/checkouts.py), interleaved with this one, for a same-host ratio.
+``--quick``: the fixed beam at 0.20 at the paper's level only, no scipy (a smoke run; with
+--baseline, one run each). One case takes ~2 min on a shared 2-core host:
 
     flock bench/.lock python bench/stiff_speed.py --cases simply_supported0.20 \
         [--scipy worst] [--baseline ../other-checkout] [--ref-dir DIR]
@@ -22,9 +23,11 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import subprocess
 import sys
+import tempfile
 import time
+
+from checkouts import run_in_tree, THIS_TREE
 
 from det_sim_ros.analysis.scenarios import reference_solution, STEP_END, step_error, \
     step_scene, step_voltage
@@ -40,10 +43,10 @@ _PAPER_SNIPPET = """
 import sys, time
 from det_sim_ros.analysis.scenarios import step_scene, step_voltage
 from det_sim_ros.sim.simulator import simulate, Simulator
-beam, eps = sys.argv[1], float(sys.argv[2])
+beam, eps, runs = sys.argv[1], float(sys.argv[2]), int(sys.argv[3])
 scene = step_scene(beam, eps, **{'integrator.tolerance': 1e-6})
 best = []
-for _ in range(5):
+for _ in range(runs):
     sim = Simulator(scene)
     t0 = time.process_time()
     simulate(sim, step_voltage(scene.physics.v_max), 4.5)
@@ -94,15 +97,13 @@ def scipy_row(beam, eps_b, fidelity, n_ritz, X_ref):
     return cpu, step_error(Simulator(scene).model, t, X, X_ref)[0]
 
 
-def paper_baseline(baseline, beam, eps_b):
+def paper_baseline(baseline, beam, eps_b, rounds=3, runs=5):
     """Return (us per period here, us per period through ``baseline``), interleaved."""
     here, there = [], []
-    for _ in range(3):
-        for root, out in ((os.getcwd(), here), (baseline, there)):
-            env = {**os.environ, 'PYTHONPATH': root}
-            text = subprocess.run([sys.executable, '-c', _PAPER_SNIPPET, beam, str(eps_b)],
-                                  env=env, cwd=root, capture_output=True, text=True,
-                                  check=True).stdout
+    for _ in range(rounds):
+        for root, out in ((THIS_TREE, here), (baseline, there)):
+            text = run_in_tree(root, [sys.executable, '-c', _PAPER_SNIPPET, beam, str(eps_b),
+                                      str(runs)])
             out.append(float(text.split()[-1]))
     return statistics.median(here), statistics.median(there)
 
@@ -120,7 +121,11 @@ def main(argv=None) -> int:
     p.add_argument('--levels', default='exact3,exact5,exact7,paper1')
     p.add_argument('--cases', default='fixed0.15,fixed0.20,simply_supported0.20',
                    help='a run of all three takes ~5 min on a shared 2-core host')
+    p.add_argument('--quick', action='store_true', help='fixed 0.20, paper, no scipy')
     args = p.parse_args(argv)
+    if args.quick:
+        args.levels, args.cases, args.scipy = 'paper1', 'fixed0.20', 'none'
+        args.ref_dir = tempfile.mkdtemp(prefix='stiff_refs_')   # not the full run's cache
     levels = [lv for lv in LEVELS if f'{lv[0]}{lv[1]}' in args.levels.split(',')]
     print(_line(['case', 'level', 'method', 'steps/period', 'us/step', 'us/period',
                  'x real time', 'error/stroke', 'old/new CPU', 'scipy/kernel CPU',
@@ -149,7 +154,8 @@ def main(argv=None) -> int:
                              f'{r["realtime"]:.1f}', f'{r["error"]:.1e}', ratio,
                              sp[0] if i == 0 else '', sp[1] if i == 0 else '']), flush=True)
         if args.baseline:
-            here, there = paper_baseline(args.baseline, beam, eps_b)
+            here, there = paper_baseline(args.baseline, beam, eps_b,
+                                         *((1, 1) if args.quick else ()))
             print(_line([case, 'paper 1', f'this tree / {args.baseline}', '', '',
                          f'{here:.2f} / {there:.2f}', '', '', '', '', '']), flush=True)
     return 0

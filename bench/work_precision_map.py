@@ -43,6 +43,9 @@ curve per level, the front marked); ``--docs`` rewrites the map's section of doc
         [--array] [--lsoda] [--plot] [--docs]
     flock bench/.lock env PYTHONPATH=. python bench/work_precision_map.py --pwm [--quick]
         [--docs]
+
+``--quick``: QUICK_GRID's points on two cases (with ``--pwm``: QUICK_PWM_POINTS against a
+coarse reference), the CSV into a temporary file unless --out names one (a smoke run).
 """
 
 from __future__ import annotations
@@ -51,6 +54,7 @@ import argparse
 import csv
 import os
 import sys
+import tempfile
 import time
 
 from continuum_reference import (case_name, CASES, controller_volts, load_reference,
@@ -82,7 +86,7 @@ GRID = {   # (fidelity, family, n_r): tolerances; the last of each is its own co
     ('exact', MODES, 4): (1e-2, 1e-3, 1e-4, 1e-6),
     ('exact', MODES, 5): (1e-2, 1e-3, 1e-6),
 }
-QUICK_GRID = {('exact', MODES, 3): (1e-2, 1e-6), ('exact', POLY, 7): (1e-2, 1e-6)}
+QUICK_GRID = {('exact', MODES, 3): (1e-2, 1e-4)}   # on the first step and switching case only
 ARRAY_POINTS = (('paper', POLY, 1, 1e-6), ('exact', POLY, 3, 1e-2), ('exact', MODES, 3, 1e-2),
                 ('exact', MODES, 3, 1e-3))
 LSODA_POINTS = (('exact', MODES, 3, 1e-4), ('exact', MODES, 3, 1e-6), ('exact', POLY, 7, 1e-4),
@@ -165,10 +169,10 @@ def score(workload, t, y, q, ref, own_y=None):
     return error, own, len(made), len(expected), right, scored
 
 
-def point_rows(point, reference, own=None):
-    """Return (the rows of every case at one point, its y by case)."""
+def point_rows(point, reference, own=None, cases=None):
+    """Return (the rows of every case (or of ``cases``) at one point, its y by case)."""
     rows, ys = [], {}
-    for workload, name, beam, eps_b, drive in workloads():
+    for workload, name, beam, eps_b, drive in cases or workloads():
         try:
             t, y, q, cpu, steps, repeated, _ = run_case(point, beam, eps_b, drive)
         except ModelDomainError as exc:   # e.g. |w'| reached 1: the level cannot run the case
@@ -550,11 +554,14 @@ def main(argv=None) -> int:
                     help='write the map section of docs/fidelity.md')
     ap.add_argument('--pwm', action='store_true',
                     help="only the 'pwm' cases (their own CSV and doc section)")
-    ap.add_argument('--out', default=None)
+    ap.add_argument('--out', default=None,
+                    help='the CSV (default: the stored map; --quick: a temporary file)')
     args = ap.parse_args(argv)
+    if args.out is None:
+        args.out = (os.path.join(tempfile.mkdtemp(prefix='work_precision_map_'), 'quick.csv')
+                    if args.quick else PWM_CSV if args.pwm else CSV)
     if args.pwm:
         return pwm_main(args)
-    args.out = args.out or CSV
     if args.plot_only:
         plot(read_csv(args.out))
         if args.docs:
@@ -570,11 +577,12 @@ def main(argv=None) -> int:
             writer = csv.DictWriter(fh, FIELDS)
             writer.writeheader()
             writer.writerows(rows)
+    cases = [workloads()[0], workloads()[len(CASES)]] if args.quick else None
     for level, tolerances in (QUICK_GRID if args.quick else GRID).items():
-        own_rows, own = point_rows((*level, tolerances[-1]), reference)
+        own_rows, own = point_rows((*level, tolerances[-1]), reference, cases=cases)
         rows += own_rows
         for tol in tolerances[:-1]:
-            rows += point_rows((*level, tol), reference, own)[0]
+            rows += point_rows((*level, tol), reference, own, cases)[0]
         save()
     if args.lsoda:
         for point in LSODA_POINTS:
@@ -594,7 +602,7 @@ def main(argv=None) -> int:
 
 def pwm_main(args) -> int:
     """Run the 'pwm' cases at PWM_POINTS; write their CSV (and their doc section)."""
-    out = args.out or PWM_CSV
+    out = args.out
     references = pwm_references(args.quick)
     rows = []
     for point in QUICK_PWM_POINTS if args.quick else PWM_POINTS:

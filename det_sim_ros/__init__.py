@@ -14,6 +14,8 @@ checks every module's imports):
     scenes     scene files (YAML): loading and validation
     core       the compiled kernel (C) behind its one facade, core.kernel
 
+docs/architecture.md has the layers' rules, how a sample travels and where to change what.
+
 Importing the package has no side effects. The common entry points are here, imported on
 first use:
 :func:`load_scene`, :class:`Simulator`, :func:`simulate`, :func:`linearize`, :func:`fit`.

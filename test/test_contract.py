@@ -11,7 +11,7 @@ import subprocess
 import sys
 
 from conftest import child_env
-from det_sim_ros.io.contract import (CdrError, Command, CommandDecoder,
+from det_sim_ros.io.contract import (CdrError, clamp_message, Command, CommandDecoder,
                                      decode_float64_multi_array, decode_joint_state, encode_clock,
                                      encode_float64_multi_array, encode_joint_state, JOINT_STATE,
                                      OUTPUT_FIELDS, OutputContract)
@@ -421,3 +421,14 @@ def test_clock_bytes_are_the_writers_layout():
         w = Writer()
         w.stamp(t_ns)
         assert encode_clock(t_ns) == w.to_bytes()
+
+
+def test_the_clamp_warning_names_the_channel_then_the_value():
+    """Check the warning the node logs for a clamped command, from the contract's decoding."""
+    for names, volts, expected in (
+            (['det0'], [-5.0], 'det0: -5 V clamped to [0, 3000] V (voltage_command)'),
+            (['left', 'right'], [3500.0, 10.0],
+             'left: 3500 V clamped to [0, 3000] V (voltage_command)')):
+        command = CommandDecoder(names, 3000.0).decode(
+            'voltage_command', encode_float64_multi_array(volts), [0.0] * len(names))
+        assert clamp_message('voltage_command', command.clamped, 3000.0) == expected

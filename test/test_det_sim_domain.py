@@ -7,6 +7,7 @@ ROS_DOMAIN_ID, when set, is the fixture's domain; unset, the fixture picks one f
 
 import os
 
+from conftest import DOMAIN_ID, pick_domain_id as suite_domain_id
 from det_sim_ros.ros.testing import LockstepSim, pick_domain_id
 import pytest
 import rclpy
@@ -50,3 +51,13 @@ def test_a_bad_ros_domain_id_is_one_line(monkeypatch, text):
     monkeypatch.setenv('ROS_DOMAIN_ID', text)
     with pytest.raises(ValueError, match=r'^ROS_DOMAIN_ID=.*expected a number in 0\.\.232$'):
         LockstepSim('default')
+
+
+def test_the_suite_runs_on_the_users_ros_domain_id():
+    """Check the suite's domain: ROS_DOMAIN_ID trimmed, else 1 + pid % 101; junk refused."""
+    assert suite_domain_id({'ROS_DOMAIN_ID': '42'}, 7) == 42
+    assert suite_domain_id({'ROS_DOMAIN_ID': ' 0 '}, 7) == 0
+    assert suite_domain_id({}, 7) == 8 and suite_domain_id({'ROS_DOMAIN_ID': ''}, 7) == 8
+    with pytest.raises(pytest.UsageError, match='ROS_DOMAIN_ID'):
+        suite_domain_id({'ROS_DOMAIN_ID': 'abc'}, 7)
+    assert os.environ['ROS_DOMAIN_ID'] == str(DOMAIN_ID)

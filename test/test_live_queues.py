@@ -7,7 +7,7 @@ are: the contracts are about what runs, when and how often, counted against what
 
 import threading
 
-from det_sim_ros.io.live_queues import Busy, CallQueue, SampleQueue
+from det_sim_ros.io.live_queues import Busy, CallQueue, Pending, SampleQueue
 import pytest
 
 SAFETY_S = 30.0   # a safety net: a wait that hits it fails the test
@@ -97,3 +97,43 @@ def test_a_full_sample_queue_drops_the_oldest_and_counts_them():
     assert samples.dropped == 2 and samples.most == 5 and len(samples) == 0
     samples.put(range(8, 20))   # one batch beyond the limit
     assert list(samples.take()) == [15, 16, 17, 18, 19] and samples.dropped == 9
+
+
+def test_a_call_that_started_and_runs_long_is_pending_and_its_outcome_follows():
+    """
+    Check that a call the worker started and has not finished is told pending, not failed.
+
+    The worker takes the work at once and runs it until ``release``; the caller, after twice
+    its timeout, gets Pending (a TimeoutError that says it goes on); once released, the work's
+    outcome reaches ``late`` on the worker thread, and it did run: no answer was untrue.
+    """
+    calls = CallQueue(limit=8, timeout_s=0.5)
+    release, ran, late, answers = threading.Event(), [], [], []
+
+    def work():
+        release.wait(SAFETY_S)
+        ran.append(threading.current_thread())
+        return 'max_lag = 0.2'
+
+    def worker():
+        while not ran:
+            calls.run_pending()
+            release.wait(0.001)
+
+    def caller():
+        try:
+            answers.append(calls.call(work, late=lambda ok, value: late.append((ok, value))))
+        except Exception as exc:  # noqa: BLE001 - what the caller was told, checked below
+            answers.append(exc)
+
+    threads = [threading.Thread(target=worker), threading.Thread(target=caller)]
+    for thread in threads:
+        thread.start()
+    threads[1].join(SAFETY_S)
+    [answer] = answers
+    assert isinstance(answer, Pending) and 'it goes on, its outcome follows' in str(answer)
+    assert calls.pending == 1 and late == [] and ran == []
+    release.set()
+    threads[0].join(SAFETY_S)
+    assert ran == [threads[0]] and late == [(True, 'max_lag = 0.2')]
+    assert calls.timed_out == 0 and calls.failed == 0

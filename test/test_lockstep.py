@@ -299,27 +299,34 @@ README_EXAMPLE = textwrap.dedent("""
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
 
-    def test_pi_brings_dy_to_2_mm(det_sim):
-        sim = det_sim('default')                       # sim_node in lockstep, own ROS domain
+    def make_pi(sim):                                  # a PI node: Δy to 2 mm from 0.6 s
         node = rclpy.create_node('pi', context=sim.context)
         cmd = node.create_publisher(Float64MultiArray, 'voltage_command', 10)
         integral = [0.0]
         def on_dy(msg):                                # answers every sample
             t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-            error = 2e-3 - msg.position[0] if t >= 0.6 else 0.0   # set point 2 mm at 0.6 s
+            error = 2e-3 - msg.position[0] if t >= 0.6 else 0.0
             integral[0] += error * 1e-3
             volts = min(3000.0, max(0.0, 2e4 * error + 6e6 * integral[0]))
             cmd.publish(Float64MultiArray(data=[volts]))
         node.create_subscription(JointState, 'displacement', on_dy, 10)
-        run = sim.run(until=1.2, nodes=[node])
+        return node
+
+    def test_pi_brings_dy_to_2_mm(det_sim):
+        sim = det_sim('default')                       # sim_node in lockstep, own ROS domain
+        run = sim.run(until=1.2, nodes=[make_pi(sim)])
         step = run.step_metrics('dy', target=2e-3, t_step=0.6)
         assert step.settling_time <= 0.5 and abs(step.steady_state_error) <= 0.05 * 2e-3
+
+    def test_pi_settles_on_every_perturbed_plant(det_sim):   # what 8 perturbed copies share
+        runs = det_sim.ensemble(lambda sim: [make_pi(sim)], until=1.2, copies=8)
+        assert runs.shared(start=0.6, target=2e-3, t_step=0.6).settling[1] <= 0.5
 """)
 
 
 def test_readme_example_runs_as_a_plugin(tmp_path):
     """
-    Check that the README's example runs as a pytest plugin test.
+    Check that the README's examples run as pytest plugin tests (one run, an ensemble).
 
     The README's example, in a file of its own, with the plugin loaded as pytest loads an
     installed one (the pytest11 entry point, or -p before the package is reinstalled). A
@@ -338,4 +345,4 @@ def test_readme_example_runs_as_a_plugin(tmp_path):
                           + [str(tmp_path / 'test_example.py')],
                           capture_output=True, text=True, env=env, cwd=tmp_path, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert '1 passed' in proc.stdout and 'warning' not in proc.stdout, proc.stdout
+    assert '2 passed' in proc.stdout and 'warning' not in proc.stdout, proc.stdout

@@ -144,3 +144,60 @@ def test_replay_of_the_directory_is_the_newest_run(log_dir, capsys):
     # re-simulated: the newest run's own scene and inputs reproduce it bit for bit
     assert main_replay(['resim', str(folder)]) == 0
     assert 'bit-exact' in capsys.readouterr().out
+
+
+def _foreign_mcap(path):
+    """Write a valid MCAP file of another program (no det_sim_ros metadata record)."""
+    from mcap.writer import Writer
+    with open(path, 'wb') as stream:
+        writer = Writer(stream)
+        writer.start(profile='ros2', library='another program')
+        schema = writer.register_schema('std_msgs/msg/String', 'ros2msg', b'string data')
+        channel = writer.register_channel('/chatter', 'cdr', schema)
+        writer.add_message(channel, 1, b'\x00\x01\x00\x00\x03\x00\x00\x00hi\x00', 1)
+        writer.finish()
+
+
+@pytest.fixture
+def folder_with_foreign_files(log_dir, tmp_path):
+    """Link the three runs' files, then write three files of no run, newer than them."""
+    folder, runs = log_dir
+    mixed = tmp_path / 'mixed'
+    mixed.mkdir()
+    for files in runs.values():
+        for path in files:
+            os.link(path, mixed / os.path.basename(path))
+    time.sleep(0.01)
+    (mixed / 'zz_notes.mcap').write_text('time,voltage\n0,2000\n')
+    (mixed / 'zz_empty.mcap').write_bytes(b'')
+    _foreign_mcap(mixed / 'zz_other_program.mcap')
+    return mixed, runs
+
+
+def test_files_of_no_run_are_named_and_never_the_newest(folder_with_foreign_files, tmp_path,
+                                                        capsys):
+    """
+    Check that an empty, a non-MCAP and another program's MCAP file are in no run.
+
+    They are the newest files of the folder by modification time; the newest run is still the
+    recorder's, and plot and replay name the left-out files in one line each.
+    """
+    from det_sim_ros.cli import main_replay
+    mixed, runs = folder_with_foreign_files
+    found = log_runs(str(mixed))
+    assert [os.path.basename(run.files[0]) for run in found] == [
+        os.path.basename(files[0]) for files in runs.values()]
+    assert {os.path.basename(path): why for path, why in found.unreadable} == {
+        'zz_empty.mcap': 'empty', 'zz_notes.mcap': 'not an MCAP file',
+        'zz_other_program.mcap': "no det_sim_ros metadata: another program's file"}
+    newest = os.path.basename(runs['split'][0])[:-5]
+    assert main(['plot', str(mixed), '--out', str(tmp_path / 'plots')]) == 0
+    assert main_replay(['info', str(mixed)]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    for verb in ('plot', 'replay info'):
+        [left_out] = [line for line in printed
+                      if line.startswith(f'det_sim {verb}: left out 3 file(s)')]
+        assert all(f'zz_{name}.mcap' in left_out for name in ('empty', 'notes', 'other_program'))
+        [note] = [line for line in printed if line.startswith(f'det_sim {verb}: the newest')]
+        assert f'the newest of 3 runs, {newest} (4 file(s))' in note
+    assert sorted(os.listdir(tmp_path / 'plots')) == [f'{newest}.png', f'{newest}_summary.txt']

@@ -6,6 +6,7 @@ entry point (``python -m det_sim_ros.cli.sim_node``) on the test domain.
 """
 
 import concurrent.futures
+import contextlib
 import os
 import re
 import signal
@@ -14,7 +15,7 @@ import sys
 import time
 
 from conftest import child_env, ChildProcess
-from det_sim_ros.ros.name_check import Claim, younger
+from det_sim_ros.ros.name_check import Claim, ESTABLISHED_S, yields
 from det_sim_ros.ros.params import NODE_PARAMS
 import pytest
 
@@ -170,12 +171,15 @@ def test_a_stop_says_how_far_the_run_went_and_where_its_log_is(tmp_path):
 
 
 def test_claims_are_ordered_the_same_way_by_every_node():
-    """Check the claims' order: the earlier start wins, a tie goes to the smaller id."""
-    old, new, tie = Claim(100, 7), Claim(200, 1), Claim(100, 9)
-    assert younger(new, old) and not younger(old, new)
-    assert younger(tie, old) and not younger(old, tie)
-    assert not younger(old, old)                    # its own claim, heard back
-    assert Claim.parse(new.text()) == new and Claim.parse('not a claim') is None
+    """Check the claims' order: established first, then the smaller id; no clock in it."""
+    running, new, other = Claim(True, 9), Claim(False, 1), Claim(False, 7)
+    assert yields(new, running) and not yields(running, new)      # whatever the ids
+    assert yields(other, new) and not yields(new, other)          # alike: the smaller id
+    assert yields(Claim(True, 9), Claim(True, 7))
+    assert not yields(new, Claim(True, 1))          # its own claim, heard back established
+    for claim in (running, new):
+        assert Claim.parse(claim.text()) == claim
+    assert Claim.parse('not a claim') is None and Claim.parse('1796570663 00ff') is None
 
 
 def test_duplicate_name_refused_unless_allowed(tmp_path):
@@ -191,8 +195,13 @@ def test_duplicate_name_refused_unless_allowed(tmp_path):
     first = Node(tmp_path, *args)
     try:
         # the start line names the level: the shipped default is the exact kinematics in 3
-        # buckling modes on its fixed beam
-        assert 'fidelity exact buckling modes n_r=3' in first.wait_for(READY)
+        # buckling modes on its fixed beam; and the tolerance in effect, its level's
+        from det_sim_ros.scenes.scene import load_scene
+        from det_sim_ros.sim.integrators import integration_tolerance
+        line = first.wait_for(READY)
+        assert 'fidelity exact buckling modes n_r=3' in line
+        tolerance = integration_tolerance(load_scene('default'))
+        assert f', tolerance {tolerance:g} (auto: its level); ' in line, line
         with concurrent.futures.ThreadPoolExecutor(3) as pool:
             seconds = list(pool.map(lambda _: run_entry(args, cwd=tmp_path), range(3)))
         for second in seconds:
@@ -201,11 +210,15 @@ def test_duplicate_name_refused_unless_allowed(tmp_path):
             assert len(fatal) == 1 and 'another node named /startup_dup/sim_node' in fatal[0]
             assert 'Traceback' not in second.stderr
         assert first.proc.poll() is None           # the running node was not the one refused
-        allowed = Node(tmp_path, *args, '-p', 'allow_duplicate_name:=true')
+        # a scene of its own tolerance (an allowed duplicate): the start line says it
+        scene = tmp_path / 'tolerance.yaml'
+        scene.write_text('base: default\nintegrator:\n  tolerance: 2.5e-05\n')
+        allowed = Node(tmp_path, *args, '-p', 'allow_duplicate_name:=true',
+                       '-p', f'scene_file:={scene}')
         try:
             warning = allowed.wait_for('another node named /startup_dup/sim_node')
             assert '[WARN]' in warning
-            allowed.wait_for(READY)
+            assert ', tolerance 2.5e-05; ' in allowed.wait_for(READY)
         finally:
             allowed_stopped = allowed.stop()
         assert allowed_stopped == 0
@@ -284,8 +297,8 @@ def test_of_nodes_started_together_exactly_one_keeps_its_name(tmp_path):
     """
     Check three nodes of one name started at the same moment: one runs, two are refused.
 
-    Each orders the claims the same way (start time, then instance id), so exactly the oldest
-    goes on, whichever claim each hears first.
+    Each orders the claims the same way (none established yet: the instance id), so exactly
+    one goes on, whichever claim each hears first.
     """
     args = ['--ros-args', '-r', '__ns:=/startup_together', '-p', 'log.enabled:=false',
             '-p', 'info_period:=0.0']
@@ -331,6 +344,70 @@ def test_the_host_lock_is_one_per_domain_and_name():
     assert len(addresses) == 3 and len({len(a) for a in addresses}) == 1
 
 
+# Holds the lock of (7, argv[1]) in a process that forks a child (multiprocessing's fork, as a
+# ProcessPoolExecutor on Linux does), prints the child's pid and waits to be killed.
+FORKING_HOLDER = """
+import multiprocessing, sys, time
+from det_sim_ros.ros.host_lock import HostNameLock, LockState
+lock = HostNameLock(7, sys.argv[1])
+assert lock.state is LockState.HELD
+child = multiprocessing.get_context('fork').Process(target=time.sleep, args=(120,))
+child.start()
+print(child.pid, flush=True)
+time.sleep(120)
+"""
+
+
+def test_a_forked_child_keeps_no_lock():
+    """
+    Check that the lock dies with the process that took it, not with its last forked child.
+
+    A process takes the lock and forks a child (which shares its descriptors); the parent is
+    SIGKILLed while the child lives on: the name is free at once, and to the child it is held
+    by another process.
+    """
+    from det_sim_ros.ros.host_lock import HostNameLock, LockState
+    name = f'/host_lock_fork_{os.getpid()}/sim_node'
+    parent = subprocess.Popen([sys.executable, '-c', FORKING_HOLDER, name], env=child_env(),
+                              stdout=subprocess.PIPE, text=True)
+    child_pid = int(parent.stdout.readline())
+    try:
+        assert HostNameLock(7, name).state is LockState.HELD_ELSEWHERE
+        parent.kill()
+        parent.wait()
+        os.kill(child_pid, 0)                      # the child still runs
+        successor = HostNameLock(7, name)
+        assert successor.state is LockState.HELD
+        successor.release()
+    finally:
+        parent.kill()
+        parent.wait()
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(child_pid, signal.SIGKILL)
+
+
+def test_a_refusal_names_the_holder(tmp_path):
+    """Check that a process refused the lock reads the holder's pid and command line."""
+    from det_sim_ros.ros.host_lock import HostNameLock, LockState
+    name = f'/host_lock_holder_{os.getpid()}/sim_node'
+    marker = f'holder-marker-{os.getpid()}'
+    script = tmp_path / 'holder.py'
+    script.write_text('import sys, time\nfrom det_sim_ros.ros.host_lock import HostNameLock\n'
+                      'lock = HostNameLock(7, sys.argv[1])\nprint(lock.state.name, flush=True)\n'
+                      'time.sleep(120)\n')
+    holder = subprocess.Popen([sys.executable, str(script), name, marker], env=child_env(),
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == 'HELD'
+        refused = HostNameLock(7, name)
+        assert refused.state is LockState.HELD_ELSEWHERE
+        said = refused.holder()
+        assert said == f'pid {holder.pid}: {sys.executable} {script} {name} {marker}', said
+    finally:
+        holder.kill()
+        holder.wait()
+
+
 def test_the_host_lock_alone_refuses_a_node(tmp_path):
     """
     Check that a name held on this host refuses a node at once, with no claim on DDS at all.
@@ -348,6 +425,7 @@ def test_the_host_lock_alone_refuses_a_node(tmp_path):
         assert refused.returncode == 1, refused.stderr
         fatal = [line for line in refused.stderr.splitlines() if '[FATAL]' in line]
         assert len(fatal) == 1 and 'another node named /startup_locked/sim_node' in fatal[0]
+        assert f'(on this host, pid {os.getpid()}: ' in fatal[0]   # the holder: this process
         alone = Node(tmp_path, *args, environ={'ROS_AUTOMATIC_DISCOVERY_RANGE': 'OFF'})
         try:
             alone.wait_for(READY)
@@ -424,13 +502,13 @@ def _wait_for_line(path, text, proc, timeout=TIMEOUT):
     pytest.fail(f'no {text!r} in {path}: {path.read_text()}')
 
 
-def test_a_duplicate_on_another_host_stops_once_it_hears_the_older_claim(tmp_path):
+def test_a_duplicate_on_another_host_stops_once_it_hears_the_established_claim(tmp_path):
     """
-    Check two nodes of one name on two hosts (network namespaces): the younger stops.
+    Check two nodes of one name on two hosts (network namespaces): the newcomer stops.
 
     Each holds its own host's lock (a network namespace is a host to the lock as to DDS), so
-    the younger does not wait for the claims of other hosts and stops when DDS brings the older
-    node's claim: one FATAL line, exit code 1; the older node goes on.
+    the newcomer does not wait for the claims of other hosts and stops when DDS brings the
+    established node's claim: one FATAL line, exit code 1; the established node goes on.
     """
     from netns_hosts import can_make_namespaces, NetnsHosts
     why = can_make_namespaces()
@@ -446,21 +524,22 @@ def test_a_duplicate_on_another_host_stops_once_it_hears_the_older_claim(tmp_pat
             with open(path, 'w') as out:
                 procs.append(net.popen(host, args, stdout=out, stderr=subprocess.STDOUT,
                                        env=env, cwd=tmp_path))
-            if host == 0:   # (the younger may hear the claim before its start-up line, or after)
+            if host == 0:   # running, established: its claim wins over a newcomer's
                 _wait_for_line(path, READY, procs[-1])
-        older, younger_node = procs
+                time.sleep(ESTABLISHED_S + 0.5)
+        established, newcomer = procs
         try:
-            code = younger_node.wait(timeout=TIMEOUT)
+            code = newcomer.wait(timeout=TIMEOUT)
         except subprocess.TimeoutExpired:
             code = 'still running'
-        running = older.poll() is None
-        older.send_signal(signal.SIGINT)
-        older_code = older.wait(timeout=TIMEOUT)
+        running = established.poll() is None
+        established.send_signal(signal.SIGINT)
+        established_code = established.wait(timeout=TIMEOUT)
     text = outputs[1].read_text()
     assert code == 1, text
     fatal = [line for line in text.splitlines() if '[FATAL]' in line]
     assert len(fatal) == 1 and 'another node named /startup_hosts/sim_node' in fatal[0], text
-    assert running and older_code == 0, outputs[0].read_text()
+    assert running and established_code == 0, outputs[0].read_text()
 
 
 def test_reset_answer_names_the_new_log_file(harness, tmp_path):
@@ -473,3 +552,64 @@ def test_reset_answer_names_the_new_log_file(harness, tmp_path):
     assert recorder.path != old and len(recorder.paths) == 2
     assert answer.message.endswith(f'the log continues in {recorder.path}')
     assert old not in answer.message
+
+
+# sim_node with this process's wall clock an hour behind (Python's time.time_ns and time.time):
+# a node whose start time were compared would look an hour older than any other
+SKEWED_ENTRY = [sys.executable, '-c', (
+    'import runpy, sys, time\n'
+    'real_ns, real_s = time.time_ns, time.time\n'
+    'time.time_ns = lambda: real_ns() - 3600 * 10**9\n'
+    'time.time = lambda: real_s() - 3600.0\n'
+    'sys.argv[0] = "sim_node"\n'
+    'runpy.run_module("det_sim_ros.cli.sim_node", run_name="__main__")\n')]
+
+
+def test_across_hosts_a_newcomer_with_a_skewed_clock_publishes_nothing(tmp_path):
+    """
+    Check the path across hosts on one host: DET_SIM_HOST_LOCK=off, DDS alone settles the name.
+
+    A node runs until established; a newcomer of its name whose wall clock is an hour behind
+    starts: it waits for the claims of DDS, hears the established one and stops before it
+    publishes (one FATAL line, exit 1). A watch of the name's samples from before the newcomer
+    to after its end sees one run only: the running node's samples, one period apart, none
+    from t = 0 again.
+    """
+    environ = {'DET_SIM_HOST_LOCK': 'off'}
+    args = ['--ros-args', '-r', '__ns:=/startup_skew', '-p', 'log.enabled:=false',
+            '-p', 'info_period:=0.0']
+    running = Node(tmp_path, *args, environ=environ)
+    try:
+        running.wait_for(READY)
+        time.sleep(ESTABLISHED_S + 0.5)
+        watch = subprocess.Popen([sys.executable, '-m', 'det_sim_ros.cli', 'watch', '--csv',
+                                  '--ns', 'startup_skew', '--duration', '8'], cwd=tmp_path,
+                                 env=child_env(), text=True, stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE)
+        try:
+            header = b''   # (byte by byte: communicate() would miss what a readline buffered)
+            while not header.endswith(b'\n') and (byte := os.read(watch.stdout.fileno(), 1)):
+                header += byte
+            assert header.startswith(b't,'), header                 # it has samples
+            newcomer = subprocess.Popen(SKEWED_ENTRY + args, cwd=tmp_path, text=True,
+                                        env=child_env(**environ), stdout=subprocess.PIPE,
+                                        stderr=subprocess.PIPE)
+            try:   # (it ends within its claim's settling, SETTLE_MAX_S after its start-up)
+                _, newcomer_err = newcomer.communicate(timeout=20.0)
+            except subprocess.TimeoutExpired:
+                newcomer.kill()
+                _, newcomer_err = newcomer.communicate()
+            rows, _ = watch.communicate(timeout=TIMEOUT)
+        finally:
+            watch.kill()
+            watch.wait()
+        still_running = running.proc.poll() is None
+    finally:
+        stopped = running.stop()
+    assert newcomer.returncode == 1, newcomer_err
+    fatal = [line for line in newcomer_err.splitlines() if '[FATAL]' in line]
+    assert len(fatal) == 1 and 'another node named /startup_skew/sim_node' in fatal[0]
+    assert still_running and stopped == 0, ''.join(running.lines)
+    steps = [round(float(row.split(',')[0]) * 1000) for row in rows.splitlines()]
+    assert len(steps) > 1000 and steps[0] > 1000    # (the running node's: seconds in)
+    assert all(b == a + 1 for a, b in zip(steps, steps[1:]))   # none from the newcomer

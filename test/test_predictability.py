@@ -213,3 +213,72 @@ def test_a_closed_loop_ensemble_gives_each_copy_its_own_controller():
     first = runs.runs[0]
     assert all(np.allclose(run.voltage, first.voltage, rtol=1e-3, atol=1.0)
                for run in runs.runs[1:])
+
+
+def test_the_shell_verb_says_where_and_exits_1_with_check(tmp_path, capsys):
+    """
+    Check that det_sim predictability prints the verdict, writes its CSV and obeys --check.
+
+    The 10 Hz PWM on the fixed beam at 0.15 is not robust (exit 1 with --check, its first
+    stretch in the line as the offline function finds it); 2 Hz switching is (exit 0). The CSV's
+    distance column is the function's, sample for sample.
+    """
+    import csv
+    from det_sim_ros.cli import det_sim as cli
+    out = tmp_path / 'pwm'
+    code = cli.main(['predictability', '--set', 'scene.eps_b=0.15', '--no-plots', '--check',
+                     '--out', str(out)])
+    line = capsys.readouterr().out
+    expected = predictability(switching_scene('fixed', 0.15), pwm_voltage(3000.0), 2.5)
+    assert code == 1 and f'not robust from t = {expected.robust_until:.3f} s' in line
+    with open(out / 'predictability.csv', newline='') as stream:
+        rows = list(csv.DictReader(stream))
+    assert len(rows) == expected.t.size
+    assert np.allclose([float(r['twin_distance']) for r in rows], expected.distance,
+                       rtol=1e-9, atol=0)   # the CSV's 10 significant digits
+    assert cli.main(['predictability', '--input', 'switching', '--no-plots', '--check',
+                     '--out', str(tmp_path / 'sw')]) == 0
+    assert 'robust: a twin' in capsys.readouterr().out
+
+
+def test_the_distance_is_the_largest_over_the_dets_and_a_nan_is_never_hidden():
+    """
+    Check that a sample's distance takes the worst DET, and a NaN in any DET wins.
+
+    The plate's two DETs: the per-sample float path equals the vectorised one bit for bit (the
+    same operations: |a - b| times the reciprocal scale), and is the larger of the two DETs'
+    distances; a NaN in the second DET is the answer, not a value skipped.
+    """
+    from det_sim_ros.analysis.predictability import Stroke
+    sim = Simulator('plate')
+    stroke = Stroke(sim.model)
+    run = sim.step().copy()
+    twin = run.copy()
+    q_right = sim.model.channel('q')[1]
+    twin[q_right] += 1e-4
+    distance = stroke.distance(run, twin)
+    assert distance == stroke.distances(run[None, :], twin[None, :])[0]
+    assert distance == pytest.approx(1e-4 / stroke.q_gap[1], rel=1e-9)
+    twin[q_right] = math.nan
+    assert math.isnan(stroke.distance(run, twin))
+
+
+def test_an_array_scene_leaves_the_twin_off_unless_asked():
+    """
+    Check that predictability.mode 'auto' skips the twin of an array (it doubles the physics).
+
+    The node's choice, through its public seam with a stand-in node: 'auto' on the shipped
+    100-copy array gives the measure off with one INFO line saying how to turn it on; 'off'
+    is off everywhere.
+    """
+    import types
+    from det_sim_ros.ros.predictability import attach_predictability
+    said = []
+    logger = types.SimpleNamespace(info=said.append)
+    node = types.SimpleNamespace(simulator=Simulator('array'), get_logger=lambda: logger)
+    params = {'predictability.mode': 'auto'}
+    measure = attach_predictability(node, params.get, qos=None)
+    assert not measure.enabled and measure.values() == {'predictability': 'off'}
+    assert len(said) == 1 and 'predictability.mode:=on' in said[0]
+    params['predictability.mode'] = 'off'
+    assert not attach_predictability(node, params.get, qos=None).enabled

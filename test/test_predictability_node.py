@@ -7,7 +7,7 @@ bit for bit, so the node's first stretch starts where det_sim_ros.analysis.predi
 does (an independent path: one compiled run of the scene and one of its twin, no ROS).
 """
 
-from det_sim_ros.analysis.predictability import predictability
+from det_sim_ros.analysis.predictability import PathNotRobustWarning, predictability
 from det_sim_ros.analysis.scenarios import pwm_voltage, switching_scene
 from det_sim_ros.io.log import LogReader
 from det_sim_ros.io.messages import decode_joint_state
@@ -60,7 +60,9 @@ def test_the_node_says_where_its_path_stops_being_robust(det_sim, tmp_path):  # 
     listener.create_subscription(
         DiagnosticArray, '/diagnostics',
         lambda m: statuses.append({kv.key: kv.value for kv in m.status[0].values}), 10)
-    sim.run(until=2.5, nodes=[make_open_loop(sim.context, volts), listener])
+    with pytest.warns(PathNotRobustWarning, match='ensemble'):   # the plugin says so too
+        run = sim.run(until=2.5, nodes=[make_open_loop(sim.context, volts), listener])
+    assert run.robust_until == pytest.approx(offline.robust_until)
     sim.node.publish_diagnostics()
     sim.spin_until(lambda: statuses and statuses[-1]['sim_time_s'] == '2.500000',
                    '/diagnostics at 2.5 s')
@@ -80,7 +82,12 @@ def test_the_node_says_where_its_path_stops_being_robust(det_sim, tmp_path):  # 
         logged[round(message.log_time * 1e-6)] = decode_joint_state(message.data).position[0]
     first_ms = round(offline.robust_until * 1e3)
     assert logged[first_ms] > 0.05 and max(v for ms, v in logged.items() if ms < first_ms) <= 0.05
-    assert len(logged) >= 250   # 100 Hz over 2.5 s, and the stretch's start
+    assert len(logged) >= 25   # 10 Hz over 2.5 s, and the stretch's start
+    # det_sim plot's reading: the panel, and the shading from the stretch's first sample
+    from det_sim_ros.io.logplot import read_log
+    data = read_log(str(tmp_path / 'run.mcap'))
+    assert any(channel.unit == '% of stroke' for channel in data.channels)
+    assert data.not_robust and data.not_robust[0][0] == pytest.approx(offline.robust_until)
 
 
 def test_a_lockstep_ensemble_states_what_every_perturbed_copy_shares(det_sim):  # noqa: F811
@@ -112,6 +119,7 @@ def test_a_lockstep_ensemble_states_what_every_perturbed_copy_shares(det_sim):  
         node.create_subscription(JointState, 'displacement', on_dy, 10)
         return [node]
     runs = det_sim.ensemble(make_controllers, until=1.2, copies=4)
+    assert all(run.robust_until is None for run in runs.runs)   # a settling PI is robust
     shared = runs.shared(start=0.6, target=2e-3, t_step=0.6)
     assert len(runs) == 4 and shared.final_branch == 'buckled+', shared
     assert shared.settling[1] <= 0.5, shared

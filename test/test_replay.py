@@ -14,6 +14,7 @@ from det_sim_ros.io.replay import OUTPUT_FIELDS, resimulate, simulate_to_log
 from det_sim_ros.ros.play import play
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import Simulator
+import numpy as np
 import pytest
 
 # the paper's one-term model: the fidelity is not the subject of these tests, and its
@@ -364,3 +365,61 @@ def test_command_decoding_refuses_repeated_and_empty_names():
     assert volts(['right'], [5.0]) == [1.0, 5.0]
     assert volts(['left', 'left'], [5.0, 6.0]) is None
     assert volts([], []) is None
+
+
+# -- a re-simulation starts from the logged initial state, not the scene's -------------------
+
+MOVED_START_COMMANDS = {0: [0.0], 40: [2500.0], 90: [1200.0]}
+MOVED_START_STEPS = 150
+
+
+def _record_from(tmp_path, x0, log_x0=True):
+    """
+    Run the default scene from ``x0`` and log it as the node logs it; return the path.
+
+    With ``log_x0`` False the log lacks the 'x0' metadata (a re-simulation then starts from
+    the scene's own initial state).
+    """
+    sim = Simulator(load_scene('default', PAPER))
+    sim.x0 = np.array(x0, dtype=float)
+    sim.reset()
+    path = tmp_path / 'moved_start.mcap'
+    metadata = {'method': sim.method.name, 'substeps': sim.substeps_setting}
+    if log_x0:
+        metadata['x0'] = repr(sim.x0.tolist())
+    with Recorder(path, sim.scene, metadata=metadata) as recorder:
+        simulate_to_log(recorder, sim, MOVED_START_COMMANDS, MOVED_START_STEPS)
+    return str(path)
+
+
+def _moved_start():
+    """Return the scene's initial state with the deflection, its rate and the charge moved."""
+    sim = Simulator(load_scene('default', PAPER))
+    scene_x0 = sim.x0
+    x0 = scene_x0.copy()
+    names = sim.model.state_names
+    x0[names.index('q[0]')] *= 0.8          # deflection: 80 % of the rest value, m
+    x0[names.index('q_dot[0]')] = 0.3       # m/s
+    assert not np.array_equal(x0, scene_x0)
+    return x0
+
+
+def test_resimulation_starts_from_the_logged_initial_state(tmp_path):
+    path = _record_from(tmp_path, _moved_start())
+    result = resimulate(path)
+    assert result.ok(), result.table()
+    assert result.steps == MOVED_START_STEPS and result.commands == len(MOVED_START_COMMANDS)
+    assert all(v == 0.0 for v in result.max_deviation.values()), result.table()
+
+
+def test_a_log_without_its_initial_state_resimulates_from_the_scenes_and_deviates(tmp_path):
+    """
+    Check that the test above can fail.
+
+    The same run logged without its initial state re-simulates from the scene's own and
+    deviates.
+    """
+    path = _record_from(tmp_path, _moved_start(), log_x0=False)
+    result = resimulate(path)
+    assert max(result.max_deviation.values()) > 0.0
+    assert not result.ok()

@@ -327,12 +327,14 @@ def test_scene_loads_by_default():
 def test_diagnostics_and_the_log_name_the_fidelity(harness, tmp_path):
     """Check /diagnostics and the MCAP log's metadata name the scene's model level."""
     from det_sim_ros.io.log import LogReader
+    from det_sim_ros.sim.integrators import integration_tolerance
     h = harness(**{'scene.fidelity': 'exact', 'scene.n_ritz': 3, 'scene.shapes': 'polynomial',
                    'diagnostics_period': 0.05,
                    'log.path': str(tmp_path / 'logs')})
     h.spin_until(lambda: h.diagnostics, 'a diagnostics message')
     values = {kv.key: kv.value for kv in h.diagnostics[-1].status[0].values}
     assert values['fidelity'] == 'exact n_r=3'
+    assert float(values['tolerance']) == integration_tolerance(h.node.scene) > 0.0   # not 0: auto
     recorder = h.node.recorder
     h.close()
     assert LogReader(recorder.paths[0]).info['fidelity'] == 'exact n_r=3'
@@ -538,3 +540,16 @@ def test_implausible_physics_is_flagged_on_diagnostics(harness):
     h.diagnostics.clear()
     h.spin_until(lambda: h.diagnostics, 'diagnostics after the reset')
     assert h.diagnostics[-1].status[0].level == DiagnosticStatus.OK
+
+
+def test_diagnostics_name_a_namespaced_node_fully(ros_context):
+    node = SimNode(context=ros_context, namespace='arm1', parameter_overrides=[
+        Parameter('real_time', value=False), Parameter('start_paused', value=True),
+        Parameter('log.enabled', value=False)])
+    try:
+        sent = [node.publish_diagnostics()]
+    finally:
+        node.destroy_node()
+    status = sent[-1].status[0]
+    assert status.name == '/arm1/sim_node: simulation'
+    assert status.hardware_id == '/arm1/sim_node'

@@ -1,6 +1,7 @@
 """Statics (paper Section 4, Fig. 5) at the shared parameter set; no ROS needed."""
 
 from det_sim_ros.physics import statics
+from det_sim_ros.physics.model import build_model
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.simulator import simulate
 import numpy as np
@@ -212,3 +213,37 @@ def test_brentq_finds_the_roots_scipy_finds():
             assert ours == theirs, (f, ours, theirs)
     with pytest.raises(ValueError, match='opposite signs'):
         brentq(np.cos, 0.0, 1.0)
+
+
+# -- the rest state against scipy's root finder on the compiled right-hand side ------------------
+
+@pytest.mark.parametrize('overrides', [
+    {},
+    {'scene.beam': 'simply_supported', 'scene.eps_b': 0.15},
+    {'scene.fidelity': 'consistent', 'scene.n_ritz': 3},
+    {'scene.fidelity': 'exact', 'scene.n_ritz': 3},
+])
+def test_rest_state_is_the_root_scipy_finds(overrides):
+    """
+    Check that the rest state is the root scipy finds.
+
+    scipy.optimize.root (MINPACK's Levenberg-Marquardt) on the compiled accelerations at zero
+    velocity and 0 V, started 5 % off, lands on the rest state the statics give (the buckled+
+    side) to round-off.
+    """
+    from scipy.optimize import root
+    model = build_model(load_scene('default', overrides))
+    rest = statics.initial_state(model)
+    n_q = model.arrays.n_q
+    u = np.zeros(model.n_inputs)
+
+    def accelerations(coords):
+        x = np.zeros(model.n_states)
+        x[:n_q] = coords
+        return model.f(0.0, x, u)[n_q:2 * n_q]
+    length = model.scene.beam_length
+    found = root(lambda z: accelerations(z * length), 0.95 * rest[:n_q] / length, method='lm',
+                 options={'xtol': 1e-13})
+    assert found.success, found.message
+    np.testing.assert_allclose(rest[:n_q], found.x * length, rtol=0, atol=1e-11 * length)
+    assert not rest[n_q:].any()                      # at rest: no velocity, creep or charge

@@ -44,3 +44,31 @@ def test_a_plate_line_shows_each_det_and_the_plate_height_and_tilt():
     assert stream.getvalue() == (
         't = 1.500 s  left: dy 1 mm q 5.1 mm q_p 15 µC i 200.2 nA  '
         'right: dy 1.4 mm q 5.2 mm q_p 0 C i 0 A  plate: height 1.2 mm tilt -2.5 mrad\n')
+
+
+def _sample(watcher, stamp_ns, topics=('displacement', 'deflection', 'charge', 'current')):
+    for topic in topics:
+        watcher.take(topic, _msg(('det0',), (0.0,), (0.0,), stamp_ns=stamp_ns))
+
+
+def test_lost_samples_are_counted_where_they_are_missing():
+    """
+    Check the loss line against stamps fed with known holes, a lost part and a reset.
+
+    Periods of 1 ms: 0..4, then 8..9 (5, 6, 7 missing), 10 lacks a topic (never complete),
+    11, then a reset back to 0 and 1 (a step back is a new start, not a loss).
+    """
+    watcher = Watcher(csv=True, count=0, stream=io.StringIO())
+    for k in (0, 1, 2, 3, 4, 8, 9):
+        _sample(watcher, k * 1_000_000)
+    _sample(watcher, 10_000_000, topics=('displacement', 'deflection'))
+    for k in (11, 0, 1):
+        _sample(watcher, k * 1_000_000)
+    assert watcher.lost() == 4
+    assert watcher.loss_line().startswith(
+        '4 sample(s) lost between the 10 taken, in 2 gap(s), the first after t = 0.004 s, '
+        'the largest 3 after t = 0.004 s (')
+    quiet = Watcher(csv=True, count=0, stream=io.StringIO())
+    for k in range(5):
+        _sample(quiet, k * 1_000_000)
+    assert quiet.lost() == 0 and quiet.loss_line() == ''

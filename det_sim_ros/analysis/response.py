@@ -59,7 +59,12 @@ def step_metrics(t, x, target: float, t_step: float = 0.0, band: float = 0.05) -
 
 @dataclasses.dataclass
 class SimRun:
-    """A lockstep run as arrays (rows: samples t = k dt; columns: DETs in command order)."""
+    """
+    A run as arrays (rows: samples t = k dt; columns: DETs in command order).
+
+    ``robust_until``: where the node's predictability measure found the path stop being robust
+    (s; None if it never did, or the measure was off: docs/predictability.md).
+    """
 
     det_names: list
     t: np.ndarray
@@ -68,6 +73,7 @@ class SimRun:
     dy: np.ndarray
     charge: np.ndarray
     current: np.ndarray
+    robust_until: float | None = None
 
     def signal(self, name: str, det: int | str = 0) -> np.ndarray:
         """Return one column: ``name`` in voltage, q, dy, charge, current; ``det``: index, name."""

@@ -212,9 +212,9 @@ def make_evaluator(problem: Problem, parallel: str = 'auto',
 
     'auto' is threads on every core when there is more than one and a run of the logs takes at
     least :data:`PARALLEL_MIN_CALL` (``call_seconds``, as measured), else serial: the compiled
-    run releases the GIL, but each run's Python part (scene, model, rest state: ~10 ms) does
-    not, and on the shared 2-core host threads did not pay for the 40 ms runs of a 10 s log at
-    ``fidelity: paper`` (bench/fit_speed.py, docs/calibration.md).
+    run releases the GIL, but each run's Python part (scene, model, rest state) does not, and
+    on a shared 2-core host threads do not pay for the short runs of a 10 s log at
+    ``fidelity: paper`` (docs/calibration.md, "Measured accuracy and speed"; bench/fit_speed.py).
     """
     cores = os.cpu_count() or 1
     if parallel == 'auto':

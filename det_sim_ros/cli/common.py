@@ -204,13 +204,19 @@ def log_runs_to_use(paths, verb: str, each: bool | None = None) -> list[list[str
 
     Else the newest one; when ``paths`` (a log directory) hold several runs, one line says
     which run is used, how many others there are and how to pick another. ``each`` None: the
-    verb has no option for every run.
+    verb has no option for every run. Files that are not sim_node logs are left out, named in
+    one line; when no run is left they are returned, for the verb's checks to say what is
+    wrong with them.
     """
-    from ..io.log import log_runs
+    from ..io.log import log_files, log_runs
     try:
         runs = log_runs(paths)
     except FileNotFoundError as exc:
         raise CliError(str(exc)) from None
+    if not runs:
+        return [log_files(paths)]
+    if runs.unreadable:
+        print(f'det_sim {verb}: {runs.unreadable_line()}', flush=True)
     if each or len(runs) == 1:
         return [list(run.files) for run in runs]
     newest, other = runs[-1], runs[-2]

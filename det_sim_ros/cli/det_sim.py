@@ -10,6 +10,8 @@ The offline verbs write data (CSV, JSON) and plots (PNG); the ROS tools are ``fl
     det_sim bench   [--quick] [--out DIR] ...   (work-precision benchmark; the 'bench' extra)
     det_sim plot LOG.mcap [--out DIR] [--all]         (every channel of a sim_node log, PNG)
     det_sim linearize [--voltage 1500] [--branch buckled+] [--json]   (A, B, C, D; Bode)
+    det_sim predictability [--input pwm|switching|step] [--hz 10] | --log LOG   [--check]
+                    (a perturbed twin beside a run: where its path stops being robust)
     det_sim fit LOG [LOG ...] --params E_M,eta_M [--scene S] [-o fitted.yaml] [--map ...]
                     (scene parameters fitted to measured logs: scene file, report, PNG)
     det_sim fleet FLEET.yaml [--host NAME] [--log-dir DIR]   (sim_node processes, one per
@@ -38,13 +40,15 @@ import argparse
 import sys
 
 from . import common
-from .verbs import bench, fit, fleet, linearize, node, plot, replay, statics, step, view
+from .verbs import (bench, fit, fleet, linearize, node, plot, predictability, replay, statics,
+                    step, view)
 
 __all__ = ['main', 'main_replay', 'build_parser', 'VERBS']
 
 PROG = 'det_sim'
 VERBS = {'statics': statics, 'step': step, 'bench': bench, 'plot': plot,
-         'linearize': linearize, 'fit': fit, 'fleet': fleet, 'replay': replay, 'view': view,
+         'linearize': linearize, 'predictability': predictability, 'fit': fit, 'fleet': fleet,
+         'replay': replay, 'view': view,
          **node.VERBS}
 
 

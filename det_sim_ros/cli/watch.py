@@ -9,10 +9,18 @@ over more than four DETs), each value in engineering notation (1.790 mm, 200.2 n
 height and tilt (the structure topic) follow. The CSV rows hold SI units (m, m/s, C, A), one
 column per topic, field and DET. Which quantities, labels and resolutions: the output table
 (det_sim_ros.scenes.outputs).
+
+Every sample is kept while this process is slower than the node for a while (a busy core, a
+terminal or pipe that takes the rows slowly): each output topic's reader keeps
+:data:`QUEUE_DEPTH` messages (the node's writer keeps 10, so the reader's queue is what holds
+them while Python is busy). A sample lost anyway (this whole process stopped longer than the
+node's writer and the transport hold) shows as a gap in the sim time stamps, which advance by
+one period per sample: :meth:`Watcher.loss_line` says how many and where, in one line.
 """
 
 from __future__ import annotations
 
+import collections
 import math
 import statistics
 
@@ -21,7 +29,9 @@ from ..ros.shell import OUTPUT_TOPICS
 from ..scenes.outputs import (csv_fields, line_quantities, main_topic,
                               structure_line_quantities)
 
-__all__ = ['Watcher', 'LINE_QUANTITIES']
+__all__ = ['Watcher', 'LINE_QUANTITIES', 'QUEUE_DEPTH']
+
+QUEUE_DEPTH = 10000   # messages per output topic: 10 s of a 1 kHz node's samples
 
 # (topic, field) -> (label, SI unit, resolution in it) of the live line, from the output table
 # (det_sim_ros.scenes.outputs): a value below the resolution is round-off and shown as 0
@@ -71,11 +81,15 @@ class Watcher:
         self._next_line = None
         self._header = False
         self._structure = None                # the latest structure message (plates)
+        self._last_stamp = None               # the latest complete sample's stamp (ns)
+        self.samples = 0                      # complete samples taken
+        self._steps = collections.Counter()   # stamp step (ns) -> how often
+        self._gaps = []                       # (stamp before, stamp after) of unusual steps
 
     def subscribe(self, shell) -> None:
         """Subscribe to the node's output topics through ``shell`` (a NodeShell)."""
         for topic in OUTPUT_TOPICS + (STRUCTURE_TOPIC,):
-            shell.subscribe(topic, self.take)
+            shell.subscribe(topic, self.take, depth=QUEUE_DEPTH)
 
     def waiting(self) -> bool:
         """Return True while no complete sample has arrived."""
@@ -99,8 +113,45 @@ class Watcher:
         for older in [s for s in self._partial if s < stamp]:   # lost parts: never complete
             del self._partial[older]
         self._latest = (stamp, parts)
+        self._note_step(stamp)
         if self.csv and not self.done():
             self._csv_row(stamp, parts)
+
+    def _note_step(self, stamp: int) -> None:
+        """Count the step from the previous sample (a step back: a reset, a new start)."""
+        previous, self._last_stamp = self._last_stamp, stamp
+        self.samples += 1
+        if previous is None or stamp <= previous:
+            return
+        step = stamp - previous
+        self._steps[step] += 1
+        if step > 1.5 * min(self._steps):
+            self._gaps.append((previous, stamp))
+
+    def lost(self) -> int:
+        """Return how many samples are missing between those taken (steps of many periods)."""
+        if not self._steps:
+            return 0
+        period = min(self._steps)   # the node's period: the smallest step between samples
+        return sum(count * (round(step / period) - 1) for step, count in self._steps.items())
+
+    def loss_line(self) -> str:
+        """Return one line saying how many samples were lost and where ('' if none)."""
+        lost = self.lost()
+        if not lost:
+            return ''
+        period = min(self._steps)
+        gaps = [(a, b) for a, b in self._gaps if round((b - a) / period) > 1]
+        where = ''
+        if gaps:
+            first = gaps[0]
+            largest = max(gaps, key=lambda gap: gap[1] - gap[0])
+            where = (f', the first after t = {first[0] * 1e-9:.3f} s, the largest '
+                     f'{round((largest[1] - largest[0]) / period) - 1} after t = '
+                     f'{largest[0] * 1e-9:.3f} s')
+        return (f'{lost} sample(s) lost between the {self.samples} taken, in {len(gaps)} '
+                f'gap(s){where} (this process was stopped or starved longer than the node'
+                "'s writer holds its samples)")
 
     def tick(self, now: float) -> None:
         """Print the live line once a wall second (not with ``csv``)."""

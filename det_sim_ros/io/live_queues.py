@@ -4,7 +4,9 @@ The live view's hand-overs between threads, each bounded and counted.
 A Foxglove WebSocket server runs its callbacks on threads of its own; sim_node's state belongs
 to its executor thread, and its samples leave through a sender thread. :class:`CallQueue`
 carries client requests to the thread that owns the state (bounded: a full queue refuses;
-a call that timed out is cancelled, never run late); :class:`SampleQueue` carries samples to
+a call that timed out before it started is cancelled, never run late; one that started and
+has not finished is :class:`Pending`, and its outcome is handed over when it comes);
+:class:`SampleQueue` carries samples to
 the sender (bounded: the oldest go, counted). Neither imports ROS.
 """
 
@@ -14,21 +16,26 @@ from collections import deque
 import threading
 from typing import Callable
 
-__all__ = ['Busy', 'CallQueue', 'SampleQueue']
+__all__ = ['Busy', 'CallQueue', 'Pending', 'SampleQueue']
 
 
 class Busy(RuntimeError):
     """The call queue is full: the request is refused (the reason is the text)."""
 
 
+class Pending(TimeoutError):
+    """A call started on the worker thread and not finished in time: it goes on."""
+
+
 _WAITING, _RUNNING, _CANCELLED = 'waiting', 'running', 'cancelled'
 
 
 class _Work:
-    __slots__ = ('work', 'state', 'done', 'outcome')
+    __slots__ = ('work', 'state', 'done', 'outcome', 'late')
 
     def __init__(self, work):
         self.work, self.state, self.done, self.outcome = work, _WAITING, None, None
+        self.late = None   # called with the outcome when the caller stopped waiting for it
 
 
 class CallQueue:
@@ -37,11 +44,13 @@ class CallQueue:
 
     At most ``limit`` pieces of work wait; beyond that :meth:`post` and :meth:`call` raise
     :class:`Busy`. A :meth:`call` not run within ``timeout_s`` is cancelled and raises
-    TimeoutError: it never runs afterwards. Posted work that raises is counted and its
-    exception handed to ``on_error`` (on the worker thread); the worker never sees it.
+    TimeoutError: it never runs afterwards; one that started and has not finished within
+    another ``timeout_s`` raises :class:`Pending` (it goes on; its outcome goes to the call's
+    ``late``). Posted work that raises is counted and its exception handed to ``on_error``
+    (on the worker thread); the worker never sees it.
 
-    Counters: ``refused`` (queue full), ``timed_out``, ``failed`` (posted work that raised),
-    ``most`` (the longest the queue has been).
+    Counters: ``refused`` (queue full), ``timed_out``, ``pending`` (answered Pending),
+    ``failed`` (posted work that raised), ``most`` (the longest the queue has been).
     """
 
     def __init__(self, limit: int, timeout_s: float,
@@ -50,7 +59,7 @@ class CallQueue:
         self._on_error = on_error
         self._pending: deque[_Work] = deque()
         self._lock = threading.Lock()
-        self.refused = self.timed_out = self.failed = self.most = 0
+        self.refused = self.timed_out = self.pending = self.failed = self.most = 0
 
     def __len__(self) -> int:
         return len(self._pending)
@@ -67,12 +76,16 @@ class CallQueue:
         """Run ``work()`` on the worker thread soon; do not wait. :class:`Busy` if full."""
         self._put(_Work(work))
 
-    def call(self, work: Callable[[], object]):
+    def call(self, work: Callable[[], object],
+             late: Callable[[bool, object], None] | None = None):
         """
         Run ``work()`` on the worker thread; return its result (its exception raised).
 
+        :param late: called on the worker thread with (True, result) or (False, exception)
+            when the work finishes after :class:`Pending` was raised.
         :raises Busy: the queue is full (nothing runs).
         :raises TimeoutError: not started within ``timeout_s`` (cancelled: nothing runs).
+        :raises Pending: started, not finished within another ``timeout_s``: it goes on.
         """
         item = _Work(work)
         item.done = threading.Event()
@@ -87,7 +100,13 @@ class CallQueue:
                                        'nothing was done')
             # started just now: its outcome is the answer (the work is short)
             if not item.done.wait(self.timeout_s):
-                raise TimeoutError(f'the node did not finish within {2 * self.timeout_s:g} s')
+                with self._lock:
+                    if item.outcome is None:   # still running: say so, hand its outcome on
+                        item.late = late
+                        self.pending += 1
+                        raise Pending(f'the node started it and has not finished within '
+                                      f'{2 * self.timeout_s:g} s; it goes on, its outcome '
+                                      'follows')
         ok, value = item.outcome
         if not ok:
             raise value
@@ -107,14 +126,22 @@ class CallQueue:
                 item = self._pending.popleft()
                 item.state = _RUNNING
             try:
-                item.outcome = (True, item.work())
+                outcome = (True, item.work())
             except Exception as exc:  # noqa: BLE001 - a caller's answer, or counted
-                item.outcome = (False, exc)
+                outcome = (False, exc)
                 if item.done is None:
                     self.failed += 1
                     self._on_error(exc)
+            with self._lock:
+                item.outcome, late = outcome, item.late
             if item.done is not None:
                 item.done.set()
+            if late is not None:
+                try:
+                    late(*outcome)
+                except Exception as exc:  # noqa: BLE001 - counted, handed over
+                    self.failed += 1
+                    self._on_error(exc)
 
 
 class SampleQueue:

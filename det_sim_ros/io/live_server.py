@@ -122,6 +122,10 @@ class ClientCommands:
         self._channels[(client, channel)] = (command, encoding)
         return ''
 
+    def __len__(self) -> int:
+        """Return how many command channels the clients have advertised now."""
+        return len(self._channels)
+
     def unadvertise(self, client: int, channel: int) -> None:
         """Forget a client's channel."""
         self._channels.pop((client, channel), None)
@@ -180,6 +184,12 @@ class LiveServer:
         self.host = host
         self.port = self._server.port
         self.url = foxglove_url(host, self.port)
+
+    @property
+    def subscriptions(self) -> int:
+        """Return how many (client, channel) subscriptions there are now."""
+        with self._lock:
+            return len(self._subscribed)
 
     @property
     def app_url(self) -> str:

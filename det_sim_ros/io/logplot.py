@@ -22,7 +22,7 @@ import struct
 import numpy as np
 
 from .cdr import CdrError, deserialize, Reader
-from .contract import basename, COMMAND_TOPICS, JOINT_COMMAND_TOPIC
+from .contract import basename, COMMAND_TOPICS, JOINT_COMMAND_TOPIC, PREDICTABILITY_TOPIC
 from .log import file_kind, LogReader
 from .sensing import is_truth_topic
 from ..scenes.outputs import plot_panels, structure_panels
@@ -40,6 +40,10 @@ class LogPlotError(ValueError):
 # published name
 PANELS = plot_panels()
 PANELS_STRUCTURE = structure_panels()
+# the node's predictability measure (det_sim_ros.ros.predictability): its own panel, and the
+# stretches where it is beyond its limit (the log's metadata 'predictability_limit') shaded
+PANEL_PREDICTABILITY = ('twin distance (path robust below the limit)', '% of stroke', 100.0)
+DEFAULT_PREDICTABILITY_LIMIT = 0.05
 ENVELOPE_COLUMNS = 2000
 
 
@@ -67,6 +71,7 @@ class LogData:
     refused: int
     complete: bool
     t_end: float
+    not_robust: list = dataclasses.field(default_factory=list)   # [(t0, t1)] s, shaded
 
 
 # -- CDR layouts (read by det_sim_ros.io.cdr's Reader) -------------------------------------------
@@ -241,6 +246,11 @@ def read_log(paths) -> LogData:
         type_name = scan.type_of(topic)
         t, names, fields = _read_joint_states(scan.by_length(topic),
                                               lambda d, ty=type_name: deserialize(ty, d))
+        if topic == PREDICTABILITY_TOPIC:
+            if 'position' in fields:
+                title, unit, scale = PANEL_PREDICTABILITY
+                channels.append(Channel(title, unit, t, fields['position'] * scale, names))
+            continue
         if not det_names and topic != 'structure':
             det_names = names
         if t.size:
@@ -262,7 +272,27 @@ def read_log(paths) -> LogData:
     if times.size:
         t_end = max(t_end, float(times[-1]))
     return LogData(reader.files, det_names or [f'det{i}' for i in range(n_det)], times, volts,
-                   channels, n_commands, refused, scan.complete, t_end)
+                   channels, n_commands, refused, scan.complete, t_end,
+                   _not_robust(channels, _logged_limit(reader)))
+
+
+def _logged_limit(reader) -> float:
+    try:
+        return float(reader.info.get('predictability_limit') or DEFAULT_PREDICTABILITY_LIMIT)
+    except (ValueError, AttributeError):
+        return DEFAULT_PREDICTABILITY_LIMIT
+
+
+def _not_robust(channels, limit: float) -> list:
+    """Return [(t0, t1)] where the logged twin distance is beyond ``limit`` (a fraction)."""
+    channel = next((c for c in channels if c.title == PANEL_PREDICTABILITY[0]), None)
+    if channel is None or not channel.t.size:
+        return []
+    order = np.argsort(channel.t, kind='stable')
+    t, beyond = channel.t[order], channel.values[order, 0] / PANEL_PREDICTABILITY[2] > limit
+    edges = np.flatnonzero(np.diff(np.r_[False, beyond, False].astype(int)))
+    return [(float(t[a]), float(t[min(b, t.size - 1)])) for a, b in zip(edges[0::2],
+                                                                        edges[1::2])]
 
 
 def _read_joint_states(by_length, decode):
@@ -412,6 +442,8 @@ def plot_log(data: LogData, path: str, dpi: int = 80, title: str = '') -> str:
         ax.set_title(ch.title, fontsize=9, loc='left')
     for ax in axes:
         ax.grid(alpha=0.3)
+        for start, end in data.not_robust:   # the path not robust there: shaded
+            ax.axvspan(start, end, color='r', alpha=0.12, lw=0)
         if not many and ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7, loc='upper right')
     if many:

@@ -41,9 +41,10 @@ MODES = ('real_time', 'free_run', 'lockstep')
 DIAGNOSTICS_TOPIC = '/diagnostics'
 # JointState, one channel 'twin_distance': how far the perturbed twin is from the run, a
 # fraction of the stroke (det_sim_ros.analysis.predictability), at PREDICTABILITY_RATE_HZ of sim
-# time and at every stretch's start and end
+# time and at every stretch's start and end. Not every sample: a message between two samples
+# ends the log writer's packed run of samples (docs/predictability.md: the node's cost)
 PREDICTABILITY_TOPIC = 'predictability'
-PREDICTABILITY_RATE_HZ = 100.0
+PREDICTABILITY_RATE_HZ = 10.0
 TOPIC_TYPES = {**{topic: JOINT_STATE for topic in OUTPUT_FIELDS}, STRUCTURE_TOPIC: JOINT_STATE,
                COMMAND_TOPIC: FLOAT64_MULTI_ARRAY, JOINT_COMMAND_TOPIC: JOINT_STATE,
                CLOCK_TOPIC: CLOCK, DIAGNOSTICS_TOPIC: 'diagnostic_msgs/msg/DiagnosticArray',

@@ -125,6 +125,7 @@ def diagnostics_message(*, node_name: str, stamp, mode: str, paused: bool, simul
         'fault': simulator.fault,
         'stepper': simulator.describe_stepper(),      # adaptive: the current step count
         'fidelity': simulator.scene.fidelity_label,
+        'tolerance': f'{simulator.tolerance:g}',     # the resolved one ('auto': its level's)
         **pacing.values,
         'waiting_for': wait.text() if wait is not None else '',
         'waiting_s': f'{wait.seconds:.3f}' if wait is not None else '0.000',

@@ -28,7 +28,9 @@ __all__ = ['ANNOUNCE_S', 'announce_early', 'PROFILE', 'REANNOUNCE_S']
 
 ANNOUNCE_S = 2.0           # s of announcements every 0.1 s after the participant is created
 ANNOUNCE_PERIOD_NS = 100_000_000
-# s between two announcements after that (Fast DDS: 3 s); a DATA(p) of ~0.5 kB to each peer
+# s between two announcements after that (Fast DDS: 3 s): a newcomer whose own announcement
+# went unanswered waits at most this long (docs/real_time.md, 'The start of a run'); each is one
+# small DATA(p) message to each peer
 REANNOUNCE_S = 0.25
 PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
 <profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">

@@ -9,9 +9,11 @@ client subscribes a period costs one flag test. A client may publish voltage com
 CDR; checked as DDS commands are), call the node's services (JSON requests) and get and set its
 parameters. Everything a client asks runs on the node's executor thread (a short poll timer),
 never on the server's threads, through a bounded queue (a full queue refuses; a request not
-run within ``ANSWER_TIMEOUT_S`` is cancelled and never runs). Refused, clamped and failed
-requests are told to the clients as status messages; refusals, timeouts, failures and samples
-dropped are counted on /diagnostics (``live_*`` keys). docs/visualization.md has the details.
+run within ``ANSWER_TIMEOUT_S`` is cancelled and never runs; one that started and has not
+finished within twice that is told pending, and its outcome follows as a status). Refused,
+clamped and failed requests are told to the clients as status messages; refusals, timeouts,
+failures and samples dropped are counted on /diagnostics (``live_*`` keys), and so are the
+clients' subscriptions and command channels. docs/visualization.md has the details.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 
 from ..io.contract import COMMAND_TOPICS, DIAGNOSTICS_TOPIC, JOINT_STATE, stamp_ns, TOPIC_TYPES
-from ..io.live_queues import Busy, CallQueue, SampleQueue
+from ..io.live_queues import Busy, CallQueue, Pending, SampleQueue
 from ..io.live_server import ClientCommands, LiveServer, LiveUnavailable, require_sdk
 from ..io.schemas import type_name_of
 from ..scenes.scene import SceneError
@@ -171,17 +173,22 @@ class LiveView:
         Return the live view's counters, as /diagnostics shows them (docs/real_time.md).
 
         Client requests waiting for the node (now, at most so far, the bound), refused for a
-        full queue, timed out (cancelled), failed with an exception; samples waiting for the
-        sender (now, at most so far) and dropped from its full queue.
+        full queue, timed out (cancelled), answered pending (started, not finished in time),
+        failed with an exception; samples waiting for the sender (now, at most so far) and
+        dropped from its full queue; the clients' subscriptions and command channels now (a
+        client that leaves, however it leaves, takes its own with it).
         """
         calls, samples = self._calls, self._samples
         return {'live_requests_waiting': str(len(calls)), 'live_requests_most': str(calls.most),
                 'live_requests_limit': str(calls.limit),
                 'live_requests_refused': str(calls.refused),
                 'live_requests_timed_out': str(calls.timed_out),
+                'live_requests_pending': str(calls.pending),
                 'live_request_errors': str(calls.failed),
                 'live_samples_waiting': str(len(samples)), 'live_samples_most': str(samples.most),
-                'live_samples_dropped': str(samples.dropped)}
+                'live_samples_dropped': str(samples.dropped),
+                'live_subscriptions': str(self._server.subscriptions),
+                'live_client_channels': str(len(self._commands))}
 
     # -- the node's messages ------------------------------------------------------------------
     def send(self, batch) -> None:
@@ -295,9 +302,13 @@ class LiveView:
                 if name not in message.get_fields_and_field_types():
                     raise ValueError(f'{type_name_of(srv_type)} request has no field {name!r}')
                 setattr(message, name, value)
-            response = self._calls.call(lambda: service.callback(message, srv_type.Response()))
-            return json.dumps({name: getattr(response, name)
-                               for name in response.get_fields_and_field_types()}).encode()
+            name = _service_name(self._node, service)
+            response = self._calls.call(lambda: service.callback(message, srv_type.Response()),
+                                        late=lambda ok, value: self._status(
+                                            f'{name} finished after its answer: '
+                                            + (_fields_json(value) if ok else f'failed: {value}'),
+                                            error=not ok))
+            return _fields_json(response).encode()
         return handle
 
     # -- parameters (server threads; run on the executor thread) ----------------------------
@@ -310,15 +321,30 @@ class LiveView:
 
     def on_set_parameters(self, client, parameters, request_id=None) -> list:
         names = [p.name for p in parameters]
+        listed = ', '.join(names)
         try:   # one call: set and read back, so that a timeout leaves nothing half done
             refusals, values = self._calls.call(
-                lambda: (self._set(parameters), self._values(names)))
+                lambda: (self._set(parameters), self._values(names)),
+                late=lambda ok, value: self._set_late(listed, ok, value))
+        except Pending as exc:   # it goes on: the outcome follows (_set_late)
+            self._status(f'parameters pending ({listed}): {exc}')
+            return []
         except (Busy, TimeoutError) as exc:   # cancelled: none of them is set
             self._status('parameters not set (' + ', '.join(names) + f'): {exc}', error=True)
             return []
         if refusals:
             self._status('parameters refused: ' + '; '.join(refusals), error=True)
         return values
+
+    def _set_late(self, listed: str, ok: bool, outcome) -> None:
+        """Tell the clients how a set they were told pending ended (the executor thread)."""
+        if not ok:
+            self._status(f'parameters not set ({listed}): {type(outcome).__name__}: '
+                         f'{outcome}', error=True)
+        elif outcome[0]:
+            self._status('parameters refused: ' + '; '.join(outcome[0]), error=True)
+        else:
+            self._status(f'parameters set ({listed})')
 
     def _values(self, names) -> list:
         from foxglove import Parameter as LiveParameter
@@ -351,6 +377,17 @@ class LiveView:
         from foxglove import Parameter as LiveParameter
         self._server.publish_parameters([LiveParameter(p.name, value=_native(p.value))
                                          for p in params])
+
+
+def _service_name(node, service) -> str:
+    """Return a service's resolved name (/arm1/sim_node/pause)."""
+    return node.resolve_service_name(service.srv_name)
+
+
+def _fields_json(message) -> str:
+    """Return a ROS message's fields as JSON (a service response for a client)."""
+    return json.dumps({name: getattr(message, name)
+                       for name in message.get_fields_and_field_types()})
 
 
 def _native(value):

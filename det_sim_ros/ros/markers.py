@@ -14,17 +14,17 @@ all DETs are drawn in that one frame, side by side (:func:`.geometry.layout_offs
 
 Speed: the message layout is fixed for a model, so it is serialized once with sentinel values
 in the fields that move, their byte offsets are located, and each frame only writes the new
-numbers into a copy of those bytes (tens of microseconds per frame; building rclpy Point
-objects cost about 20x more).
+numbers into a copy of those bytes, far cheaper than building rclpy Point objects per frame
+(the cost: docs/performance.md, 'Markers', from ``bench/marker_cost.py``).
 
 :class:`NodeMarkers` is the node's side: the publisher on ``markers`` and the display-rate
 throttle (every N-th control sample, N = rate_hz / display rate, so the cost per simulated
-second is bounded and the frames are stamped on the sample grid); viewers get at most two
-frames per display period of wall time (a free run would send them ~8x as many as a display
+second is bounded and the frames are stamped on the sample grid); viewers get at most two frames
+per display period of wall time (a free run would send them many times as many as a display
 shows). No frame is built while nobody subscribes to ``markers`` and the log is off. A frame
-that would show nothing new (no coordinate moved by more than 0.1 µm, the same voltages) is
-not sent, except once per simulated second: markers persist in RViz and Foxglove until
-replaced, so a settled actuator costs about one frame per simulated second.
+that would show nothing new (no coordinate moved by more than 0.1 µm, the same voltages) is not
+sent, except once per simulated second: markers persist in RViz and Foxglove until replaced, so
+a settled actuator costs about one frame per simulated second.
 """
 
 from __future__ import annotations
@@ -294,10 +294,9 @@ class MarkerFrames:
 
         That is when each cell has one coordinate and paper or consistent kinematics:
         V = P @ (1, q, q^2, q^4) for all cells in one matrix product; else None (the general path
-        of :meth:`values`). A frame then takes a handful of numpy calls instead of ~20: 77 -> 22 us
-        per frame in a loop that steps 33 periods between frames (cold caches, as in the node).
-        Inside the node a frame still costs 150-240 us of the executor thread, most of it the first
-        touch of each numpy and DDS path after the samples' work (docs/visualization.md).
+        of :meth:`values`). A frame then takes a handful of numpy calls instead of one per drawn
+        quantity; what a frame costs in the node: docs/performance.md, 'Markers'
+        (``bench/marker_cost.py``).
         """
         maps = self._cell_maps
         if (any(poly is None for *_, poly in maps) or len({len(m[0]) for m in maps}) != 1
@@ -458,9 +457,9 @@ class NodeMarkers:
 
     The log records every frame of the display grid (sim time). Viewers get at most one frame
     per half display period of *wall* time: in real time that is every frame (a catch-up burst
-    aside), while a free run at 8x real time would otherwise send ~240 frames per wall second,
-    which no display shows and which cost the node's DDS threads and the viewer (measured: a
-    free-running node's added CPU fell from +17.8 % to +4.3 % with the cap). A frame held
+    aside), while a free run would otherwise send frames many times faster than any display shows
+    them, at a cost to the node's DDS threads and the viewer (docs/performance.md, 'Markers';
+    ``bench/marker_cost.py``). A frame held
     back from viewers is sent at the next chance if nothing newer comes.
     """
 

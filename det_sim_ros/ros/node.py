@@ -138,14 +138,18 @@ class SimNode(Node):
         qos = {topic: out_qos for topic in self._outputs.topics + self._outputs.truth_topics}
         qos.update({COMMAND_TOPIC: in_qos, JOINT_COMMAND_TOPIC: in_qos,
                     PREDICTABILITY_TOPIC: out_qos})
+        # (before the recorder: the log's metadata says whether the measure runs)
+        self._predictability = attach_predictability(self, self._p, out_qos)
         self._recorder = open_recorder(self._p, self.scene, qos, {
             'method': self._sim.method.name, 'substeps': self._sim.substeps_setting,
             'fidelity': self.scene.fidelity_label,
             'y0': repr(self.y0[0]) if len(self.y0) == 1 else repr(self.y0),
             'initial_state': self._initial_text,
             'x0': repr(self._sim.x0.tolist()),   # what ~/reset returns to
+            'predictability_limit': (repr(self._p('predictability.limit'))
+                                     if self._predictability.enabled else ''),
             'node': self.get_fully_qualified_name()}, self.get_namespace(), self.get_logger())
-        self._predictability = attach_predictability(self, self._p, self._recorder, out_qos)
+        self._predictability.log_to(self._recorder)
         self._commands = CommandInput(self._sim, self.det_names, self.scene.physics.v_max,
                                       self._recorder, self.get_logger(),
                                       self._pacing.command_received)
@@ -159,7 +163,8 @@ class SimNode(Node):
         self.get_logger().info(
             f'scene {scene_file!r}: {self.scene.beam} beam, eps_b = {self.scene.eps_b:g}, '
             f'fidelity {self.scene.fidelity_label}, {self.scene.rate_hz:g} Hz, '
-            f'{self._sim.describe_stepper()}; '
+            f'{self._sim.describe_stepper()}, tolerance {self._sim.tolerance:g}'
+            f'{" (auto: its level)" if self.scene.tolerance <= 0.0 else ""}; '
             f'{self._pacing.label()}{", paused" if self.paused else ""}{gate_text}; initial state '
             f'{self._initial_text}; {len(self.det_names)} DET(s), '
             f'voltage command order: [{", ".join(self.det_names)}]'

@@ -117,10 +117,11 @@ NODE_PARAMS = {
                        'network interface; anyone who reaches it can command the node)', True,
                        None),
     # the predictability measure (det_sim_ros.ros.predictability): docs/predictability.md
-    'predictability.enabled': Param(True, 'step a perturbed twin beside the run and report '
-                                    'how far it drifts (/diagnostics, the predictability topic, '
-                                    'the log; a WARN where the path stops being robust)', True,
-                                    None),
+    'predictability.mode': Param('auto', "'on': step a perturbed twin beside the run and report "
+                                 'how far it drifts (/diagnostics, the predictability topic, the '
+                                 "log; a WARN where the path stops being robust); 'auto': on "
+                                 'unless the scene is an array (a twin doubles its physics); '
+                                 "'off'", True, ('auto', 'on', 'off')),
     'predictability.parameter': Param('m', "the twin's perturbed physics parameter", True,
                                       tuple(k for k in PHYSICS_SPEC if k != 'n')),
     'predictability.relative': Param(1.0e-6, "the twin's parameter is value * (1 + this) (1e-6: "
@@ -132,10 +133,10 @@ NODE_PARAMS = {
     'predictability.limit': Param(0.05, 'the twin distance (a fraction of the stroke) beyond '
                                   'which the path is not robust', True, (1.0e-6, 10.0)),
     'allow_duplicate_name': Param(False, 'run even if another node of this fully qualified '
-                                  'name is running (one warning); false: the younger of two '
+                                  'name is running (one warning); false: the newcomer of two '
                                   'stops with one FATAL line, on one host before it publishes '
                                   '(a host lock on the name), across hosts once it hears the '
-                                  'older (docs/topics.md)',
+                                  'established node (docs/topics.md)',
                                   True, None),
     'strict_parameters': Param(False, 'a parameter name the node does not know (-p, a params '
                                'file) stops the start with one FATAL line; false: one warning '

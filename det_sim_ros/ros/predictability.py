@@ -1,7 +1,8 @@
 """
 The node's predictability measure: a perturbed twin stepped beside the run, and what it says.
 
-With ``predictability.enabled`` (the default) every period also steps a twin of the scene
+With ``predictability.mode`` 'on' (by default, 'auto': unless the scene is an array, whose
+twin would double the physics of every copy) every period also steps a twin of the scene
 (det_sim_ros.analysis.predictability: the ``predictability.parameter`` changed by
 ``predictability.relative``, the tolerance times ``predictability.tolerance_factor``) under the
 same commands. Its distance from the run, a fraction of the stroke, goes on /diagnostics, on the
@@ -35,6 +36,12 @@ class NoMeasure:
     def follow(self, sim, out) -> None:
         """Do nothing (the measure is off)."""
 
+    def log_to(self, recorder) -> None:
+        """Do nothing (the measure is off)."""
+
+    def first_not_robust(self) -> None:
+        """Return None: nothing is known (the measure is off)."""
+
     def reset(self) -> None:
         """Do nothing (the measure is off)."""
 
@@ -49,15 +56,15 @@ class NodePredictability:
 
     :param monitor: the twin beside the node's simulator.
     :param publish: publishes the ``predictability`` JointState bytes.
-    :param recorder: the MCAP recorder, or None.
     :param logger: the node's logger.
     """
 
     enabled = True
 
-    def __init__(self, monitor: TwinMonitor, publish, recorder, logger):
+    def __init__(self, monitor: TwinMonitor, publish, logger):
         self.monitor = monitor
-        self._publish, self._recorder, self._logger = publish, recorder, logger
+        self._publish, self._logger = publish, logger
+        self._recorder = None
         self._every = max(1, int(round(1.0 / (PREDICTABILITY_RATE_HZ * monitor.twin.dt))))
         self._fault_told = False
 
@@ -80,6 +87,15 @@ class NodePredictability:
             if self._recorder is not None:
                 self._recorder.record(PREDICTABILITY_TOPIC, data, stamp_ns(sim.k, sim.dt),
                                       type_name=JOINT_STATE)
+
+    def log_to(self, recorder) -> None:
+        """Record the measure with ``recorder`` (the node's MCAP recorder, or None)."""
+        self._recorder = recorder
+
+    def first_not_robust(self) -> float | None:
+        """Return the sim time (s) the path first stopped being robust, None if never."""
+        first = self.monitor.stretches.first
+        return None if first is None else first * self.monitor.twin.dt
 
     def _tell(self, event: str, t: float) -> None:
         monitor = self.monitor
@@ -118,17 +134,23 @@ class NodePredictability:
         }
 
 
-def attach_predictability(node, get, recorder, qos):
+def attach_predictability(node, get, qos):
     """
     Return the node's measure from its ``predictability.*`` parameters.
 
-    :class:`NoMeasure` when off, or (with one INFO line saying why) for a scene without a
-    stroke to measure against.
+    :class:`NoMeasure` when off, or (with one INFO line saying why) for an array scene in mode
+    'auto' and for a scene without a stroke to measure against.
 
     :param get: a parameter's value by name.
     :raises SceneError: an invalid perturbation (one line naming the parameter).
     """
-    if not get('predictability.enabled'):
+    mode = get('predictability.mode')
+    if mode == 'off':
+        return NoMeasure()
+    if mode == 'auto' and node.simulator.model.arrays.n_groups > 1:
+        node.get_logger().info('predictability measure off for an array scene (a twin doubles '
+                               'the physics of every copy): -p predictability.mode:=on to step '
+                               'one (docs/predictability.md)')
         return NoMeasure()
     try:
         perturbation = Perturbation(get('predictability.parameter'),
@@ -142,4 +164,4 @@ def attach_predictability(node, get, recorder, qos):
         raise SceneError(f'parameters predictability.*: {exc}') from None
     from sensor_msgs.msg import JointState
     publisher = node.create_publisher(JointState, PREDICTABILITY_TOPIC, qos)
-    return NodePredictability(monitor, publisher.publish, recorder, node.get_logger())
+    return NodePredictability(monitor, publisher.publish, node.get_logger())

@@ -176,14 +176,20 @@ class NodeShell:
     # -- parameters ---------------------------------------------------------------------------
     def get_parameter(self, name: str):
         """Return a parameter's value (bool, int, float, str or list)."""
+        return self.get_parameters([name])[0]
+
+    def get_parameters(self, names: list[str]) -> list:
+        """Return several parameters' values in one call of the node's service."""
         from rcl_interfaces.srv import GetParameters
         from rclpy.parameter import parameter_value_to_python
         from rcl_interfaces.msg import ParameterType
         response = self.call('get_parameters', GetParameters, GetParameters.Request(
-            names=[name]))
-        if not response.values or response.values[0].type == ParameterType.PARAMETER_NOT_SET:
-            raise ShellError(f'{self.target} has no parameter {name!r}')
-        return parameter_value_to_python(response.values[0])
+            names=list(names)))
+        values = list(response.values)
+        for i, name in enumerate(names):
+            if i >= len(values) or values[i].type == ParameterType.PARAMETER_NOT_SET:
+                raise ShellError(f'{self.target} has no parameter {name!r}')
+        return [parameter_value_to_python(value) for value in values[:len(names)]]
 
     def set_parameter(self, name: str, value) -> None:
         """Set a parameter (an int for a double parameter is taken as a float), or raise."""

@@ -27,8 +27,8 @@ def make_executor(context=None):
     """
     Return the executor sim_node spins in: rclpy's EventsExecutor.
 
-    It takes about 6 µs per timer callback here against ~100 µs for the
-    SingleThreadedExecutor (bench/node_rate.py measures both). Spin it with :func:`spin`.
+    Its timer callbacks cost a fraction of the SingleThreadedExecutor's (docs/performance.md,
+    'Node I/O and real time'; ``bench/node_rate.py`` measures both). Spin it with :func:`spin`.
     """
     from rclpy.experimental import EventsExecutor
     return EventsExecutor(context=context)

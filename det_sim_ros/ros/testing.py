@@ -27,10 +27,12 @@ from __future__ import annotations
 import os
 import time
 from typing import Iterable, Sequence
+import warnings
 
 import numpy as np
 
 from ..analysis.ensemble import Ensemble, ensemble_overrides
+from ..analysis.predictability import PathNotRobustWarning
 from ..analysis.response import SimRun, StepMetrics
 from ..scenes.outputs import main_topic
 
@@ -105,6 +107,7 @@ class LockstepSim:
         self.executor = None
         self._rows: list = []
         self._nodes: list = []
+        self._warned = False
 
     # -- set-up ----------------------------------------------------------------------------
     def start(self, nodes: Iterable = (), wait: bool = True) -> 'LockstepSim':
@@ -173,7 +176,15 @@ class LockstepSim:
         self.spin_until(lambda: simulator.k >= k_end or simulator.fault, f'sim time {until} s')
         if simulator.fault:
             raise RuntimeError(f'sim_node fault: {simulator.fault}')
-        return self.result()
+        run = self.result()
+        if run.robust_until is not None and not self._warned:
+            self._warned = True   # (once per sim: a later run() of it says nothing new)
+            warnings.warn(PathNotRobustWarning(
+                f'this lockstep run is not robust from t = {run.robust_until:.3f} s (a twin '
+                "differing by a parameter's 7th digit took another path): assert on what "
+                'det_sim.ensemble(...).shared() states, not on this run (docs/predictability.md)'),
+                stacklevel=2)
+        return run
 
     def result(self) -> SimRun:
         """Return the samples recorded so far (the t = 0 sample first)."""
@@ -182,8 +193,9 @@ class LockstepSim:
 
         def column(i):
             return np.array([row[i] for row in rows], dtype=float)
+        first = self.node.predictability.first_not_robust()
         return SimRun(list(self.node.det_names), column(0) * dt, column(1), column(2),
-                      column(3), column(4), column(5))
+                      column(3), column(4), column(5), first)
 
     def close(self) -> None:
         """Destroy the nodes (the log, if any, is finished) and shut the context down."""
@@ -216,7 +228,9 @@ def lockstep_ensemble(make_controllers, until: float, scene: str = 'default',
     for change in changes:
         sim = LockstepSim(scene, {**(overrides or {}), **change}, params, domain_id)
         try:
-            runs.append(sim.run(until, nodes=list(make_controllers(sim))))
+            with warnings.catch_warnings():   # (a copy not robust is what an ensemble is for)
+                warnings.simplefilter('ignore', PathNotRobustWarning)
+                runs.append(sim.run(until, nodes=list(make_controllers(sim))))
         finally:
             sim.close()
     return Ensemble(runs, changes)

@@ -35,9 +35,9 @@ __all__ = ['Simulator', 'InputCheck', 'simulate', 'SimulationResult', 'POWER_RES
            'inputs_within']
 
 # |power-balance residual| beyond which a run is no longer vouched for: the stress suite keeps
-# it below 1e-3 (Rs >= 1 kOhm, every pre-strain, 10^6 steps; normally ~1e-5), so a larger value
+# it below this (test/test_integrators.py: Rs >= 1 kOhm, every pre-strain), so a larger value
 # means the integration error has left the tolerance (e.g. voltages far beyond the calibrated
-# 3 kV: v_max = 1e5 V at 1e5 V gave 0.06 from rest and 30 from the released start)
+# 3 kV)
 POWER_RESIDUAL_LIMIT = 1e-3
 # ... or this many times the integrator's tolerance, if larger: the residual is the integration
 # error of the energy states, and it grows with the tolerance (docs/fidelity.md has the ratios:
@@ -79,7 +79,7 @@ class Simulator:
     :param method: stepper name (default: the scene's ``integrator.method``; 'auto' picks
         'etdrk4' when the scene has a stiff charge state, 'etdrk4_linearized' when its beams
         also have more than one Ritz term (stiff beam modes), and 'dp5' otherwise: the
-        cheapest per accuracy in bench/work_precision.py and bench/stiff_speed.py).
+        cheapest per accuracy in ``det_sim bench`` and bench/stiff_speed.py).
     :param substeps: internal steps per control period (default: the scene's; 0 = adaptive
         from the scene's tolerance when the method has an embedded estimate, else a fixed count
         from the tolerance).

@@ -79,7 +79,9 @@ def _send(args) -> int:
     names, volts = _parse_voltages(args.voltages)
 
     def action(shell):
-        dets = shell.det_names()
+        # one call for both: a send costs one parameter round trip, clamped or not
+        dets, v_max = shell.get_parameters(['structure.dets', 'physics.v_max'])
+        dets, v_max = list(dets), float(v_max)
         if names is None and len(volts) != len(dets):
             raise common.CliError(f'{len(volts)} voltage(s) for {len(dets)} DET(s): give one per '
                                   f"DET in command order [{', '.join(dets)}]")
@@ -90,7 +92,6 @@ def _send(args) -> int:
         topic = shell.send(volts, names)
         pairs = list(zip(names or dets, volts))
         print(f"sent {', '.join(f'{n}={v:g}' for n, v in pairs)} V on {topic}")
-        v_max = float(shell.get_parameter('physics.v_max'))
         clamped = [f'{n}: {v:g} V' for n, v in pairs if not 0.0 <= v <= v_max]
         if clamped:   # the node clamps them (and warns): say so here too
             from ...io.contract import clamp_message
@@ -136,6 +137,9 @@ def _watch(args) -> int:
                           '(paused?); waiting', file=sys.stderr)
         except KeyboardInterrupt:   # the usual way to stop watching
             pass
+        loss = watcher.loss_line() if args.csv else ''
+        if loss:
+            print(f'det_sim: watch: {loss}', file=sys.stderr)
         return 0
     try:
         return _run(args, action)

@@ -64,7 +64,7 @@ from .file import logged_scene
 from .format import END_METADATA_NAME, LIBRARY, METADATA_NAME, SCENE_ATTACHMENT
 from .reader import log_files, LogMessage, LogReader, recover, recover_unfinished
 from .recorder import Recorder
-from .runs import log_runs, LogRun
+from .runs import log_runs, LogRun, LogRuns
 from .sniff import file_kind, is_torn
 from ..cdr import deserialize, message_class, serialize
 from ..schemas import DELIMITER, message_definition, qos_profiles_yaml, type_name_of
@@ -73,4 +73,4 @@ __all__ = ['Recorder', 'LogReader', 'LogMessage', 'message_definition', 'qos_pro
            'type_name_of', 'serialize', 'deserialize', 'recover', 'recover_unfinished',
            'is_torn', 'log_files', 'LIBRARY', 'METADATA_NAME', 'END_METADATA_NAME',
            'SCENE_ATTACHMENT', 'DELIMITER', 'message_class', 'file_kind', 'logged_scene',
-           'log_runs', 'LogRun']
+           'log_runs', 'LogRun', 'LogRuns']

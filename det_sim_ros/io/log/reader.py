@@ -13,9 +13,10 @@ checked against its CRC and walked the same way, so its messages are sliced, not
 
 Why not mcap's readers: a torn file (cut inside a record) gives every message before the cut
 here and nothing else to handle; mcap's seeking reader gives none of it (it needs the summary)
-and its non-seeking one raises ``EndOfFile`` after them. Read in full, ``messages`` costs
-1.45 us per message against 3.2-3.9 us through mcap's readers, and ``blocks`` (the plot's
-columns, which mcap has no counterpart of) 0.49 us (bench/mcap_library.py; docs/logging.md).
+and its non-seeking one raises ``EndOfFile`` after them. Read in full, ``messages`` is cheaper
+per message than mcap's readers, and ``blocks`` (the plot's columns, which mcap has no
+counterpart of) cheaper still (docs/logging.md, "mcap's Writer and readers, and this
+package's"; ``bench/mcap_library.py``).
 """
 
 from __future__ import annotations

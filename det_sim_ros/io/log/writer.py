@@ -10,12 +10,12 @@ the chunk in progress as its own public state (:class:`OpenChunk`) and the file'
 appends Message records to the chunk and keeps its index and the statistics as
 :meth:`McapWriter.add_message` would, without reaching into mcap's writer.
 
-Why not mcap's Writer: it keeps its chunk in progress private, and the packer is the speed of
-the log: 4.5 us per sample of the node's outputs (2.0 in the writer thread's runs) against
-14.8 us through ``mcap.writer.Writer.add_message`` (bench/mcap_library.py; the table in
-docs/logging.md). mcap's Writer serves where no open chunk is needed: :func:`~.reader.recover`
-writes with it. Crash safety and flush control do not need a writer of its own
-(:class:`~.tail_stream.TailStream` under either writer; both end a chunk at ``flush``).
+Why not mcap's Writer: it keeps its chunk in progress private, and the packer is the speed of the
+log, a fraction of ``mcap.writer.Writer.add_message``'s cost per sample (docs/logging.md, "mcap's
+Writer and readers, and this package's"; ``bench/mcap_library.py``). mcap's Writer serves where no
+open chunk is needed: :func:`~.reader.recover` writes with it. Crash safety and flush control do
+not need a writer of its own (:class:`~.tail_stream.TailStream` under either writer; both end a
+chunk at ``flush``).
 """
 
 from __future__ import annotations

@@ -48,7 +48,7 @@ static void kinematics_cells(const ds_model *m, const double *x, ds_work *w, int
                 w->Us4[c] = s.bending;
             continue;
         }
-        if (r == 1) {   /* one term: polynomials in q, ~5x cheaper than quadrature */
+        if (r == 1) {   /* one term: closed-form polynomials in q, no quadrature to run */
             const double c2 = cell->c2, c4 = cell->kappa * cell->c4;
             const double qc = x[o], q2 = qc * qc;
             w->y[c] = one_term_shortening(cell, qc);
@@ -233,10 +233,10 @@ one_term_mechanics(const ds_model *m, double q, double qd)
 }
 
 /*
- * ds_rhs for a model of one one-term cell (the default scene, and each copy of an array when
- * it steps as its own group): the same operations in the same order as the general code below
- * (so the same bits), with everything in registers instead of the scratch arrays. About half
- * the cost of the general path, which loops over cells, terms and mass entries.
+ * ds_rhs for a model of one one-term cell (a scene at the paper's level, and each copy of such
+ * an array when it steps as its own group): the same operations in the same order as the
+ * general code below (so the same bits), with everything in registers instead of the scratch
+ * arrays, where the general path loops over cells, terms and mass entries.
  */
 static int rhs_one_term(const ds_model *m, const double *x, const double *u, double *dx,
                         ds_work *w, int quasi_static)
@@ -486,10 +486,10 @@ void ds_stretches(const ds_model *m, const double *x, ds_work *w, double *lam)
  * With the power monitor, also W_in -= v q_p on the way in and += on the way out: in between,
  * the stages integrate xi = W_in - v q_p, whose rate v v_p / Rp (v held) is as smooth as the
  * mechanics, instead of the supplied power v i, whose charging current follows every input
- * jump on the charge time scale (~30 us). The supplied energy v dq_p then comes exactly from
- * the charge the exponential stages integrate: under a controller's new voltage every period
- * the quadrature of v i had put a 1.4e-3 relative error into W_in after 3 s at tolerance 1e-6
- * (the state 1e-9), and the power balance had flagged a run whose outputs were right.
+ * jump on the charge time scale Rs C. The supplied energy v dq_p then comes exactly from the
+ * charge the exponential stages integrate: a quadrature of v i would miss part of each jump
+ * under a controller's new voltage every period, and the power balance would flag a run whose
+ * outputs are right (test_supplied_energy_is_exact_under_a_new_voltage_every_period).
  */
 void ds_shift_charge(const ds_model *m, double *x, const double *u, double sign, ds_work *w)
 {

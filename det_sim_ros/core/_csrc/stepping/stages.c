@@ -185,8 +185,9 @@ advance_core(const ds_stepper *st, ds_group *g, double *x, const double *u, doub
     return DS_OK;
 }
 
-/* The layouts that batch runs and the default scene step (a one-term cell with creep and an RC
- * source, with or without the power monitor, under a four-stage table such as ETDRK4 or RK4)
+/* The one-term layouts (a cell at the paper's level, alone or as an array's copy, with creep
+ * and an RC source, with or without the power monitor, under a four-stage table such as ETDRK4
+ * or RK4)
  * get their own copy of the core with the sizes as constants, so the compiler unrolls the
  * per-state and per-stage loops and inlines the copies. The arithmetic and its order are the
  * generic core's (no -ffast-math, no contraction): the results are bit-identical. */

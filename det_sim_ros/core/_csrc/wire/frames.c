@@ -1,10 +1,11 @@
 /*
  * Marker frames of one-coordinate cells (det_sim_ros/ros/markers.py, MarkerFrames): every drawn
  * value of a cell is a polynomial in its coordinate q, V = P0 + P1 q + P2 q^2 + P3 q^4, and
- * the DET's drawn thickness is n d0 l0 / height. The node builds a frame every ~33 control
- * samples, with caches the samples' DDS work has cooled: in Python that cost 150-240 us per
- * frame, most of it the first touch of numpy's code paths; here it is one call. The numpy
- * version (MarkerFrames.values) stays the reference the tests hold this code to.
+ * the DET's drawn thickness is n d0 l0 / height. The node builds a frame every few dozen
+ * control samples, with caches the samples' DDS work has cooled, where numpy's many small
+ * calls pay their first touch each time; here a frame is one call (its cost:
+ * docs/performance.md, 'Markers'). The numpy version (MarkerFrames.values) stays the reference
+ * the tests hold this code to.
  */
 #include <math.h>
 #include <string.h>

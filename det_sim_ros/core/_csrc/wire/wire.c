@@ -1,9 +1,9 @@
 /*
  * The node's I/O path in compiled code: one sample's output messages (CDR) from the simulator's
- * output vector, and MCAP Message record heads. In Python a sample cost the node 4-7 us to
- * encode (struct packs of Python floats) and ~3 us to lay out as log records; here both are a
- * few hundred ns. contract.SampleEncoder (the struct packs) and io.log's one-by-one writer
- * stay the references the tests hold this code to, byte for byte.
+ * output vector, and MCAP Message record heads. Compiled because it runs for every sample the
+ * node publishes and logs, where struct packs of Python floats would be a large share of a
+ * period (docs/performance.md, 'Node I/O and real time'). The struct-pack encoder and io.log's
+ * one-by-one writer stay the references the tests hold this code to, byte for byte.
  */
 #include "wire/wire.h"
 #include "wire/endian.h"
