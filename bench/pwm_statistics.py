@@ -295,6 +295,8 @@ def main(argv=None) -> int:
     ap.add_argument('--copies', type=int, default=COPIES)
     ap.add_argument('--docs', action='store_true',
                     help='write the tables into docs/fidelity.md')
+    ap.add_argument('--beam', choices=('fixed', 'simply_supported'), default=None,
+                    help="one beam's cases only (not with --docs)")
     ap.add_argument('--cache', default='',
                     help='a folder to keep the ensembles in (a rerun reads them back)')
     args = ap.parse_args(argv)
@@ -303,11 +305,12 @@ def main(argv=None) -> int:
         results = study([QUICK['case']], lambda beam: QUICK['levels'], copies, cache=args.cache)
     else:
         copies = args.copies
-        results = study(CASES, LEVELS.get, copies, cache=args.cache)
+        cases = [c for c in CASES if args.beam in (None, c[0])]
+        results = study(cases, LEVELS.get, copies, cache=args.cache)
     text = tables(results, copies, 'flock bench/.lock env PYTHONPATH=. python '
                   'bench/pwm_statistics.py --docs')
     print(text)
-    if args.docs and not args.quick:
+    if args.docs and not args.quick and args.beam is None:
         write_doc(text, begin=BEGIN, end=END)
     return 0
 
