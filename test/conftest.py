@@ -270,9 +270,14 @@ class Harness:
         if topic == 'deflection':
             self.velocities[t] = list(msg.velocity)
 
-    def spin_until(self, condition, what='condition'):
-        """Spin both nodes until condition() holds; fail after the wall-clock safety timeout."""
-        deadline = time.monotonic() + WALL_TIMEOUT
+    def spin_until(self, condition, what='condition', timeout=WALL_TIMEOUT):
+        """
+        Spin both nodes until condition() holds; fail after ``timeout`` s of wall time.
+
+        The default is the safety net; a wait for what follows at once (a log line, a refusal)
+        passes a few seconds, so a test whose behaviour broke fails in seconds, not minutes.
+        """
+        deadline = time.monotonic() + timeout
         while not condition():
             if time.monotonic() > deadline:
                 pytest.fail(f'timed out waiting for {what}')

@@ -27,6 +27,9 @@ pytest.importorskip('foxglove')
 
 SUBPROTOCOL = 'foxglove.sdk.v1'
 TIMEOUT = 60.0   # s; a safety net only: a wait that hits it fails the test
+# s for what follows a client's message at once (a refusal on /diagnostics, published every
+# second): a broken refusal fails in seconds, not at the safety net
+PROMPT = 10.0
 NODE = [sys.executable, '-m', 'det_sim_ros.cli.sim_node']
 VIEW = [sys.executable, '-m', 'det_sim_ros.cli', 'view']
 
@@ -100,12 +103,12 @@ class Client:
             _, call, length = struct.unpack_from('<III', frame, 1)
             self.responses[call] = json.loads(frame[13 + length:])
 
-    async def pump(self, until, what):
-        deadline = time.monotonic() + TIMEOUT
+    async def pump(self, until, what, timeout=TIMEOUT):
+        deadline = time.monotonic() + timeout
         while not until():
             left = deadline - time.monotonic()
             if left <= 0:
-                pytest.fail(f'no {what} within {TIMEOUT} s')
+                pytest.fail(f'no {what} within {timeout} s')
             try:
                 self.take(await asyncio.wait_for(self.ws.recv(), left))
             except asyncio.TimeoutError:
@@ -217,11 +220,12 @@ async def watch_node(port):
     # malformed commands are refused with the reason, on /diagnostics and to the client
     await client.publish(1, b'{"data": "high"}')
     await client.pump(lambda: 'must be a list of numbers' in diagnostic_values(client).get(
-        'last_refused', ''), 'the refusal of a malformed command on /diagnostics')
+        'last_refused', ''), 'the refusal of a malformed command on /diagnostics',
+        timeout=PROMPT)
     assert any('must be a list of numbers' in s for s in client.statuses)
     await client.publish(1, b'{"data": [1000, 2000]}')
     await client.pump(lambda: 'expected 1 voltage' in diagnostic_values(client).get(
-        'last_refused', ''), 'the refusal of a command of the wrong length')
+        'last_refused', ''), 'the refusal of a command of the wrong length', timeout=PROMPT)
     # reset: a new session (the client clears its buffers), then samples from t = 0 again
     sessions = len(client.sessions)
     answer = await client.call('/sim_node/reset', {}, call_id=7)
@@ -247,7 +251,7 @@ async def watch_node(port):
                       and 'real_time_factor' in client.parameters, 'the parameters set')
     assert client.parameters['real_time_factor'] == 1.0   # refused: unchanged, and why
     await client.pump(lambda: any('real_time_factor' in s for s in client.statuses),
-                      'the reason real_time_factor was refused')
+                      'the reason real_time_factor was refused', timeout=PROMPT)
     await client.ws.close()
     return client
 

@@ -20,6 +20,13 @@ import numpy as np
 import pytest
 
 pytestmark = pytest.mark.ros
+# s of wall time a wait for a log line that follows at once may take (the fake wall clock
+# moved, a diagnostics window reported): a broken behaviour fails in seconds, not at the
+# safety net WALL_TIMEOUT
+PROMPT = 5.0
+# ... on the real clock, a node slipping from its first periods: a few 0.5 s diagnostics
+# windows, with room for a loaded 2-core machine
+PROMPT_REAL_CLOCK = 20.0
 
 
 class FakeWall:
@@ -271,19 +278,21 @@ def test_falling_behind_real_time_warns_once_and_says_when_caught_up(harness, tm
         return [line for line in lines if line.startswith(start)]
 
     slip(10.0)
-    h.spin_until(lambda: logged('behind real time'), 'the WARN')
+    h.spin_until(lambda: logged('behind real time'), 'the WARN', timeout=PROMPT)
     (warned,) = logged('behind real time')
     assert 'below real time' in warned and 'slipped' in warned
     assert 'ms of CPU' in warned and 'internal steps' in warned
     assert '1.000 ms of wall time' in warned   # dt 1 ms at real_time_factor 1
     assert not logged('caught up')
     quiet_window()
-    h.spin_until(lambda: logged('caught up with real time'), 'the caught-up line')
+    h.spin_until(lambda: logged('caught up with real time'), 'the caught-up line',
+                 timeout=PROMPT)
     slip(1.0)                                  # within the rate limit: not warned again
     quiet_window()
     assert len(logged('behind real time')) == 1 and len(logged('caught up')) == 1
     slip(BEHIND_WARN_INTERVAL_S)               # after it: warned, naming the silent episode
-    h.spin_until(lambda: len(logged('behind real time')) == 2, 'the second WARN')
+    h.spin_until(lambda: len(logged('behind real time')) == 2, 'the second WARN',
+                 timeout=PROMPT)
     assert '(1 more time(s) since the last warning)' in logged('behind real time')[1]
 
 
@@ -302,7 +311,7 @@ def test_a_node_whose_periods_cost_more_than_real_time_gives_says_so(harness):
     h = harness(real_time=True, diagnostics_period=0.5, **{'integrator.substeps': 100000})
     lines = listen_to_rosout(h)
     h.spin_until(lambda: any(line.startswith('behind real time') for line in lines),
-                 "the 'behind real time' WARN")
+                 "the 'behind real time' WARN", timeout=PROMPT_REAL_CLOCK)
     (warned,) = [line for line in lines if line.startswith('behind real time')]
     assert 'below real time' in warned or 'lagging' in warned, warned
     cpu_ms, budget_ms = (float(x) for x in re.search(
@@ -311,7 +320,7 @@ def test_a_node_whose_periods_cost_more_than_real_time_gives_says_so(harness):
     assert budget_ms == 1.0 and cpu_ms > budget_ms, warned      # dt 1 ms, real_time_factor 1
     assert 'take about all the CPU' in warned
     h.spin_until(lambda: any(m.status[0].level == DiagnosticStatus.WARN for m in h.diagnostics),
-                 '/diagnostics at WARN')
+                 '/diagnostics at WARN', timeout=PROMPT_REAL_CLOCK)
     (status, *_) = [m.status[0] for m in h.diagnostics
                     if m.status[0].level == DiagnosticStatus.WARN]
     assert 'below real time' in status.message or 'lagging' in status.message, status.message

@@ -49,6 +49,21 @@ STEPS = {
 }
 # periods the default (at auto) runs again with more steps over PROFILE
 REPEATED_DEFAULT_AUTO = 23.0
+# The BDF stepper (core/_csrc/stepping/bdf.c) on the simply supported default at its own
+# tolerance (auto: 3e-3, AUTO_TOLERANCE), with its RC source and with an ideal one: per
+# stretch of PROFILE, (steps, Jacobians, LU factorizations, rejected steps). They follow from
+# its constants (NEWTON_MAXITER, NEWTON_TOL, LU_KEEP, MIN_FACTOR, MAX_FACTOR, FIT_ROUND_OFF,
+# the first step's rule; BDF_LOCAL_TOLERANCE, BDF_SLOW_WEIGHT in det_sim_ros.sim.integrators),
+# which the kernel and its numpy reference share: a change to one of them in both shows here.
+BDF_SCENES = {
+    'simply_supported': {'scene.beam': 'simply_supported'},
+    'simply_supported_ideal': {'scene.beam': 'simply_supported', 'scene.source': 'ideal',
+                               'integrator.method': 'bdf'},
+}
+BDF_COUNTS = {
+    'simply_supported': [(53, 1, 4, 0), (698, 5, 36, 12), (716, 22, 59, 11)],
+    'simply_supported_ideal': [(53, 1, 4, 0), (702, 4, 30, 9), (742, 23, 58, 15)],
+}
 
 
 def step_counts(name):
@@ -83,3 +98,19 @@ def test_repeated_periods_are_counted_and_pinned():
                 sim.step()
         counts[substeps] = sim.stepper.periods_repeated
     assert counts == {0: REPEATED_DEFAULT_AUTO, 4: 0.0}
+
+
+@pytest.mark.parametrize('name', sorted(BDF_SCENES))
+def test_bdf_steps_jacobians_factorizations_and_rejections_are_pinned(name):
+    sim = Simulator(load_scene('default', {**BDF_SCENES[name], 'integrator.tolerance': 0.0}))
+    assert sim.method.name == 'bdf'
+    counts = []
+    for volts, periods in PROFILE:
+        sim.set_input([volts])
+        before = (sim.steps_taken, *sim.stepper.bdf_counts())
+        for _ in range(periods):
+            sim.step()
+        after = (sim.steps_taken, *sim.stepper.bdf_counts())
+        counts.append(tuple(a - b for a, b in zip(after, before)))
+    assert not sim.fault
+    assert counts == BDF_COUNTS[name]

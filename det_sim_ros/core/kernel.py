@@ -11,7 +11,11 @@ Physics and stepping:
   settings and the per-period step-count control; one count per independent coupled group.
 - ``matrix_phis(Z, scale, full, half)``: the phi functions of a small matrix (the dense linear
   part of 'etdrk4_linearized'; det_sim_ros.physics.matrix_phi is the same in numpy).
-- status codes ``OK``, ``BAD_STRETCH``, ``NON_FINITE``, ``BAD_SLOPE``.
+- status codes ``OK``, ``BAD_STRETCH``, ``NON_FINITE``, ``BAD_SLOPE`` (the model's domain) and
+  ``STEP_UNDERFLOW``, ``NO_PROGRESS``, ``SINGULAR`` (the BDF stepper's failures); their text
+  for users is det_sim_ros.physics.model's. A failed period leaves x at its start.
+- ``Stepper.plant_nan(site, after, lasting=False)``: a NaN planted in a right-hand side or a
+  BDF Jacobian, for the tests that check how a period fails.
 
 Wire and log (the bytes of det_sim_ros.io.contract and det_sim_ros.io.log):
 
@@ -29,14 +33,16 @@ compiled kernel to it on random states of every scene kind.
 
 try:
     from ._ckernel import (ARENA_SLOTS, BAD_SLOPE, BAD_STRETCH, CELL_OUTPUTS, FrameMap,
-                           keep_owned_probe, matrix_phis, Model, NON_FINITE, OK, pack_records,
-                           SampleCodec, SensorReader, Stepper)
+                           keep_owned_probe, matrix_phis, Model, NO_PROGRESS, NON_FINITE, OK,
+                           pack_records, SampleCodec, SensorReader, SINGULAR, Stepper,
+                           STEP_UNDERFLOW)
 except ImportError as error:  # pragma: no cover - only a broken install gets here
     raise ImportError(
         'det_sim_ros: the compiled kernel det_sim_ros.core._ckernel is missing or broken '
         f'({error}). It is built when the package is installed: `pip install .` (needs a C '
         'compiler); in a source checkout, `python setup.py build_ext --inplace`.') from None
 
-__all__ = ['Model', 'Stepper', 'OK', 'BAD_STRETCH', 'NON_FINITE', 'BAD_SLOPE', 'CELL_OUTPUTS',
+__all__ = ['Model', 'Stepper', 'OK', 'BAD_STRETCH', 'NON_FINITE', 'BAD_SLOPE', 'STEP_UNDERFLOW',
+           'NO_PROGRESS', 'SINGULAR', 'CELL_OUTPUTS',
            'SampleCodec', 'pack_records', 'FrameMap', 'matrix_phis', 'SensorReader',
            'ARENA_SLOTS', 'keep_owned_probe']

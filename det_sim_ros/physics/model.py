@@ -55,9 +55,13 @@ CELL_OUTPUTS = ('q', 'q_dot', 'y', 'lambda', 'q_p', 'v_p', 'i_DE', 'C', 'eps_E')
 GLOBAL_OUTPUTS = ('H', 'P_in', 'P_diss')
 _STATUS_TEXT = {
     kernel.BAD_STRETCH: 'DET stretch lambda = (l - y)/l0 <= 0: the beam ends met (l - y <= 0)',
-    kernel.NON_FINITE: 'non-finite state or output (NaN or inf)',
+    kernel.NON_FINITE: 'non-finite state, rate or output (NaN or inf)',
     kernel.BAD_SLOPE: "beam slope |w'| reached 1 (theta = 90 deg): outside the 'exact' "
                         "kinematics (w' = sin theta); use fidelity 'consistent' for such motions",
+    kernel.STEP_UNDERFLOW: 'the BDF step size underflowed (below 1e-10 of the control period): '
+                           'the state changes faster than the stepper can follow',
+    kernel.NO_PROGRESS: 'the BDF stepper made no progress (100000 steps in one control period)',
+    kernel.SINGULAR: 'the BDF iteration matrix I - h/alpha J is singular',
 }
 
 

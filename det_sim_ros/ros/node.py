@@ -52,6 +52,7 @@ __all__ = ['SimNode', 'main', 'STRUCTURE_TOPIC', 'rest_shortenings',
            'structure_channels', 'make_executor', 'spin']
 
 NODE_NAME = 'sim_node'
+OUTPUT_HISTORY = 1000   # samples each output writer keeps for its reliable readers (1 s at 1 kHz)
 # (the topic contract: names, types, channels, y0, the bytes on the wire: det_sim_ros.io.contract)
 
 
@@ -128,8 +129,14 @@ class SimNode(Node):
             raise SceneError(refusal)
         keep_all = QoSProfile(history=HistoryPolicy.KEEP_ALL)
         in_qos = keep_all if self._p('qos_keep_all') else QoSProfile(depth=10)
-        out_qos = qos_profile_sensor_data if self._p('qos_sensor_data') else in_qos
-        self._create_endpoints(in_qos, out_qos)
+        # the outputs' writers keep a second of samples: a reader held up by a busy host (a
+        # slow terminal, a stalled process) gets every one repaired, not only the last 10
+        sensor_data = self._p('qos_sensor_data')
+        out_qos = (qos_profile_sensor_data if sensor_data else keep_all
+                   if self._p('qos_keep_all') else QoSProfile(depth=OUTPUT_HISTORY))
+        # (a marker frame is large and only the newest matters: the inputs' depth)
+        marker_qos = qos_profile_sensor_data if sensor_data else in_qos
+        self._create_endpoints(in_qos, out_qos, marker_qos)
         self._gate = self._make_gate()
         self._pacing.start(self)
         self._reports = NodeReports(self, self._diag_pub, self._p('diagnostics_period'),
@@ -188,7 +195,7 @@ class SimNode(Node):
             self.destroy_timer(self._gate_timer)
             self._pacing.run(self.running)
 
-    def _create_endpoints(self, in_qos, out_qos):
+    def _create_endpoints(self, in_qos, out_qos, marker_qos):
         # the sample's messages (measured by the scene's sensors, if any, and their truth)
         self._outputs, self._output_pubs, self._truth_pubs, self._publish_outputs = attach_outputs(
             self, self.contract, out_qos)
@@ -197,7 +204,7 @@ class SimNode(Node):
         self._publish_clock = self._clock_pub.publish if self._clock_pub else None
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         self._markers = attach_markers(self, self._sim.model, self._p('markers.rate_hz'),
-                                       self._p('markers.frame_id'), out_qos)
+                                       self._p('markers.frame_id'), marker_qos)
         # commands arrive as CDR bytes (raw): decoded and checked by the contract, and logged
         # re-encoded with zero padding (equal commands give equal logs)
         self._command_subs = {

@@ -15,9 +15,24 @@ __all__ = ['AUTO_SHAPES', 'AUTO_RITZ', 'resolve_level']
 
 # beam -> family: the clamped-clamped beam's symmetric buckling modes converge geometrically
 # (its elastica is a whole period of an elliptic function); the clamped-pinned beam's do not,
-# and its polynomials need fewer terms
+# and its polynomials need fewer terms.
+#
+# The assumption this rests on: the clamped-clamped beam's buckling modes span only symmetric
+# shapes (about mid-span), which is exact only while nothing loads a beam asymmetrically. Each
+# beam is loaded only through its end shortening (the DET's force, the interface mass, the
+# structure's inertia: physics/model.py), which is even in every antisymmetric shape, and
+# starts symmetric (the rest state, the released shape): the antisymmetric coordinates of a
+# complete basis then stay zero. A load off the axis or off mid-span (a point mass, a
+# sensor's force, an imperfection) would break it: test/test_symmetric_modes.py runs every
+# shipped scene on a complete basis and fails if a fixed beam's shape gains an antisymmetric
+# part.
+#
+# n_ritz has one meaning in every family: the shape functions (coordinates) of a beam, each a
+# state pair (q, q_dot). What they span differs: the fixed beam's buckling modes are
+# symmetric modes only (3 of them span what the polynomials' 3 symmetric terms of n_r 5 do,
+# and better), the polynomials and the clamped-pinned modes every shape.
 AUTO_SHAPES = {'fixed': 'buckling_modes', 'simply_supported': 'polynomial'}
-# (beam, family) -> terms
+# (beam, family) -> shape functions per beam
 AUTO_RITZ = {('fixed', 'buckling_modes'): 3, ('fixed', 'polynomial'): 9,
              ('simply_supported', 'polynomial'): 7, ('simply_supported', 'buckling_modes'): 9}
 

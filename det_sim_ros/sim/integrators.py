@@ -29,7 +29,7 @@ import numpy as np
 
 from ..core import kernel
 
-__all__ = ['Method', 'METHODS', 'MULTISTEP', 'BDF', 'BDF_MIN_TERMS', 'BDF_MIN_TOLERANCE',
+__all__ = ['Method', 'METHODS', 'MULTISTEP', 'BDF', 'BDF_MIN_COORDINATES', 'BDF_MIN_TOLERANCE',
            'bdf_weights', 'get_method',
            'choose_substeps', 'step_control', 'error_weights',
            'linear_refresh',
@@ -171,13 +171,13 @@ BDF = Method('bdf', 5, (0.0,), _ETD_EULER, False,
              multistep=True)
 MULTISTEP = {BDF.name: BDF}
 # 'auto' steps a single coupled group (no array copies, no amplifier) with BDF from this many
-# Ritz terms in a beam, at a tolerance of at least BDF_MIN_TOLERANCE: the simply supported
-# level (7 polynomials, 3e-3) ran its 2 Hz switching case 3x faster at the same error and its
-# controller case 1.5x (bench/controller_cost.py, docs/fidelity.md "Which method"). Elsewhere
-# the linearized stages stay ahead: at 3 buckling modes (the fixed default) their phi functions
-# are 6 x 6, and at 1e-4 (n_r 9) BDF's orders <= 5 take many steps (a dithered hold 7x against
-# 16x real time).
-BDF_MIN_TERMS = 6
+# Ritz coordinates in a beam (its n_ritz, whatever family: the states the stiff beam modes
+# cost; det_sim_ros.scenes.levels), at a tolerance of at least BDF_MIN_TOLERANCE: there it
+# steps the simply supported level's switching and controller cases faster at the same error;
+# elsewhere the linearized stages stay ahead (at 3 buckling modes their phi functions are
+# 6 x 6; at 1e-4 BDF's orders <= 5 take many steps). The measurements: docs/performance.md,
+# "Methods side by side", and bench/controller_cost.py.
+BDF_MIN_COORDINATES = 6
 BDF_MIN_TOLERANCE = 1e-3
 # The dense linear part of 'etdrk4_linearized' is taken anew at a period's start when the input
 # changed or a q or qdot moved by more than this in the error norm's scale (beam length, length
@@ -410,12 +410,11 @@ def error_weights(model) -> np.ndarray:
 # The BDF stepper's norm (core/_csrc/stepping/bdf.c, physics/reference_bdf.py) holds every
 # state it integrates implicitly: the beams' as error_weights, the charge on C0 v_max and the
 # creep strain on 1 (strain), both BDF_SLOW_WEIGHT times looser. Chosen on the simply supported
-# level (n_r 7, 3e-3) over its step, 2 Hz switching and controller cases and a hold at 1.5 kV
-# dithered +-25 V every period: 1e-2 resolves each dither jump's charge transient (controller
-# 18x, dither 17x real time); 1e-3 41x / 44x; 1e-4 43x / 51x at 0.15-0.59 % error; 1e-5 and
-# less (0: the charge out of the norm, and out of Newton's test) no faster and less accurate
-# (controller 29-37x, up to 0.78 %). The power monitor's integrals (W_in, W_diss) feed back on
-# nothing and stay out (0).
+# level (n_r 7, 3e-3) over its step, 2 Hz switching and controller cases and a dithered hold
+# (docs/numerics.md, "The BDF stepper", has the scan): tighter resolves every dither jump's
+# charge transient at great cost, looser leaves the charge out of Newton's test and is no
+# faster. The power monitor's integrals (W_in, W_diss) feed back on nothing: the stepper keeps
+# them out of its norm and its iteration matrix whatever their weight (bdf.h, n_core).
 BDF_SLOW_WEIGHT = 1e-4
 
 

@@ -24,8 +24,9 @@ from typing import Callable
 import numpy as np
 
 from .amplifier import CommandStage
-from .integrators import (BDF_MIN_TERMS, BDF_MIN_TOLERANCE, get_method, integration_tolerance,
-                          make_stepper, Method, step_control, transient_settings)
+from .integrators import (BDF_MIN_COORDINATES, BDF_MIN_TOLERANCE, get_method,
+                          integration_tolerance, make_stepper, Method, step_control,
+                          transient_settings)
 from ..core import kernel
 from ..physics.model import build_model, Model, ModelDomainError
 from ..physics.statics import initial_state
@@ -126,12 +127,12 @@ class Simulator:
         if name == 'auto':
             if self.scene.source != 'rc':
                 return get_method('dp5')
-            # beams with more than one Ritz term have stiff, heavily damped modes; from
-            # BDF_MIN_TERMS on, BDF steps them for less than the linearized stages' phi upkeep
-            # (at loose tolerances)
-            modes = np.diff(a.cell_q)
+            # beams with more than one Ritz coordinate have stiff, heavily damped modes; from
+            # BDF_MIN_COORDINATES on, BDF steps them for less than the linearized stages' phi
+            # upkeep (at loose tolerances)
+            modes = np.diff(a.cell_q)   # coordinates per beam: its n_ritz
             tolerance = integration_tolerance(self.scene)
-            if (one_group and np.max(modes) >= BDF_MIN_TERMS
+            if (one_group and np.max(modes) >= BDF_MIN_COORDINATES
                     and tolerance >= BDF_MIN_TOLERANCE):
                 return get_method('bdf')
             return get_method('etdrk4_linearized' if np.any(modes > 1) else 'etdrk4')

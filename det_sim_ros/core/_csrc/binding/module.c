@@ -48,6 +48,9 @@ PyMODINIT_FUNC PyInit__ckernel(void)
         || PyModule_AddIntConstant(mod, "BAD_STRETCH", DS_BAD_STRETCH) < 0
         || PyModule_AddIntConstant(mod, "NON_FINITE", DS_NON_FINITE) < 0
         || PyModule_AddIntConstant(mod, "BAD_SLOPE", DS_BAD_SLOPE) < 0
+        || PyModule_AddIntConstant(mod, "STEP_UNDERFLOW", DS_STEP_UNDERFLOW) < 0
+        || PyModule_AddIntConstant(mod, "NO_PROGRESS", DS_NO_PROGRESS) < 0
+        || PyModule_AddIntConstant(mod, "SINGULAR", DS_SINGULAR) < 0
         || PyModule_AddIntConstant(mod, "CELL_OUTPUTS", DS_CELL_OUTPUTS) < 0
         || PyModule_AddIntConstant(mod, "ARENA_SLOTS", ARENA_SLOTS) < 0) {
         Py_DECREF(mod);

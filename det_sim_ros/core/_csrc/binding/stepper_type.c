@@ -14,6 +14,7 @@ typedef struct {
     ModelObject *model;
     ds_stepper st;
     ds_work out_work;   /* outputs after a period: the stepper's own (run() releases the GIL) */
+    double *x_start;    /* period(): x at the period's start, put back if its outputs fail */
     int ready;
 } StepperObject;
 
@@ -22,6 +23,7 @@ static void Stepper_dealloc(StepperObject *self)
     if (self->ready) {
         ds_stepper_free(&self->st);
         ds_work_free(&self->out_work);
+        free(self->x_start);
     }
     Py_XDECREF(self->model);
     Py_TYPE(self)->tp_free((PyObject *)self);
@@ -105,8 +107,11 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
         self->st.bdf_tol = bdf_tol;
         self->st.bdf_weights = b[4].view.buf;
         const int init = ds_stepper_init(&self->st, &mo->m, dt, z_tol, fine, &ctl, bw.buf);
-        if (init < 0 || ds_work_init(&self->out_work, &mo->m) < 0) {
+        self->x_start = init < 0 ? NULL : calloc((size_t)mo->m.n_state, sizeof(double));
+        if (init < 0 || !self->x_start || ds_work_init(&self->out_work, &mo->m) < 0) {
             ds_stepper_free(&self->st);
+            free(self->x_start);
+            self->x_start = NULL;
             if (init == -2)
                 PyErr_SetString(PyExc_ValueError, "a dense linear part needs every stage node "
                                                   "c_i and 1 among the table's phi arguments");
@@ -186,6 +191,7 @@ static PyObject *Stepper_period(StepperObject *self, PyObject *const *args, Py_s
         return NULL;
     double *x = b[0].view.buf, *u = b[2].view.buf;
     const double *u_old = b[1].view.buf;
+    memcpy(self->x_start, x, (size_t)m->n_state * sizeof(double));
     int status;
     if (self->st.n_groups > 1) {   /* batches take long enough to let other threads run */
         Py_BEGIN_ALLOW_THREADS
@@ -194,8 +200,11 @@ static PyObject *Stepper_period(StepperObject *self, PyObject *const *args, Py_s
     } else {
         status = ds_period(&self->st, x, u_old, u);
     }
-    if (status == DS_OK)
+    if (status == DS_OK) {
         status = ds_outputs(m, x, u, b[3].view.buf, &self->out_work);
+        if (status != DS_OK)   /* a failed period leaves x at its start, whatever failed */
+            memcpy(x, self->x_start, (size_t)m->n_state * sizeof(double));
+    }
     release_buffers(b, 4);
     return PyLong_FromLong(status);
 }
@@ -322,6 +331,39 @@ static PyObject *Stepper_linear_counts(StepperObject *self, PyObject *unused)
     return Py_BuildValue("(LLL)", refreshes, fills, chains);
 }
 
+/*
+ * plant_nan(site, after, lasting=False): a fault for tests. site 'rhs': the after-th right-hand
+ * side the stepper evaluates from now (every group's) returns NaN in its first acceleration; 'jacobian':
+ * the after-th Jacobian a BDF stepper takes from now gets a NaN. With ``lasting`` every
+ * evaluation after it too. after 0 removes the plant.
+ */
+static PyObject *Stepper_plant_nan(StepperObject *self, PyObject *args, PyObject *kwds)
+{
+    static char *kwlist[] = {"site", "after", "lasting", NULL};
+    const char *site;
+    long long after;
+    int lasting = 0;
+    NEED_READY(self);
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "sL|p", kwlist, &site, &after, &lasting))
+        return NULL;
+    const int rhs = strcmp(site, "rhs") == 0, jac = strcmp(site, "jacobian") == 0;
+    if ((!rhs && !jac) || after < 0) {
+        PyErr_SetString(PyExc_ValueError, "plant_nan: site 'rhs' or 'jacobian', after >= 0");
+        return NULL;
+    }
+    for (int64_t gi = 0; gi < self->st.n_groups; gi++) {
+        ds_group *g = &self->st.group[gi];
+        if (rhs) {
+            g->w.nan_after = after;
+            g->w.nan_lasting = lasting;
+        } else if (g->bdf) {
+            g->bdf->nan_after = after;
+            g->bdf->nan_lasting = lasting;
+        }
+    }
+    Py_RETURN_NONE;
+}
+
 static PyObject *Stepper_bdf_counts(StepperObject *self, PyObject *unused)
 {
     (void)unused;
@@ -442,6 +484,10 @@ static PyMethodDef Stepper_methods[] = {
      "linearized stepper"},
     {"bdf_counts", (PyCFunction)Stepper_bdf_counts, METH_NOARGS,
      "bdf_counts() -> (Jacobians taken, LU factorizations, steps rejected) of a BDF stepper"},
+    {"plant_nan", (PyCFunction)(void (*)(void))Stepper_plant_nan,
+     METH_VARARGS | METH_KEYWORDS,
+     "plant_nan(site, after, lasting=False): a NaN in the after-th right-hand side ('rhs') "
+     "or BDF Jacobian ('jacobian') from now: a fault for tests"},
     {"reset_control", (PyCFunction)Stepper_reset_control, METH_NOARGS,
      "step counts and error estimates back to their initial values"},
     {"group_substeps", (PyCFunction)Stepper_group_substeps, METH_NOARGS,

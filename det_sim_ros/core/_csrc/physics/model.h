@@ -24,8 +24,12 @@
 
 #include <stdint.h>
 
-/* Status codes (same values as det_sim_ros.core.kernel.OK ...). */
-enum { DS_OK = 0, DS_BAD_STRETCH = 1, DS_NON_FINITE = 2, DS_BAD_SLOPE = 3 };
+/* Status codes (same values as det_sim_ros.core.kernel.OK ...; the user's text of each is
+ * det_sim_ros/physics/model.py's). The last three are the BDF stepper's: its step size fell
+ * below MIN_STEP_FRACTION of the period, it took MAX_ATTEMPTS steps in one period, or its
+ * iteration matrix I - h/alpha J had a zero pivot (stepping/bdf.c). */
+enum { DS_OK = 0, DS_BAD_STRETCH = 1, DS_NON_FINITE = 2, DS_BAD_SLOPE = 3,
+       DS_STEP_UNDERFLOW = 4, DS_NO_PROGRESS = 5, DS_SINGULAR = 6 };
 
 /* Kinematics level of a cell (scene fidelity). */
 enum { KIN_PAPER = 0, KIN_CONSISTENT = 1, KIN_EXACT = 2 };
@@ -89,6 +93,10 @@ typedef struct {
     int *i_law, *v_law;                /* each DET's amplifier laws at the state of the last
                                         * ds_amp_laws on this scratch (amplifier.h) */
     int owned;                         /* the buffer is this scratch's (ds_work_init) */
+    int64_t nan_after;                 /* a test's planted fault: the nan_after-th rhs from
+                                        * now returns NaN in its first acceleration (0: none;
+                                        * Stepper.plant_nan) */
+    int nan_lasting;                   /* ... and every rhs after it */
 } ds_work;
 
 #endif

@@ -442,9 +442,13 @@ rhs_general(const ds_model *m, const double *x, const double *u, double *dx, ds_
 int ds_rhs(const ds_model *m, const double *x, const double *u, double *dx, ds_work *w,
            int quasi_static)
 {
-    if (m->one_term)
-        return rhs_one_term(m, x, u, dx, w, quasi_static);
-    return rhs_general(m, x, u, dx, w, quasi_static);
+    const int status = m->one_term ? rhs_one_term(m, x, u, dx, w, quasi_static)
+                                   : rhs_general(m, x, u, dx, w, quasi_static);
+    if (w->nan_after > 0 && --w->nan_after == 0) {   /* a planted fault (tests only) */
+        dx[m->n_q] = NAN;   /* an acceleration: every stepper reads it */
+        w->nan_after = w->nan_lasting;
+    }
+    return status;
 }
 
 /* Diagonal linear part for exponential steppers: dq_p/dt = -q_p/(C Rs||Rp) + ...; all zero

@@ -26,7 +26,7 @@
  * A jump du moves the charge the circuit relaxes to by dz = C du Rp/(Rs+Rp); the lag decays
  * like dz exp(-t/tau) with tau = C (Rs || Rp). While it is large it changes the electrostatic
  * force on the time scale tau, which explicit mechanics stages with steps >> tau cannot follow
- * (measured: at 1 ms / 8 steps this alone made the 'step' error 1.9e-3; resolved, 8.6e-6).
+ * (docs/numerics.md, "Stepping", has what resolving it buys).
  */
 static void charge_transient(const ds_stepper *st, ds_group *g, const double *x,
                              const double *u_old, const double *u_new, double *T,
@@ -67,11 +67,9 @@ static void charge_transient(const ds_stepper *st, ds_group *g, const double *x,
 #define DYADIC_LEVELS 30
 /* From this many linearized coordinates (n_r 6) a transient climbs back to h by halvings
  * rather than taking one step to the grid of h. A new step size costs a phi chain, ~nd^3, a
- * step ~nd^2. Measured on a 1 kV command dithered +-25 V per period and on the controller
- * case: the step to the grid is 1.2-2.1x faster at 3 and 5 terms (nd 6, 10); at 7 terms the
- * climb is 1.2-1.5x faster where the Jacobian is renewed often (the grid's (1 - 2^-k) h
- * sizes need chains of their own after each) and 1.1x slower on a steady dither; at 9 terms
- * the climb is 2.2x faster. */
+ * step ~nd^2: with few coordinates the step to the grid is cheaper, with many the climb (the
+ * grid's (1 - 2^-k) h sizes need chains of their own after each Jacobian). The measurements:
+ * docs/numerics.md, "Charge transients in dyadic steps". */
 #define CLIMB_MIN_ND 12
 
 /*
@@ -139,8 +137,8 @@ static int fixed_period(const ds_stepper *st, ds_group *g, double *x, const doub
              * ratio exp(fine/5) from fine*tau (half the steps of uniform fine*tau steps).
              * fine is calibrated for jumps of jump_ref (the 'step' scenes' v_max); a smaller
              * jump du leaves a lag du/jump_ref as large, so the same local error allows a
-             * first step (jump_ref/du)^(1/5) longer: a controller's 1 V change per period
-             * took 22 steps per period, now 11, at the same error. */
+             * first step (jump_ref/du)^(1/5) longer (a controller's small changes per period
+             * take half the steps at the same error: docs/numerics.md, "Stepping"). */
             double fine = st->fine;
             if (st->jump_ref > 0.0 && jump < st->jump_ref)
                 fine *= pow(st->jump_ref / jump, 0.2);

@@ -89,6 +89,16 @@ CORE_PART void pending_estimate(const double *emb, const double *N, double *pend
     }
 }
 
+/* A stage state with a NaN or inf reads as a slope outside the exact kinematics in the
+ * right-hand side (its stretch is NaN): name it for what it is. */
+static int stage_status(int status, const double *X, int64_t nx)
+{
+    for (int64_t k = 0; k < nx && status == DS_BAD_SLOPE; k++)
+        if (!isfinite(X[k]))
+            return DS_NON_FINITE;
+    return status;
+}
+
 /* One step of size h from x (stiff weights set): the stages N_i, the new state in g->X.
  * h_prev > 0: the previous step's estimate is completed with N_0. Returns a status. */
 CORE_PART int one_step(const ds_method *me, ds_group *g, const double *x, const double *u,
@@ -107,7 +117,7 @@ CORE_PART int one_step(const ds_method *me, ds_group *g, const double *x, const 
         double *Ni = N + i * nx;
         const int status = ds_rhs(m, X, u, Ni, &g->w, g->quasi_static);
         if (status != DS_OK)
-            return status;
+            return stage_status(status, X, nx);
         for (int64_t k = s0; k < s1; k++)
             Ni[k] -= g->L[k] * X[k];
         if (g->cpl)
@@ -308,7 +318,7 @@ static int one_step_linear(const ds_method *me, ds_group *g, const ds_lin_slot *
         double *Ni = N + i * nx;
         const int status = ds_rhs(m, X, u, Ni, &g->w, g->quasi_static);
         if (status != DS_OK)
-            return status;
+            return stage_status(status, X, nx);
         linear_remainder(g, X, Ni, s0, s1);
         if (g->cpl)
             ds_coupling_remainder(me, g, X, Ni);

@@ -232,8 +232,10 @@ int ds_stepper_init(ds_stepper *st, const ds_model *m, double dt, double z_tol, 
         }
         if (st->bdf) {   /* one coupled group without an amplifier (checked by the caller) */
             g->bdf = malloc(sizeof(ds_bdf));
-            if (!g->bdf || ds_bdf_init(g->bdf, g->m->n_state, st->bdf_weights, st->bdf_tol,
-                                       st->dt / 16.0) < 0) {
+            /* the power monitor's integrals come last: bookkeeping, out of the iteration */
+            const int64_t n_core = g->m->power ? g->m->i_power : g->m->n_state;
+            if (!g->bdf || ds_bdf_init(g->bdf, g->m->n_state, n_core, st->bdf_weights,
+                                       st->bdf_tol) < 0) {
                 free(g->bdf);
                 g->bdf = NULL;
                 return -1;
