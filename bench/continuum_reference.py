@@ -43,9 +43,9 @@ import subprocess
 import sys
 import time
 
-from det_sim_ros.analysis.scenarios import (delta_y, snap_times, STEP_END, step_scene,
-                                            STEP_SWITCH_TIMES, step_voltage, SWITCHING_END,
-                                            switching_error, switching_voltage)
+from det_sim_ros.analysis.scenarios import (delta_y, pwm_voltage, snap_times, STEP_END,
+                                            step_scene, STEP_SWITCH_TIMES, step_voltage,
+                                            SWITCHING_END, switching_error, switching_voltage)
 from det_sim_ros.physics.model import build_model
 from det_sim_ros.physics.statics import initial_state
 import numpy as np
@@ -71,8 +71,8 @@ def case_name(beam: str, eps_b: float) -> str:
 
 
 def switching_case_name(beam: str, eps_b: float, drive) -> str:
-    """Return the key of a switching case, e.g. 'switching_2hz/fixed_0.20'."""
-    kind = 'controller' if drive == 'controller' else f'switching_{drive:g}hz'
+    """Return the key of a switching case, e.g. 'switching_2hz/fixed_0.20' ('pwm/...')."""
+    kind = drive if drive in ('controller', 'pwm') else f'switching_{drive:g}hz'
     return f'{kind}/{case_name(beam, eps_b)}'
 
 
@@ -86,11 +86,11 @@ def controller_volts(periods: int, dt: float, copies: int = 1, seed: int = 0) ->
 
 
 def switching_inputs(beam: str, eps_b: float, drive, dt: float):
-    """Return (scene overrides, per-period volts) of a switching case."""
+    """Return (scene overrides, per-period volts) of a switching case ('pwm': the scenario's)."""
     n = int(round(SWITCHING_END / dt))
     if drive == 'controller':
         return {'scene.initial_state': 'rest'}, controller_volts(n, dt)[:, 0]
-    voltage = switching_voltage(3000.0, drive)
+    voltage = pwm_voltage(3000.0) if drive == 'pwm' else switching_voltage(3000.0, drive)
     return {'scene.initial_state': 'released'}, np.array([voltage(k * dt) for k in range(n)])
 
 
@@ -103,14 +103,15 @@ def _state_scale(model) -> np.ndarray:
 
 
 def solve_case(beam: str, eps_b: float, n_r: int, rtol: float, drive=None,
-               shapes: str = 'polynomial') -> dict:
+               shapes: str = 'polynomial', overrides: dict | None = None) -> dict:
     """
     Return the 1 kHz samples t, y, q, dy of one case (exact kinematics, n_r terms of ``shapes``).
 
-    ``drive`` None: the step case; a frequency or 'controller': that switching case.
+    ``drive`` None: the step case; a frequency, 'controller' or 'pwm': that switching case.
+    ``overrides``: further scene keys (a perturbed twin's ``physics.m``).
     """
     level = {'scene.fidelity': 'exact', 'scene.n_ritz': n_r, 'scene.shapes': shapes,
-             'scene.monitor_power': False}
+             'scene.monitor_power': False, **(overrides or {})}
     if drive is None:
         scene = step_scene(beam, eps_b, **level)
         n = int(round(STEP_END / scene.dt))

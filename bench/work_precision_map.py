@@ -14,6 +14,14 @@ every point of GRID, each case run through ``simulate()`` (CPU: time.process_tim
   27-85 % of the travel, bench/continuum_reference.py's table: the path depends on rounding);
 - 'controller': both beams at 0.20 from rest, a new command every period (a 0 / 2.5 kV square
   wave at 2 Hz plus a +-25 V dither), 2.5 s: error as for switching;
+- with ``--pwm`` (instead of the cases above; its own CSV and doc section): the 'pwm'
+  scenario (released; from 0.5 s to 2.5 s a 10 Hz PWM at 3 kV, duty 30 %, 50 %, 70 %, 50 %)
+  on both beams at eps_b 0.15 and 0.20, at PWM_POINTS. Judged for robustness first:
+  ``analysis.predictability.predictability()`` of the point's run, and the same twin of the
+  converged reference (interface mass x (1 + 1e-6), rtol x 0.9, LSODA). Where both paths are
+  robust the case is scored as switching (error, every snap within 2 ms); where either is not,
+  its error and snaps are reported, not scored (bench/pwm_statistics.py scores those on
+  statistics over ensembles);
 - with ``--array``: the shipped array (100 copies, two threads) under the controller's input
   (each copy its own dither), ARRAY_END s: x real time from both threads' CPU and the wall clock;
 - with ``--lsoda``: scipy's LSODA on the same compiled right-hand side (``Model.f``, one solve
@@ -25,16 +33,19 @@ its worst scored error there, whether it makes every snap, and its slowest case'
 "integration": its error against the same level at the tightest tolerance of the grid (the
 level's own converged run), over that run's error against the continuum.
 
-Writes bench/data/work_precision_map.csv (one row per point and case) and, with ``--plot``,
+Writes bench/data/work_precision_map.csv (one row per point and case; ``--pwm``:
+bench/data/work_precision_pwm.csv, ``--docs`` its own section) and, with ``--plot``,
 docs/figures/work_precision_map.png (per beam: worst error against the slowest case's CPU, one
 curve per level, the front marked); ``--docs`` rewrites the map's section of docs/fidelity.md;
 ``--plot-only`` redraws from the CSV. Run it under the bench lock:
 
     flock bench/.lock env PYTHONPATH=. python bench/work_precision_map.py [--quick]
         [--array] [--lsoda] [--plot] [--docs]
+    flock bench/.lock env PYTHONPATH=. python bench/work_precision_map.py --pwm [--quick]
+        [--docs]
 
-``--quick``: QUICK_GRID's points on two cases, the CSV into a temporary file unless --out names one
-(a smoke run).
+``--quick``: QUICK_GRID's points on two cases (with ``--pwm``: QUICK_PWM_POINTS against a
+coarse reference), the CSV into a temporary file unless --out names one (a smoke run).
 """
 
 from __future__ import annotations
@@ -46,9 +57,11 @@ import sys
 import tempfile
 import time
 
-from continuum_reference import (case_name, CASES, controller_volts, load_reference, solve_case,
-                                 stroke, stroke_error, switched, switching_case_name,
-                                 SWITCHING_CASES, switching_inputs)
+from continuum_reference import (case_name, CASES, controller_volts, load_reference,
+                                 REFERENCE_N_R, REFERENCE_RTOL, solve_case, stroke,
+                                 stroke_error, switched, switching_case_name, SWITCHING_CASES,
+                                 switching_inputs)
+from det_sim_ros.analysis.predictability import Perturbation, predictability, Stroke
 from det_sim_ros.analysis.scenarios import (delta_y, snap_times, STEP_END, step_scene,
                                             step_voltage, SWITCHING_END, switching_error)
 from det_sim_ros.physics.model import ModelDomainError
@@ -78,12 +91,22 @@ ARRAY_POINTS = (('paper', POLY, 1, 1e-6), ('exact', POLY, 3, 1e-2), ('exact', MO
                 ('exact', MODES, 3, 1e-3))
 LSODA_POINTS = (('exact', MODES, 3, 1e-4), ('exact', MODES, 3, 1e-6), ('exact', POLY, 7, 1e-4),
                 ('exact', POLY, 7, 1e-6))
+# the 'pwm' cases' points: each beam's default, the levels on the map's fronts, tight ones
+PWM_POINTS = (('exact', MODES, 3, 1e-2), ('exact', MODES, 3, 1e-4), ('exact', MODES, 4, 1e-3),
+              ('exact', MODES, 5, 1e-3), ('exact', POLY, 7, 3e-3), ('exact', POLY, 7, 1e-4),
+              ('exact', POLY, 9, 1e-3), ('exact', POLY, 9, 1e-4))
+QUICK_PWM_POINTS = (('exact', MODES, 3, 1e-2), ('exact', POLY, 7, 3e-3))
+PWM_CASES = (('fixed', 0.15), ('fixed', 0.20), ('simply_supported', 0.15),
+             ('simply_supported', 0.20))
+PWM_CSV_FIELDS = ('point_robust_until', 'reference_robust_until')
 ARRAY_END = 1.0         # s
 ARRAY_THREADS = 2
 BEAMS = ('fixed', 'simply_supported')
 BEGIN, END = '<!-- work_precision_map: begin -->', '<!-- work_precision_map: end -->'
+PWM_BEGIN, PWM_END = '<!-- work_precision_pwm: begin -->', '<!-- work_precision_pwm: end -->'
 HERE = os.path.dirname(os.path.abspath(__file__))
 CSV = os.path.join(HERE, 'data', 'work_precision_map.csv')
+PWM_CSV = os.path.join(HERE, 'data', 'work_precision_pwm.csv')
 FIGURE = os.path.join(HERE, os.pardir, 'docs', 'figures', 'work_precision_map.png')
 FIELDS = ('workload', 'case', 'beam', 'fidelity', 'shapes', 'n_r', 'tolerance', 'error',
           'integration_error', 'snaps', 'snaps_ref', 'right', 'scored', 'cpu_per_s',
@@ -190,6 +213,129 @@ def lsoda_rows(point, reference):
         print(f'  lsoda {name:>34} {_level(*point[:3])} rtol {point[3]:.0e}: error '
               f'{error:.2e} {1 / cpu:.1f}x', flush=True)
     return rows
+
+
+def pwm_references(quick: bool = False) -> dict:
+    """
+    Return {case name: reference} of the 'pwm' cases, each with its robustness.
+
+    The converged beam (as the stored reference: exact, polynomial n_r 11, LSODA at 1e-10)
+    with 'robust_until', where its twin
+    (interface mass x (1 + 1e-6), rtol x 0.9, as predictability()'s) first leaves 5 % of the
+    stroke, None if never. ``quick``: n_r 7 at 1e-6 (a smoke run).
+    """
+    n_r, rtol = (7, 1e-6) if quick else (REFERENCE_N_R, REFERENCE_RTOL)
+    twin = Perturbation()
+    out = {}
+    for beam, eps_b in PWM_CASES:
+        scene = step_scene(beam, eps_b, **{'scene.initial_state': 'released'})
+        run = solve_case(beam, eps_b, n_r, rtol, 'pwm')
+        other = solve_case(beam, eps_b, n_r, rtol * twin.tolerance_factor, 'pwm',
+                           overrides={'physics.m': scene.physics.m * (1.0 + twin.relative)})
+        level = {'scene.fidelity': 'exact', 'scene.shapes': POLY, 'scene.n_ritz': n_r}
+        stroke_of = Stroke(Simulator(scene.replace(**level)).model)
+        distance = np.maximum(np.abs(run['y'] - other['y']) / stroke_of.y0[0],
+                              np.abs(run['q'] - other['q']) / stroke_of.q_gap[0])
+        beyond = np.nonzero(distance > 0.05)[0]
+        run['robust_until'] = float(run['t'][beyond[0]]) if beyond.size else None
+        run['peak'] = float(np.max(distance))
+        out[switching_case_name(beam, eps_b, 'pwm')] = run
+        print(f'  reference pwm/{case_name(beam, eps_b)} (n_r {n_r}, rtol {rtol:g}): '
+              f'{len(snap_times(run["t"], run["q"]))} snaps, its twin '
+              + ('robust' if beyond.size == 0 else f'beyond 5 % from {run["robust_until"]:.3f} s')
+              + f' (peak {run["peak"]:.1%})', flush=True)
+    return out
+
+
+def pwm_rows(point, references) -> list:
+    """Return the rows of the 'pwm' cases at one point, scored where both paths are robust."""
+    rows = []
+    for beam, eps_b in PWM_CASES:
+        name = switching_case_name(beam, eps_b, 'pwm')
+        ref = references[name]
+        try:
+            t, y, q, cpu, steps, repeated, scene = run_case(point, beam, eps_b, 'pwm')
+            # the twin's tolerance x 0.9 must not cross 'auto''s BDF threshold (1e-3): the
+            # stepper named as the run resolved it
+            scene = scene.replace(**{'integrator.method': Simulator(scene).method.name})
+            measured = predictability(scene, switching_inputs(beam, eps_b, 'pwm', 1e-3)[1],
+                                      SWITCHING_END)
+        except ModelDomainError as exc:
+            print(f'  {name:>40} {_level(*point[:3]):>24} {point[3]:.0e}: {exc}', flush=True)
+            continue
+        robust = measured.robust and ref['robust_until'] is None
+        error, _, snaps, snaps_ref, right, _ = score('pwm', t, y, q, ref)
+        rows.append(dict(zip(FIELDS + PWM_CSV_FIELDS, (
+            'pwm', name, beam, *point, error, float('nan'), snaps, snaps_ref, right, robust,
+            cpu, 1.0 / cpu, steps, repeated,
+            '' if measured.robust else measured.robust_until,
+            '' if ref['robust_until'] is None else ref['robust_until']))))
+        print(f'  {name:>40} {_level(*point[:3]):>24} {point[3]:.0e}: '
+              + ('robust' if measured.robust else f'not robust from {measured.robust_until:.3f} s')
+              + f', error {error:.2e} snaps {snaps}/{snaps_ref}'
+              + ('' if robust else ' (not scored)') + f' {1 / cpu:.0f}x', flush=True)
+    return rows
+
+
+def pwm_section(rows, references) -> str:
+    """Return the markdown of the 'pwm' cases: robustness, and the score where robust."""
+    import datetime
+    out = [f'Measured {datetime.date.today().isoformat()}, commit {_commit()}, {MACHINE}, by '
+           '`flock bench/.lock env PYTHONPATH=. python bench/work_precision_map.py --pwm '
+           "--docs`. The 'pwm' scenario (released; from 0.5 s a 10 Hz PWM at 3 kV, duty 30, "
+           "50, 70, 50 % for 0.5 s each, to 2.5 s). First robustness: the point's own run by "
+           '`predictability()` (its twin: interface mass × (1 + 1e-6), tolerance × 0.9, beyond '
+           '5 % of the stroke from the time given), and the same twin of the converged '
+           'reference (exact, polynomial n_r 11, LSODA at 1e-10, rtol × 0.9). Where both are '
+           'robust the case is scored as switching (max |y − y_ref| from 0.5 s / travel; '
+           "snaps made / the reference's, ✓ each within 2 ms); elsewhere the same numbers are "
+           'reported in italics, not scored: the path is not a result of either model.', '']
+    names = [switching_case_name(b, e, 'pwm') for b, e in PWM_CASES]
+    ref_cells = []
+    for name in names:
+        ref = references[name]
+        until = ('robust' if ref['robust_until'] is None
+                 else f'not robust from {ref["robust_until"]:.2f} s')
+        ref_cells.append(f'{until}, {len(snap_times(ref["t"], ref["q"]))} snaps')
+    out += ['| level | tolerance | ' + ' | '.join(
+                n.split('/')[1].replace('simply_supported', 'simply supported')
+                .replace('_', ' ε_b ') for n in names) + ' |',
+            '|---|---|' + '---|' * len(names),
+            '| converged reference | 1e-10 | ' + ' | '.join(ref_cells) + ' |']
+    by = {}
+    for r in map(_num_pwm, rows):
+        by.setdefault((r['fidelity'], r['shapes'], int(r['n_r']), r['tolerance']), {})[
+            r['case']] = r
+    for key in sorted(by, key=lambda k: (k[1] != MODES, k[2], -k[3])):
+        cells = []
+        for name in names:
+            r = by[key].get(name)
+            if r is None:
+                cells.append('–')
+                continue
+            until = ('robust' if r['point_robust_until'] == '' else
+                     f'not robust from {float(r["point_robust_until"]):.2f} s')
+            numbers = (f'{r["error"]:.1%}, {int(r["snaps"])}/{int(r["snaps_ref"])}'
+                       f'{" ✓" if r["right"] else " ✗"}, {r["x_real_time"]:.0f}×')
+            cells.append(f'{until}: ' + (numbers if r['scored'] else f'*{numbers}*'))
+        out.append(f'| {_level(*key[:3])} | {key[3]:g} | ' + ' | '.join(cells) + ' |')
+    return '\n'.join(out)
+
+
+def _num_pwm(row):
+    out = _num({k: v for k, v in row.items() if k in FIELDS})
+    for key in PWM_CSV_FIELDS:
+        out[key] = '' if row[key] in ('', None) else float(row[key])
+    return out
+
+
+def _commit() -> str:
+    import subprocess
+    try:
+        return subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True,
+                              text=True, check=True, cwd=HERE).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return 'unknown'
 
 
 def array_rows(point):
@@ -406,12 +552,16 @@ def main(argv=None) -> int:
     ap.add_argument('--plot-only', action='store_true', help='redraw from the CSV only')
     ap.add_argument('--docs', action='store_true',
                     help='write the map section of docs/fidelity.md')
+    ap.add_argument('--pwm', action='store_true',
+                    help="only the 'pwm' cases (their own CSV and doc section)")
     ap.add_argument('--out', default=None,
                     help='the CSV (default: the stored map; --quick: a temporary file)')
     args = ap.parse_args(argv)
     if args.out is None:
         args.out = (os.path.join(tempfile.mkdtemp(prefix='work_precision_map_'), 'quick.csv')
-                    if args.quick else CSV)
+                    if args.quick else PWM_CSV if args.pwm else CSV)
+    if args.pwm:
+        return pwm_main(args)
     if args.plot_only:
         plot(read_csv(args.out))
         if args.docs:
@@ -447,6 +597,27 @@ def main(argv=None) -> int:
     if args.docs:
         write_doc(doc_section(rows), begin=BEGIN, end=END)
         print(f'wrote the map into {os.path.normpath(DOC)}')
+    return 0
+
+
+def pwm_main(args) -> int:
+    """Run the 'pwm' cases at PWM_POINTS; write their CSV (and their doc section)."""
+    out = args.out
+    references = pwm_references(args.quick)
+    rows = []
+    for point in QUICK_PWM_POINTS if args.quick else PWM_POINTS:
+        rows += pwm_rows(point, references)
+    os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
+    with open(out, 'w', encoding='utf-8', newline='') as fh:
+        writer = csv.DictWriter(fh, FIELDS + PWM_CSV_FIELDS)
+        writer.writeheader()
+        writer.writerows(rows)
+    print(f'wrote {os.path.normpath(out)}')
+    text = pwm_section([{k: str(v) for k, v in r.items()} for r in rows], references)
+    print(text)
+    if args.docs and not args.quick:
+        write_doc(text, begin=PWM_BEGIN, end=PWM_END)
+        print(f'wrote the pwm cases into {os.path.normpath(DOC)}')
     return 0
 
 
