@@ -58,20 +58,25 @@ def test_the_measure_fires_on_fast_pwm_no_later_than_hand_made_twins_leave(beam,
     Check that the measure fires on fast pwm no later than hand made twins leave.
 
     The 10 Hz PWM cases where twins of the default leave 5 % of the travel: the measure's first
-    stretch starts no later than either twin leaves.
+    stretch starts by the time both twins have left, and within one PWM period (0.1 s) of the
+    first to leave.
 
-    (The twins' times are themselves rounding-dependent; what holds on any platform is the order:
-    the measure's twin carries both perturbations at once and is scored on y0 < travel, so it
-    crosses first.)
+    Why these bounds hold on any platform: each twin's time is itself rounding-dependent (a
+    chaotic path), so no fixed order between three different perturbations is guaranteed; but
+    all three grow from perturbations of similar size at the same exponential rate, and the
+    measure's twin carries both perturbations and is scored on y0 < travel, so it crosses
+    within a fraction of a growth time of the earliest (measured: 2-65 ms before the earlier
+    twin, docs/predictability.md), far inside one drive period.
     """
     scene = switching_scene(beam, eps_b)
     volts = pwm_voltage(scene.physics.v_max)
     twins = _hand_twins(scene, volts, 2.5)
-    assert all(first is not None for first, _ in twins.values()), twins   # the premise
+    left = [first for first, _ in twins.values()]
+    assert all(first is not None for first in left), twins   # the premise
     measured = predictability(scene, volts, 2.5)
     assert not measured.robust, measured.summary()
-    assert measured.robust_until <= min(first for first, _ in twins.values()), (
-        measured.summary(), twins)
+    assert measured.robust_until <= max(left), (measured.summary(), twins)
+    assert measured.robust_until <= min(left) + 0.1, (measured.summary(), twins)
 
 
 ROBUST_CASES = (
@@ -167,7 +172,7 @@ def test_under_fast_pwm_a_single_run_is_fragile_and_the_ensemble_is_not():
     rounding.
 
     What every copy of an ensemble shares holds for both plants: the snap counts of 20 perturbed
-    copies fall in a band (35-80 snaps, 20-60 % of the time on q > 0: measured 45-68 and 32-49 %, a
+    copies fall in a band (35-80 snaps, 20-60 % of the time on q > 0: measured 46-64 and 27-45 %, a
     band wide against the spread of a chaotic path, whatever a platform's rounding makes of each
     copy), and neither ensemble agrees on a final branch (all 20 copies on one branch by chance:
     about 2 in a million).
@@ -282,3 +287,20 @@ def test_an_array_scene_leaves_the_twin_off_unless_asked():
     assert len(said) == 1 and 'predictability.mode:=on' in said[0]
     params['predictability.mode'] = 'off'
     assert not attach_predictability(node, params.get, qos=None).enabled
+
+
+def test_a_twin_and_the_copies_step_by_the_run_s_method():
+    """
+    Check that a tighter tolerance does not switch the twin's or a copy's stepper.
+
+    'auto' takes BDF for the simply supported beam only from a tolerance of 1e-3 up: a run at
+    exactly 1e-3 steps by BDF, and its twin (tolerance x 0.9) and every ensemble copy must too,
+    or the measure would compare two methods, not two plants.
+    """
+    from det_sim_ros.analysis.ensemble import ensemble_overrides
+    scene = switching_scene('simply_supported', 0.20, **{'integrator.tolerance': 1e-3})
+    sim = Simulator(scene)
+    assert sim.method.name == 'bdf'
+    assert TwinMonitor(sim).twin.method.name == 'bdf'
+    for change in ensemble_overrides(scene, 5)[1:]:
+        assert Simulator(scene.replace(**change)).method.name == 'bdf'

@@ -39,6 +39,9 @@ def ensemble_overrides(scene: Scene, copies: int, perturbation: Perturbation | N
     """
     Return each copy's scene overrides (copy 0: none), as the module's docstring draws them.
 
+    Every copy steps by the method the scene resolves ('auto' picks by tolerance: a copy of a
+    tighter one must not change method).
+
     :raises ValueError: fewer than 2 copies.
     """
     if not isinstance(copies, int) or copies < 2:
@@ -47,11 +50,12 @@ def ensemble_overrides(scene: Scene, copies: int, perturbation: Perturbation | N
     rng = np.random.default_rng(seed)
     z = rng.standard_normal(copies)
     u = rng.uniform(0.0, 1.0, copies)
+    method = Simulator(scene).method.name
     overrides = [{}]
     for i in range(1, copies):
         copy = Perturbation(perturbation.parameter, perturbation.relative * float(z[i]),
                             1.0 - (1.0 - perturbation.tolerance_factor) * float(u[i]))
-        overrides.append(copy.overrides(scene))
+        overrides.append(copy.overrides(scene, method))
     return overrides
 
 

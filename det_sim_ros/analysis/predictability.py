@@ -91,8 +91,13 @@ class Perturbation:
             raise ValueError('perturbation: relative 0 and tolerance_factor 1 make the twin '
                              'the run itself')
 
-    def overrides(self, scene: Scene) -> dict:
-        """Return the twin's scene overrides: the perturbed parameter and tolerance."""
+    def overrides(self, scene: Scene, method: str | None = None) -> dict:
+        """
+        Return the twin's scene overrides: the perturbed parameter and tolerance.
+
+        ``method``: the stepper the run resolved ('auto' picks by tolerance, and a twin of a
+        tighter one must not step by another method): pinned in the twin's scene.
+        """
         if self.parameter not in PHYSICS_SPEC:
             raise SceneError(f'perturbation parameter {self.parameter!r}: not a physics key '
                              f'(one of {", ".join(PHYSICS_SPEC)})')
@@ -105,11 +110,13 @@ class Perturbation:
         if self.tolerance_factor != 1.0:
             changes['integrator.tolerance'] = (integration_tolerance(scene)
                                                * self.tolerance_factor)
+        if method is not None:
+            changes['integrator.method'] = method
         return changes
 
-    def twin_scene(self, scene: Scene) -> Scene:
+    def twin_scene(self, scene: Scene, method: str | None = None) -> Scene:
         """Return the twin's scene: ``scene`` with the parameter and tolerance perturbed."""
-        return scene.replace(**self.overrides(scene))
+        return scene.replace(**self.overrides(scene, method))
 
     def describe(self) -> str:
         """Say what the twin changes, in a phrase ('m x (1 + 1e-06), tolerance x 0.9')."""
@@ -291,7 +298,7 @@ def predictability(scene, volts: Callable[[float], float] | np.ndarray, t_end: f
         scene = load_scene(scene)
     run_sim = Simulator(scene)
     stroke = Stroke(run_sim.model)
-    twin_sim = Simulator(perturbation.twin_scene(scene))
+    twin_sim = Simulator(perturbation.twin_scene(scene, run_sim.method.name))
     run = simulate(run_sim, volts, t_end)
     try:
         twin = simulate(twin_sim, volts, t_end)
@@ -325,7 +332,7 @@ class TwinMonitor:
                  limit: float = ROBUST_LIMIT):
         self.perturbation = perturbation or Perturbation()
         self.stroke = Stroke(sim.model)
-        self.twin = Simulator(self.perturbation.twin_scene(sim.scene),
+        self.twin = Simulator(self.perturbation.twin_scene(sim.scene, sim.method.name),
                               threads=sim.stepper.threads)
         self.stretches = Stretches(limit, hold_samples(sim.dt))
         self.distance = 0.0
