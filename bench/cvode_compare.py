@@ -9,8 +9,8 @@ compiled right-hand side (``Model.f``, a Python call per evaluation), one solve 
 voltage, at a ladder of relative tolerances (absolute: rtol times each state's scale). Every
 run is scored against the stored continuum reference as the map scores switching (max |y -
 y_ref| from 0.5 s over the travel; every snap within 2 ms) and timed by the calling thread's
-CPU: importing scikit-sundae starts a thread that keeps a core busy, which doubled every
-figure measured as process CPU after it, the kernel's included. Compare a solver with the
+CPU: once scikit-sundae is imported, the kernel's runs cost twice their wall time in process
+CPU (a second thread busy while they run), which halved the kernel's figure measured that way. Compare a solver with the
 kernel at equal error: the ratio of their x real time.
 
 Without scikit-sundae (``pip install '.[bench]'``) the CVODE rows are skipped with one line.
