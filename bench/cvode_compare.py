@@ -10,8 +10,8 @@ voltage, at a ladder of relative tolerances (absolute: rtol times each state's s
 run is scored against the stored continuum reference as the map scores switching (max |y -
 y_ref| from 0.5 s over the travel; every snap within 2 ms) and timed by the calling thread's
 CPU: once scikit-sundae is imported, the kernel's runs cost twice their wall time in process
-CPU (a second thread busy while they run), which halved the kernel's figure measured that way. Compare a solver with the
-kernel at equal error: the ratio of their x real time.
+CPU (a second thread busy while they run), which halved the kernel's figure measured that way.
+Compare a solver with the kernel at equal error: the ratio of their x real time.
 
 Without scikit-sundae (``pip install '.[bench]'``) the CVODE rows are skipped with one line.
 
