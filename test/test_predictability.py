@@ -244,6 +244,9 @@ def test_the_shell_verb_says_where_and_exits_1_with_check(tmp_path, capsys):
     assert cli.main(['predictability', '--input', 'switching', '--no-plots', '--check',
                      '--out', str(tmp_path / 'sw')]) == 0
     assert 'robust: a twin' in capsys.readouterr().out
+    for bad in (['--relative', 'nan'], ['--parameter', 'nope']):   # bad input: one line, 2
+        assert cli.main(['predictability', *bad, '--out', str(tmp_path / 'bad')]) == 2
+        assert capsys.readouterr().err.count('\n') == 1
 
 
 def test_the_distance_is_the_largest_over_the_dets_and_a_nan_is_never_hidden():

@@ -69,8 +69,11 @@ def _scene_and_input(args):
 def main(args) -> int:
     """Run the scene and its twin; print the verdict, write the CSV (and the PNG)."""
     from ...analysis.predictability import Perturbation, predictability
+    try:   # (a perturbation that cannot be: bad input, one line, exit 2)
+        perturbation = Perturbation(args.parameter, args.relative, args.tolerance_factor)
+    except ValueError as exc:
+        raise common.CliError(str(exc)) from None
     scene, volts, t_end, label = _scene_and_input(args)
-    perturbation = Perturbation(args.parameter, args.relative, args.tolerance_factor)
     result = predictability(scene, volts, t_end, perturbation, args.limit)
     print(f'{label}, {scene.beam} beam, eps_b {scene.eps_b:g}: {result.summary()}')
     out = common.out_dir(args)
