@@ -307,3 +307,31 @@ def test_a_twin_and_the_copies_step_by_the_run_s_method():
     assert TwinMonitor(sim).twin.method.name == 'bdf'
     for change in ensemble_overrides(scene, 5)[1:]:
         assert Simulator(scene.replace(**change)).method.name == 'bdf'
+
+
+def test_the_node_says_when_the_path_is_robust_again_from_the_stretch_s_end():
+    """
+    Check the node's INFO line at a stretch's end names where the twin came back.
+
+    A stand-in logger and a PWM that stops: the fixed beam at 0.15 under the 10 Hz PWM, then a
+    3 kV hold from 2.5 s (one equilibrium: run and twin meet again) and 0 V from 3 s. The stretch
+    ends (the premise), and the line names its end (the first sample of the hold back within
+    half the limit), not the moment it is said, HOLD_S later.
+    """
+    import types
+    from det_sim_ros.ros.predictability import NodePredictability
+    volts = pwm_voltage(3000.0)
+    sim = Simulator(switching_scene('fixed', 0.15))
+    said = []
+    logger = types.SimpleNamespace(info=said.append, warning=said.append)
+    measure = NodePredictability(TwinMonitor(sim), lambda data: None, logger)
+    for k in range(4000):
+        sim.set_input([volts(k * sim.dt) if k < 2500 else 3000.0 if k < 3000 else 0.0])
+        measure.follow(sim, sim.step())
+    spans = measure.monitor.stretches.spans
+    ended = [end for _, end in spans if end is not None]
+    again = [line for line in said if 'robust again' in line]
+    assert ended and len(again) == len(ended), spans
+    for line, end in zip(again, ended):
+        assert f'from t = {end * sim.dt:.3f} s' in line
+    assert any('not robust from' in line for line in said)

@@ -107,9 +107,10 @@ class NodePredictability:
                 f'stroke away (limit {limit:g} %), so the samples from here depend on rounding; '
                 'assert on what an ensemble of perturbed runs shares, not on this path '
                 '(docs/predictability.md)')
-        else:
-            self._logger.info(f'path robust again from t = {t:.3f} s (the twin back within '
-                              f'{limit / 2:g} % of the stroke)')
+        else:   # (said once the twin has stayed back for HOLD_S: the stretch ended before)
+            back = monitor.stretches.spans[-1][1] * monitor.twin.dt
+            self._logger.info(f'path robust again from t = {back:.3f} s (the twin back within '
+                              f'{limit / 2:g} % of the stroke since)')
 
     def reset(self) -> None:
         """Start the twin over with the run (~/reset)."""
