@@ -68,7 +68,7 @@ from det_sim_ros.physics.model import ModelDomainError
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.integrators import integration_tolerance
 from det_sim_ros.sim.simulator import simulate, Simulator
-from fidelity_choice import DOC, MACHINE, write_doc
+from fidelity_choice import _commit, DOC, MACHINE, write_doc
 import numpy as np
 
 POLY, MODES = 'polynomial', 'buckling_modes'
@@ -329,15 +329,6 @@ def _num_pwm(row):
     return out
 
 
-def _commit() -> str:
-    import subprocess
-    try:
-        return subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True,
-                              text=True, check=True, cwd=HERE).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return 'unknown'
-
-
 def array_rows(point):
     """Return the shipped array's rows (wall clock and CPU, ARRAY_THREADS threads)."""
     scene = load_scene('array', level_overrides(*point))
@@ -456,15 +447,9 @@ def plot(rows, path=FIGURE):
 def doc_section(rows) -> str:
     """Return the markdown of the map: per beam, error, snaps and cost of every point."""
     import datetime
-    import subprocess
     points = by_point(rows)
     fronts = {beam: beam_front(points, beam) for beam in BEAMS}
-    try:
-        commit = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True,
-                                text=True, check=True, cwd=HERE).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        commit = 'unknown'
-    out = [f'Measured {datetime.date.today().isoformat()}, commit {commit}, {MACHINE}, by '
+    out = [f'Measured {datetime.date.today().isoformat()}, commit {_commit()}, {MACHINE}, by '
            '`flock bench/.lock env PYTHONPATH=. python bench/work_precision_map.py --lsoda '
            '--array --plot --docs` (one run per point, CPU time of one core: ±30 % with the '
            'load; ratios side by side in one run). Per beam: the worst error over its step '
