@@ -64,6 +64,11 @@ SCENES = {
     'plate': ('plate', PAPER),
     'array20': ('array', {**PAPER, 'structure.copies': 20}),
     'substeps12': ('default', {**PAPER, 'integrator.substeps': 12}),
+    # the BDF stepper (what 'auto' picks for the simply supported beam) and an amplified
+    # supply (the amplifier's periods), named so that a change of 'auto' keeps them
+    'bdf_simply_supported': ('default', {'scene.beam': 'simply_supported',
+                                         'integrator.method': 'bdf'}),
+    'linearized_amplifier': ('amplifier_lab', {'integrator.method': 'etdrk4_linearized'}),
 }
 
 
