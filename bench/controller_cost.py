@@ -68,7 +68,7 @@ def run_case(case) -> list:
         start = time.process_time()
         simulate(sim, volts, seconds)
         best = min(best, time.process_time() - start)
-    if getattr(sim.method, 'multistep', False):
+    if getattr(sim.stepper, 'kind', None) == 'bdf' or getattr(sim.method, 'multistep', False):
         return [seconds / best, sim.steps_taken, list(sim.stepper.bdf_counts()), 'bdf']
     return [seconds / best, sim.steps_taken, list(sim.stepper.linear_counts()), sim.method.name]
 

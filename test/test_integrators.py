@@ -148,7 +148,8 @@ def test_auto_step_meets_its_tolerance_on_the_step_scenario():
     scene = load_scene('default', {**RELEASED, 'integrator.tolerance': 1e-6})
     sim = Simulator(scene)
     assert sim.adaptive
-    fixed = integrators.choose_substeps(sim.method, sim.dt, 1e-6, sim.model.fastest_beam_rate())
+    fixed = integrators.choose_substeps(sim.method, sim.dt, 1e-6,
+                                        sim.method.kind.beam_rate(sim.model))
     volts = lambda t: 3000.0 * (t >= 0.2)  # noqa: E731
     coarse = simulate(sim, volts, 0.5)
     fine = simulate(scene, volts, 0.5, method=sim.method.name, substeps=4 * fixed)

@@ -9,6 +9,8 @@ Physics and stepping:
   fields of :class:`det_sim_ros.physics.model.ModelArrays`.
 - ``Stepper(model, ...)``: a method table (det_sim_ros.sim.integrators), the charge-transient
   settings and the per-period step-count control; one count per independent coupled group.
+  ``kind`` (one of ``STEPPER_KINDS``: 'stages', 'linearized', 'bdf') says how it steps and
+  ``options`` holds what that kind reads (core/_csrc/stepping/kind.c); ``Stepper.kind``.
 - ``matrix_phis(Z, scale, full, half)``: the phi functions of a small matrix (the dense linear
   part of 'etdrk4_linearized'; det_sim_ros.physics.matrix_phi is the same in numpy).
 - status codes ``OK``, ``BAD_STRETCH``, ``NON_FINITE``, ``BAD_SLOPE`` (the model's domain) and
@@ -35,14 +37,15 @@ try:
     from ._ckernel import (ARENA_SLOTS, BAD_SLOPE, BAD_STRETCH, CELL_OUTPUTS, FrameMap,
                            keep_owned_probe, matrix_phis, Model, NO_PROGRESS, NON_FINITE, OK,
                            pack_records, SampleCodec, SensorReader, SINGULAR, Stepper,
-                           STEP_UNDERFLOW)
+                           STEP_UNDERFLOW, STEPPER_KINDS)
 except ImportError as error:  # pragma: no cover - only a broken install gets here
     raise ImportError(
         'det_sim_ros: the compiled kernel det_sim_ros.core._ckernel is missing or broken '
         f'({error}). It is built when the package is installed: `pip install .` (needs a C '
         'compiler); in a source checkout, `python setup.py build_ext --inplace`.') from None
 
-__all__ = ['Model', 'Stepper', 'OK', 'BAD_STRETCH', 'NON_FINITE', 'BAD_SLOPE', 'STEP_UNDERFLOW',
+__all__ = ['Model', 'Stepper', 'STEPPER_KINDS', 'OK', 'BAD_STRETCH', 'NON_FINITE', 'BAD_SLOPE',
+           'STEP_UNDERFLOW',
            'NO_PROGRESS', 'SINGULAR', 'CELL_OUTPUTS',
            'SampleCodec', 'pack_records', 'FrameMap', 'matrix_phis', 'SensorReader',
            'ARENA_SLOTS', 'keep_owned_probe']

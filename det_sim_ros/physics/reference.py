@@ -445,9 +445,10 @@ def step(a, method, x, u, h: float) -> np.ndarray:
     """
     x = np.asarray(x, dtype=float)
     u = np.asarray(u, dtype=float)
-    if method.linearized:
-        raise ValueError(f'{method.name}: a method with a dense linear part steps in '
-                         'reference_linearized.step_linearized (it takes the linear part)')
+    if method.kind.name != 'stages':
+        raise ValueError(f"{method.name}: only a table's stages step here; the kind "
+                         f'{method.kind.name!r} steps in reference_linearized.step_linearized '
+                         '(a dense linear part) or reference_bdf (BDF)')
     laws = amplifier_laws(a, x, u) if a.amplifier else None   # held for the step
     L = stiff_rates(a, x, laws) if method.exponential else np.zeros(a.n_state)
     quasi = bool(method.exponential and a.rc_source)

@@ -1,5 +1,5 @@
 """
-Fixed-step steppers declared as coefficient tables over one compiled stepping core.
+The methods: coefficient tables over one compiled stepping core, and the kinds of stepper.
 
 Each :class:`Method` is data: stage nodes ``c`` and the coefficients a_ij, b_i written as sums of
 ``weight * phi_k(c_arg * h * L)`` (``k = -1``: a constant weight). The compiled core
@@ -12,6 +12,14 @@ Why exponential: the electrical time constant Rs C is hundreds of times shorter 
 period at the shipped values, so explicit RK4 at the control period's step diverges; an
 exponential update keeps every step size stable (tested from Rs = 1 Ohm to 1 MOhm) at the cost
 of one exp per step and charge state.
+
+Kinds: a method's :class:`StepperKind` (``KINDS``) is the one place the kinds of stepper differ:
+'stages' (the table's stages), 'linearized' (the same with a dense linear part over the beams'
+q, qdot) and 'bdf' (the variable-order BDF stepper, which has no table). A kind says how the
+steps per period are controlled, which options the compiled stepper takes, which models it can
+step and how it is described; the compiled core has the same kinds (core/_csrc/stepping/kind.c,
+``kernel.STEPPER_KINDS``). A new table is a row of METHODS; a new kind is a class here and an
+entry there.
 
 How many steps: within a control period the steps are equal; their number is either fixed
 (``integrator.substeps`` > 0, or a method without an embedded pair) or adapts per period to the
@@ -31,11 +39,138 @@ import numpy as np
 from ..core import kernel
 
 __all__ = ['Method', 'METHODS', 'MULTISTEP', 'BDF', 'BDF_MIN_COORDINATES', 'BDF_MIN_TOLERANCE',
+           'StepperKind', 'KINDS',
            'bdf_weights', 'get_method',
            'choose_substeps', 'step_control', 'error_weights',
            'linear_refresh',
            'transient_settings', 'TransientSettings', 'StepControl', 'make_stepper',
            'advance', 'AUTO_TOLERANCE', 'integration_tolerance']
+
+
+class StepperKind:
+    """
+    The table's stages, explicit or exponential in the charge: the kind 'stages'.
+
+    A kind is what the compiled core calls it (``name``, one of ``kernel.STEPPER_KINDS``) and
+    everything in which the kinds differ: how the steps per period are controlled
+    (:meth:`control`), the options of the compiled stepper (:meth:`options`), the models it
+    cannot step (:meth:`refusal`) and the phrase a log shows (:meth:`describe`). The other
+    kinds subclass it.
+    """
+
+    name = 'stages'
+    # its own steps and their control, whatever the table (no step count per period)
+    own_step_control = False
+
+    def refusal(self, model) -> str:
+        """Return why the kind cannot step ``model`` ('' when it can)."""
+        return ''
+
+    def beam_rate(self, model) -> float:
+        """Return the fastest beam rate the explicit stages must stay stable for, 1/s."""
+        return model.fastest_beam_rate()
+
+    def local_tolerance(self, method) -> float:
+        """Return the embedded estimate's tolerance per unit of the scene's (see below)."""
+        return LOCAL_TOLERANCE[method.embedded_order]
+
+    def largest_count(self, model, n0: int, n_min: int) -> int:
+        """Return the most steps a period may take when the count adapts."""
+        return MAX_SUBSTEPS_FACTOR * max(n0, n_min)
+
+    def control(self, method, model, substeps: int) -> 'StepControl':
+        """
+        Return the step-count controller's settings.
+
+        Adaptive when ``substeps`` is 0 and the method has an embedded estimate, else fixed at
+        ``substeps`` (0: :func:`choose_substeps`).
+        """
+        scene = model.scene
+        tolerance = integration_tolerance(scene)
+        beam_rate = self.beam_rate(model)
+        n0 = substeps or choose_substeps(method, scene.dt, tolerance, beam_rate)
+        if substeps or not method.adaptive:
+            return StepControl(n0, 0.0, n0, n0, 1.0)
+        n_min = min_substeps(scene.dt, beam_rate)
+        return StepControl(max(n0, n_min), self.local_tolerance(method) * tolerance, n_min,
+                           self.largest_count(model, n0, n_min), method.embedded_order + 1.0)
+
+    def options(self, model, control: 'StepControl') -> dict:
+        """Return the compiled stepper's options of this kind."""
+        return {}
+
+    def describe(self, method, control: 'StepControl', substeps: int) -> str:
+        """Return the stepping in one phrase: 'etdrk4 x20' or 'etdrk4 adaptive (now x12)'."""
+        if control.adaptive:
+            return f'{method.name} adaptive (now x{substeps})'
+        return f'{method.name} x{substeps}'
+
+
+class LinearizedKind(StepperKind):
+    """
+    The table's stages with a dense linear part: the kind 'linearized'.
+
+    The linear part also holds the Jacobian of the beams' q, qdot (taken at a period's start,
+    see LINEAR_REFRESH), so their stiff modes are integrated exactly too and set no stability
+    bound on the step.
+    """
+
+    name = 'linearized'
+
+    def beam_rate(self, model) -> float:
+        """Return 0: the stiff beam modes are in the linear part."""
+        return 0.0
+
+    def local_tolerance(self, method) -> float:
+        """Return LINEARIZED_LOCAL_TOLERANCE (its estimate is weighted by phi functions)."""
+        return LINEARIZED_LOCAL_TOLERANCE
+
+    def largest_count(self, model, n0: int, n_min: int) -> int:
+        """Return the bound of LINEARIZED_MAX_FACTOR (the ringing after a release)."""
+        return LINEARIZED_MAX_FACTOR * max(n0, n_min,
+                                           min_substeps(model.scene.dt, model.fastest_beam_rate()))
+
+    def options(self, model, control: 'StepControl') -> dict:
+        """Return when the linear part is taken anew: a state move and an input change."""
+        return {'refresh': linear_refresh(integration_tolerance(model.scene)),
+                'refresh_input': LINEAR_REFRESH_INPUT * _largest_v_max(model)}
+
+
+class BdfKind(StepperKind):
+    """
+    The variable-order BDF stepper (core/_csrc/stepping/bdf.c): the kind 'bdf'.
+
+    No table: its own step size and order control to a local error per step, implicit in
+    every state, with whole control periods as its unit.
+    """
+
+    name = 'bdf'
+    own_step_control = True
+
+    def refusal(self, model) -> str:
+        """Return why not when ``model`` is an array or has an amplifier."""
+        a = model.arrays
+        if a.n_groups != 1 or a.amplifier:
+            return ('steps one coupled group without an amplifier (not an array, nor an '
+                    'amplified supply)')
+        return ''
+
+    def control(self, method, model, substeps: int) -> 'StepControl':
+        """Return its local error per step; the step counts are unused."""
+        return StepControl(1, BDF_LOCAL_TOLERANCE * integration_tolerance(model.scene), 1, 1,
+                           1.0)
+
+    def options(self, model, control: 'StepControl') -> dict:
+        """Return its tolerance and its norm's weights."""
+        return {'tolerance': control.tolerance, 'weights': bdf_weights(model)}
+
+    def describe(self, method, control: 'StepControl', substeps: int) -> str:
+        """Return 'bdf adaptive (steps and order)'."""
+        return f'{method.name} adaptive (steps and order)'
+
+
+KINDS = {kind.name: kind for kind in (StepperKind(), LinearizedKind(), BdfKind())}
+STAGES = KINDS['stages']
 
 
 @dataclasses.dataclass(frozen=True)
@@ -53,12 +188,8 @@ class Method:
     # first stage), and the embedded solution's order. () = none: fixed substeps only.
     embedded: tuple = ()
     embedded_order: int = 0
-    # True: the linear part also holds the Jacobian of the beams' q, qdot (dense, taken at a
-    # period's start, see LINEAR_REFRESH), so their stiff modes are integrated exactly too
-    linearized: bool = False
-    # True: not a table's stages but the variable-order BDF stepper (core/_csrc/stepping/bdf.c)
-    # with its own step-size and order control; the table is then unused
-    multistep: bool = False
+    # how the compiled core steps it: the table's stages unless said otherwise
+    kind: StepperKind = STAGES
 
     @property
     def n_stages(self) -> int:
@@ -73,7 +204,7 @@ class Method:
     @property
     def adaptive(self) -> bool:
         """Return whether the steps can follow an error estimate (an embedded pair, or BDF's)."""
-        return bool(self.embedded) or self.multistep
+        return bool(self.embedded) or self.kind.own_step_control
 
 
 def _explicit(name, order, a, b, c, description):
@@ -159,7 +290,8 @@ METHODS = {m.name: m for m in (
            *_RK4_EMBEDDED),
     Method('etdrk4_linearized', 4, (0.0, 0.5, 0.5, 1.0), _ETD_KROGSTAD, True,
            'Krogstad ETDRK4-B with the beams linearized: exact charge relaxation and exact '
-           'linear beam modes (their Jacobian per control period)', *_RK4_EMBEDDED, True),
+           'linear beam modes (their Jacobian per control period)', *_RK4_EMBEDDED,
+           KINDS['linearized']),
 )}
 # The variable-order BDF stepper (numerical differentiation formulas of orders 1-5, the scheme of
 # scipy's BDF; core/_csrc/stepping/bdf.c, physics/reference_bdf.py): implicit in every state,
@@ -169,7 +301,7 @@ METHODS = {m.name: m for m in (
 # functions (docs/fidelity.md, "Which method").
 BDF = Method('bdf', 5, (0.0,), _ETD_EULER, False,
              'variable-order BDF (NDF orders 1-5) with its own step and order control',
-             multistep=True)
+             kind=KINDS['bdf'])
 MULTISTEP = {BDF.name: BDF}
 # 'auto' steps a single coupled group (no array copies, no amplifier) with BDF from this many
 # Ritz coordinates in a beam (its n_ritz, whatever family: the states the stiff beam modes
@@ -261,11 +393,10 @@ def choose_substeps(method: Method, dt: float, tolerance: float, beam_rate: floa
     Return the internal steps per control period for ``tolerance`` and the fastest beam mode.
 
     The expected error is then below ``tolerance`` and the explicit stages stay stable for the
-    fastest beam mode (``beam_rate``, 1/s; see Model.fastest_beam_rate: it decides from about 6
+    fastest beam mode the kind's stages see (``beam_rate``, 1/s; StepperKind.beam_rate, 0 for
+    a dense linear part; see Model.fastest_beam_rate: it decides from about 6
     Ritz terms on).
     """
-    if method.linearized:   # the stiff beam modes are in the linear part
-        beam_rate = 0.0
     const = ERROR_CONSTANT.get(method.name)
     if const is None:
         return min_substeps(dt, beam_rate)
@@ -279,17 +410,17 @@ def min_substeps(dt: float, beam_rate: float = 0.0) -> int:
     return max(1, int(math.ceil(dt / h_max - 1e-9)))
 
 
-# Adaptive step counts (ds_period_core in _csrc/stepping/period.c): fixed steps inside each control
-# period, their number chosen per period from the method's embedded error estimate, weighted per
-# Ritz coordinate by 1/l (deflection) and dt/l (velocity) with l the cell's beam length. The local
-# tolerance is LOCAL_TOLERANCE[embedded order] times the scene tolerance: the scene tolerance
-# bounds the 'step' error (max over the run of |Delta-y error| / stroke), which accumulates
-# local errors and amplifies them through snap-through. Calibrated on all six 'step' scenes
-# at tolerances 1e-3 ... 1e-8 against the Radau rtol 1e-12 references: with 5e-4 the worst
-# error is 0.27...0.55 x tolerance for etdrk4 (RC source; 2.0 steps per period at 1e-3, 8.9
-# at 1e-6, 27.5 at 1e-8) and 0.09...0.62 x for dp5 (ideal source; 1.2 / 3.1 / 6.9), where the
-# fixed counts of choose_substeps take 20 (etdrk4) and 10 (dp5) steps per period at 1e-6.
-# The error grows slightly faster than the tolerance (about tol^1.05), hence the margin.
+# Adaptive step counts (ds_stages_period in _csrc/stepping/period.c): fixed steps inside each
+# control period, their number chosen per period from the method's embedded error estimate,
+# weighted per Ritz coordinate by 1/l (deflection) and dt/l (velocity) with l the cell's beam
+# length. The local tolerance is LOCAL_TOLERANCE[embedded order] times the scene tolerance: the
+# scene tolerance bounds the 'step' error (max over the run of |Delta-y error| / stroke), which
+# accumulates local errors and amplifies them through snap-through. Calibrated on all six 'step'
+# scenes at tolerances 1e-3 ... 1e-8 against the Radau rtol 1e-12 references: with 5e-4 the worst
+# error is 0.27...0.55 x tolerance for etdrk4 (RC source; 2.0 steps per period at 1e-3, 8.9 at
+# 1e-6, 27.5 at 1e-8) and 0.09...0.62 x for dp5 (ideal source; 1.2 / 3.1 / 6.9), where the fixed
+# counts of choose_substeps take 20 (etdrk4) and 10 (dp5) steps per period at 1e-6. The error grows
+# slightly faster than the tolerance (about tol^1.05), hence the margin.
 LOCAL_TOLERANCE = {3: 5e-4, 4: 5e-4}
 # 'etdrk4_linearized' (its estimate weighted by phi functions of the beams' Jacobian), calibrated
 # on the three exact 'step' scenes (fixed eps_b 0.15, 0.20, simply supported 0.20) at n_r 3, 5, 7
@@ -318,7 +449,7 @@ LINEARIZED_MAX_FACTOR = 16
 @dataclasses.dataclass(frozen=True)
 class StepControl:
     """
-    The per-period step-count controller's settings (ds_period_core in _csrc/stepping/period.c).
+    The per-period step-count controller's settings (ds_stages_period in _csrc/stepping/period.c).
 
     Fixed at ``substeps`` when ``tolerance`` is 0, else adaptive between ``min_substeps`` and
     ``max_substeps`` from the embedded estimate (which scales as n^-``exponent``).
@@ -338,28 +469,13 @@ class StepControl:
 
 def step_control(method: Method, model, substeps: int = 0) -> StepControl:
     """
-    Return the step-count controller's settings.
+    Return the step-count controller's settings of ``method`` for ``model``.
 
-    Adaptive when ``substeps`` is 0 and the method has an embedded estimate, else fixed at
-    ``substeps`` (0: :func:`choose_substeps`).
+    Its kind's (:meth:`StepperKind.control`): for the tables, adaptive when ``substeps`` is 0
+    and the method has an embedded estimate, else fixed at ``substeps`` (0:
+    :func:`choose_substeps`).
     """
-    scene = model.scene
-    tolerance = integration_tolerance(scene)
-    if method.multistep:   # its own step control; the counts are unused
-        return StepControl(1, BDF_LOCAL_TOLERANCE * tolerance, 1, 1, 1.0)
-    beam_rate = 0.0 if method.linearized else model.fastest_beam_rate()
-    n0 = substeps or choose_substeps(method, scene.dt, tolerance, beam_rate)
-    if substeps or not method.adaptive:
-        return StepControl(n0, 0.0, n0, n0, 1.0)
-    n_min = min_substeps(scene.dt, beam_rate)
-    local = LINEARIZED_LOCAL_TOLERANCE if method.linearized else LOCAL_TOLERANCE[
-        method.embedded_order]
-    tol = local * tolerance
-    n_max = MAX_SUBSTEPS_FACTOR * max(n0, n_min)
-    if method.linearized:   # see LINEARIZED_MAX_FACTOR
-        n_max = LINEARIZED_MAX_FACTOR * max(n0, n_min, min_substeps(scene.dt,
-                                                                    model.fastest_beam_rate()))
-    return StepControl(max(n0, n_min), tol, n_min, n_max, method.embedded_order + 1.0)
+    return method.kind.control(method, model, substeps)
 
 
 def make_stepper(model, method: Method, control: StepControl, dt: float,
@@ -379,12 +495,8 @@ def make_stepper(model, method: Method, control: StepControl, dt: float,
                           min_substeps=int(control.min_substeps),
                           max_substeps=int(control.max_substeps),
                           exponent=float(control.exponent),
-                          jump_ref=float(transient.jump_ref),
-                          linearized=method.linearized,
-                          lin_refresh=linear_refresh(integration_tolerance(model.scene)),
-                          lin_refresh_input=LINEAR_REFRESH_INPUT * _largest_v_max(model),
-                          bdf=method.multistep, bdf_tolerance=control.tolerance,
-                          bdf_weights=bdf_weights(model) if method.multistep else None)
+                          jump_ref=float(transient.jump_ref), kind=method.kind.name,
+                          options=method.kind.options(model, control))
 
 
 def _largest_v_max(model) -> float:

@@ -4,9 +4,10 @@ The simulator: state, the sim-time grid t = k dt, and inputs held between comman
 :class:`Simulator` advances exactly one control period dt per :meth:`Simulator.step` with the input
 held constant (zero-order hold), in fixed internal steps of the chosen method. With
 ``integrator.substeps: 0`` and a method that has an embedded error estimate (the default) their
-number adapts from period to period to the scene's tolerance (ds_period_core in
-_csrc/stepping/period.c); else it is fixed. Independent coupled groups (the copies of an array)
-each keep their own count.
+number adapts from period to period to the scene's tolerance (ds_stages_period in
+_csrc/stepping/period.c); else it is fixed; the BDF stepper has its own step control (the
+method's kind: det_sim_ros.sim.integrators.StepperKind). Independent coupled groups (the
+copies of an array) each keep their own count.
 Time is always ``k * dt`` (never accumulated), and the same inputs give bit-identical outputs: the
 step count depends only on the state and the inputs. A state that leaves the model's domain puts
 the simulator in a fault: the last good state is kept, ``fault`` names the cause, and
@@ -123,7 +124,6 @@ class Simulator:
 
     def _pick_method(self, name: str) -> Method:
         a = self.model.arrays
-        one_group = a.n_groups == 1 and not a.amplifier
         if name == 'auto':
             if self.scene.source != 'rc':
                 return get_method('dp5')
@@ -132,17 +132,18 @@ class Simulator:
             # upkeep (at loose tolerances)
             modes = np.diff(a.cell_q)   # coordinates per beam: its n_ritz
             tolerance = integration_tolerance(self.scene)
-            if (one_group and np.max(modes) >= BDF_MIN_COORDINATES
+            bdf = get_method('bdf')
+            if (not bdf.kind.refusal(self.model) and np.max(modes) >= BDF_MIN_COORDINATES
                     and tolerance >= BDF_MIN_TOLERANCE):
-                return get_method('bdf')
+                return bdf
             return get_method('etdrk4_linearized' if np.any(modes > 1) else 'etdrk4')
         try:
             method = get_method(name)
         except ValueError as exc:   # a scene value: one line naming the key and the choices
             raise SceneError(f"scene key 'integrator.method': {exc}") from None
-        if method.multistep and not one_group:
-            raise SceneError(f"scene key 'integrator.method': {name!r} steps one coupled group "
-                             'without an amplifier (not an array, nor an amplified supply)')
+        refusal = method.kind.refusal(self.model)
+        if refusal:
+            raise SceneError(f"scene key 'integrator.method': {name!r} {refusal}")
         return method
 
     # -- state ----------------------------------------------------------------------------
@@ -220,11 +221,7 @@ class Simulator:
         """
         threads = self.stepper.threads
         on = f', {threads} threads' if threads > 1 else ''
-        if self.method.multistep:
-            return f'{self.method.name} adaptive (steps and order){on}'
-        if self.adaptive:
-            return f'{self.method.name} adaptive (now x{self.substeps}){on}'
-        return f'{self.method.name} x{self.substeps}{on}'
+        return self.method.kind.describe(self.method, self.control, self.substeps) + on
 
     # -- input ----------------------------------------------------------------------------
     def set_input(self, volts) -> InputCheck:

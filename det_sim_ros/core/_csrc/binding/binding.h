@@ -25,6 +25,7 @@
 #include "physics/physics.h"
 #include "stepping/batch.h"
 #include "stepping/group.h"
+#include "stepping/kind.h"
 #include "stepping/linear_part.h"
 #include "stepping/bdf.h"
 #include "stepping/matrix_phi.h"

@@ -25,6 +25,28 @@ static struct PyModuleDef module = {
     -1, module_functions,
 };
 
+/* STEPPER_KINDS: the names of stepping/kind.c's kinds, in its order. */
+static int add_kinds(PyObject *mod)
+{
+    int n = 0;
+    while (ds_kinds[n])
+        n++;
+    PyObject *names = PyTuple_New(n);
+    for (int i = 0; names && i < n; i++) {
+        PyObject *name = PyUnicode_FromString(ds_kinds[i]->name);
+        if (!name) {
+            Py_CLEAR(names);
+            break;
+        }
+        PyTuple_SET_ITEM(names, i, name);
+    }
+    if (!names || PyModule_AddObject(mod, "STEPPER_KINDS", names) < 0) {
+        Py_XDECREF(names);
+        return -1;
+    }
+    return 0;
+}
+
 PyMODINIT_FUNC PyInit__ckernel(void)
 {
     if (PyType_Ready(&ModelType) < 0 || PyType_Ready(&StepperType) < 0
@@ -52,7 +74,8 @@ PyMODINIT_FUNC PyInit__ckernel(void)
         || PyModule_AddIntConstant(mod, "NO_PROGRESS", DS_NO_PROGRESS) < 0
         || PyModule_AddIntConstant(mod, "SINGULAR", DS_SINGULAR) < 0
         || PyModule_AddIntConstant(mod, "CELL_OUTPUTS", DS_CELL_OUTPUTS) < 0
-        || PyModule_AddIntConstant(mod, "ARENA_SLOTS", ARENA_SLOTS) < 0) {
+        || PyModule_AddIntConstant(mod, "ARENA_SLOTS", ARENA_SLOTS) < 0
+        || add_kinds(mod) < 0) {
         Py_DECREF(mod);
         return NULL;
     }

@@ -42,51 +42,106 @@ static int valid_terms(const double *terms, Py_ssize_t len, Py_ssize_t s)
     return valid;
 }
 
+/* The kind's options from ``options`` (a dict, or None: none) into o; ``weights`` holds the
+ * buffer of the option of that name. -1 with a ValueError naming the option it cannot take. */
+static int kind_options(const ds_kind *kind, PyObject *options, Py_ssize_t n_state,
+                        ds_kind_options *o, buf *weights)
+{
+    if (options == Py_None)
+        return 0;
+    if (!PyDict_Check(options)) {
+        PyErr_SetString(PyExc_TypeError, "Stepper: options must be a dict");
+        return -1;
+    }
+    PyObject *key, *value;
+    Py_ssize_t pos = 0;
+    while (PyDict_Next(options, &pos, &key, &value)) {
+        const char *name = PyUnicode_Check(key) ? PyUnicode_AsUTF8(key) : NULL;
+        if (!name || !ds_kind_reads(kind, name)) {
+            PyErr_Format(PyExc_ValueError, "Stepper: the kind '%s' takes no option %R (it "
+                         "reads: %s)", kind->name, key, *kind->options ? kind->options : "none");
+            return -1;
+        }
+        if (strcmp(name, "weights") == 0) {
+            if (get_buffer(value, weights, 'd', n_state, 0, "weights") < 0)
+                return -1;
+            o->weights = weights->view.buf;
+            continue;
+        }
+        const double v = PyFloat_AsDouble(value);
+        if (v == -1.0 && PyErr_Occurred())
+            return -1;
+        if (!(v >= 0.0 && v < INFINITY)) {
+            PyErr_Format(PyExc_ValueError, "Stepper: option %s must be finite and >= 0", name);
+            return -1;
+        }
+        *(strcmp(name, "refresh") == 0 ? &o->refresh
+          : strcmp(name, "refresh_input") == 0 ? &o->refresh_input : &o->tolerance) = v;
+    }
+    return 0;
+}
+
+/* The kind of that name, or NULL with a ValueError naming the kinds there are. */
+static const ds_kind *kind_named(const char *name)
+{
+    const ds_kind *kind = ds_kind_named(name);
+    if (!kind) {
+        char known[128] = "";
+        for (int i = 0; ds_kinds[i]; i++) {
+            strncat(known, i ? ", " : "", sizeof known - strlen(known) - 1);
+            strncat(known, ds_kinds[i]->name, sizeof known - strlen(known) - 1);
+        }
+        PyErr_Format(PyExc_ValueError, "Stepper: unknown kind '%s' (known: %s)", name, known);
+    }
+    return kind;
+}
+
 static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
 {
     static char *kwlist[] = {"model", "c", "terms", "embedded", "error_weights", "dt",
                              "z_tol", "fine", "substeps", "tolerance", "min_substeps",
-                             "max_substeps", "exponent", "jump_ref", "linearized",
-                             "lin_refresh", "lin_refresh_input", "bdf", "bdf_tolerance",
-                             "bdf_weights", NULL};
-    PyObject *model, *c, *terms, *embedded, *weights, *bdf_weights = NULL;
-    int bdf = 0;
-    double bdf_tol = 0.0;
-    double dt, z_tol, fine, tol, exponent, jump_ref = 0.0, lin_refresh = 0.0;
-    double lin_refresh_input = 0.0;
+                             "max_substeps", "exponent", "jump_ref", "kind", "options", NULL};
+    PyObject *model, *c, *terms, *embedded, *weights, *options = Py_None;
+    const char *kind_name = "stages";
+    double dt, z_tol, fine, tol, exponent, jump_ref = 0.0;
     long long n0, n_min, n_max;
-    int linearized = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O!OOOOdddLdLLd|dpddpdO", kwlist, &ModelType,
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O!OOOOdddLdLLd|dsO", kwlist, &ModelType,
                                      &model, &c, &terms, &embedded, &weights, &dt, &z_tol, &fine,
                                      &n0, &tol, &n_min, &n_max, &exponent, &jump_ref,
-                                     &linearized, &lin_refresh, &lin_refresh_input, &bdf,
-                                     &bdf_tol, &bdf_weights))
+                                     &kind_name, &options))
         return -1;
     if (self->ready) {
         PyErr_SetString(PyExc_RuntimeError, "Stepper already initialised");
         return -1;
     }
     if (!(dt > 0.0) || n0 < 1 || n_min < 1 || n_max < n_min || !(exponent > 0.0)
-        || !(jump_ref >= 0.0 && jump_ref < INFINITY) || !(lin_refresh >= 0.0)
-        || !(lin_refresh_input >= 0.0)) {
+        || !(jump_ref >= 0.0 && jump_ref < INFINITY)) {
         PyErr_SetString(PyExc_ValueError, "Stepper: need dt > 0, 1 <= min <= max substeps, "
-                                          "a finite jump_ref >= 0, lin_refresh >= 0, "
-                                          "lin_refresh_input >= 0");
+                                          "a finite jump_ref >= 0");
         return -1;
     }
     ModelObject *mo = (ModelObject *)model;
-    if (bdf && (mo->m.n_groups != 1 || mo->m.amp || !(bdf_tol > 0.0) || !bdf_weights)) {
-        PyErr_SetString(PyExc_ValueError, "the BDF stepper steps one coupled group without an "
-                                          "amplifier, with bdf_tolerance > 0 and bdf_weights");
+    const ds_kind *kind = kind_named(kind_name);
+    ds_kind_options o = {0};
+    buf kind_weights = {0};
+    if (!kind || kind_options(kind, options, mo->m.n_state, &o, &kind_weights) < 0) {
+        release_buffer(&kind_weights);
         return -1;
     }
-    PyObject *const tables[] = {c, terms, embedded, weights, bdf ? bdf_weights : weights};
-    const spec specs[] = {{'d', -1, 0, "c"}, {'d', -1, 0, "terms"}, {'d', -1, 0, "embedded"},
-                          {'d', mo->m.n_state, 0, "error_weights"},
-                          {'d', mo->m.n_state, 0, "bdf_weights"}};
-    buf b[5];
-    if (get_buffers(tables, specs, 5, b) < 0)
+    const char *refused = kind->refuse(&mo->m, &o);
+    if (refused) {
+        PyErr_SetString(PyExc_ValueError, refused);
+        release_buffer(&kind_weights);
         return -1;
+    }
+    PyObject *const tables[] = {c, terms, embedded, weights};
+    const spec specs[] = {{'d', -1, 0, "c"}, {'d', -1, 0, "terms"}, {'d', -1, 0, "embedded"},
+                          {'d', mo->m.n_state, 0, "error_weights"}};
+    buf b[4];
+    if (get_buffers(tables, specs, 4, b) < 0) {
+        release_buffer(&kind_weights);
+        return -1;
+    }
     const Py_buffer bc = b[0].view, bt = b[1].view, be = b[2].view, bw = b[3].view;
     const Py_ssize_t s = bc.len / 8;
     int rc = -1;
@@ -100,12 +155,8 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
     } else {
         ds_control ctl = {n0, n_min, n_max, tol, exponent};
         self->st.jump_ref = jump_ref;
-        self->st.linearized = linearized;
-        self->st.lin_refresh = lin_refresh;
-        self->st.lin_refresh_input = lin_refresh_input;
-        self->st.bdf = bdf;
-        self->st.bdf_tol = bdf_tol;
-        self->st.bdf_weights = b[4].view.buf;
+        self->st.kind = kind;
+        self->st.options = o;
         const int init = ds_stepper_init(&self->st, &mo->m, dt, z_tol, fine, &ctl, bw.buf);
         self->x_start = init < 0 ? NULL : calloc((size_t)mo->m.n_state, sizeof(double));
         if (init < 0 || !self->x_start || ds_work_init(&self->out_work, &mo->m) < 0) {
@@ -124,7 +175,8 @@ static int Stepper_init(StepperObject *self, PyObject *args, PyObject *kwds)
             rc = 0;
         }
     }
-    release_buffers(b, 5);
+    release_buffers(b, 4);
+    release_buffer(&kind_weights);
     return rc;
 }
 
@@ -146,9 +198,9 @@ static PyObject *Stepper_advance(StepperObject *self, PyObject *const *args, Py_
                                           "use period() for independent groups");
         return NULL;
     }
-    if (self->st.bdf) {
-        PyErr_SetString(PyExc_ValueError, "advance() steps a table method; the BDF stepper "
-                                          "steps whole periods (period(), run())");
+    if (self->st.kind->whole_periods) {
+        PyErr_Format(PyExc_ValueError, "advance() steps a table method; the kind '%s' steps "
+                     "whole periods (period(), run())", self->st.kind->name);
         return NULL;
     }
     double h = PyFloat_AsDouble(args[2]);
@@ -495,7 +547,15 @@ static PyMethodDef Stepper_methods[] = {
     {NULL}
 };
 
+static PyObject *Stepper_kind(StepperObject *self, void *unused)
+{
+    (void)unused;
+    NEED_READY(self);
+    return PyUnicode_FromString(self->st.kind->name);
+}
+
 static PyGetSetDef Stepper_getset[] = {
+    {"kind", (getter)Stepper_kind, NULL, "how each group steps (one of STEPPER_KINDS)", NULL},
     {"substeps", (getter)Stepper_get, (setter)Stepper_set,
      "steps the next period starts with (largest over the groups; set: every group)",
      (void *)0},

@@ -12,7 +12,7 @@
 #include "stepping/batch.h"
 #include "physics/outputs.h"
 #include "physics/physics.h"
-#include "stepping/period.h"
+#include "stepping/kind.h"
 #include "stepping/stepper.h"
 
 /* Gather the group's part of the whole model's x into the local layout (energies start at 0:
@@ -58,7 +58,7 @@ int ds_period(ds_stepper *st, double *x, const double *u_old, const double *u)
 {
     const ds_model *m = st->model;
     if (st->n_groups == 1)
-        return ds_period_core(st, &st->group[0], x, u_old, u);
+        return st->kind->period(st, &st->group[0], x, u_old, u);
     const int64_t n_groups = st->n_groups;
 #ifdef _OPENMP
 #pragma omp parallel for schedule(static) num_threads(st->threads) if (st->threads > 1)
@@ -66,7 +66,8 @@ int ds_period(ds_stepper *st, double *x, const double *u_old, const double *u)
     for (int64_t gi = 0; gi < n_groups; gi++) {
         ds_group *g = &st->group[gi];
         gather(m, g, x, g->x_local);
-        g->status = ds_period_core(st, g, g->x_local, u_old + g->c_first, u + g->c_first);
+        g->status = st->kind->period(st, g, g->x_local, u_old + g->c_first,
+                                     u + g->c_first);
     }
     for (int64_t gi = 0; gi < n_groups; gi++)
         if (st->group[gi].status != DS_OK)
@@ -130,7 +131,7 @@ static void run_group_chunk(const ds_stepper *st, int64_t gi, int64_t c0, int64_
         const double *u_old = (j == 0 ? u_last : U + (j - 1) * nu) + g->c_first;
         if (m->power)
             g->x_local[g->m->i_power] = g->x_local[g->m->i_power + 1] = 0.0;
-        g->status = ds_period_core(st, g, g->x_local, u_old, u);
+        g->status = st->kind->period(st, g, g->x_local, u_old, u);
         if (g->status != DS_OK) {
             failed_at[gi] = j;
             break;

@@ -13,6 +13,7 @@
  * coupling.h    the charge's exact coupling to an amplifier output that follows its command
  * linear_part.h a dense linear part over the beams' q, qdot (with matrix_phi.h)
  * bdf.h         the variable-order BDF stepper, in place of the table's stages
+ * kind.h        the kinds of stepper (stages, linearized, bdf): the one place they differ
  * method.h      the method table and the phi functions
  */
 #ifndef DETSIM_STEPPING_GROUP_H
@@ -23,6 +24,17 @@
 
 struct ds_linear;   /* linear_part.h */
 struct ds_bdf;      /* bdf.h */
+struct ds_kind;     /* kind.h */
+
+/* The options of every kind of stepper in one record; a kind reads those its entry in kind.c
+ * names. */
+typedef struct {
+    double refresh;          /* linearized: the weighted state change since the linear part
+                                was taken that renews it */
+    double refresh_input;    /* linearized: the input change that renews it, V (0: any) */
+    double tolerance;        /* bdf: local error per step in its weighted norm */
+    const double *weights;   /* bdf: its norm's 1 / scale per state (read at init only) */
+} ds_kind_options;
 
 /* The transients of one DET in an amplified control period (amp_period.c): the charge's and
  * the output's last transient (start time in the period, s; time constant, s; size, V). */
@@ -66,7 +78,8 @@ typedef struct ds_group {
     double *view_mi;
 } ds_group;
 
-/* A model's stepper: the method, the transient settings and one ds_group per coupled group. */
+/* A model's stepper: the method and its kind, the transient settings and one ds_group per
+ * coupled group. */
 typedef struct ds_stepper {
     const ds_model *model;
     ds_method method;
@@ -80,12 +93,8 @@ typedef struct ds_stepper {
     ds_group *group;
     double *arena;                      /* every group's scratch, in group order (locality) */
     int threads;
-    int linearized;                     /* a dense linear part over q, qdot per group */
-    double lin_refresh;                 /* weighted state change that renews it */
-    double lin_refresh_input;           /* input change (V) that renews it (0: any) */
-    int bdf;                            /* step with the BDF stepper instead of the table */
-    double bdf_tol;                     /* its local error per step (weighted norm) */
-    const double *bdf_weights;          /* its norm's 1 / scale per state (init only) */
+    const struct ds_kind *kind;         /* how each group steps (kind.h) */
+    ds_kind_options options;            /* what the kind reads of them */
 } ds_stepper;
 
 #endif

@@ -114,7 +114,7 @@ int ds_linear_init(ds_linear *lin, const ds_method *me, const ds_model *m)
 }
 
 /* Whether x, u are far enough from where A was taken to take it anew. An input within
- * lin_refresh_input (V) of A's keeps it: a controller's small per-period corrections would
+ * options.refresh_input (V) of A's keeps it: a controller's small per-period corrections would
  * otherwise take A (and its weights) anew every period, and a stale A only moves part of the
  * linear dynamics into the explicit remainder, whose error the step control sees. */
 static int needs_refresh(const ds_stepper *st, const ds_group *g, const double *x,
@@ -124,11 +124,11 @@ static int needs_refresh(const ds_stepper *st, const ds_group *g, const double *
     if (!lin->valid)
         return 1;
     for (int64_t i = 0; i < g->m->n_cells; i++)
-        if (fabs(u[i] - lin->u_lin[i]) > st->lin_refresh_input
-            || (st->lin_refresh_input == 0.0 && u[i] != lin->u_lin[i]))
+        if (fabs(u[i] - lin->u_lin[i]) > st->options.refresh_input
+            || (st->options.refresh_input == 0.0 && u[i] != lin->u_lin[i]))
             return 1;
     for (int64_t k = 0; k < lin->nd; k++)
-        if (fabs(x[k] - lin->x_lin[k]) * g->inv_scale[k] > st->lin_refresh)
+        if (fabs(x[k] - lin->x_lin[k]) * g->inv_scale[k] > st->options.refresh)
             return 1;
     return 0;
 }

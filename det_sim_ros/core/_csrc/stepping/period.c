@@ -12,7 +12,6 @@
 #include "stepping/period.h"
 #include "physics/physics.h"
 #include "stepping/amp_period.h"
-#include "stepping/bdf.h"
 #include "stepping/linear_part.h"
 #include "stepping/stages.h"
 
@@ -198,11 +197,9 @@ static int64_t count_ladder(int64_t n)
  * count the estimate predicts (estimate ~ n^-exponent), never below n_min nor below half the
  * current count. On failure x holds the state at the period's start.
  */
-int ds_period_core(const ds_stepper *st, ds_group *g, double *x, const double *u_old,
-                   const double *u)
+int ds_stages_period(const ds_stepper *st, ds_group *g, double *x, const double *u_old,
+                     const double *u)
 {
-    if (g->bdf)   /* its own steps and step control (bdf.c) */
-        return ds_bdf_period(st, g, x, u);
     ds_control *ctl = &g->ctl;
     const double dt = st->dt;
     if (g->lin) {   /* the dense linear part, taken anew if the state has moved */

@@ -7,7 +7,9 @@
 
 #include "stepping/group.h"
 
-int ds_period_core(const ds_stepper *st, ds_group *g, double *x, const double *u_old,
-                   const double *u);
+/* One control period of one group by the method table's stages (the kinds 'stages' and
+ * 'linearized', kind.c); on failure x holds its start. */
+int ds_stages_period(const ds_stepper *st, ds_group *g, double *x, const double *u_old,
+                     const double *u);
 
 #endif

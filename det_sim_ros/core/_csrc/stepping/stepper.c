@@ -9,7 +9,7 @@
 #include "physics/physics.h"
 #include "stepping/coupling.h"
 #include "stepping/linear_part.h"
-#include "stepping/bdf.h"
+#include "stepping/kind.h"
 
 /* Whether a group's charge couples exactly to its amplifier outputs (coupling.c). */
 static int coupled(const ds_group *g, const ds_method *me)
@@ -161,12 +161,7 @@ void ds_stepper_free(ds_stepper *st)
         free(g->view_ints);
         free(g->view_mi);
         free(g->transient);
-        if (g->lin)
-            ds_linear_free(g->lin);
-        free(g->lin);
-        if (g->bdf)
-            ds_bdf_free(g->bdf);
-        free(g->bdf);
+        st->kind->group_free(g);
     }
     free(st->group);
     st->group = NULL;
@@ -219,30 +214,11 @@ int ds_stepper_init(ds_stepper *st, const ds_model *m, double dt, double z_tol, 
             g->inv_scale[k] = inv_scale[g->q_first + k];
             g->inv_scale[nq + k] = inv_scale[m->n_q + g->q_first + k];
         }
-        if (st->linearized) {
-            g->lin = malloc(sizeof(ds_linear));
-            if (!g->lin)
-                return -1;
-            const int rc = ds_linear_init(g->lin, &st->method, g->m);
-            if (rc < 0) {
-                free(g->lin);
-                g->lin = NULL;
-                return rc;
-            }
-        }
-        if (st->bdf) {   /* one coupled group without an amplifier (checked by the caller) */
-            g->bdf = malloc(sizeof(ds_bdf));
-            /* the power monitor's integrals come last: bookkeeping, out of the iteration */
-            const int64_t n_core = g->m->power ? g->m->i_power : g->m->n_state;
-            if (!g->bdf || ds_bdf_init(g->bdf, g->m->n_state, n_core, st->bdf_weights,
-                                       st->bdf_tol) < 0) {
-                free(g->bdf);
-                g->bdf = NULL;
-                return -1;
-            }
-        }
+        const int rc = st->kind->group_init(st, g);
+        if (rc < 0)
+            return rc;
     }
-    st->bdf_weights = NULL;
+    st->options.weights = NULL;
     return 0;
 }
 
@@ -251,9 +227,6 @@ void ds_reset_control(ds_stepper *st)
     for (int64_t gi = 0; gi < st->n_groups; gi++) {
         st->group[gi].ctl = st->group[gi].ctl_initial;
         st->group[gi].est = 0.0;
-        if (st->group[gi].lin)
-            ds_linear_reset(st->group[gi].lin);
-        if (st->group[gi].bdf)
-            ds_bdf_reset(st->group[gi].bdf);
+        st->kind->group_reset(&st->group[gi]);
     }
 }
