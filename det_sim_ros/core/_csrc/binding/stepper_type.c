@@ -68,15 +68,18 @@ static int kind_options(const ds_kind *kind, PyObject *options, Py_ssize_t n_sta
             o->weights = weights->view.buf;
             continue;
         }
+        const ds_kind_number *field = ds_kind_numbers;
+        while (field->name && strcmp(field->name, name) != 0)
+            field++;
         const double v = PyFloat_AsDouble(value);
         if (v == -1.0 && PyErr_Occurred())
             return -1;
-        if (!(v >= 0.0 && v < INFINITY)) {
-            PyErr_Format(PyExc_ValueError, "Stepper: option %s must be finite and >= 0", name);
+        if (!field->name || !(v >= 0.0 && v < INFINITY)) {
+            PyErr_Format(PyExc_ValueError, "Stepper: option %s must be %s", name,
+                         field->name ? "finite and >= 0" : "a field of ds_kind_options");
             return -1;
         }
-        *(strcmp(name, "refresh") == 0 ? &o->refresh
-          : strcmp(name, "refresh_input") == 0 ? &o->refresh_input : &o->tolerance) = v;
+        *(double *)((char *)o + field->offset) = v;
     }
     return 0;
 }

@@ -125,6 +125,13 @@ static const ds_kind bdf = {
 
 /* ---------------------------------------------------------------- the table of kinds */
 
+const ds_kind_number ds_kind_numbers[] = {
+    {"refresh", offsetof(ds_kind_options, refresh)},
+    {"refresh_input", offsetof(ds_kind_options, refresh_input)},
+    {"tolerance", offsetof(ds_kind_options, tolerance)},
+    {NULL, 0},
+};
+
 const ds_kind *const ds_kinds[] = {&stages, &linearized, &bdf, NULL};
 
 const ds_kind *ds_kind_named(const char *name)

@@ -5,10 +5,12 @@
  *
  * A new coefficient table is data (a row of det_sim_ros/sim/integrators.py's METHODS, decoded
  * by method.c) and needs no entry; a new kind of stepper is one file plus one entry here, and
- * its options in ds_kind_options (group.h).
+ * its options in ds_kind_options (group.h) with their names in ds_kind_numbers (kind.c).
  */
 #ifndef DETSIM_STEPPING_KIND_H
 #define DETSIM_STEPPING_KIND_H
+
+#include <stddef.h>
 
 #include "stepping/group.h"
 
@@ -27,6 +29,14 @@ typedef struct ds_kind {
                   const double *u);
     int whole_periods;      /* steps only whole control periods (advance() refuses it) */
 } ds_kind;
+
+/* The number-valued fields of ds_kind_options by name (the binding reads them so; the one
+ * array option, weights, is a buffer). NULL-terminated. */
+typedef struct {
+    const char *name;
+    size_t offset;          /* of its double in ds_kind_options */
+} ds_kind_number;
+extern const ds_kind_number ds_kind_numbers[];
 
 /* Every kind, NULL-terminated. */
 extern const ds_kind *const ds_kinds[];
