@@ -116,3 +116,33 @@ def test_bdf_failures_are_told_apart(volts, status, text):
     assert np.array_equal(x, start)
     with pytest.raises(ModelDomainError, match=text):
         raise ModelDomainError(got)
+
+
+@pytest.mark.parametrize('source, overrides, after', [
+    ('default', {'scene.source': 'ideal'}, 2000),
+    ('array', {'structure.copies': 3, 'scene.source': 'ideal'}, 1000),
+])
+def test_a_failed_run_leaves_x_where_the_last_good_period_ended(source, overrides, after):
+    """
+    Check that Stepper.run, failing part-way, leaves x at the state of its last good period.
+
+    The input ramps every period, so every period books an input jump into the power monitor
+    before it steps (an ideal source books it at the jump); a lasting NaN planted ``after``
+    evaluations on fails a period part-way through the run. x must then be X[done], bit for
+    bit, as the periods one at a time leave it: not the failed period's booked start. A single
+    group runs period by period, an array in chunks of groups.
+    """
+    sim = Simulator(load_scene(source, overrides))
+    assert sim.model.arrays.power_monitor
+    n = 40
+    U = np.ascontiguousarray(np.linspace(100.0, 3000.0, n)[:, None]
+                             * np.ones((1, sim.model.n_inputs)))
+    X = np.empty((n + 1, sim.model.n_states))
+    Y = np.empty((n + 1, len(sim.output_names)))
+    x = sim.x.copy()
+    start = x.copy()
+    sim.stepper.plant_nan('rhs', after, lasting=True)
+    status, done = sim.stepper.run(x, sim.u, sim.u, U, X, Y)
+    assert status == kernel.NON_FINITE and 0 < done < n
+    assert np.array_equal(X[0], start)
+    assert np.array_equal(x, X[done])

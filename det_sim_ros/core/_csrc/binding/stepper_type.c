@@ -266,9 +266,10 @@ static PyObject *Stepper_period(StepperObject *self, PyObject *const *args, Py_s
 
 /*
  * run(x, u_held, u_last, U, X, Y) -> (status, periods completed): many periods in one call.
- * Period k holds U[k]; X[k + 1] and Y[k + 1] receive the state and outputs after it; u_held is
- * the input held now (already booked), u_last the one the last period ran with. x is left at
- * the last good state. The GIL is released for the whole run.
+ * Period k holds U[k]; X[0] receives x, X[k + 1] and Y[k + 1] the state and outputs after
+ * period k; u_held is the input held now (already booked), u_last the one the last period ran
+ * with. x is left at the last good state (X[periods completed]). The GIL is released for the
+ * whole run.
  */
 static PyObject *Stepper_run(StepperObject *self, PyObject *const *args, Py_ssize_t n)
 {

@@ -235,7 +235,14 @@ static int run_chunked(ds_stepper *st, ds_work *ow, double *x, const double *u_h
 int ds_run(ds_stepper *st, ds_work *ow, double *x, const double *u_held, const double *u_last,
            const double *U, int64_t n, double *X, double *Y, int64_t *done)
 {
-    if (st->n_groups > 1)
-        return run_chunked(st, ow, x, u_held, u_last, U, n, X, Y, done);
-    return run_serial(st, ow, x, u_held, u_last, U, n, X, Y, done);
+    const int64_t nx = st->model->n_state;
+    memcpy(X, x, (size_t)nx * sizeof(double));
+    const int status = st->n_groups > 1
+                       ? run_chunked(st, ow, x, u_held, u_last, U, n, X, Y, done)
+                       : run_serial(st, ow, x, u_held, u_last, U, n, X, Y, done);
+    /* a failed period, or its outputs, leave x where the last good period ended (before the
+     * failed period booked its input jump), whichever part failed */
+    if (status != DS_OK)
+        memcpy(x, X + *done * nx, (size_t)nx * sizeof(double));
+    return status;
 }
