@@ -24,9 +24,9 @@ entry there.
 How many steps: within a control period the steps are equal; their number is either fixed
 (``integrator.substeps`` > 0, or a method without an embedded pair) or adapts per period to the
 scene's tolerance from the method's embedded error estimate (:func:`step_control`). The 'step'
-scenario spends most of its time settled, where one step per 1 ms period suffices, and a
-snap-through needs ~30: at tolerance 1e-6 adapting takes 5.3-11.9 steps per period on the six
-'step' scenes instead of the fixed 20.
+scenario spends most of its time settled, where one step per 1 ms period suffices, while a
+snap-through needs tens: adapting takes several times fewer steps than a fixed count
+(docs/numerics.md, "Stepping").
 """
 
 from __future__ import annotations
@@ -376,11 +376,8 @@ def get_method(name: str) -> Method:
 
 
 # Step size that meets a tolerance: a method of order p reaches a relative Delta-y error of about
-# ERROR_CONSTANT * (h / 1 ms)^p on the 'step' scenario. Measured on all six scenes (both beams,
-# eps_b 0.15/0.20/0.25) against Radau/DOP853 rtol 1e-12 references, with the charge transients
-# resolved (fixed_period in _csrc/stepping/period.c): etdrk4 (RC source) 0.035...0.14, dp5
-# (ideal source) 0.0013...0.05; the largest, at eps_b = 0.15 where the snap-through is most
-# sensitive, is used so the tolerance holds on every shared scene.
+# ERROR_CONSTANT * (h / 1 ms)^p on the 'step' scenario; the largest over the six 'step' scenes,
+# so the tolerance holds on each (docs/numerics.md, "The table steppers' calibrated constants").
 ERROR_CONSTANT = {'etdrk4': 0.15, 'etdrk4_linearized': 0.15, 'dp5': 0.06}
 MAX_STEP = 1.0e-3   # s: keeps h * omega_beam < 0.6 (stable for every table here)
 
@@ -415,28 +412,22 @@ def min_substeps(dt: float, beam_rate: float = 0.0) -> int:
 # weighted per Ritz coordinate by 1/l (deflection) and dt/l (velocity) with l the cell's beam
 # length. The local tolerance is LOCAL_TOLERANCE[embedded order] times the scene tolerance: the
 # scene tolerance bounds the 'step' error (max over the run of |Delta-y error| / stroke), which
-# accumulates local errors and amplifies them through snap-through. Calibrated on all six 'step'
-# scenes at tolerances 1e-3 ... 1e-8 against the Radau rtol 1e-12 references: with 5e-4 the worst
-# error is 0.27...0.55 x tolerance for etdrk4 (RC source; 2.0 steps per period at 1e-3, 8.9 at
-# 1e-6, 27.5 at 1e-8) and 0.09...0.62 x for dp5 (ideal source; 1.2 / 3.1 / 6.9), where the fixed
-# counts of choose_substeps take 20 (etdrk4) and 10 (dp5) steps per period at 1e-6. The error grows
-# slightly faster than the tolerance (about tol^1.05), hence the margin.
+# accumulates local errors and amplifies them through snap-through, hence a local tolerance far
+# below it (its calibration: docs/numerics.md, "The table steppers' calibrated constants").
 LOCAL_TOLERANCE = {3: 5e-4, 4: 5e-4}
-# 'etdrk4_linearized' (its estimate weighted by phi functions of the beams' Jacobian), calibrated
-# on the three exact 'step' scenes (fixed eps_b 0.15, 0.20, simply supported 0.20) at n_r 3, 5, 7
-# and tolerance 1e-6 against etdrk4 at 1e-10: 5e-4 gave up to 3e-6 (n_r 7), this up to ~1e-6.
+# 'etdrk4_linearized' (its estimate weighted by phi functions of the beams' Jacobian): tighter
+# than the explicit tables' for the same error (docs/numerics.md, the same section).
 LINEARIZED_LOCAL_TOLERANCE = 1.25e-4
 # 'bdf': its local error per step (weighted max norm of bdf_weights) per unit of the scene
 # tolerance, chosen with the work-precision map (bench/work_precision_map.py): at the simply
 # supported level (n_r 7, 3e-3) it keeps the step and switching cases within the model's own
 # error (docs/fidelity.md).
 BDF_LOCAL_TOLERANCE = 3e-4
-# At most MAX_SUBSTEPS_FACTOR x the fixed count of choose_substeps per period: bounds the cost
-# of a period. A single actuator never reaches it at the calibrated settings (a snap-through
-# takes ~30 steps, the bound at 1e-6 is 40), but an array whose copies switch at different
-# times shares one count: unbounded, the slowest copy's count made every copy pay for it; a
-# bound of the fixed count itself let the error exceed the tolerance (bench/batch.py, staggered
-# copies; docs/performance.md's array table).
+# At most MAX_SUBSTEPS_FACTOR times the fixed count of choose_substeps per period: bounds the
+# cost of a period. A single actuator does not reach it, but an array whose copies switch at
+# different times shares one count: unbounded, the slowest copy's count made every copy pay for
+# it; the fixed count itself let the error exceed the tolerance (docs/numerics.md, the same
+# section; bench/batch.py).
 MAX_SUBSTEPS_FACTOR = 2
 # A linearized method takes few steps while the beam is settled or slow, but the violent
 # ringing right after a release or a snap-through (qdot ~ 5 m/s) can ask for more than twice
@@ -547,10 +538,9 @@ def bdf_weights(model) -> np.ndarray:
 
 # Resolving the charge transient after an input jump (fixed_period in _csrc/stepping/period.c):
 # steps of TRANSIENT_FINE * tau while the charge lag exceeds TRANSIENT_CHARGE * tolerance * C0
-# v_max. The first step after a jump is TRANSIENT_FINE * tau, later ones grow geometrically (see
-# fixed_period). Measured on 'step' with etdrk4 (fixed 0.15/0.20, simply supported 0.15):
-# 0.35 at 3e-6, scaled as tolerance^(1/4), keeps the error below the tolerance at 1e-6 and 1e-8
-# (2.4e-7...5.7e-7 and 2.5e-9...4.9e-9), so the first step follows the tolerance.
+# v_max. The first step after a jump is TRANSIENT_FINE * tau at a tolerance of 3e-6, scaled as
+# tolerance^(1/4) so the first step follows the tolerance; later ones grow geometrically (see
+# fixed_period; its calibration: docs/numerics.md, "The table steppers' calibrated constants").
 TRANSIENT_FINE = 0.35      # at a tolerance of 3e-6
 TRANSIENT_CHARGE = 1.0
 
