@@ -37,6 +37,7 @@ the file is not written).
 from __future__ import annotations
 
 import argparse
+import datetime
 import json
 import os
 import subprocess
@@ -243,7 +244,8 @@ def main(argv=None) -> int:
             arrays[f'{name}/{key}'] = results[(name, *runs[0])][key]
     meta = {'fidelity': 'exact', 'n_ritz': REFERENCE_N_R, 'rtol': REFERENCE_RTOL,
             'solver': 'scipy odeint (LSODA) on Model.f, one solve per constant voltage',
-            'commit': _commit(), 'cases': [name for name, *_ in cases],
+            'commit': _commit(), 'date': datetime.date.today().isoformat(),
+            'cases': [name for name, *_ in cases],
             'convergence': convergence}
     os.makedirs(args.out, exist_ok=True)
     path = os.path.join(args.out, os.path.basename(DATA_FILE))

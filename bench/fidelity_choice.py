@@ -174,10 +174,11 @@ def table(rows, reference) -> str:
     strokes = _range_mm([stroke(c['y']) for c in cases])
     peaks = _range_mm([peak_displacement(c['t'], c['dy']) for c in cases])
     names = ', '.join(f'{b.replace("_", " ")} {e:.2f}' for b, e in CASES)
-    lines = [f'Measured {datetime.date.today().isoformat()}, commit {_commit()}, {MACHINE} '
-             '(CPU times vary ±30 %; ratios between rows are side by side in one '
-             f'run). Cases: {names}; error = max |Δy − Δy_ref| over the 3 kV phase as a '
-             'fraction of the stroke (the travel of the beam end over the run, from the released '
+    lines = [f'Measured {datetime.date.today().isoformat()}, commit {_commit()}, {MACHINE}, by '
+             '`flock bench/.lock env PYTHONPATH=. python bench/fidelity_choice.py` (CPU times '
+             f'vary ±30 %; ratios between rows are side by side in one run). Cases: {names}; '
+             'error = max |Δy − Δy_ref| over the 3 kV phase as a fraction of the stroke (the '
+             'travel of the beam end over the run, from the released '
              f'start to the buckled rest state: {strokes}) and, in parentheses, of the peak '
              f'displacement in the 3 kV phase (max |Δy_ref|: {peaks}); '
              f'Δy_ref the exact kinematics at n_r {meta["n_ritz"]}, tolerance {meta["rtol"]:g} '
@@ -203,11 +204,24 @@ def table(rows, reference) -> str:
     return '\n'.join(lines)
 
 
+def _dated(meta) -> str:
+    """Return ', <date>' for the stored reference: its own date, else its commit's."""
+    if meta.get('date'):
+        return f', {meta["date"]}'
+    try:
+        day = subprocess.run(['git', 'show', '-s', '--format=%cs', meta['commit']],
+                             capture_output=True, text=True, check=True, cwd=HERE).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return ''
+    return f' (of {day})' if day else ''
+
+
 def convergence_table(meta) -> str:
     """Return the reference's convergence check (stored with it) as markdown."""
-    lines = [f'The reference\'s own convergence (bench/continuum_reference.py, {meta["solver"]};'
-             f' commit {meta["commit"]}): the same error measure against the stored reference, '
-             f'exact n_r {meta["n_ritz"]} at tolerance {meta["rtol"]:g}.', '',
+    lines = [f'The reference\'s own convergence ({meta["solver"]}; computed at commit '
+             f'{meta["commit"]}{_dated(meta)} by `python bench/continuum_reference.py`): the same '
+             'error measure against the stored reference, exact n_r '
+             f'{meta["n_ritz"]} at tolerance {meta["rtol"]:g}.', '',
              '| case | n_r | tolerance | CPU s | error | switched (step) / snaps |',
              '|---|---|---|---|---|---|']
     for name, n_r, rtol, cpu, error, outcome in meta['convergence']:

@@ -233,7 +233,7 @@ def _fake_benchmark(monkeypatch, tmp_path):
         yield [row]
 
     fake.run = run
-    fake.write_tables = lambda rows, out: seen.setdefault('written', (rows, out))
+    fake.write_tables = lambda rows, out, command: seen.setdefault('written', (rows, out, command))
     monkeypatch.setitem(sys.modules, 'sympy', types.ModuleType('sympy'))
     monkeypatch.setitem(sys.modules, 'det_sim_ros.analysis.benchmark', fake)
     import det_sim_ros.analysis
@@ -256,6 +256,51 @@ def test_bench_arguments_reach_the_benchmark(monkeypatch, tmp_path, capsys):
     assert not seen and 'unrecognized arguments' in capsys.readouterr().err
     assert cli.main(['bench', '--beams', 'hinged', '--out', out]) == 2
     assert 'unknown beam' in capsys.readouterr().err
+
+
+@pytest.mark.ros   # git runs in a process (the commit)
+def test_bench_page_opens_with_its_date_commit_machine_and_command(monkeypatch, tmp_path):
+    """
+    Check that the page det_sim bench writes opens with its date, commit, machine and command.
+
+    The real page writer on a one-row run (the benchmark itself takes an hour): the date is
+    today's (UTC), the commit one this checkout's git knows ('unknown' outside a checkout),
+    and the command, parsed again, asks for the same run.
+    """
+    from datetime import datetime, timezone
+    import re
+    import shlex
+    from det_sim_ros.analysis import benchmark
+    row = {'beam': 'fixed', 'eps_b': 0.2, 'solver': 'auto', 'setting': 'tol 1e-06',
+           'cpu_per_sim_s': 0.01, 'err_dy': 1e-6, 'err_qp': 1e-6, 'realtime_factor': 100.0,
+           'steps_per_period': 1.0}
+    monkeypatch.setattr(benchmark, 'run', lambda *args, **kwargs: iter([[row]]))
+    monkeypatch.setitem(sys.modules, 'sympy', types.ModuleType('sympy'))
+    out = str(tmp_path / 'wp')
+    argv = ['bench', '--quick', '--out', out, '--eps-b', '0.15,0.2', '--repeats', '2']
+    days = {datetime.now(timezone.utc).strftime('%Y-%m-%d')}
+    assert cli.main(argv) == 0
+    days.add(datetime.now(timezone.utc).strftime('%Y-%m-%d'))
+    with open(os.path.join(out, 'work_precision.md'), encoding='utf-8') as f:
+        first, blank, header = f.read().splitlines()[:3]
+    found = re.fullmatch(r'Measured (\S+), commit (\S+), (\d+)-core (\S+), by `([^`]+)` .*', first)
+    assert found, first
+    day, commit, cores, _, command = found.groups()
+    assert day in days and int(cores) == os.cpu_count()
+    assert blank == '' and header.startswith('| beam |')
+    source = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..')
+    in_checkout = subprocess.run(['git', '-C', source, 'rev-parse', '--git-dir'],
+                                 capture_output=True).returncode == 0
+    if in_checkout:
+        known = subprocess.run(['git', '-C', source, 'rev-parse', '--verify', '--quiet',
+                                commit.removesuffix('-dirty') + '^{commit}'], capture_output=True)
+        assert known.returncode == 0, commit
+    else:
+        assert commit == 'unknown'
+    words = shlex.split(command)
+    assert words[0] == 'det_sim'
+    again, asked = (cli.build_parser().parse_args(a) for a in (words[1:], argv))
+    assert vars(again) == vars(asked)
 
 
 def test_bench_help_lists_its_options(capsys):

@@ -225,3 +225,91 @@ def test_the_shell_page_covers_every_verb():
     text = _read(os.path.join(DOCS, 'shell.md'))
     missing = [verb for verb in VERBS if not re.search(rf'`det_sim {verb}\b', text)]
     assert not missing, f'docs/shell.md does not cover: {missing}'
+
+
+# -- measured tables: each says when, on which code and by which command -----------------------
+
+MEASURED_PAGES = ('performance.md', 'fidelity.md', 'work_precision.md')
+_DATE = re.compile(r'\b20\d\d-[01]\d-[0-3]\d\b')
+_COMMIT = re.compile(rf'(?<![\w-]){_HASH}')
+# the command that regenerates a table: `python bench/<script>.py ...` (behind flock and env as
+# the page gives it) or `det_sim <verb> ...`, in backticks
+_COMMAND = re.compile(r'`[^`\n]*(?:\bpython bench/\w+\.py|\bdet_sim [a-z])[^`\n]*`')
+
+
+def _tables_without_provenance(text: str):
+    """
+    Return the first row of every table not preceded, within its section, by a provenance.
+
+    A provenance is a paragraph (lines up to a blank line) naming a date (YYYY-MM-DD), a commit
+    hash and the bench command. A section runs from its heading to the next heading of its
+    level or higher; a subsection's tables may be dated by its parent's text above it.
+    """
+    text = re.sub(r'```.*?```', '', text, flags=re.DOTALL)   # a code block's '#' is no heading
+    missing = []
+    sections = [(0, [])]   # (heading level, its paragraphs so far, each joined into one line)
+    lines = text.splitlines() + ['']
+    current = []
+    in_table = False
+    for i, line in enumerate(lines):
+        stripped = line.strip()
+        heading = re.match(r'(#+)\s', stripped)
+        if heading:
+            if current:
+                sections[-1][1].append(' '.join(current))
+            level = len(heading.group(1))
+            while sections[-1][0] >= level:
+                sections.pop()
+            sections.append((level, []))
+            current, in_table = [], False
+            continue
+        # a subsection inherits its parents' text, but not the page title's (the page's intro)
+        paragraphs = [p for k, (level, section) in enumerate(sections)
+                      if level >= 2 or k == len(sections) - 1 for p in section]
+        is_row = stripped.startswith('|')
+        if is_row and not in_table and i + 1 < len(lines) \
+                and re.match(r'\|\s*:?-{3,}', lines[i + 1].strip()):
+            if current:   # the paragraph just above the table, if not yet closed
+                sections[-1][1].append(' '.join(current))
+                paragraphs.append(' '.join(current))
+                current = []
+            if not any(_DATE.search(p) and _COMMIT.search(p) and _COMMAND.search(p)
+                       for p in paragraphs):
+                missing.append(stripped)
+            in_table = True
+            continue
+        if is_row and in_table:
+            continue
+        in_table = False
+        if stripped:
+            current.append(stripped)
+        elif current:
+            sections[-1][1].append(' '.join(current))
+            current = []
+    return missing
+
+
+@pytest.mark.parametrize('name', MEASURED_PAGES)
+def test_every_measured_table_says_date_commit_and_command(name):
+    """Check that each table of a measured page is dated, has its commit and its command."""
+    missing = _tables_without_provenance(_read(os.path.join(DOCS, name)))
+    assert not missing, f'docs/{name}: tables without date, commit and command: {missing}'
+
+
+def test_the_table_provenance_check_sees_a_bare_table():
+    table = '| a | b |\n|---|---|\n| 1 | 2 |\n'
+    dated = ('Measured 2026-12-06, commit 1a21759, 2-core x86-64 VM, by '
+             '`flock /tmp/lock python bench/realtime.py --quick`:\n\n')
+    assert _tables_without_provenance('## A\n\n' + dated + table) == []
+    assert _tables_without_provenance('## A\n\n' + dated + table + '\nMore.\n\n' + table) == []
+    for undated in (dated.replace('2026-12-06', 'today'), dated.replace('1a21759', 'main'),
+                    dated.replace('python bench/realtime.py', 'the bench')):
+        assert _tables_without_provenance('## A\n\n' + undated + table) == ['| a | b |']
+    # a provenance in the section before does not date this one, its parent's text does
+    assert _tables_without_provenance('## A\n\n' + dated + '## B\n\n' + table) == ['| a | b |']
+    assert _tables_without_provenance('## A\n\n' + dated + '### B\n\n' + table) == []
+    assert _tables_without_provenance(
+        '## A\n\n### B\n\n' + dated + '### C\n\n' + table) == ['| a | b |']
+    assert _tables_without_provenance('# Page\n\n' + dated + table) == []
+    assert _tables_without_provenance('# Page\n\n' + dated + '## A\n\n' + table) == ['| a | b |']
+    assert _tables_without_provenance('## A\n\n' + table + '\n' + dated) == ['| a | b |']

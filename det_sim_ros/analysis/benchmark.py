@@ -21,16 +21,20 @@ The summary table (:func:`speedups`) gives, per error level, the CPU of the chea
 run that reaches it divided by the CPU of 'auto' at that error.
 
 :func:`run` measures, :func:`write_tables` writes ``work_precision.csv`` and
-``work_precision.md``. Run: ``det_sim bench --out bench/out`` (about 10 min per scene;
-``--quick``: one scene, fewer points), which also draws ``work_precision.png``; it needs the
-``bench`` extra (sympy for the analytic Jacobian, python-control, matplotlib).
+``work_precision.md``, the page opening with :func:`provenance`'s line (the date, the checkout's
+commit, the machine and the command that wrote it), so a regenerated page is dated. Run:
+``det_sim bench --out bench/out`` (about 10 min per scene; ``--quick``: one scene, fewer
+points), which also draws ``work_precision.png``; it needs the ``bench`` extra (sympy for the
+analytic Jacobian, python-control, matplotlib).
 """
 
 from __future__ import annotations
 
 import csv
 import os
+import platform
 import statistics
+import subprocess
 import time
 
 import numpy as np
@@ -42,7 +46,8 @@ from ..physics.model import build_model
 from ..physics.statics import initial_state
 from ..sim.simulator import simulate, Simulator
 
-__all__ = ['run', 'run_scene', 'write_tables', 'cost_at_error', 'speedups', 'one_term_jacobian']
+__all__ = ['run', 'run_scene', 'write_tables', 'provenance', 'checkout_commit', 'cost_at_error',
+           'speedups', 'one_term_jacobian']
 
 
 def _cpu(fn, repeats):
@@ -429,11 +434,40 @@ def _whole_run(solver):
     return solver.endswith('whole run')
 
 
-def write_tables(rows, out):
+def checkout_commit() -> str:
+    """
+    Return ``git describe --always --dirty`` of the checkout this package runs from.
+
+    'unknown' when the package is not run from a git checkout (an installed copy) or git is
+    missing: a page must not name the commit of some other repository around it.
+    """
+    source = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    try:
+        top = subprocess.run(['git', '-C', source, 'rev-parse', '--show-toplevel'],
+                             capture_output=True, text=True, timeout=10)
+        if top.returncode != 0 or os.path.realpath(top.stdout.strip()) != os.path.realpath(source):
+            return 'unknown'
+        described = subprocess.run(['git', '-C', source, 'describe', '--always', '--dirty'],
+                                   capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return 'unknown'
+    return described.stdout.strip() if described.returncode == 0 else 'unknown'
+
+
+def provenance(command: str) -> str:
+    """Return the line that dates a written page: UTC date, commit, machine, the command."""
+    machine = f"{os.cpu_count()}-core {platform.machine().replace('_', '-') or 'unknown'}"
+    return (f"Measured {time.strftime('%Y-%m-%d', time.gmtime())}, commit {checkout_commit()}, "
+            f'{machine}, by `{command}` (CPU times vary with the host and its load: compare '
+            'the rows of one page, side by side in one run).')
+
+
+def write_tables(rows, out, command='det_sim bench'):
     """
     Write the result tables into the folder ``out``.
 
-    ``work_precision.csv`` (one row per run) and ``work_precision.md`` (the runs and the
+    ``work_precision.csv`` (one row per run) and ``work_precision.md`` (:func:`provenance`'s
+    line for ``command``, the command line that ran the benchmark, then the runs and the
     speed-up tables).
     """
     os.makedirs(out, exist_ok=True)
@@ -442,6 +476,7 @@ def write_tables(rows, out):
         writer.writeheader()
         writer.writerows(rows)
     with open(os.path.join(out, 'work_precision.md'), 'w') as stream:
+        stream.write(provenance(command) + '\n\n')
         stream.write('| beam | eps_b | solver | setting | CPU s / sim s | RTF | err Δy | err q_p '
                      '| steps / period |\n')
         stream.write('|---|---|---|---|---|---|---|---|---|\n')

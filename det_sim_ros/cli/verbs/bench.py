@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import shlex
 import sys
 
 from .. import common
@@ -61,12 +62,24 @@ def main(args) -> int:
     for rows in benchmark.run(beams, eps_values, args.quick, args.repeats,
                               reference_dir=args.reference_dir,
                               log=lambda s: print(s, file=sys.stderr, flush=True)):
-        benchmark.write_tables(rows, args.out)   # a long run keeps what it measured
+        # a long run keeps what it measured; the page names the command that measured it
+        benchmark.write_tables(rows, args.out, command=command_line(args))
         if 'matplotlib' not in skipped:
             _plot(rows, args.out)
     kinds = 'csv,md' if 'matplotlib' in skipped else 'csv,md,png'
     print(f'wrote {args.out}/work_precision.{{{kinds}}}')
     return 0
+
+
+def command_line(args) -> str:
+    """Return the ``det_sim bench`` command line that runs what ``args`` ask for."""
+    words = ['det_sim', 'bench', '--out', args.out, '--beams', ','.join(args.beams),
+             '--eps-b', ','.join(f'{e:g}' for e in args.eps_b), '--repeats', str(args.repeats)]
+    if args.quick:
+        words.append('--quick')
+    if args.reference_dir:
+        words += ['--reference-dir', args.reference_dir]
+    return shlex.join(words)
 
 
 def _benchmark():
