@@ -7,6 +7,8 @@ that the compiled stepper takes each kind's options and refuses the others in on
 a new coefficient table steps with no change anywhere else.
 """
 
+import re
+
 from det_sim_ros.core import kernel
 from det_sim_ros.physics import reference
 from det_sim_ros.physics.model import build_model
@@ -14,6 +16,7 @@ from det_sim_ros.physics.statics import initial_state
 from det_sim_ros.scenes.scene import load_scene
 from det_sim_ros.sim.integrators import (get_method, KINDS, make_stepper, Method, METHODS,
                                          MULTISTEP, step_control, StepControl)
+from det_sim_ros.sim.simulator import Simulator
 import numpy as np
 import pytest
 
@@ -110,3 +113,21 @@ def test_a_new_table_steps_as_a_row_and_nothing_else(model):
     floor = 1e-6 * np.max(np.abs(expected))
     assert np.all(np.abs(ours - expected) <= 1e-10 * np.maximum(np.abs(expected), floor))
     assert np.max(np.abs(ours - x) / np.maximum(np.abs(x), floor)) > 1e-6   # it moved
+
+
+@pytest.mark.parametrize('overrides, phrase', [
+    ({'scene.fidelity': 'paper', 'integrator.method': 'etdrk4', 'integrator.substeps': 12},
+     r'^etdrk4 x12$'),
+    ({'integrator.method': 'etdrk4_linearized'}, r'^etdrk4_linearized adaptive \(now x\d+\)$'),
+    ({'scene.beam': 'simply_supported', 'integrator.method': 'bdf'},
+     r'^bdf adaptive \(steps and order\)$'),
+])
+def test_each_kind_describes_its_stepping_as_the_user_reads_it(overrides, phrase):
+    """
+    Check the phrase of each kind that logs, the start line and /diagnostics show.
+
+    A fixed count names it; an adaptive table names its current count; BDF, which has no count,
+    says that it adapts its steps and order (a count there would be a number it never uses).
+    """
+    sim = Simulator(load_scene('default', overrides))
+    assert re.match(phrase, sim.describe_stepper())
