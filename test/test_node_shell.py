@@ -24,7 +24,8 @@ RATE = 0.1   # real_time_factor: 100 samples per wall second
 
 
 @pytest.fixture(scope='module')
-def node():
+def spun_node():
+    """Start the plate's sim_node, spun by an executor in a thread; yield (node, executor)."""
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
@@ -41,11 +42,38 @@ def node():
     executor.add_node(sim)
     thread = threading.Thread(target=executor.spin, daemon=True)
     thread.start()
-    yield sim
+    yield sim, executor
     executor.shutdown()
     sim.destroy_node()
     rclpy.try_shutdown(context=context)
     thread.join(timeout=10.0)
+
+
+@pytest.fixture
+def node(spun_node):
+    """Return the module's running sim_node."""
+    return spun_node[0]
+
+
+@pytest.fixture
+def set_paused(spun_node):
+    """
+    Pause (True) or resume (False) the node with the function its ~/pause service calls.
+
+    For a test's setup and cleanup: run in the node's executor thread, as the service runs it,
+    with no shell of its own (test_send_by_name_and_in_det_order_then_advance and
+    test_watch_csv_and_live_lines check the pause and resume verbs).
+    """
+    sim, executor = spun_node
+
+    def set_paused(paused):
+        task = executor.create_task(sim.set_paused, paused)
+        deadline = time.monotonic() + 30.0
+        while not task.done():
+            assert time.monotonic() < deadline, 'the executor did not run the pause'
+            time.sleep(0.005)
+        assert sim.paused == paused
+    return set_paused
 
 
 def _charge(node):
@@ -114,7 +142,7 @@ def test_parameters_get_and_set(node, capsys):
     assert node.get_parameter('max_lag').value == 1.0
 
 
-def test_watch_csv_and_live_lines(node, capfd):
+def test_watch_csv_and_live_lines(node, capfd, set_paused):
     """Watch with a real stderr (capfd): rclpy's EventsExecutor, as on a terminal."""
     def ok(argv):
         assert main(argv + NS) == 0
@@ -135,12 +163,12 @@ def test_watch_csv_and_live_lines(node, capfd):
         assert main(['advance'] + NS) == 1
         assert 'not paused' in capfd.readouterr().err
     finally:
-        ok(['pause'])
+        set_paused(True)
 
 
-def test_watch_waits_for_a_paused_node_says_so_and_shows_it_once_resumed(node, tmp_path):
+def test_watch_waits_for_a_paused_node_says_so_and_shows_it_once_resumed(set_paused, tmp_path):
     """Check a paused node's watch: a note after --timeout (5 s), lines after resume, exit 0."""
-    assert main(['pause'] + NS) == 0
+    set_paused(True)
     watch = ChildProcess([sys.executable, '-m', 'det_sim_ros.cli', 'watch', *NS], tmp_path)
     try:
         note = watch.wait_for('waiting')
@@ -150,7 +178,7 @@ def test_watch_waits_for_a_paused_node_says_so_and_shows_it_once_resumed(node, t
         assert 'left: dy' in watch.wait_for('t = ')
     finally:
         code = watch.stop()
-        main(['pause'] + NS)
+        set_paused(True)
     assert code == 0 and 'error' not in ''.join(watch.lines), watch.lines
 
 
@@ -178,8 +206,9 @@ def _interrupt(argv, delay):
         while proc.poll() is None and not _handles_sigterm(proc.pid):
             assert time.monotonic() < deadline, 'the verb never took the signals'
             time.sleep(0.002)
-        time.sleep(delay)
-        if proc.poll() is None:
+        try:   # a verb done before the moment ends is not signalled (no wait for the moment)
+            proc.wait(timeout=delay)
+        except subprocess.TimeoutExpired:
             proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=30.0)
     finally:
@@ -189,7 +218,7 @@ def _interrupt(argv, delay):
     return proc.returncode, out, err
 
 
-def test_every_verb_stops_cleanly_on_ctrl_c_at_any_moment(node):
+def test_every_verb_stops_cleanly_on_ctrl_c_at_any_moment(set_paused):
     """
     Check SIGINT at random moments of each verb: exit 0 or 130 with one line, no traceback.
 
@@ -204,11 +233,14 @@ def test_every_verb_stops_cleanly_on_ctrl_c_at_any_moment(node):
     # one random moment in each third of the first 1.5 s per verb (its start, its wait, its
     # end): every phase is hit in every run, at fewer cases than uniform draws need
     cases = [(argv, rng.uniform(lo, lo + 0.5)) for argv in INTERRUPTED for lo in (0.0, 0.5, 1.0)]
-    problems, interrupted = [], 0
+    problems, interrupted, previous = [], 0, None
     try:
         for argv, delay in cases:
-            if argv[0] in ('advance', 'watch'):   # a paused node to advance, samples to watch
-                assert main(['pause' if argv[0] == 'advance' else 'resume'] + NS) == 0
+            # a paused node to advance, samples to watch: set before a verb's first case (its
+            # cases leave the node as they found it; the verbs before may not)
+            if argv[0] in ('advance', 'watch') and argv != previous:
+                set_paused(argv[0] == 'advance')
+            previous = argv
             code, out, err = _interrupt(argv, delay)
             # -2: the signal came while the interpreter exited, after the shell had given the
             # signals back (a shell reports it as 130 too); nothing more was to be written
@@ -218,21 +250,21 @@ def test_every_verb_stops_cleanly_on_ctrl_c_at_any_moment(node):
                 problems.append(f'{argv} after {delay:.2f} s: exit {code}\n{err}')
             interrupted += code == 130 or argv[0] == 'watch'
     finally:
-        main(['pause'] + NS)
+        set_paused(True)
     assert not problems, '\n'.join(problems)
     assert interrupted >= len(cases) // 3      # most stops came before the verb was done
 
 
-def test_ctrl_c_as_watch_starts_exits_0(node):
+def test_ctrl_c_as_watch_starts_exits_0(set_paused):
     """
     Check Ctrl-C at once after det_sim took the signals: watch exits 0, quietly (docs/shell.md).
 
     The moment falls in det_sim's start (its imports, the arguments), before the shell opens.
     """
-    assert main(['resume'] + NS) == 0
+    set_paused(False)
     try:
         for argv in (['watch'], ['watch', '--csv']):
             code, out, err = _interrupt(argv, 0.0)
             assert (code, err) == (0, ''), (argv, code, err)
     finally:
-        main(['pause'] + NS)
+        set_paused(True)
