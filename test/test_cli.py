@@ -288,9 +288,14 @@ def test_bench_page_opens_with_its_date_commit_machine_and_command(monkeypatch, 
     day, commit, cores, _, command = found.groups()
     assert day in days and int(cores) == os.cpu_count()
     assert blank == '' and header.startswith('| beam |')
-    source = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..')
-    in_checkout = subprocess.run(['git', '-C', source, 'rev-parse', '--git-dir'],
-                                 capture_output=True).returncode == 0
+    # the package's own tree: a source checkout names its commit, an installed copy (CI's
+    # `pip install .`, whose site-packages may sit inside some other repository) says 'unknown'
+    import det_sim_ros
+    source = os.path.dirname(os.path.dirname(os.path.abspath(det_sim_ros.__file__)))
+    top = subprocess.run(['git', '-C', source, 'rev-parse', '--show-toplevel'],
+                         capture_output=True, text=True)
+    in_checkout = (top.returncode == 0
+                   and os.path.realpath(top.stdout.strip()) == os.path.realpath(source))
     if in_checkout:
         known = subprocess.run(['git', '-C', source, 'rev-parse', '--verify', '--quiet',
                                 commit.removesuffix('-dirty') + '^{commit}'], capture_output=True)
