@@ -206,6 +206,10 @@ def ensemble(scene, t_end: float, volts: Callable | np.ndarray | None = None,
     """
     Run an input or a controller against ``copies`` perturbed copies of ``scene``, offline.
 
+    What the copies share is the scene's level's answer: under fast switching a coarse level's
+    statistics can differ from the converged beam's (docs/lockstep.md, "When a single run is
+    enough", names a level that holds them).
+
     :param volts: an open-loop input, as :func:`~det_sim_ros.sim.simulator.simulate` takes it.
     :param controller: or a closed loop: a function of no arguments that returns a fresh
         controller (its state its own, one per copy): ``act(t, dy, q) -> volts``, called with
