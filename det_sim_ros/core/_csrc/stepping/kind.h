@@ -4,8 +4,9 @@
  * which of the options it reads, which models it cannot step, and its control period.
  *
  * A new coefficient table is data (a row of det_sim_ros/sim/integrators.py's METHODS, decoded
- * by method.c) and needs no entry; a new kind of stepper is one file plus one entry here, and
- * its options in ds_kind_options (group.h) with their names in ds_kind_numbers (kind.c).
+ * by method.c) and needs no entry; a new kind of stepper is one file plus one entry here, its
+ * options in ds_kind_options (group.h) with their names in ds_kind_numbers (kind.c), and its
+ * per-group state a field of ds_group (group.h, as lin and bdf).
  */
 #ifndef DETSIM_STEPPING_KIND_H
 #define DETSIM_STEPPING_KIND_H
