@@ -9,7 +9,7 @@ through ``Stepper.period``; the message is the one :class:`ModelDomainError` giv
 from det_sim_ros.core import kernel
 from det_sim_ros.physics.model import ModelDomainError
 from det_sim_ros.scenes.scene import load_scene
-from det_sim_ros.sim.simulator import Simulator
+from det_sim_ros.sim.simulator import simulate, Simulator
 import numpy as np
 import pytest
 
@@ -146,3 +146,9 @@ def test_a_failed_run_leaves_x_where_the_last_good_period_ended(source, override
     assert status == kernel.NON_FINITE and 0 < done < n
     assert np.array_equal(X[0], start)
     assert np.array_equal(x, X[done])
+    # simulate() on the same plant: the simulator keeps that state, at the last good period
+    again = Simulator(load_scene(source, overrides))
+    again.stepper.plant_nan('rhs', after, lasting=True)
+    with pytest.raises(ModelDomainError):
+        simulate(again, U, n * again.dt)
+    assert again.k == done and np.array_equal(again.x, X[done])

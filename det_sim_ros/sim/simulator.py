@@ -376,16 +376,17 @@ def simulate(scene, voltage: Callable[[float], float] | np.ndarray, t_end: float
     Y = np.empty((n + 1, len(sim.output_names)))
     X = np.empty((n + 1, sim.model.n_states))
     Y[0] = list(sim.outputs().values())
-    X[0] = sim.x
-    # the whole run in one compiled call (same periods as n calls of Simulator.step)
+    # the whole run in one compiled call (same periods as n calls of Simulator.step); it writes
+    # X[0] and leaves x at X[done], the last good state
     x = sim.x.copy()
     if sim.command_stage is None:
         applied, u_held = U, sim.u
     else:   # the amplifier's DAC, delay and offset: the inputs the circuit receives
         applied, u_held = np.ascontiguousarray(sim.command_stage.run(U)), sim._u_prev
     status, done = sim.stepper.run(x, u_held, sim._u_prev, applied, X, Y)
+    sim.x = x
     if done:
-        sim.x, sim.u, sim._u_prev = X[done].copy(), U[done - 1].copy(), applied[done - 1].copy()
+        sim.u, sim._u_prev = U[done - 1].copy(), applied[done - 1].copy()
         sim.k += done
     if status != kernel.OK:
         error = ModelDomainError(status, f'at t = {sim.t + sim.dt:.6g} s')
