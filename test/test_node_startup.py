@@ -170,6 +170,65 @@ def test_a_stop_says_how_far_the_run_went_and_where_its_log_is(tmp_path):
     assert periods > 0 and t == pytest.approx(periods * 1e-3, rel=1e-6)   # free run, 1 kHz
 
 
+STUCK_START = """
+import ctypes, sys
+import rclpy, rclpy.node
+from det_sim_ros.ros import node, spinning
+from det_sim_ros.scenes.scene import SceneError
+spinning.MIDDLEWARE_START_LIMIT_S = 1.0
+
+
+def stuck_in_the_middleware(*args, **kwargs):
+    ctypes.PyDLL(None).sleep(20)   # a C call that holds the GIL: no Python thread runs
+
+
+def slow_scene(*args, **kwargs):
+    ctypes.PyDLL(None).sleep(3)
+    raise SceneError('scene key x: planted')
+
+
+where = sys.argv[1]
+if where == 'rclpy.init':
+    rclpy.init = stuck_in_the_middleware
+elif where == 'scene':
+    node.load_node_scene = slow_scene
+else:
+    setattr(rclpy.node.Node, where, stuck_in_the_middleware)
+sys.exit(node.main(['sim_node', '--ros-args', '-p', 'log.enabled:=false']))
+"""
+
+
+@pytest.mark.parametrize('where', ['rclpy.init', '__init__', 'create_subscription'])
+def test_a_start_stuck_in_the_middleware_ends_with_its_stacks(tmp_path, where):
+    """
+    Check that a start stuck in the middleware ends with exit 1 and every thread's stack.
+
+    rclpy's context, the node's DDS participant, the name claim's subscription: each made to
+    hang in a C call that holds the GIL (where neither a Python thread nor a signal handler
+    runs). The start's watchdog (set to 1 s here) writes the stacks, the stuck call among them,
+    and exits 1 instead of leaving a silent process.
+    """
+    result = subprocess.run([sys.executable, '-c', STUCK_START, where], cwd=tmp_path,
+                            env=child_env(), text=True, capture_output=True, timeout=TIMEOUT)
+    assert result.returncode == 1, result.stderr[-2000:]
+    assert 'Timeout (0:00:01)' in result.stderr
+    assert 'stuck_in_the_middleware' in result.stderr
+
+
+def test_the_start_bound_leaves_a_slow_scene_preparation_alone(tmp_path):
+    """
+    Check that the middleware's start bound does not cut a scene preparation that takes long.
+
+    A scene that takes 3 s to load (3x the bound set here) still ends in its own one-line
+    refusal: the bound covers the middleware's calls only.
+    """
+    result = subprocess.run([sys.executable, '-c', STUCK_START, 'scene'], cwd=tmp_path,
+                            env=child_env(), text=True, capture_output=True, timeout=TIMEOUT)
+    assert result.returncode == 1 and 'Timeout' not in result.stderr, result.stderr[-2000:]
+    lines = (result.stdout + result.stderr).strip().splitlines()
+    assert len(lines) == 1 and 'cannot start' in lines[0] and 'planted' in lines[0]
+
+
 def test_claims_are_ordered_the_same_way_by_every_node():
     """Check the claims' order: established first, then the smaller id; no clock in it."""
     running, new, other = Claim(True, 9), Claim(False, 1), Claim(False, 7)

@@ -40,6 +40,7 @@ FULL = os.environ.get('DET_SIM_RELIABILITY', '') == 'full'
 READY = 'voltage command order'     # the node's last start-up line
 WALL_LIMIT = 120.0                  # s, a safety net only
 EXIT_LIMIT = 30.0                   # s from a stop signal to the exit: 6x the node's own bound
+REFUSAL_LIMIT = 30.0                # s for a refused start to exit (a safety net: it takes ~1 s)
 
 
 def _interactive():
@@ -63,6 +64,32 @@ def _wait_exit(proc):
         except subprocess.TimeoutExpired:
             proc.kill()
         return 'hung'
+
+
+def _exit_and_output(proc, limit):
+    """
+    Return (exit code, output) of a child whose output is a pipe; ('hung', output and stacks).
+
+    A child still running after ``limit`` s is sent SIGABRT: its faulthandler prints every
+    thread's Python stack, and gdb (where it may attach) the native ones, into the failure.
+    """
+    try:
+        output, _ = proc.communicate(timeout=limit)
+        return proc.returncode, output
+    except subprocess.TimeoutExpired:
+        pass   # (a later communicate() still returns all the output)
+    native = ''
+    if shutil.which('gdb'):
+        native = subprocess.run(['gdb', '-p', str(proc.pid), '-batch', '-ex',
+                                 'thread apply all bt'], capture_output=True, text=True,
+                                timeout=60.0).stdout
+    proc.send_signal(signal.SIGABRT)
+    try:
+        output, _ = proc.communicate(timeout=10.0)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        output, _ = proc.communicate()
+    return 'hung', f'{output}\nnative stacks:\n{native or "(no gdb)"}'
 
 
 @dataclasses.dataclass
@@ -423,10 +450,11 @@ def test_bad_startup_inputs_as_processes(tmp_path):
     def run(row):
         key, value, _ = row
         arg = _as_parameter(key, value)
-        proc = subprocess.run([sys.executable, '-m', 'det_sim_ros.cli.sim_node', '--ros-args',
-                               *_quiet(key), '-p', arg], capture_output=True,
-                              text=True, timeout=WALL_LIMIT, env=_env())
-        return row, proc.returncode, (proc.stdout + proc.stderr).strip()
+        proc = subprocess.Popen([sys.executable, '-m', 'det_sim_ros.cli.sim_node', '--ros-args',
+                                 *_quiet(key), '-p', arg], stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True, env=_env())
+        code, text = _exit_and_output(proc, REFUSAL_LIMIT)
+        return row, code, text.strip()
     with concurrent.futures.ThreadPoolExecutor(2) as pool:
         results = list(pool.map(run, rows))
     failures = [f'{row}: exit {code}: {text}' for row, code, text in results

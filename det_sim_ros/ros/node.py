@@ -37,7 +37,8 @@ from .rclpy_facade import RCLError, take_serialized
 from .recording import open_recorder
 from .reports import NodeReports
 from .sensing import attach_outputs
-from .spinning import make_executor, spin, spin_until_stopped, StopRequested, StopSignals
+from .spinning import (limit_middleware_start, make_executor, spin, spin_until_stopped,
+                       StopRequested, StopSignals)
 from .waiting import SubscriberGate
 from ..io.contract import (CLOCK_TOPIC, COMMAND_TOPIC, DIAGNOSTICS_TOPIC, encode_clock,
                            JOINT_COMMAND_TOPIC, OutputContract, PREDICTABILITY_TOPIC,
@@ -75,11 +76,13 @@ class SimNode(Node):
 
     def __init__(self, **kwargs):
         # (what the node is started with is declared as given, then as checked: declaration)
-        super().__init__(NODE_NAME, automatically_declare_parameters_from_overrides=True,
-                         **kwargs)
+        with limit_middleware_start():
+            super().__init__(NODE_NAME, automatically_declare_parameters_from_overrides=True,
+                             **kwargs)
         try:
             # claimed first: the others' claims are heard while the scene is prepared
-            self.name_claim = NameClaim(self)
+            with limit_middleware_start():
+                self.name_claim = NameClaim(self)
             self._prepare()
         except Exception as exc:
             exc.logger_name = self.get_logger().name   # the FATAL line names the node as named
@@ -421,7 +424,8 @@ def main(args=None):
     code = 0
     with StopSignals() as stop, announce_early():   # (before the participant exists)
         try:
-            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+            with limit_middleware_start():
+                rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
             node = SimNode()
             stop.preparing = False
             if not stop.requested:

@@ -8,19 +8,25 @@ Its executor, and SIGINT/SIGTERM turned into a clean stop between two callbacks 
 
 from __future__ import annotations
 
+import contextlib
 import faulthandler
 import gc
 import signal
 
 import rclpy
 
-__all__ = ['limit_teardown', 'make_executor', 'spin', 'spin_until_stopped', 'StopRequested',
+__all__ = ['limit_middleware_start', 'limit_teardown', 'make_executor',
+           'MIDDLEWARE_START_LIMIT_S', 'spin', 'spin_until_stopped', 'StopRequested',
            'StopSignals', 'TEARDOWN_LIMIT_S']
 
 # s: the executor's, the node's and the context's teardown at the end of a run (a few ms
 # here), and the interpreter's exit after it; ros2 launch, too, escalates a SIGINT that did not
 # end a process after 5 s
 TEARDOWN_LIMIT_S = 5.0
+# s: the middleware's part of a start (rclpy's context, the node and its DDS participant, the
+# name claim's endpoints; milliseconds here): far above a loaded host's, far below a user's
+# patience with a silent process
+MIDDLEWARE_START_LIMIT_S = 20.0
 
 
 def make_executor(context=None):
@@ -108,6 +114,26 @@ def limit_teardown(seconds: float = TEARDOWN_LIMIT_S) -> None:
     once the log is finished (:meth:`StopSignals.end`); leaving StopSignals cancels it.
     """
     faulthandler.dump_traceback_later(seconds, exit=True)
+
+
+@contextlib.contextmanager
+def limit_middleware_start(seconds: float | None = None):
+    """
+    Within the block, a start stuck in the middleware ends the process after ``seconds``.
+
+    The same watchdog as :func:`limit_teardown` (default :data:`MIDDLEWARE_START_LIMIT_S`):
+    a DDS participant that never comes up (Fast DDS blocked on shared memory, a network
+    interface that hangs) would leave a silent process that publishes nothing and ignores
+    Ctrl-C (the C++ call holds the GIL); instead every thread's stack goes to stderr and the
+    process exits with code 1. Leaving the block cancels the watchdog (faulthandler has one:
+    an embedding program's own ``dump_traceback_later`` is cancelled too).
+    """
+    faulthandler.dump_traceback_later(MIDDLEWARE_START_LIMIT_S if seconds is None
+                                      else seconds, exit=True)
+    try:
+        yield
+    finally:
+        faulthandler.cancel_dump_traceback_later()
 
 
 def spin_until_stopped(node, stop) -> int:
