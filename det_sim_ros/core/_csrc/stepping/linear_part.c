@@ -124,8 +124,7 @@ static int needs_refresh(const ds_stepper *st, const ds_group *g, const double *
     if (!lin->valid)
         return 1;
     for (int64_t i = 0; i < g->m->n_cells; i++)
-        if (fabs(u[i] - lin->u_lin[i]) > st->options.refresh_input
-            || (st->options.refresh_input == 0.0 && u[i] != lin->u_lin[i]))
+        if (fabs(u[i] - lin->u_lin[i]) > st->options.refresh_input)   /* 0: any change */
             return 1;
     for (int64_t k = 0; k < lin->nd; k++)
         if (fabs(x[k] - lin->x_lin[k]) * g->inv_scale[k] > st->options.refresh)
