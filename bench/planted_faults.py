@@ -26,9 +26,10 @@ import tempfile
 import time
 from typing import NamedTuple
 
+from fidelity_choice import _commit, MACHINE
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CORE = 'det_sim_ros/core/_csrc/'
-MACHINE = '2-core x86-64 VM'
 
 
 class Fault(NamedTuple):
@@ -153,14 +154,6 @@ def plant_all(faults, log=print) -> list:
             log(f'{fault.name}: {failure or "NOT CAUGHT"} ({seconds:.0f} s)')
             rows.append((fault, failure))
     return rows
-
-
-def _commit() -> str:
-    try:
-        return subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True,
-                              text=True, check=True, cwd=REPO).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return 'unknown'
 
 
 def table(rows, command: str) -> str:
