@@ -229,6 +229,43 @@ def test_the_start_bound_leaves_a_slow_scene_preparation_alone(tmp_path):
     assert len(lines) == 1 and 'cannot start' in lines[0] and 'planted' in lines[0]
 
 
+EMBEDDED = """
+import faulthandler, time
+import rclpy
+from rclpy.context import Context
+from rclpy.parameter import Parameter
+from det_sim_ros.ros.node import SimNode
+faulthandler.dump_traceback_later(5.0, exit=True)   # the embedding program's own watchdog
+context = Context()
+rclpy.init(context=context)
+node = SimNode(context=context, parameter_overrides=[
+    Parameter('log.enabled', value=False), Parameter('info_period', value=0.0)])
+node.destroy_node()
+rclpy.try_shutdown(context=context)
+time.sleep(10.0)   # the watchdog ends the program here
+print('the watchdog was cancelled')
+"""
+
+
+def test_an_embedded_node_leaves_the_programs_watchdog_alone(tmp_path):
+    """
+    Check that a node made in another program neither arms nor cancels faulthandler's watchdog.
+
+    The program arms its own 5 s watchdog, makes a SimNode (the det_sim fixture's way; well
+    under a second), and sleeps past it: its watchdog must still end it, in the sleep (exit 1,
+    'Timeout', the sleep's line on the stack; a host so slow that making the node took the 5 s
+    fails on that line instead of passing). The start bound is sim_node's process's alone.
+    """
+    result = subprocess.run([sys.executable, '-c', EMBEDDED], cwd=tmp_path, env=child_env(),
+                            text=True, capture_output=True, timeout=TIMEOUT)
+    sleep = 'time.sleep(10.0)   # the watchdog ends the program here'
+    sleep_line = 1 + EMBEDDED.splitlines().index(sleep)   # (-c counts from its first line)
+    assert result.returncode == 1 and 'Timeout (0:00:05)' in result.stderr, (
+        result.stdout + result.stderr[-2000:])
+    assert f'line {sleep_line} in <module>' in result.stderr, result.stderr[-2000:]
+    assert 'was cancelled' not in result.stdout
+
+
 def test_claims_are_ordered_the_same_way_by_every_node():
     """Check the claims' order: established first, then the smaller id; no clock in it."""
     running, new, other = Claim(True, 9), Claim(False, 1), Claim(False, 7)

@@ -8,6 +8,7 @@ det_sim_ros.ros.diagnostics. Topic, parameter and service contract: docs/topics.
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 
@@ -70,18 +71,24 @@ class SimNode(Node):
     ``on_sample``, called with (k, output vector) after sample k has been published (free
     run: once it is computed; a tick's samples are published together at the tick's end).
 
+    :param middleware_bound: a context manager factory around the middleware's calls of the
+        start (the node and its DDS participant, the name claim's endpoints), not around the
+        scene's preparation. The ``sim_node`` process passes
+        :func:`~det_sim_ros.ros.spinning.limit_middleware_start`, which ends a stuck start;
+        an embedding program (a test, the ``det_sim`` fixture) keeps the default, nothing,
+        since that watchdog would end the whole program.
     :param kwargs: forwarded to :class:`rclpy.node.Node` (``context``, ``namespace``,
         ``parameter_overrides``, ...).
     """
 
-    def __init__(self, **kwargs):
+    def __init__(self, middleware_bound=contextlib.nullcontext, **kwargs):
         # (what the node is started with is declared as given, then as checked: declaration)
-        with limit_middleware_start():
+        with middleware_bound():
             super().__init__(NODE_NAME, automatically_declare_parameters_from_overrides=True,
                              **kwargs)
         try:
             # claimed first: the others' claims are heard while the scene is prepared
-            with limit_middleware_start():
+            with middleware_bound():
                 self.name_claim = NameClaim(self)
             self._prepare()
         except Exception as exc:
@@ -426,7 +433,7 @@ def main(args=None):
         try:
             with limit_middleware_start():
                 rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-            node = SimNode()
+            node = SimNode(middleware_bound=limit_middleware_start)
             stop.preparing = False
             if not stop.requested:
                 code = spin_until_stopped(node, stop)

@@ -125,8 +125,9 @@ def limit_middleware_start(seconds: float | None = None):
     a DDS participant that never comes up (Fast DDS blocked on shared memory, a network
     interface that hangs) would leave a silent process that publishes nothing and ignores
     Ctrl-C (the C++ call holds the GIL); instead every thread's stack goes to stderr and the
-    process exits with code 1. Leaving the block cancels the watchdog (faulthandler has one:
-    an embedding program's own ``dump_traceback_later`` is cancelled too).
+    process exits with code 1. Leaving the block cancels the watchdog (faulthandler has one, so
+    any other ``dump_traceback_later`` too): for sim_node's own process, not for a program that
+    embeds a node (:class:`~det_sim_ros.ros.node.SimNode`'s ``middleware_bound``).
     """
     faulthandler.dump_traceback_later(MIDDLEWARE_START_LIMIT_S if seconds is None
                                       else seconds, exit=True)
