@@ -122,10 +122,10 @@ def limit_middleware_start(seconds: float | None = None):
     Within the block, a start stuck in the middleware ends the process after ``seconds``.
 
     The same watchdog as :func:`limit_teardown` (default :data:`MIDDLEWARE_START_LIMIT_S`):
-    a DDS participant that never comes up (Fast DDS blocked on shared memory, a network
-    interface that hangs) would leave a silent process that publishes nothing and ignores
-    Ctrl-C (the C++ call holds the GIL); instead every thread's stack goes to stderr and the
-    process exits with code 1. Leaving the block cancels the watchdog (faulthandler has one, so
+    a DDS participant that never comes up would leave a silent process that publishes nothing
+    and ignores Ctrl-C (rclpy's C++ calls hold the GIL, so neither a Python thread nor a signal
+    handler runs); instead every thread's stack goes to stderr and the process exits with
+    code 1. Leaving the block cancels the watchdog (faulthandler has one, so
     any other ``dump_traceback_later`` too): for sim_node's own process, not for a program that
     embeds a node (:class:`~det_sim_ros.ros.node.SimNode`'s ``middleware_bound``).
     """
