@@ -9,9 +9,10 @@ without ROS (``pytest -x -m "not ros"``), note the first failing test, restore. 
 catches is a gap in the tests, or a change that changes nothing (then the code it touches is
 dead: drop that code instead).
 
-Run: python bench/planted_faults.py (about 30 s per fault and a minute for the unplanted
-baseline on 2 cores; ``--only NAME ...`` for some). ``--quick`` only checks that every snippet
-is still in its file exactly once (no clone, no build, no test run): the table follows the code.
+Run: python bench/planted_faults.py (~10 min on 2 cores: the unplanted baseline, then per fault
+a rebuild and the tests up to the first failure; ``--only NAME ...`` for some). ``--quick``
+only checks that every snippet is still in its file exactly once (no clone, no build, no test
+run): the table follows the code.
 """
 
 from __future__ import annotations
