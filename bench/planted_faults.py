@@ -27,6 +27,7 @@ import tempfile
 import time
 from typing import NamedTuple
 
+from checkouts import tree_env
 from fidelity_choice import _commit, MACHINE
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -117,7 +118,7 @@ def check_snippets(faults=FAULTS, root=REPO) -> list:
 
 def _run_suite(tree: str) -> tuple:
     """Build the core in ``tree`` and run its suite without ROS; return (first failure, s)."""
-    env = {**os.environ, 'PYTHONPATH': tree}
+    env = tree_env(tree)
     subprocess.run([sys.executable, 'setup.py', 'build_ext', '--inplace'], cwd=tree, env=env,
                    check=True, capture_output=True)
     started = time.monotonic()

@@ -117,11 +117,11 @@ def limit_teardown(seconds: float = TEARDOWN_LIMIT_S) -> None:
 
 
 @contextlib.contextmanager
-def limit_middleware_start(seconds: float | None = None):
+def limit_middleware_start():
     """
-    Within the block, a start stuck in the middleware ends the process after ``seconds``.
+    Within the block, a start stuck in the middleware ends the process.
 
-    The same watchdog as :func:`limit_teardown` (default :data:`MIDDLEWARE_START_LIMIT_S`):
+    The same watchdog as :func:`limit_teardown`, after :data:`MIDDLEWARE_START_LIMIT_S`:
     a DDS participant that never comes up would leave a silent process that publishes nothing
     and ignores Ctrl-C (rclpy's C++ calls hold the GIL, so neither a Python thread nor a signal
     handler runs); instead every thread's stack goes to stderr and the process exits with
@@ -129,8 +129,7 @@ def limit_middleware_start(seconds: float | None = None):
     any other ``dump_traceback_later`` too): for sim_node's own process, not for a program that
     embeds a node (:class:`~det_sim_ros.ros.node.SimNode`'s ``middleware_bound``).
     """
-    faulthandler.dump_traceback_later(MIDDLEWARE_START_LIMIT_S if seconds is None
-                                      else seconds, exit=True)
+    faulthandler.dump_traceback_later(MIDDLEWARE_START_LIMIT_S, exit=True)
     try:
         yield
     finally:
